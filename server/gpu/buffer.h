@@ -1,0 +1,42 @@
+// Storage buffers with upload and readback. Device-local memory; a staging copy is used
+// when that memory is not host-visible (real GPUs), a direct map when it is (lavapipe).
+#pragma once
+
+#include <cstring>
+#include <vector>
+
+#include "gpu/context.h"
+
+namespace penumbra::gpu {
+
+class Buffer {
+  public:
+    // A storage buffer of `bytes` (rounded up to 4), zero-filled.
+    Buffer(Context& ctx, size_t bytes);
+
+    size_t Bytes() const { return bytes_; }
+    vk::Buffer Handle() const { return *buffer_; }
+
+    void Upload(const void* data, size_t bytes);
+    void Download(void* data, size_t bytes) const;
+
+    template <typename T>
+    void Upload(const std::vector<T>& v) {
+        Upload(v.data(), v.size() * sizeof(T));
+    }
+    template <typename T>
+    std::vector<T> Download() const {
+        std::vector<T> v(bytes_ / sizeof(T));
+        Download(v.data(), v.size() * sizeof(T));
+        return v;
+    }
+
+  private:
+    Context& ctx_;
+    size_t bytes_;
+    vk::raii::Buffer buffer_{nullptr};
+    vk::raii::DeviceMemory memory_{nullptr};
+    void* mapped_ = nullptr;
+};
+
+}  // namespace penumbra::gpu

@@ -1,0 +1,173 @@
+// Instance, device selection, validation capture and command submission.
+#include "gpu/context.h"
+
+#include <algorithm>
+#include <cstring>
+
+#include "base/check.h"
+
+namespace penumbra::gpu {
+namespace {
+
+constexpr const char* kValidationLayer = "VK_LAYER_KHRONOS_validation";
+
+VKAPI_ATTR VkBool32 VKAPI_CALL OnMessage(VkDebugUtilsMessageSeverityFlagBitsEXT severity,
+                                         VkDebugUtilsMessageTypeFlagsEXT,
+                                         const VkDebugUtilsMessengerCallbackDataEXT* data,
+                                         void* user) {
+    if (severity < VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT) return VK_FALSE;
+    auto* messages = static_cast<Context::Messages*>(user);
+    std::lock_guard<std::mutex> lock(messages->mutex);
+    messages->list.emplace_back(data && data->pMessage ? data->pMessage : "(no text)");
+    return VK_FALSE;
+}
+
+int Rank(const vk::PhysicalDeviceProperties& p) {
+    switch (p.deviceType) {
+        case vk::PhysicalDeviceType::eDiscreteGpu: return 3;
+        case vk::PhysicalDeviceType::eIntegratedGpu: return 2;
+        case vk::PhysicalDeviceType::eVirtualGpu: return 1;
+        default: return 0;  // CPU (lavapipe) and other
+    }
+}
+
+}  // namespace
+
+void ThrowVulkan(const char* call, vk::Result result) {
+    throw Error(std::string(call) + " failed: " + vk::to_string(result));
+}
+
+Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<Messages>()) {
+    try {
+        context_ = std::make_unique<vk::raii::Context>();
+    } catch (const std::exception& e) {
+        throw Error(std::string("Vulkan is not available (loader missing?): ") + e.what());
+    }
+    std::vector<const char*> layers, extensions;
+    if (validation) {
+        bool found = false;
+        for (const auto& l : context_->enumerateInstanceLayerProperties())
+            if (std::strcmp(l.layerName, kValidationLayer) == 0) found = true;
+        if (!found)
+            throw Error("Vulkan validation requested but VK_LAYER_KHRONOS_validation is not "
+                        "installed (Debian package vulkan-validationlayers)");
+        layers.push_back(kValidationLayer);
+        extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+        validation_ = true;
+    }
+    vk::ApplicationInfo app("penumbra", 1, "penumbra", 1, VK_API_VERSION_1_1);
+    vk::InstanceCreateInfo info({}, &app, layers, extensions);
+    try {
+        instance_ = std::make_unique<vk::raii::Instance>(*context_, info);
+        if (validation_) {
+            vk::DebugUtilsMessengerCreateInfoEXT mi(
+                {},
+                vk::DebugUtilsMessageSeverityFlagBitsEXT::eWarning |
+                    vk::DebugUtilsMessageSeverityFlagBitsEXT::eError,
+                vk::DebugUtilsMessageTypeFlagBitsEXT::eGeneral |
+                    vk::DebugUtilsMessageTypeFlagBitsEXT::eValidation |
+                    vk::DebugUtilsMessageTypeFlagBitsEXT::ePerformance,
+                &OnMessage, messages_.get());
+            messenger_ = std::make_unique<vk::raii::DebugUtilsMessengerEXT>(*instance_, mi);
+        }
+
+        // Device choice: discrete > integrated > virtual > CPU, or lavapipe when asked.
+        vk::raii::PhysicalDevices all(*instance_);
+        int best = -1, bestRank = -1;
+        for (size_t i = 0; i < all.size(); ++i) {
+            auto props = all[i].getProperties();
+            bool isCpu = props.deviceType == vk::PhysicalDeviceType::eCpu;
+            if (kind == DeviceKind::kLavapipe && !isCpu) continue;
+            if (kind == DeviceKind::kRealGpu && isCpu) continue;
+            if (Rank(props) > bestRank) bestRank = Rank(props), best = static_cast<int>(i);
+        }
+        if (best < 0) {
+            throw Error(kind == DeviceKind::kLavapipe
+                            ? "no CPU Vulkan device (lavapipe) found; install mesa-vulkan-drivers"
+                        : kind == DeviceKind::kRealGpu
+                            ? "no GPU Vulkan device found (only CPU implementations); use "
+                              "--device cpu or --device lavapipe"
+                            : "no Vulkan device found");
+        }
+        physical_ = std::make_unique<vk::raii::PhysicalDevice>(std::move(all[best]));
+        auto props = physical_->getProperties();
+        name_ = props.deviceName.data();
+        lavapipe_ = props.deviceType == vk::PhysicalDeviceType::eCpu;
+        limits_ = props.limits;
+        timestampPeriod_ = props.limits.timestampPeriod;
+
+        auto families = physical_->getQueueFamilyProperties();
+        family_ = UINT32_MAX;
+        for (uint32_t i = 0; i < families.size(); ++i)
+            if (families[i].queueFlags & vk::QueueFlagBits::eCompute) {
+                family_ = i;
+                break;
+            }
+        if (family_ == UINT32_MAX) throw Error("Vulkan device " + name_ + " has no compute queue");
+        if (families[family_].timestampValidBits == 0) timestampPeriod_ = 0.0f;
+
+        float priority = 1.0f;
+        vk::DeviceQueueCreateInfo qi({}, family_, 1, &priority);
+        vk::DeviceCreateInfo di({}, qi);
+        device_ = std::make_unique<vk::raii::Device>(*physical_, di);
+        queue_ = std::make_unique<vk::raii::Queue>(*device_, family_, 0);
+        pool_ = std::make_unique<vk::raii::CommandPool>(
+            *device_, vk::CommandPoolCreateInfo(
+                          vk::CommandPoolCreateFlagBits::eResetCommandBuffer, family_));
+    } catch (const vk::SystemError& e) {
+        throw Error(std::string("Vulkan set-up failed: ") + e.what());
+    }
+}
+
+Context::~Context() {
+    if (device_) device_->waitIdle();
+    // Members go in reverse declaration order: pool, queue, device, ..., instance.
+    pool_.reset();
+    queue_.reset();
+    device_.reset();
+    physical_.reset();
+    messenger_.reset();
+    instance_.reset();
+}
+
+vk::raii::CommandBuffer Context::AllocateCommandBuffer() const {
+    vk::CommandBufferAllocateInfo ai(**pool_, vk::CommandBufferLevel::ePrimary, 1);
+    vk::raii::CommandBuffers cbs(*device_, ai);
+    return std::move(cbs.front());
+}
+
+void Context::SubmitAndWait(const vk::raii::CommandBuffer& cb) const {
+    vk::raii::Fence fence(*device_, vk::FenceCreateInfo());
+    vk::CommandBuffer raw = *cb;
+    vk::SubmitInfo si({}, {}, raw);
+    queue_->submit(si, *fence);
+    vk::Result r = device_->waitForFences({*fence}, VK_TRUE, UINT64_MAX);
+    if (r != vk::Result::eSuccess) ThrowVulkan("vkWaitForFences", r);
+}
+
+std::vector<std::string> Context::ValidationMessages() const {
+    std::lock_guard<std::mutex> lock(messages_->mutex);
+    return messages_->list;
+}
+
+bool FindRealGpu(std::string* name) {
+    try {
+        vk::raii::Context context;
+        vk::ApplicationInfo app("penumbra-probe", 1, "penumbra", 1, VK_API_VERSION_1_1);
+        vk::raii::Instance instance(context, vk::InstanceCreateInfo({}, &app));
+        vk::raii::PhysicalDevices all(instance);
+        for (const auto& pd : all) {
+            auto props = pd.getProperties();
+            if (props.deviceType != vk::PhysicalDeviceType::eCpu &&
+                props.deviceType != vk::PhysicalDeviceType::eOther) {
+                if (name) *name = props.deviceName.data();
+                return true;
+            }
+        }
+    } catch (const std::exception&) {
+        // No loader or no ICD: no GPU.
+    }
+    return false;
+}
+
+}  // namespace penumbra::gpu

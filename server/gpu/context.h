@@ -1,0 +1,81 @@
+// The Vulkan device layer: headless instance, device choice (discrete > integrated >
+// lavapipe), one compute queue, validation messages captured for tests. The only code
+// (with buffer/pipeline) that includes Vulkan headers.
+#pragma once
+
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <vulkan/vulkan_raii.hpp>
+
+namespace penumbra::gpu {
+
+enum class DeviceKind { kAnyPreferGpu, kRealGpu, kLavapipe };
+
+class Context {
+  public:
+    // Throws penumbra::Error naming what is missing (no Vulkan, no such device).
+    Context(DeviceKind kind, bool validation);
+    ~Context();
+    Context(const Context&) = delete;
+    Context& operator=(const Context&) = delete;
+
+    const std::string& DeviceName() const { return name_; }
+    bool IsLavapipe() const { return lavapipe_; }
+    float TimestampPeriodNs() const { return timestampPeriod_; }
+    const vk::PhysicalDeviceLimits& Limits() const { return limits_; }
+
+    const vk::raii::Device& Device() const { return *device_; }
+    const vk::raii::PhysicalDevice& Physical() const { return *physical_; }
+    const vk::raii::Queue& Queue() const { return *queue_; }
+    const vk::raii::CommandPool& CommandPool() const { return *pool_; }
+    uint32_t QueueFamily() const { return family_; }
+
+    // Records with `record` into a one-time command buffer, submits and waits.
+    template <typename F>
+    void RunNow(F&& record) {
+        vk::raii::CommandBuffer cb = AllocateCommandBuffer();
+        cb.begin({vk::CommandBufferUsageFlagBits::eOneTimeSubmit});
+        record(cb);
+        cb.end();
+        SubmitAndWait(cb);
+    }
+    vk::raii::CommandBuffer AllocateCommandBuffer() const;
+    void SubmitAndWait(const vk::raii::CommandBuffer& cb) const;
+
+    // Validation-layer messages (warnings and errors) seen so far.
+    std::vector<std::string> ValidationMessages() const;
+    bool ValidationEnabled() const { return validation_; }
+
+    struct Messages {
+        std::mutex mutex;
+        std::vector<std::string> list;
+    };
+
+  private:
+    std::unique_ptr<vk::raii::Context> context_;
+    std::unique_ptr<vk::raii::Instance> instance_;
+    std::unique_ptr<vk::raii::DebugUtilsMessengerEXT> messenger_;
+    std::unique_ptr<vk::raii::PhysicalDevice> physical_;
+    std::unique_ptr<vk::raii::Device> device_;
+    std::unique_ptr<vk::raii::Queue> queue_;
+    std::unique_ptr<vk::raii::CommandPool> pool_;
+    std::unique_ptr<Messages> messages_;
+    vk::PhysicalDeviceLimits limits_{};
+    uint32_t family_ = 0;
+    float timestampPeriod_ = 1.0f;
+    bool lavapipe_ = false;
+    bool validation_ = false;
+    std::string name_;
+};
+
+// True when a Vulkan device other than a CPU implementation exists; its name in `name`.
+bool FindRealGpu(std::string* name);
+
+// Wraps a failed vk call: "vkCreateX failed: VK_ERROR_...".
+[[noreturn]] void ThrowVulkan(const char* call, vk::Result result);
+
+}  // namespace penumbra::gpu

@@ -1,0 +1,157 @@
+// Fibonacci-sphere bins, cube-map accelerated nearest-bin lookup and the Gaussian
+// spreading tables of Sec. 3.1 ("Global pass", filtering).
+#include "hierarchy/directions.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <string>
+
+#include "base/check.h"
+
+namespace penumbra {
+namespace {
+
+// Cube face and texel coordinates of a direction.
+void CubeCoords(const glm::vec3& d, int res, int& face, int& u, int& v) {
+    glm::vec3 a = glm::abs(d);
+    float s, t, m;
+    if (a.x >= a.y && a.x >= a.z) {
+        face = d.x > 0 ? 0 : 1;
+        m = a.x;
+        s = d.y;
+        t = d.z;
+    } else if (a.y >= a.z) {
+        face = d.y > 0 ? 2 : 3;
+        m = a.y;
+        s = d.x;
+        t = d.z;
+    } else {
+        face = d.z > 0 ? 4 : 5;
+        m = a.z;
+        s = d.x;
+        t = d.y;
+    }
+    u = std::clamp(static_cast<int>((s / m * 0.5f + 0.5f) * res), 0, res - 1);
+    v = std::clamp(static_cast<int>((t / m * 0.5f + 0.5f) * res), 0, res - 1);
+}
+
+glm::vec3 CubeTexelCentre(int face, int u, int v, int res) {
+    float s = ((u + 0.5f) / res) * 2.0f - 1.0f;
+    float t = ((v + 0.5f) / res) * 2.0f - 1.0f;
+    glm::vec3 d;
+    switch (face) {
+        case 0: d = {1, s, t}; break;
+        case 1: d = {-1, s, t}; break;
+        case 2: d = {s, 1, t}; break;
+        case 3: d = {s, -1, t}; break;
+        case 4: d = {s, t, 1}; break;
+        default: d = {s, t, -1}; break;
+    }
+    return glm::normalize(d);
+}
+
+float AngleBetween(const glm::vec3& a, const glm::vec3& b) {
+    return std::acos(std::clamp(glm::dot(a, b), -1.0f, 1.0f));
+}
+
+}  // namespace
+
+Directions::Directions(int count) : count_(count) {
+    if (count < kMinBins || count > kMaxBins)
+        throw Error("bin count " + std::to_string(count) + " is outside " +
+                    std::to_string(kMinBins) + "…" + std::to_string(kMaxBins));
+    const float pi = std::numbers::pi_v<float>;
+    solidAngle_ = 4.0f * pi / count;
+    spacing_ = std::sqrt(solidAngle_);
+
+    // Fibonacci sphere: equal-area latitude bands, golden-angle longitudes.
+    const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
+    dirs_.resize(count);
+    for (int i = 0; i < count; ++i) {
+        double z = 1.0 - (2.0 * i + 1.0) / count;
+        double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+        double phi = golden * i;
+        dirs_[i] = glm::normalize(glm::vec3(r * std::cos(phi), r * std::sin(phi), z));
+    }
+
+    // Adjacency: bins within 2 spacings (enough for the greedy walk to reach the nearest).
+    adjacent_.resize(count);
+    for (int i = 0; i < count; ++i)
+        for (int j = 0; j < count; ++j)
+            if (i != j && AngleBetween(dirs_[i], dirs_[j]) < 2.0f * spacing_)
+                adjacent_[i].push_back(j);
+
+    // Cube-map table, brute force at build time (≤ 6·64²·1024 dot products).
+    cubeRes_ = std::max(8, static_cast<int>(std::ceil(std::sqrt(count / 6.0f) * 2.0f)));
+    cube_.resize(6 * cubeRes_ * cubeRes_);
+    for (int f = 0; f < 6; ++f)
+        for (int v = 0; v < cubeRes_; ++v)
+            for (int u = 0; u < cubeRes_; ++u) {
+                glm::vec3 d = CubeTexelCentre(f, u, v, cubeRes_);
+                uint32_t best = 0;
+                float bestDot = -2.0f;
+                for (int b = 0; b < count; ++b) {
+                    float dd = glm::dot(d, dirs_[b]);
+                    if (dd > bestDot) bestDot = dd, best = b;
+                }
+                cube_[(f * cubeRes_ + v) * cubeRes_ + u] = best;
+            }
+
+    // Spreading tables: for each level, bins within 2.5σ with Gaussian weights, Σ = 1.
+    for (int k = 0; k < kLevels; ++k) {
+        float sigma = LevelSigma(k);
+        float radius = std::min(2.5f * sigma, pi);
+        offsets_[k].assign(count + 1, 0);
+        for (int b = 0; b < count; ++b) {
+            offsets_[k][b] = static_cast<uint32_t>(weights_[k].size());
+            double sum = 0.0;
+            size_t first = weights_[k].size();
+            for (int j = 0; j < count; ++j) {
+                float ang = AngleBetween(dirs_[b], dirs_[j]);
+                if (j != b && ang > radius) continue;
+                float w = std::exp(-0.5f * ang * ang / (sigma * sigma));
+                weights_[k].push_back({static_cast<uint32_t>(j), w});
+                sum += w;
+            }
+            for (size_t i = first; i < weights_[k].size(); ++i)
+                weights_[k][i].weight = static_cast<float>(weights_[k][i].weight / sum);
+            // Heaviest first: the bin itself leads its list.
+            std::sort(weights_[k].begin() + first, weights_[k].end(),
+                      [](const BinWeight& a, const BinWeight& c) { return a.weight > c.weight; });
+        }
+        offsets_[k][count] = static_cast<uint32_t>(weights_[k].size());
+    }
+}
+
+uint32_t Directions::Lookup(const glm::vec3& d) const {
+    int face, u, v;
+    CubeCoords(d, cubeRes_, face, u, v);
+    uint32_t best = cube_[(face * cubeRes_ + v) * cubeRes_ + u];
+    float bestDot = glm::dot(d, dirs_[best]);
+    for (bool moved = true; moved;) {
+        moved = false;
+        for (uint32_t j : adjacent_[best]) {
+            float dd = glm::dot(d, dirs_[j]);
+            if (dd > bestDot) bestDot = dd, best = j, moved = true;
+        }
+    }
+    return best;
+}
+
+// σ_0 = half the bin spacing (pre-filter against aliasing on the bin grid); each level
+// widens by √2 to follow larger senders.
+float Directions::LevelSigma(int level) const {
+    return 0.5f * spacing_ * std::pow(2.0f, 0.5f * level);
+}
+
+// A disc of angular radius α has per-axis standard deviation α/2; combined with the
+// pre-filter σ_0 this gives the Gaussian that stands in for the sender's cone.
+int Directions::LevelFor(float alpha) const {
+    float s0 = LevelSigma(0);
+    float s = std::sqrt(0.25f * alpha * alpha + s0 * s0);
+    int k = static_cast<int>(std::lround(2.0f * std::log2(s / s0)));
+    return std::clamp(k, 0, kLevels - 1);
+}
+
+}  // namespace penumbra

@@ -1,0 +1,63 @@
+// The m world-space direction bins of Sec. 3.1: near-uniform centres on the sphere,
+// a direction→bin lookup, and per-bin Gaussian neighbour lists for several cone sizes σ.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+namespace penumbra {
+
+struct BinWeight {
+    uint32_t bin;
+    float weight;
+};
+
+class Directions {
+  public:
+    static constexpr int kMinBins = 32;
+    static constexpr int kMaxBins = 1024;
+    static constexpr int kLevels = 6;  // cone sizes σ_k = σ_0 · 2^(k/2)
+
+    // `count` in [kMinBins, kMaxBins]; throws penumbra::Error otherwise.
+    explicit Directions(int count);
+
+    int Count() const { return count_; }
+    float BinSolidAngle() const { return solidAngle_; }  // ω_bin = 4π/m
+    float Spacing() const { return spacing_; }           // √(4π/m), angle to the nearest bin
+    const glm::vec3& Direction(uint32_t bin) const { return dirs_[bin]; }
+    const std::vector<glm::vec3>& All() const { return dirs_; }
+
+    // Nearest bin centre to unit direction `d`.
+    uint32_t Lookup(const glm::vec3& d) const;
+
+    // Gaussian width (radians) of spread level k.
+    float LevelSigma(int level) const;
+    // Spread level for a sender of angular radius `alpha` (radians) seen from the receiver.
+    int LevelFor(float alpha) const;
+    // Receiver bins and normalised weights (Σ = 1) that a link through `bin` spreads into.
+    std::span<const BinWeight> Neighbours(int level, uint32_t bin) const {
+        const auto& off = offsets_[level];
+        return {weights_[level].data() + off[bin], off[bin + 1] - off[bin]};
+    }
+    // Flattened tables for upload: offsets (m+1 per level) and (bin, weight) pairs.
+    const std::vector<uint32_t>& Offsets(int level) const { return offsets_[level]; }
+    const std::vector<BinWeight>& Weights(int level) const { return weights_[level]; }
+
+  private:
+    int count_;
+    float solidAngle_;
+    float spacing_;
+    std::vector<glm::vec3> dirs_;
+    // Cube-map table: face*res*res texels → a bin near the texel centre, refined by a
+    // greedy walk over `adjacent_` to the exact nearest bin.
+    int cubeRes_;
+    std::vector<uint32_t> cube_;
+    std::vector<std::vector<uint32_t>> adjacent_;
+    std::vector<uint32_t> offsets_[kLevels];
+    std::vector<BinWeight> weights_[kLevels];
+};
+
+}  // namespace penumbra

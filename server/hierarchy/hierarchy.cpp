@@ -1,0 +1,117 @@
+// Top-down median splits along the widest of three spatial and three normal axes.
+#include "hierarchy/hierarchy.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "base/check.h"
+
+namespace penumbra {
+namespace {
+
+struct Builder {
+    const Surfels& s;
+    Hierarchy& h;
+    std::vector<uint32_t> ids;
+
+    // Builds the subtree over ids[begin, end) and returns its node index.
+    uint32_t Build(size_t begin, size_t end, uint32_t parent, uint32_t depth) {
+        uint32_t index = static_cast<uint32_t>(h.nodes.size());
+        h.nodes.emplace_back();
+        glm::vec3 lo(1e30f), hi(-1e30f), nlo(2.0f), nhi(-2.0f), nsum(0.0f);
+        float area = 0.0f, maxDisc = 0.0f;
+        for (size_t i = begin; i < end; ++i) {
+            uint32_t id = ids[i];
+            lo = glm::min(lo, s.positions[id]);
+            hi = glm::max(hi, s.positions[id]);
+            nlo = glm::min(nlo, s.normals[id]);
+            nhi = glm::max(nhi, s.normals[id]);
+            nsum += s.areas[id] * s.normals[id];
+            area += s.areas[id];
+            maxDisc = std::max(maxDisc, std::sqrt(s.areas[id] / std::numbers::pi_v<float>));
+        }
+        glm::vec3 centre = 0.5f * (lo + hi);
+        float radius = 0.0f;
+        for (size_t i = begin; i < end; ++i)
+            radius = std::max(radius, glm::length(s.positions[ids[i]] - centre));
+        radius += maxDisc;
+
+        HierarchyNode node{};
+        node.center = centre;
+        node.radius = radius;
+        node.area = area;
+        node.discRadius = std::min(radius, std::sqrt(area / std::numbers::pi_v<float>));
+        node.parent = parent;
+        node.depth = depth;
+        node.surfel = kNoSurfel;
+        if (end - begin == 1) {
+            node.surfel = ids[begin];
+            node.normal = s.normals[ids[begin]];
+            node.coneCos = 1.0f;
+            node.end = index + 1;
+            h.nodes[index] = node;
+            return index;
+        }
+        float len = glm::length(nsum);
+        node.normal = len > 1e-12f ? nsum / len : glm::vec3(0.0f, 0.0f, 1.0f);
+        node.coneCos = 1.0f;
+        if (len <= 1e-12f) {
+            node.coneCos = -1.0f;
+        } else {
+            for (size_t i = begin; i < end; ++i)
+                node.coneCos = std::min(node.coneCos, glm::dot(node.normal, s.normals[ids[i]]));
+        }
+
+        // Split axis: widest spatial extent, or normal extent weighted by half the
+        // spatial size (a compact cluster with mixed normals splits by orientation).
+        glm::vec3 ext = hi - lo;
+        float size = std::max(ext.x, std::max(ext.y, ext.z));
+        glm::vec3 next = (nhi - nlo) * (0.5f * size);
+        int axis = 0;
+        float best = -1.0f;
+        for (int a = 0; a < 3; ++a) {
+            if (ext[a] > best) best = ext[a], axis = a;
+            if (next[a] > best) best = next[a], axis = 3 + a;
+        }
+        auto key = [&](uint32_t id) {
+            return axis < 3 ? s.positions[id][axis] : s.normals[id][axis - 3];
+        };
+        size_t mid = begin + (end - begin) / 2;
+        std::nth_element(ids.begin() + begin, ids.begin() + mid, ids.begin() + end,
+                         [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+        h.nodes[index] = node;
+        Build(begin, mid, index, depth + 1);
+        Build(mid, end, index, depth + 1);
+        h.nodes[index].end = static_cast<uint32_t>(h.nodes.size());
+        return index;
+    }
+};
+
+}  // namespace
+
+Hierarchy BuildHierarchy(const Surfels& surfels) {
+    Hierarchy h;
+    Builder b{surfels, h, {}};
+    for (uint32_t i = 0; i < surfels.size(); ++i)
+        if (surfels.areas[i] > 0.0f) b.ids.push_back(i);
+    if (b.ids.empty()) throw Error("the scene has no surface area to light");
+    h.nodes.reserve(2 * b.ids.size());
+    b.Build(0, b.ids.size(), kNoParent, 0);
+
+    h.leafOfSurfel.assign(surfels.size(), kNoParent);
+    for (uint32_t i = 0; i < h.nodes.size(); ++i) {
+        const auto& n = h.nodes[i];
+        if (n.IsLeaf()) {
+            h.leafOfSurfel[n.surfel] = i;
+            h.leaves.push_back(i);
+        } else {
+            h.interior.push_back(i);
+        }
+        if (n.depth >= h.byDepth.size()) h.byDepth.resize(n.depth + 1);
+        h.byDepth[n.depth].push_back(i);
+    }
+    return h;
+}
+
+}  // namespace penumbra

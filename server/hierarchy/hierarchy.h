@@ -1,0 +1,46 @@
+// Clusters over surfels, split spatially and by normal, laid out depth first (Sec. 4.1)
+// so that a node's subtree is the contiguous range [index, end) and push/pull walk rows.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "scene/surfels.h"
+
+namespace penumbra {
+
+inline constexpr uint32_t kNoSurfel = 0xffffffffu;
+inline constexpr uint32_t kNoParent = 0xffffffffu;
+
+struct HierarchyNode {
+    glm::vec3 center;  // bounding sphere of the members' discs
+    float radius;
+    glm::vec3 normal;  // leaf: the surfel normal; interior: axis of the normal cone
+    float coneCos;     // cos of the normal cone's half angle (1 for a leaf, −1 if unbounded)
+    float area;        // Σ member areas
+    float discRadius;  // √(area/π), capped by `radius`: the sender's effective size
+    uint32_t parent;   // kNoParent for the root
+    uint32_t end;      // one past the last node of this subtree
+    uint32_t surfel;   // kNoSurfel for interior nodes
+    uint32_t depth;
+
+    bool IsLeaf() const { return surfel != kNoSurfel; }
+};
+
+struct Hierarchy {
+    std::vector<HierarchyNode> nodes;  // preorder; nodes[0] is the root
+    std::vector<uint32_t> leafOfSurfel;  // kNoParent for surfels without area
+    std::vector<uint32_t> leaves;        // leaf node indices in preorder
+    std::vector<uint32_t> interior;      // interior node indices in preorder
+    // Nodes grouped by depth (for level-by-level push/pull on the device).
+    std::vector<std::vector<uint32_t>> byDepth;
+
+    size_t size() const { return nodes.size(); }
+};
+
+// Binary hierarchy over the surfels with positive area; one surfel per leaf.
+Hierarchy BuildHierarchy(const Surfels& surfels);
+
+}  // namespace penumbra

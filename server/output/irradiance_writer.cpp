@@ -1,0 +1,149 @@
+// JSON via nlohmann::json; glTF via tinygltf (load the input, add accessors, write).
+#include "output/irradiance_writer.h"
+
+#include <tiny_gltf.h>
+
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "base/check.h"
+
+namespace penumbra {
+
+IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver) {
+    IrradianceResult r;
+    std::vector<glm::vec3> surfel = solver.SurfelIrradiance();
+    for (size_t p = 0; p < scene.primitives.size(); ++p)
+        r.primitives.push_back(PrimitiveIrradiance(solver.GetSurfels(), surfel, scene, p));
+    r.stats = solver.Stats();
+    return r;
+}
+
+namespace {
+
+nlohmann::json StatsObject(const SolverStats& s) {
+    nlohmann::json j;
+    j["solver"] = s.solver;
+    j["device"] = s.device;
+    j["elements"] = s.elements;
+    j["nodes"] = s.nodes;
+    j["links"] = s.links;
+    j["bins"] = s.bins;
+    j["iterations"] = s.iterations;
+    j["element_size"] = s.elementSize;
+    j["link_build_seconds"] = s.linkBuildSeconds;
+    j["setup_seconds"] = s.setupSeconds;
+    j["ms_per_iteration"] = s.MsPerIteration();
+    nlohmann::json passes = nlohmann::json::object();
+    for (const auto& p : s.passes)
+        passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;
+    j["passes"] = passes;
+    j["table_bytes"] = s.tableBytes;
+    j["link_bytes"] = s.linkBytes;
+    return j;
+}
+
+}  // namespace
+
+std::string StatsJson(const SolverStats& stats, int indent) {
+    return StatsObject(stats).dump(indent);
+}
+
+void WriteIrradianceJson(const std::string& path, const Scene& scene,
+                         const IrradianceResult& result) {
+    nlohmann::json j;
+    j["units"] = kIrradianceUnits;
+    j["solver"] = result.stats.solver;
+    j["channel"] = result.channel;
+    nlohmann::json prims = nlohmann::json::array();
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        const auto& prim = scene.primitives[p];
+        nlohmann::json e;
+        e["node"] = prim.node;
+        e["mesh"] = prim.mesh;
+        e["primitive"] = prim.primitive;
+        nlohmann::json values = nlohmann::json::array();
+        for (const auto& v : result.primitives[p]) values.push_back({v.x, v.y, v.z});
+        e["irradiance"] = std::move(values);
+        prims.push_back(std::move(e));
+    }
+    j["primitives"] = std::move(prims);
+    j["stats"] = StatsObject(result.stats);
+    std::ofstream out(path);
+    if (!out) throw Error(path + ": cannot open for writing");
+    out << j.dump(1) << "\n";
+    if (!out) throw Error(path + ": write failed");
+}
+
+void WriteIrradianceGltf(const std::string& input, const std::string& output,
+                         const Scene& scene, const IrradianceResult& result) {
+    tinygltf::Model model;
+    tinygltf::TinyGLTF io;
+    std::string err, warn;
+    bool binary = input.size() >= 4 && input.compare(input.size() - 4, 4, ".glb") == 0;
+    bool ok = binary ? io.LoadBinaryFromFile(&model, &err, &warn, input)
+                     : io.LoadASCIIFromFile(&model, &err, &warn, input);
+    if (!ok) throw Error(input + ": " + err);
+
+    // Give every (node, mesh) pair its own mesh so colours cannot collide.
+    std::map<int, int> meshUses;
+    for (const auto& prim : scene.primitives)
+        if (prim.primitive == 0) meshUses[prim.mesh]++;
+    std::map<int, int> seen;
+    std::map<int, int> meshOfNode;
+    for (const auto& prim : scene.primitives) {
+        if (prim.primitive != 0) continue;
+        int uses = seen[prim.mesh]++;
+        if (uses == 0) {
+            meshOfNode[prim.nodeIndex] = prim.mesh;
+        } else {
+            model.meshes.push_back(model.meshes[prim.mesh]);
+            int copy = static_cast<int>(model.meshes.size()) - 1;
+            model.nodes[prim.nodeIndex].mesh = copy;
+            meshOfNode[prim.nodeIndex] = copy;
+        }
+    }
+
+    // One new buffer holding every COLOR_0 array.
+    tinygltf::Buffer buffer;
+    int bufferIndex = static_cast<int>(model.buffers.size());
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        const auto& prim = scene.primitives[p];
+        const auto& values = result.primitives[p];
+        glm::vec3 lo(std::numeric_limits<float>::max()), hi(std::numeric_limits<float>::lowest());
+        for (const auto& v : values) lo = glm::min(lo, v), hi = glm::max(hi, v);
+        tinygltf::BufferView view;
+        view.buffer = bufferIndex;
+        view.byteOffset = buffer.data.size();
+        view.byteLength = values.size() * sizeof(glm::vec3);
+        view.target = TINYGLTF_TARGET_ARRAY_BUFFER;
+        buffer.data.resize(buffer.data.size() + view.byteLength);
+        if (!values.empty())
+            std::memcpy(buffer.data.data() + view.byteOffset, values.data(), view.byteLength);
+        model.bufferViews.push_back(view);
+        tinygltf::Accessor acc;
+        acc.bufferView = static_cast<int>(model.bufferViews.size()) - 1;
+        acc.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+        acc.type = TINYGLTF_TYPE_VEC3;
+        acc.count = values.size();
+        if (!values.empty()) {
+            acc.minValues = {lo.x, lo.y, lo.z};
+            acc.maxValues = {hi.x, hi.y, hi.z};
+        }
+        model.accessors.push_back(acc);
+        int mesh = meshOfNode.at(prim.nodeIndex);
+        model.meshes[mesh].primitives[prim.primitive].attributes["COLOR_0"] =
+            static_cast<int>(model.accessors.size()) - 1;
+    }
+    model.buffers.push_back(std::move(buffer));
+    model.asset.generator = "penumbra bake";
+
+    bool outBinary = output.size() >= 4 && output.compare(output.size() - 4, 4, ".glb") == 0;
+    // embedImages, embedBuffers, prettyPrint, writeBinary
+    if (!io.WriteGltfSceneToFile(&model, output, true, true, !outBinary, outBinary))
+        throw Error(output + ": cannot write glTF");
+}
+
+}  // namespace penumbra

@@ -1,0 +1,38 @@
+// Writes per-vertex irradiance in the two bake formats: JSON (for scripts) and the input
+// glTF with a float RGB COLOR_0 on every primitive (for viewers).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "scene/scene.h"
+#include "solver/solver.h"
+
+namespace penumbra {
+
+inline constexpr const char* kIrradianceUnits =
+    "irradiance in lux (lm/m^2) for emission given in nits (cd/m^2)";
+
+struct IrradianceResult {
+    std::string channel = "indirect";
+    // One array per scene primitive, in the primitive's input vertex order.
+    std::vector<std::vector<glm::vec3>> primitives;
+    SolverStats stats;
+};
+
+// Gathers per-primitive irradiance from a solver that has run.
+IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver);
+
+// `{"units", "solver", "channel", "primitives": [...], "stats": {...}}`.
+void WriteIrradianceJson(const std::string& path, const Scene& scene,
+                         const IrradianceResult& result);
+std::string StatsJson(const SolverStats& stats, int indent = 2);
+
+// Copies glTF `input` to `output` (.glb or .gltf) with COLOR_0 = irradiance added to every
+// primitive; meshes shared by several nodes are duplicated so each gets its own colours.
+void WriteIrradianceGltf(const std::string& input, const std::string& output,
+                         const Scene& scene, const IrradianceResult& result);
+
+}  // namespace penumbra

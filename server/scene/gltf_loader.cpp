@@ -1,0 +1,350 @@
+// glTF 2.0 → Scene: node transforms, triangle primitives, materials (DESIGN.md, Scene model).
+// Unsupported features fail loudly rather than being silently ignored.
+#include "scene/gltf_loader.h"
+
+#include <tiny_gltf.h>
+
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/gtc/type_ptr.hpp>
+#include <sstream>
+
+#include "base/check.h"
+
+namespace penumbra {
+namespace {
+
+struct Context {
+    const std::string& path;
+    const tinygltf::Model& model;
+
+    [[noreturn]] void Fail(const std::string& where, const std::string& why) const {
+        throw Error(path + ": " + where + ": " + why);
+    }
+};
+
+std::string NodeLabel(const tinygltf::Model& model, int node) {
+    const auto& n = model.nodes[node];
+    std::ostringstream s;
+    s << "node " << node;
+    if (!n.name.empty()) s << " '" << n.name << "'";
+    return s.str();
+}
+
+glm::mat4 LocalTransform(const tinygltf::Node& node) {
+    if (node.matrix.size() == 16) {
+        glm::mat4 m;
+        for (int i = 0; i < 16; ++i) glm::value_ptr(m)[i] = static_cast<float>(node.matrix[i]);
+        return m;  // glTF matrices are column-major, as GLM's
+    }
+    glm::mat4 m(1.0f);
+    if (node.translation.size() == 3)
+        m = glm::translate(m, glm::vec3(node.translation[0], node.translation[1],
+                                        node.translation[2]));
+    if (node.rotation.size() == 4) {
+        glm::quat q(static_cast<float>(node.rotation[3]), static_cast<float>(node.rotation[0]),
+                    static_cast<float>(node.rotation[1]), static_cast<float>(node.rotation[2]));
+        m = m * glm::mat4_cast(q);
+    }
+    if (node.scale.size() == 3)
+        m = glm::scale(m, glm::vec3(node.scale[0], node.scale[1], node.scale[2]));
+    return m;
+}
+
+bool Finite(const glm::mat4& m) {
+    for (int i = 0; i < 16; ++i)
+        if (!std::isfinite(glm::value_ptr(m)[i])) return false;
+    return true;
+}
+
+// Reads a float VEC3 accessor (POSITION, NORMAL), honouring byteStride.
+std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, int accessorIndex,
+                                const char* attribute) {
+    const auto& model = ctx.model;
+    if (accessorIndex < 0 || accessorIndex >= static_cast<int>(model.accessors.size()))
+        ctx.Fail(where, std::string(attribute) + " names accessor " +
+                            std::to_string(accessorIndex) + ", which does not exist");
+    const auto& acc = model.accessors[accessorIndex];
+    if (acc.sparse.isSparse)
+        ctx.Fail(where, std::string(attribute) + " uses a sparse accessor (not supported)");
+    if (acc.type != TINYGLTF_TYPE_VEC3 || acc.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT ||
+        acc.normalized)
+        ctx.Fail(where, std::string(attribute) +
+                            " must be float VEC3 (quantized attributes are not supported)");
+    if (acc.bufferView < 0 || acc.bufferView >= static_cast<int>(model.bufferViews.size()))
+        ctx.Fail(where, std::string(attribute) + " accessor has no buffer view");
+    const auto& view = model.bufferViews[acc.bufferView];
+    const auto& buffer = model.buffers[view.buffer];
+    size_t stride = view.byteStride ? view.byteStride : sizeof(float) * 3;
+    size_t begin = view.byteOffset + acc.byteOffset;
+    if (acc.count > 0 && (begin + stride * (acc.count - 1) + 12 > buffer.data.size() ||
+                          acc.byteOffset + stride * (acc.count - 1) + 12 > view.byteLength))
+        ctx.Fail(where, std::string(attribute) + " accessor reads past the end of its buffer");
+    std::vector<glm::vec3> out(acc.count);
+    for (size_t i = 0; i < acc.count; ++i) {
+        float v[3];
+        std::memcpy(v, buffer.data.data() + begin + stride * i, sizeof(v));
+        out[i] = glm::vec3(v[0], v[1], v[2]);
+    }
+    return out;
+}
+
+std::vector<uint32_t> ReadIndices(const Context& ctx, const std::string& where,
+                                  int accessorIndex) {
+    const auto& model = ctx.model;
+    if (accessorIndex >= static_cast<int>(model.accessors.size()))
+        ctx.Fail(where, "indices name accessor " + std::to_string(accessorIndex) +
+                            ", which does not exist");
+    const auto& acc = model.accessors[accessorIndex];
+    if (acc.sparse.isSparse) ctx.Fail(where, "indices use a sparse accessor (not supported)");
+    if (acc.type != TINYGLTF_TYPE_SCALAR) ctx.Fail(where, "indices accessor must be SCALAR");
+    size_t size = 0;
+    switch (acc.componentType) {
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: size = 1; break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: size = 2; break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: size = 4; break;
+        default: ctx.Fail(where, "indices must be unsigned byte, short or int");
+    }
+    if (acc.bufferView < 0 || acc.bufferView >= static_cast<int>(model.bufferViews.size()))
+        ctx.Fail(where, "indices accessor has no buffer view");
+    const auto& view = model.bufferViews[acc.bufferView];
+    const auto& buffer = model.buffers[view.buffer];
+    size_t stride = view.byteStride ? view.byteStride : size;
+    size_t begin = view.byteOffset + acc.byteOffset;
+    if (acc.count > 0 && (begin + stride * (acc.count - 1) + size > buffer.data.size() ||
+                          acc.byteOffset + stride * (acc.count - 1) + size > view.byteLength))
+        ctx.Fail(where, "indices accessor reads past the end of its buffer");
+    std::vector<uint32_t> out(acc.count);
+    for (size_t i = 0; i < acc.count; ++i) {
+        const unsigned char* p = buffer.data.data() + begin + stride * i;
+        if (size == 1) {
+            out[i] = p[0];
+        } else if (size == 2) {
+            uint16_t v;
+            std::memcpy(&v, p, 2);
+            out[i] = v;
+        } else {
+            std::memcpy(&out[i], p, 4);
+        }
+    }
+    return out;
+}
+
+// Triangle list from a TRIANGLES / TRIANGLE_STRIP / TRIANGLE_FAN index sequence.
+std::vector<uint32_t> ToTriangleList(const Context& ctx, const std::string& where, int mode,
+                                     const std::vector<uint32_t>& seq) {
+    if (mode == TINYGLTF_MODE_TRIANGLES) {
+        if (seq.size() % 3 != 0)
+            ctx.Fail(where, "triangle list has " + std::to_string(seq.size()) +
+                                " indices, not a multiple of 3");
+        return seq;
+    }
+    std::vector<uint32_t> out;
+    if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+        for (size_t i = 2; i < seq.size(); ++i) {
+            if (i % 2 == 0)
+                out.insert(out.end(), {seq[i - 2], seq[i - 1], seq[i]});
+            else
+                out.insert(out.end(), {seq[i - 1], seq[i - 2], seq[i]});
+        }
+        return out;
+    }
+    if (mode == TINYGLTF_MODE_TRIANGLE_FAN) {
+        for (size_t i = 2; i < seq.size(); ++i) out.insert(out.end(), {seq[0], seq[i - 1], seq[i]});
+        return out;
+    }
+    ctx.Fail(where, "primitive mode " + std::to_string(mode) +
+                        " (points/lines) has no surface to light; only triangles are supported");
+}
+
+glm::vec3 MeanTextureColor(const Context& ctx, const std::string& where, int textureIndex) {
+    if (textureIndex < 0 || textureIndex >= static_cast<int>(ctx.model.textures.size()))
+        ctx.Fail(where, "baseColorTexture names texture " + std::to_string(textureIndex) +
+                            ", which does not exist");
+    const auto& tex = ctx.model.textures[textureIndex];
+    if (tex.source < 0 || tex.source >= static_cast<int>(ctx.model.images.size()))
+        ctx.Fail(where, "baseColorTexture has no image");
+    const auto& img = ctx.model.images[tex.source];
+    if (img.image.empty() || img.bits != 8 || img.component < 3)
+        ctx.Fail(where, "baseColorTexture image '" + img.uri +
+                            "' could not be decoded as 8-bit RGB(A)");
+    glm::dvec3 sum(0.0);
+    size_t pixels = img.image.size() / img.component;
+    for (size_t i = 0; i < pixels; ++i) {
+        const unsigned char* p = img.image.data() + i * img.component;
+        sum += glm::dvec3(SrgbToLinear(p[0] / 255.0f), SrgbToLinear(p[1] / 255.0f),
+                          SrgbToLinear(p[2] / 255.0f));
+    }
+    return pixels ? glm::vec3(sum / static_cast<double>(pixels)) : glm::vec3(1.0f);
+}
+
+Material ReadMaterial(const Context& ctx, int index) {
+    const auto& m = ctx.model.materials[index];
+    std::string where = "material " + std::to_string(index) + " '" + m.name + "'";
+    Material out;
+    out.name = m.name;
+    const auto& pbr = m.pbrMetallicRoughness;
+    glm::vec3 base(1.0f);
+    if (pbr.baseColorFactor.size() >= 3)
+        base = glm::vec3(pbr.baseColorFactor[0], pbr.baseColorFactor[1], pbr.baseColorFactor[2]);
+    if (pbr.baseColorTexture.index >= 0)
+        base *= MeanTextureColor(ctx, where, pbr.baseColorTexture.index);
+    float metallic = static_cast<float>(pbr.metallicFactor);
+    out.albedo = base * (1.0f - metallic);
+    glm::vec3 emissive(0.0f);
+    if (m.emissiveFactor.size() == 3)
+        emissive = glm::vec3(m.emissiveFactor[0], m.emissiveFactor[1], m.emissiveFactor[2]);
+    float strength = 1.0f;
+    auto ext = m.extensions.find("KHR_materials_emissive_strength");
+    if (ext != m.extensions.end() && ext->second.Has("emissiveStrength"))
+        strength = static_cast<float>(ext->second.Get("emissiveStrength").GetNumberAsDouble());
+    out.emission = emissive * strength;
+    for (int c = 0; c < 3; ++c) {
+        if (!std::isfinite(out.albedo[c]) || out.albedo[c] < 0.0f)
+            ctx.Fail(where, "base colour is not a finite non-negative number");
+        if (!std::isfinite(out.emission[c]) || out.emission[c] < 0.0f)
+            ctx.Fail(where, "emission is not a finite non-negative number");
+    }
+    if (glm::any(glm::greaterThan(out.albedo, glm::vec3(1.0f))))
+        ctx.Fail(where, "diffuse albedo exceeds 1 (the surface would create light)");
+    return out;
+}
+
+}  // namespace
+
+float SrgbToLinear(float c) {
+    return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+}
+
+Scene LoadGltf(const std::string& path) {
+    tinygltf::Model model;
+    tinygltf::TinyGLTF loader;
+    std::string err, warn;
+    bool binary = path.size() >= 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
+    bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, path)
+                     : loader.LoadASCIIFromFile(&model, &err, &warn, path);
+    if (!ok) {
+        if (err.empty()) err = "unreadable glTF";
+        while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
+        throw Error(path + ": " + err);
+    }
+    Context ctx{path, model};
+
+    for (const auto& ext : model.extensionsRequired) {
+        if (ext != "KHR_materials_emissive_strength" && ext != "KHR_lights_punctual")
+            ctx.Fail("extensionsRequired", "extension '" + ext + "' is not supported");
+    }
+
+    Scene scene;
+    scene.source = path;
+    scene.materials.reserve(model.materials.size() + 1);
+    for (size_t i = 0; i < model.materials.size(); ++i)
+        scene.materials.push_back(ReadMaterial(ctx, static_cast<int>(i)));
+    // glTF's default material: baseColor 1, metallic 1, hence black diffuse.
+    uint32_t defaultMaterial = static_cast<uint32_t>(scene.materials.size());
+    scene.materials.push_back(Material{"(default)", glm::vec3(0.0f), glm::vec3(0.0f)});
+
+    std::vector<int> roots;
+    if (!model.scenes.empty()) {
+        int s = model.defaultScene >= 0 ? model.defaultScene : 0;
+        if (s >= static_cast<int>(model.scenes.size()))
+            ctx.Fail("scene", "default scene " + std::to_string(s) + " does not exist");
+        roots = model.scenes[s].nodes;
+    } else {
+        std::vector<bool> isChild(model.nodes.size(), false);
+        for (const auto& n : model.nodes)
+            for (int c : n.children)
+                if (c >= 0 && c < static_cast<int>(isChild.size())) isChild[c] = true;
+        for (size_t i = 0; i < model.nodes.size(); ++i)
+            if (!isChild[i]) roots.push_back(static_cast<int>(i));
+    }
+
+    std::vector<int> visits(model.nodes.size(), 0);
+    std::function<void(int, const glm::mat4&, int)> visit = [&](int ni, const glm::mat4& parent,
+                                                                 int depth) {
+        if (ni < 0 || ni >= static_cast<int>(model.nodes.size()))
+            ctx.Fail("scene graph", "reference to node " + std::to_string(ni) +
+                                        ", which does not exist");
+        if (depth > 256 || ++visits[ni] > 1)
+            ctx.Fail(NodeLabel(model, ni), "node appears twice in the hierarchy (cycle or "
+                                           "shared child)");
+        const auto& node = model.nodes[ni];
+        glm::mat4 world = parent * LocalTransform(node);
+        if (!Finite(world)) ctx.Fail(NodeLabel(model, ni), "transform has NaN or infinity");
+        if (node.mesh >= 0) {
+            if (node.mesh >= static_cast<int>(model.meshes.size()))
+                ctx.Fail(NodeLabel(model, ni), "mesh " + std::to_string(node.mesh) +
+                                                   " does not exist");
+            if (std::abs(glm::determinant(glm::mat3(world))) < 1e-20f)
+                ctx.Fail(NodeLabel(model, ni), "transform is singular (zero scale)");
+            glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(world)));
+            bool flips = glm::determinant(glm::mat3(world)) < 0.0f;
+            const auto& mesh = model.meshes[node.mesh];
+            for (size_t pi = 0; pi < mesh.primitives.size(); ++pi) {
+                const auto& prim = mesh.primitives[pi];
+                std::string where = NodeLabel(model, ni) + " mesh " + std::to_string(node.mesh) +
+                                    " primitive " + std::to_string(pi);
+                auto pos = prim.attributes.find("POSITION");
+                if (pos == prim.attributes.end()) ctx.Fail(where, "has no POSITION attribute");
+                Primitive out;
+                out.node = node.name.empty() ? "node" + std::to_string(ni) : node.name;
+                out.nodeIndex = ni;
+                out.mesh = node.mesh;
+                out.primitive = static_cast<int>(pi);
+                if (prim.material >= static_cast<int>(model.materials.size()))
+                    ctx.Fail(where, "material " + std::to_string(prim.material) +
+                                        " does not exist");
+                out.material = prim.material >= 0 ? static_cast<uint32_t>(prim.material)
+                                                  : defaultMaterial;
+                out.positions = ReadVec3(ctx, where, pos->second, "POSITION");
+                std::vector<uint32_t> seq;
+                if (prim.indices >= 0) {
+                    seq = ReadIndices(ctx, where, prim.indices);
+                } else {
+                    seq.resize(out.positions.size());
+                    for (size_t i = 0; i < seq.size(); ++i) seq[i] = static_cast<uint32_t>(i);
+                }
+                out.indices = ToTriangleList(ctx, where, prim.mode, seq);
+                for (uint32_t idx : out.indices)
+                    if (idx >= out.positions.size())
+                        ctx.Fail(where, "index " + std::to_string(idx) + " is past the " +
+                                            std::to_string(out.positions.size()) + " vertices");
+                for (auto& p : out.positions) {
+                    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+                        ctx.Fail(where, "POSITION has NaN or infinity");
+                    p = glm::vec3(world * glm::vec4(p, 1.0f));
+                }
+                if (flips)
+                    for (size_t t = 0; t + 2 < out.indices.size(); t += 3)
+                        std::swap(out.indices[t + 1], out.indices[t + 2]);
+                auto nrm = prim.attributes.find("NORMAL");
+                if (nrm != prim.attributes.end()) {
+                    out.normals = ReadVec3(ctx, where, nrm->second, "NORMAL");
+                    if (out.normals.size() != out.positions.size())
+                        ctx.Fail(where, "NORMAL and POSITION counts differ");
+                    for (auto& n : out.normals) {
+                        glm::vec3 w = normalMatrix * n;
+                        float len = glm::length(w);
+                        if (!std::isfinite(len) || len == 0.0f)
+                            ctx.Fail(where, "NORMAL has a zero, NaN or infinite vector");
+                        n = w / len;
+                    }
+                } else {
+                    ComputeVertexNormals(out);
+                }
+                scene.primitives.push_back(std::move(out));
+            }
+        }
+        for (int c : node.children) visit(c, world, depth + 1);
+    };
+    for (int r : roots) visit(r, glm::mat4(1.0f), 0);
+
+    if (scene.TriangleCount() == 0)
+        throw Error(path + ": the scene has no triangles to light");
+    return scene;
+}
+
+}  // namespace penumbra

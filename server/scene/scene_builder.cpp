@@ -1,0 +1,204 @@
+// Quad/box geometry with flat normals, and its glTF serialisation through tinygltf.
+#include "scene/scene_builder.h"
+
+#include <tiny_gltf.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "base/check.h"
+
+namespace penumbra {
+
+uint32_t SceneBuilder::AddMaterial(const std::string& name, glm::vec3 albedo, glm::vec3 emission) {
+    materials_.push_back({name, albedo, emission});
+    return static_cast<uint32_t>(materials_.size() - 1);
+}
+
+void SceneBuilder::AddQuad(const std::string& node, uint32_t material, glm::vec3 p0,
+                           glm::vec3 p1, glm::vec3 p2, glm::vec3 p3, glm::vec3 towards) {
+    if (std::find(nodeOrder_.begin(), nodeOrder_.end(), node) == nodeOrder_.end())
+        nodeOrder_.push_back(node);
+    Part& part = nodes_[node][material];
+    glm::vec3 n = glm::normalize(glm::cross(p1 - p0, p3 - p0));
+    glm::vec3 centre = 0.25f * (p0 + p1 + p2 + p3);
+    bool flip = glm::dot(n, towards - centre) < 0.0f;
+    if (flip) {
+        std::swap(p1, p3);
+        n = -n;
+    }
+    uint32_t base = static_cast<uint32_t>(part.positions.size());
+    for (const auto& p : {p0, p1, p2, p3}) {
+        part.positions.push_back(p);
+        part.normals.push_back(n);
+    }
+    part.indices.insert(part.indices.end(),
+                        {base, base + 1, base + 2, base, base + 2, base + 3});
+}
+
+void SceneBuilder::AddTiledQuad(const std::string& node, uint32_t material, glm::vec3 origin,
+                                glm::vec3 u, glm::vec3 v, int nu, int nv, glm::vec3 towards) {
+    glm::vec3 du = u / float(nu), dv = v / float(nv);
+    glm::vec3 normalSide = towards - (origin + 0.5f * (u + v));
+    for (int j = 0; j < nv; ++j)
+        for (int i = 0; i < nu; ++i) {
+            glm::vec3 p = origin + float(i) * du + float(j) * dv;
+            glm::vec3 c = p + 0.5f * (du + dv);
+            AddQuad(node, material, p, p + du, p + du + dv, p + dv, c + normalSide);
+        }
+}
+
+void SceneBuilder::AddBox(const std::string& node, uint32_t material, glm::vec3 centre,
+                          glm::vec3 size, float yawDegrees, bool bottom) {
+    glm::mat4 rot = glm::rotate(glm::mat4(1.0f), glm::radians(yawDegrees), glm::vec3(0, 1, 0));
+    glm::vec3 h = 0.5f * size;
+    auto corner = [&](float sx, float sy, float sz) {
+        return centre + glm::vec3(rot * glm::vec4(sx * h.x, sy * h.y, sz * h.z, 0.0f));
+    };
+    // Each face: 4 corners and a point outside it.
+    for (int axis = 0; axis < 3; ++axis)
+        for (int sign = -1; sign <= 1; sign += 2) {
+            if (axis == 1 && sign < 0 && !bottom) continue;
+            glm::vec3 c[4];
+            const float a[4][2] = {{-1, -1}, {1, -1}, {1, 1}, {-1, 1}};
+            for (int k = 0; k < 4; ++k) {
+                float s[3];
+                s[axis] = float(sign);
+                s[(axis + 1) % 3] = a[k][0];
+                s[(axis + 2) % 3] = a[k][1];
+                c[k] = corner(s[0], s[1], s[2]);
+            }
+            glm::vec3 faceCentre = 0.25f * (c[0] + c[1] + c[2] + c[3]);
+            AddQuad(node, material, c[0], c[1], c[2], c[3], 2.0f * faceCentre - centre);
+        }
+}
+
+void SceneBuilder::AddBoxWithBottom(const std::string& node, uint32_t material,
+                                    uint32_t bottomMaterial, glm::vec3 centre, glm::vec3 size) {
+    AddBox(node, material, centre, size, 0.0f, false);
+    glm::vec3 h = 0.5f * size;
+    float y = centre.y - h.y;
+    AddQuad(node, bottomMaterial, {centre.x - h.x, y, centre.z - h.z},
+            {centre.x + h.x, y, centre.z - h.z}, {centre.x + h.x, y, centre.z + h.z},
+            {centre.x - h.x, y, centre.z + h.z}, {centre.x, y - 1.0f, centre.z});
+}
+
+Scene SceneBuilder::Build() const {
+    Scene scene;
+    scene.source = "(built in memory)";
+    scene.materials = materials_;
+    int nodeIndex = 0;
+    for (const auto& name : nodeOrder_) {
+        int primIndex = 0;
+        for (const auto& [material, part] : nodes_.at(name)) {
+            Primitive p;
+            p.node = name;
+            p.nodeIndex = nodeIndex;
+            p.mesh = nodeIndex;
+            p.primitive = primIndex++;
+            p.material = material;
+            p.positions = part.positions;
+            p.normals = part.normals;
+            p.indices = part.indices;
+            scene.primitives.push_back(std::move(p));
+        }
+        ++nodeIndex;
+    }
+    return scene;
+}
+
+void SceneBuilder::WriteGltf(const std::string& path) const {
+    tinygltf::Model model;
+    model.asset.version = "2.0";
+    model.asset.generator = "penumbra make_scenes";
+    bool usesStrength = false;
+    for (const auto& m : materials_) {
+        tinygltf::Material mat;
+        mat.name = m.name;
+        mat.pbrMetallicRoughness.baseColorFactor = {m.albedo.x, m.albedo.y, m.albedo.z, 1.0};
+        mat.pbrMetallicRoughness.metallicFactor = 0.0;
+        mat.pbrMetallicRoughness.roughnessFactor = 1.0;
+        float peak = std::max(m.emission.x, std::max(m.emission.y, m.emission.z));
+        if (peak > 0.0f) {
+            // emissiveFactor is clamped to [0,1] by the spec: the rest goes to the strength.
+            glm::vec3 factor = m.emission / std::max(peak, 1.0f);
+            mat.emissiveFactor = {factor.x, factor.y, factor.z};
+            if (peak > 1.0f) {
+                tinygltf::Value::Object strength;
+                strength["emissiveStrength"] = tinygltf::Value(double(peak));
+                mat.extensions["KHR_materials_emissive_strength"] = tinygltf::Value(strength);
+                usesStrength = true;
+            }
+        }
+        model.materials.push_back(mat);
+    }
+    if (usesStrength) model.extensionsUsed.push_back("KHR_materials_emissive_strength");
+
+    tinygltf::Buffer buffer;
+    auto addView = [&](const void* data, size_t bytes, int target) {
+        tinygltf::BufferView view;
+        view.buffer = 0;
+        view.byteOffset = buffer.data.size();
+        view.byteLength = bytes;
+        view.target = target;
+        buffer.data.resize(buffer.data.size() + ((bytes + 3) & ~size_t(3)));
+        std::memcpy(buffer.data.data() + view.byteOffset, data, bytes);
+        model.bufferViews.push_back(view);
+        return static_cast<int>(model.bufferViews.size() - 1);
+    };
+    tinygltf::Scene scene;
+    for (const auto& name : nodeOrder_) {
+        tinygltf::Mesh mesh;
+        mesh.name = name;
+        for (const auto& [material, part] : nodes_.at(name)) {
+            tinygltf::Primitive prim;
+            prim.material = static_cast<int>(material);
+            prim.mode = TINYGLTF_MODE_TRIANGLES;
+            glm::vec3 lo(1e30f), hi(-1e30f);
+            for (const auto& p : part.positions) lo = glm::min(lo, p), hi = glm::max(hi, p);
+            tinygltf::Accessor pos;
+            pos.bufferView = addView(part.positions.data(), part.positions.size() * 12,
+                                     TINYGLTF_TARGET_ARRAY_BUFFER);
+            pos.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+            pos.type = TINYGLTF_TYPE_VEC3;
+            pos.count = part.positions.size();
+            pos.minValues = {lo.x, lo.y, lo.z};
+            pos.maxValues = {hi.x, hi.y, hi.z};
+            model.accessors.push_back(pos);
+            prim.attributes["POSITION"] = static_cast<int>(model.accessors.size() - 1);
+            tinygltf::Accessor nrm = pos;
+            nrm.bufferView = addView(part.normals.data(), part.normals.size() * 12,
+                                     TINYGLTF_TARGET_ARRAY_BUFFER);
+            nrm.minValues.clear();
+            nrm.maxValues.clear();
+            model.accessors.push_back(nrm);
+            prim.attributes["NORMAL"] = static_cast<int>(model.accessors.size() - 1);
+            tinygltf::Accessor idx;
+            idx.bufferView = addView(part.indices.data(), part.indices.size() * 4,
+                                     TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+            idx.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+            idx.type = TINYGLTF_TYPE_SCALAR;
+            idx.count = part.indices.size();
+            model.accessors.push_back(idx);
+            prim.indices = static_cast<int>(model.accessors.size() - 1);
+            mesh.primitives.push_back(prim);
+        }
+        model.meshes.push_back(mesh);
+        tinygltf::Node node;
+        node.name = name;
+        node.mesh = static_cast<int>(model.meshes.size() - 1);
+        model.nodes.push_back(node);
+        scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
+    }
+    model.buffers.push_back(buffer);
+    model.scenes.push_back(scene);
+    model.defaultScene = 0;
+    bool binary = path.size() >= 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
+    tinygltf::TinyGLTF io;
+    if (!io.WriteGltfSceneToFile(&model, path, true, true, !binary, binary))
+        throw Error(path + ": cannot write glTF");
+}
+
+}  // namespace penumbra

@@ -1,0 +1,45 @@
+// Builds scenes from quads and boxes, in memory (for tests) or as glTF files (for the
+// bundled scenes). Every object is one glTF node; each material one primitive of it.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "scene/scene.h"
+
+namespace penumbra {
+
+class SceneBuilder {
+  public:
+    uint32_t AddMaterial(const std::string& name, glm::vec3 albedo, glm::vec3 emission = {});
+
+    // A planar quad p0..p3 whose normal points to the side of `towards`.
+    void AddQuad(const std::string& node, uint32_t material, glm::vec3 p0, glm::vec3 p1,
+                 glm::vec3 p2, glm::vec3 p3, glm::vec3 towards);
+    // An axis-aligned quad grid of nx × ny tiles (more input triangles, same surface).
+    void AddTiledQuad(const std::string& node, uint32_t material, glm::vec3 origin, glm::vec3 u,
+                      glm::vec3 v, int nu, int nv, glm::vec3 towards);
+    // A closed box (6 outward faces) centred at `centre`, rotated by `yawDegrees` about +y.
+    // `bottom == false` leaves out the face at −y (a box standing on a floor).
+    void AddBox(const std::string& node, uint32_t material, glm::vec3 centre, glm::vec3 size,
+                float yawDegrees = 0.0f, bool bottom = true);
+    // Box with a different material on its −y face (a light fixture).
+    void AddBoxWithBottom(const std::string& node, uint32_t material, uint32_t bottomMaterial,
+                          glm::vec3 centre, glm::vec3 size);
+
+    Scene Build() const;
+    // Writes .gltf (buffers embedded as base64) or .glb. Throws penumbra::Error.
+    void WriteGltf(const std::string& path) const;
+
+  private:
+    struct Part {
+        std::vector<glm::vec3> positions, normals;
+        std::vector<uint32_t> indices;
+    };
+    std::vector<Material> materials_;
+    std::vector<std::string> nodeOrder_;
+    std::map<std::string, std::map<uint32_t, Part>> nodes_;
+};
+
+}  // namespace penumbra

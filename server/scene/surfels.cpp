@@ -1,0 +1,70 @@
+// Longest-edge bisection refinement of a Scene into surfels with areas and normals.
+#include "scene/surfels.h"
+
+#include <unordered_map>
+
+#include "base/check.h"
+
+namespace penumbra {
+
+Surfels RefineScene(const Scene& scene, float elementSize) {
+    if (!(elementSize > 0.0f)) throw Error("element size must be a positive number of metres");
+    Surfels out;
+    const float maxEdge2 = elementSize * elementSize;
+    for (const auto& prim : scene.primitives) {
+        const uint32_t base = static_cast<uint32_t>(out.positions.size());
+        out.firstSurfel.push_back(base);
+        for (size_t i = 0; i < prim.positions.size(); ++i) {
+            out.positions.push_back(prim.positions[i]);
+            out.normals.push_back(prim.normals[i]);
+            out.areas.push_back(0.0f);
+            out.materials.push_back(prim.material);
+        }
+        // Edge midpoint cache keyed by the sorted surfel pair.
+        std::unordered_map<uint64_t, uint32_t> midpoints;
+        auto midpoint = [&](uint32_t a, uint32_t b) {
+            uint64_t key = a < b ? (uint64_t(a) << 32 | b) : (uint64_t(b) << 32 | a);
+            auto it = midpoints.find(key);
+            if (it != midpoints.end()) return it->second;
+            uint32_t m = static_cast<uint32_t>(out.positions.size());
+            out.positions.push_back(0.5f * (out.positions[a] + out.positions[b]));
+            glm::vec3 n = out.normals[a] + out.normals[b];
+            float len = glm::length(n);
+            out.normals.push_back(len > 1e-6f ? n / len : out.normals[a]);
+            out.areas.push_back(0.0f);
+            out.materials.push_back(prim.material);
+            midpoints.emplace(key, m);
+            return m;
+        };
+        std::vector<glm::uvec3> stack;
+        for (size_t t = 0; t + 2 < prim.indices.size(); t += 3)
+            stack.emplace_back(base + prim.indices[t], base + prim.indices[t + 1],
+                               base + prim.indices[t + 2]);
+        while (!stack.empty()) {
+            glm::uvec3 tri = stack.back();
+            stack.pop_back();
+            const glm::vec3 p[3] = {out.positions[tri[0]], out.positions[tri[1]],
+                                    out.positions[tri[2]]};
+            float e[3];
+            for (int k = 0; k < 3; ++k) {
+                glm::vec3 d = p[(k + 1) % 3] - p[k];
+                e[k] = glm::dot(d, d);
+            }
+            int longest = e[0] >= e[1] ? (e[0] >= e[2] ? 0 : 2) : (e[1] >= e[2] ? 1 : 2);
+            if (e[longest] > maxEdge2) {
+                // Split edge (longest, longest+1) at its midpoint: two triangles.
+                uint32_t a = tri[longest], b = tri[(longest + 1) % 3], c = tri[(longest + 2) % 3];
+                uint32_t m = midpoint(a, b);
+                stack.emplace_back(a, m, c);
+                stack.emplace_back(m, b, c);
+                continue;
+            }
+            float area = 0.5f * glm::length(glm::cross(p[1] - p[0], p[2] - p[0]));
+            for (int k = 0; k < 3; ++k) out.areas[tri[k]] += area / 3.0f;
+            out.refinedTriangles.insert(out.refinedTriangles.end(), {tri[0], tri[1], tri[2]});
+        }
+    }
+    return out;
+}
+
+}  // namespace penumbra

@@ -1,0 +1,30 @@
+// Surface samples: every triangle is refined until no edge exceeds the element size;
+// the refined mesh's vertices are the surfels (DESIGN.md, Scene model).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "scene/scene.h"
+
+namespace penumbra {
+
+struct Surfels {
+    std::vector<glm::vec3> positions;
+    std::vector<glm::vec3> normals;  // unit
+    std::vector<float> areas;        // one third of the adjacent refined triangles' area
+    std::vector<uint32_t> materials;
+    // Primitive p's input vertex i is surfel firstSurfel[p] + i (input vertices come first).
+    std::vector<uint32_t> firstSurfel;
+    std::vector<uint32_t> refinedTriangles;  // triangle list over surfel indices
+
+    size_t size() const { return positions.size(); }
+};
+
+// Refines by longest-edge bisection until every edge is at most `elementSize`.
+// Midpoints of shared edges are shared within a primitive, so its surface stays connected.
+Surfels RefineScene(const Scene& scene, float elementSize);
+
+}  // namespace penumbra

@@ -1,0 +1,40 @@
+// The antiradiance solver (Dachsbacher et al. 2007) behind the Solver interface:
+// builds the model once, then iterates on the chosen device back end.
+#pragma once
+
+#include <memory>
+
+#include "solver/antiradiance/cpu_passes.h"
+#include "solver/antiradiance/model.h"
+#include "solver/solver.h"
+
+namespace penumbra {
+
+class VulkanAntiradiance;
+
+class AntiradianceSolver : public Solver {
+  public:
+    AntiradianceSolver(const Scene& scene, const SolverSettings& settings,
+                       const ProgressFn& progress);
+    ~AntiradianceSolver() override;
+
+    void Iterate(int n) override;
+    std::vector<glm::vec3> SurfelIrradiance() override;
+    const Surfels& GetSurfels() const override { return model_.surfels; }
+    SolverStats Stats() const override;
+
+    const AntiradianceModel& Model() const { return model_; }
+
+  private:
+    SolverSettings settings_;
+    ProgressFn progress_;
+    AntiradianceModel model_;
+    std::unique_ptr<cpu::CpuBackend> cpu_;
+    std::unique_ptr<VulkanAntiradiance> gpu_;
+    std::string deviceName_;
+    int iterations_ = 0;
+    double msTotal_ = 0.0;
+    double setupSeconds_ = 0.0;
+};
+
+}  // namespace penumbra

@@ -1,0 +1,44 @@
+// The antiradiance passes in C++ on the same table layout as the shaders: the CPU twin
+// of every GPU pass (for tests) and the fused fast path of `--device cpu`.
+// Tables are float[node][bin][rgb]: I_ex (exitant intensity), L_in (incident radiance).
+#pragma once
+
+#include <vector>
+
+#include "solver/antiradiance/model.h"
+
+namespace penumbra::cpu {
+
+// I_ex of the leaves = emitted intensity a·cos·L_e (front bins), 0 behind; pulled up.
+void InitEmission(const AntiradianceModel& m, float* iex);
+
+// Global pass (U): L_in[r] = Σ_links F · w_σ · I_ex[s][bin] for every node r.
+void GlobalPass(const AntiradianceModel& m, const float* iex, float* lin);
+// Push: L_in of every node += L_in of its parent, in preorder (parents first).
+void PushPass(const AntiradianceModel& m, float* lin);
+// Local pass at the leaves (K: Eq. 18, J: Eq. 19). Hemispheres not in `mode` keep
+// `iexOld`. Writes per-leaf irradiance (rgb) to `irradiance`.
+void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld, float* iexNew,
+               float* irradiance, LocalMode mode);
+// Pull: interior I_ex = Σ children, bottom up (reverse preorder).
+void PullPass(const AntiradianceModel& m, float* iex);
+
+// The CPU back end: ping-pong I_ex, L_in only for clusters, global + local fused per leaf.
+class CpuBackend {
+  public:
+    explicit CpuBackend(const AntiradianceModel& model);
+    void Iterate(LocalMode mode);
+    const std::vector<float>& LeafIrradiance() const { return irradiance_; }
+    size_t TableBytes() const;
+    // Milliseconds spent in each stage since construction.
+    double msGlobal = 0, msPush = 0, msLocal = 0, msPull = 0;
+
+  private:
+    const AntiradianceModel& m_;
+    std::vector<float> iex_[2];
+    std::vector<float> lin_;  // rows of interior nodes only are used
+    std::vector<float> irradiance_;
+    int cur_ = 0;
+};
+
+}  // namespace penumbra::cpu

@@ -1,0 +1,74 @@
+// Builds the antiradiance model: refine, cluster, bin, link, and per-leaf attributes.
+#include "solver/antiradiance/model.h"
+
+#include <cmath>
+#include <numbers>
+
+#include "base/check.h"
+
+namespace penumbra {
+
+AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSettings& settings,
+                                         const ProgressFn& progress) {
+    AntiradianceModel model;
+    model.dirs = Directions(settings.bins);
+    float h = settings.elementSize > 0.0f ? settings.elementSize
+                                          : scene.Diameter() * kDefaultElementFraction;
+    if (!(h > 0.0f) || !std::isfinite(h))
+        throw Error("element size must be a positive number of metres");
+    model.elementSize = h;
+    if (progress) progress("refining", 0.0);
+    model.surfels = RefineScene(scene, h);
+    if (progress) progress("clustering", 0.0);
+    model.hierarchy = BuildHierarchy(model.surfels);
+
+    LinkSettings ls;
+    ls.oracle = settings.oracle;
+    ls.threads = settings.threads;
+    model.links = BuildLinks(model.hierarchy, model.dirs, ls, [&](double f) {
+        if (progress) progress("linking", f);
+    });
+
+    const auto& nodes = model.hierarchy.nodes;
+    model.leftChild.assign(nodes.size(), kNoParent);
+    model.rightChild.assign(nodes.size(), kNoParent);
+    for (uint32_t i = 0; i < nodes.size(); ++i) {
+        if (nodes[i].IsLeaf()) continue;
+        model.leftChild[i] = i + 1;
+        model.rightChild[i] = nodes[i + 1].end;
+    }
+
+    const float pi = std::numbers::pi_v<float>;
+    const float omega = model.dirs.BinSolidAngle();
+    model.leaves.reserve(model.hierarchy.leaves.size());
+    for (uint32_t node : model.hierarchy.leaves) {
+        const HierarchyNode& n = nodes[node];
+        uint32_t s = n.surfel;
+        const Material& mat = scene.materials[model.surfels.materials[s]];
+        LeafAttributes leaf{};
+        leaf.normal = model.surfels.normals[s];
+        leaf.area = model.surfels.areas[s];
+        leaf.albedo = mat.albedo;
+        leaf.emission = mat.emission;
+        double in = 0.0, out = 0.0;
+        for (const auto& d : model.dirs.All()) {
+            float c = glm::dot(leaf.normal, d);
+            (c > 0.0f ? out : in) += omega * std::abs(c);
+        }
+        leaf.cosNormIn = in > 0.0 ? static_cast<float>(pi / in) : 0.0f;
+        leaf.cosNormOut = out > 0.0 ? static_cast<float>(pi / out) : 0.0f;
+        leaf.node = node;
+        leaf.parent = n.parent;
+        leaf.surfel = s;
+        model.leaves.push_back(leaf);
+    }
+    return model;
+}
+
+LocalMode ModeOfIteration(const SolverSettings& settings, int i) {
+    if (settings.scheme == Scheme::kSymmetric) return kBoth;
+    // Asymmetric (Eqs. 13, 14): one radiance step, then antiradiance steps with L frozen.
+    return i % (1 + settings.antiradianceSteps) == 0 ? kReflect : kAntiradiance;
+}
+
+}  // namespace penumbra

@@ -1,0 +1,313 @@
+// Upload of the model, descriptor sets for both ping-pong parities, and recording of the
+// global → push → local → pull sequence with a barrier between dependent dispatches.
+#include "solver/antiradiance/vulkan_passes.h"
+
+#include <algorithm>
+#include <numeric>
+
+#include "base/check.h"
+#include "gpu/buffer.h"
+#include "gpu/context.h"
+#include "gpu/pipeline.h"
+#include "shaders/global_spv.h"
+#include "shaders/local_spv.h"
+#include "shaders/pull_spv.h"
+#include "shaders/push_spv.h"
+#include "solver/antiradiance/cpu_passes.h"
+
+namespace penumbra {
+namespace {
+
+constexpr uint32_t kWorkgroup = 64;
+constexpr uint32_t kTimestamps = 5;  // start, after global, push, local, pull
+
+uint32_t Groups(uint64_t invocations) {
+    return static_cast<uint32_t>((invocations + kWorkgroup - 1) / kWorkgroup);
+}
+
+template <typename T>
+std::span<const uint32_t> Words(const T& array) {
+    return {array, sizeof(array) / sizeof(uint32_t)};
+}
+
+struct LocalPush {
+    uint32_t count;
+    uint32_t mode;
+    float binSolidAngle;
+};
+struct RangePush {
+    uint32_t first;
+    uint32_t count;
+};
+
+}  // namespace
+
+struct VulkanAntiradiance::Impl {
+    const AntiradianceModel& m;
+    gpu::Context ctx;
+    // Model data (read only).
+    gpu::Buffer linkOffsets, links, neighbourOffsets, neighbours, receivers, leaves, dirs,
+        parents, children, nodesByDepth;
+    // Tables.
+    gpu::Buffer iex0, iex1, lin, irradiance;
+    gpu::Pipeline global, push, local, pull;
+    vk::raii::DescriptorSet globalSet[2]{nullptr, nullptr}, localSet[2]{nullptr, nullptr},
+        pullSet[2]{nullptr, nullptr}, pushSet{nullptr};
+    vk::raii::QueryPool queries{nullptr};
+    // Depth ranges into nodesByDepth (push uses all nodes, pull only clusters).
+    std::vector<RangePush> pushLevels, pullLevels;
+    int cur = 0;
+    double msPass[4] = {0, 0, 0, 0};
+
+    Impl(const AntiradianceModel& model, bool lavapipe, bool validation)
+        : m(model),
+          ctx(lavapipe ? gpu::DeviceKind::kLavapipe : gpu::DeviceKind::kRealGpu, validation),
+          linkOffsets(ctx, m.links.offsets.size() * 4),
+          links(ctx, m.links.links.size() * sizeof(Link)),
+          neighbourOffsets(ctx, Directions::kLevels * (m.Bins() + 1) * 4),
+          neighbours(ctx, NeighbourCount() * sizeof(BinWeight)),
+          receivers(ctx, m.Nodes() * 4),
+          leaves(ctx, m.leaves.size() * sizeof(LeafAttributes)),
+          dirs(ctx, m.Bins() * 16),
+          parents(ctx, m.Nodes() * 4),
+          children(ctx, m.Nodes() * 8),
+          nodesByDepth(ctx, m.Nodes() * 4 * 2),
+          iex0(ctx, m.TableFloats() * 4),
+          iex1(ctx, m.TableFloats() * 4),
+          lin(ctx, m.TableFloats() * 4),
+          irradiance(ctx, m.leaves.size() * 12),
+          global(ctx, Words(kSpirv_global), 7, Spec(), sizeof(uint32_t)),
+          push(ctx, Words(kSpirv_push), 3, Spec(), sizeof(RangePush)),
+          local(ctx, Words(kSpirv_local), 6, Spec(), sizeof(LocalPush)),
+          pull(ctx, Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
+        Upload();
+        const gpu::Buffer* g0[] = {&linkOffsets, &links, &neighbourOffsets, &neighbours,
+                                   &iex0, &lin, &receivers};
+        const gpu::Buffer* g1[] = {&linkOffsets, &links, &neighbourOffsets, &neighbours,
+                                   &iex1, &lin, &receivers};
+        globalSet[0] = global.MakeSet(g0);
+        globalSet[1] = global.MakeSet(g1);
+        const gpu::Buffer* l0[] = {&leaves, &dirs, &lin, &iex0, &iex1, &irradiance};
+        const gpu::Buffer* l1[] = {&leaves, &dirs, &lin, &iex1, &iex0, &irradiance};
+        localSet[0] = local.MakeSet(l0);
+        localSet[1] = local.MakeSet(l1);
+        const gpu::Buffer* p0[] = {&iex0, &children, &nodesByDepth};
+        const gpu::Buffer* p1[] = {&iex1, &children, &nodesByDepth};
+        pullSet[0] = pull.MakeSet(p0);
+        pullSet[1] = pull.MakeSet(p1);
+        const gpu::Buffer* ps[] = {&lin, &parents, &nodesByDepth};
+        pushSet = push.MakeSet(ps);
+        if (ctx.TimestampPeriodNs() > 0.0f)
+            queries = vk::raii::QueryPool(
+                ctx.Device(),
+                vk::QueryPoolCreateInfo({}, vk::QueryType::eTimestamp, kTimestamps));
+    }
+
+    std::vector<uint32_t> Spec() const { return {kWorkgroup, static_cast<uint32_t>(m.Bins())}; }
+
+    size_t NeighbourCount() const {
+        size_t n = 0;
+        for (int k = 0; k < Directions::kLevels; ++k) n += m.dirs.Weights(k).size();
+        return n;
+    }
+
+    void Upload() {
+        linkOffsets.Upload(m.links.offsets);
+        links.Upload(m.links.links);
+        // Neighbour tables of all levels, flattened with absolute offsets.
+        std::vector<uint32_t> offs;
+        std::vector<BinWeight> all;
+        for (int k = 0; k < Directions::kLevels; ++k) {
+            uint32_t base = static_cast<uint32_t>(all.size());
+            for (uint32_t o : m.dirs.Offsets(k)) offs.push_back(base + o);
+            const auto& w = m.dirs.Weights(k);
+            all.insert(all.end(), w.begin(), w.end());
+        }
+        neighbourOffsets.Upload(offs);
+        neighbours.Upload(all);
+        // Receivers with the most links first: neighbouring lanes do similar work.
+        std::vector<uint32_t> order(m.Nodes());
+        std::iota(order.begin(), order.end(), 0u);
+        const auto& lo = m.links.offsets;
+        std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+            return lo[a + 1] - lo[a] > lo[b + 1] - lo[b];
+        });
+        receivers.Upload(order);
+        leaves.Upload(m.leaves);
+        std::vector<glm::vec4> d;
+        for (const auto& v : m.dirs.All()) d.emplace_back(v, 0.0f);
+        dirs.Upload(d);
+        std::vector<uint32_t> par(m.Nodes());
+        std::vector<glm::uvec2> ch(m.Nodes());
+        for (size_t i = 0; i < m.Nodes(); ++i) {
+            par[i] = m.hierarchy.nodes[i].parent == kNoParent ? 0 : m.hierarchy.nodes[i].parent;
+            ch[i] = glm::uvec2(m.leftChild[i] == kNoParent ? 0 : m.leftChild[i],
+                               m.rightChild[i] == kNoParent ? 0 : m.rightChild[i]);
+        }
+        parents.Upload(par);
+        children.Upload(ch);
+        // Push: every node below the root, depth by depth. Pull: clusters, deepest first.
+        std::vector<uint32_t> flat;
+        const auto& byDepth = m.hierarchy.byDepth;
+        for (size_t d = 1; d < byDepth.size(); ++d) {
+            pushLevels.push_back({static_cast<uint32_t>(flat.size()),
+                                  static_cast<uint32_t>(byDepth[d].size())});
+            flat.insert(flat.end(), byDepth[d].begin(), byDepth[d].end());
+        }
+        for (size_t d = byDepth.size(); d-- > 0;) {
+            RangePush range{static_cast<uint32_t>(flat.size()), 0};
+            for (uint32_t n : byDepth[d])
+                if (!m.hierarchy.nodes[n].IsLeaf()) flat.push_back(n), range.count++;
+            if (range.count) pullLevels.push_back(range);
+        }
+        nodesByDepth.Upload(flat);
+        // Initial exitant intensity: the emitters' (CPU twin computes it once).
+        std::vector<float> init(m.TableFloats());
+        cpu::InitEmission(m, init.data());
+        iex0.Upload(init);
+        iex1.Upload(init);
+    }
+
+    void Stamp(const vk::raii::CommandBuffer& cb, uint32_t i) {
+        if (*queries) cb.writeTimestamp(vk::PipelineStageFlagBits::eComputeShader, *queries, i);
+    }
+
+    void RecordGlobal(const vk::raii::CommandBuffer& cb) {
+        cb.bindPipeline(vk::PipelineBindPoint::eCompute, global.Handle());
+        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, global.Layout(), 0,
+                              {*globalSet[cur]}, {});
+        uint32_t count = static_cast<uint32_t>(m.Nodes());
+        cb.pushConstants<uint32_t>(global.Layout(), vk::ShaderStageFlagBits::eCompute, 0, count);
+        cb.dispatch(Groups(count), 1, 1);
+    }
+    void RecordPush(const vk::raii::CommandBuffer& cb) {
+        cb.bindPipeline(vk::PipelineBindPoint::eCompute, push.Handle());
+        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, push.Layout(), 0, {*pushSet}, {});
+        for (const auto& level : pushLevels) {
+            cb.pushConstants<RangePush>(push.Layout(), vk::ShaderStageFlagBits::eCompute, 0, level);
+            cb.dispatch(Groups(uint64_t(level.count) * m.Bins() * 3), 1, 1);
+            // Each depth reads the rows the previous depth wrote.
+            gpu::ComputeBarrier(cb);
+        }
+    }
+    void RecordLocal(const vk::raii::CommandBuffer& cb, LocalMode mode) {
+        cb.bindPipeline(vk::PipelineBindPoint::eCompute, local.Handle());
+        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, local.Layout(), 0,
+                              {*localSet[cur]}, {});
+        LocalPush pc{static_cast<uint32_t>(m.leaves.size()), mode, m.dirs.BinSolidAngle()};
+        cb.pushConstants<LocalPush>(local.Layout(), vk::ShaderStageFlagBits::eCompute, 0, pc);
+        cb.dispatch(Groups(pc.count), 1, 1);
+    }
+    // Pulls into the table the local pass just wrote (`target` parity).
+    void RecordPull(const vk::raii::CommandBuffer& cb, int target) {
+        cb.bindPipeline(vk::PipelineBindPoint::eCompute, pull.Handle());
+        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, pull.Layout(), 0,
+                              {*pullSet[target]}, {});
+        for (const auto& level : pullLevels) {
+            cb.pushConstants<RangePush>(pull.Layout(), vk::ShaderStageFlagBits::eCompute, 0, level);
+            cb.dispatch(Groups(uint64_t(level.count) * m.Bins() * 3), 1, 1);
+            // The next (shallower) depth sums the rows this one wrote.
+            gpu::ComputeBarrier(cb);
+        }
+    }
+
+    void Iterate(LocalMode mode) {
+        vk::raii::CommandBuffer cb = ctx.AllocateCommandBuffer();
+        cb.begin({vk::CommandBufferUsageFlagBits::eOneTimeSubmit});
+        if (*queries) cb.resetQueryPool(*queries, 0, kTimestamps);
+        Stamp(cb, 0);
+        RecordGlobal(cb);
+        // L_in written by the global pass is read and updated by push.
+        gpu::ComputeBarrier(cb);
+        Stamp(cb, 1);
+        RecordPush(cb);
+        Stamp(cb, 2);
+        RecordLocal(cb, mode);
+        // The local pass's I_ex rows are summed by pull.
+        gpu::ComputeBarrier(cb);
+        Stamp(cb, 3);
+        RecordPull(cb, 1 - cur);
+        Stamp(cb, 4);
+        cb.end();
+        ctx.SubmitAndWait(cb);
+        ReadTimestamps();
+        cur = 1 - cur;
+    }
+
+    void ReadTimestamps() {
+        if (!*queries) return;
+        auto [result, ticks] = queries.getResults<uint64_t>(
+            0, kTimestamps, kTimestamps * sizeof(uint64_t), sizeof(uint64_t),
+            vk::QueryResultFlagBits::e64 | vk::QueryResultFlagBits::eWait);
+        if (result != vk::Result::eSuccess) gpu::ThrowVulkan("vkGetQueryPoolResults", result);
+        double ns = ctx.TimestampPeriodNs();
+        for (int p = 0; p < 4; ++p) msPass[p] += (ticks[p + 1] - ticks[p]) * ns * 1e-6;
+    }
+};
+
+VulkanAntiradiance::VulkanAntiradiance(const AntiradianceModel& model, bool lavapipe,
+                                       bool validation) {
+    try {
+        impl_ = std::make_unique<Impl>(model, lavapipe, validation);
+    } catch (const vk::SystemError& e) {
+        throw Error(std::string("Vulkan back end set-up failed: ") + e.what());
+    }
+}
+
+VulkanAntiradiance::~VulkanAntiradiance() = default;
+
+void VulkanAntiradiance::Iterate(LocalMode mode) { impl_->Iterate(mode); }
+
+void VulkanAntiradiance::Finish() { impl_->ctx.Queue().waitIdle(); }
+
+std::vector<float> VulkanAntiradiance::ReadLeafIrradiance() {
+    return impl_->irradiance.Download<float>();
+}
+
+std::string VulkanAntiradiance::DeviceName() const {
+    return "vulkan:" + impl_->ctx.DeviceName();
+}
+
+std::vector<PassTiming> VulkanAntiradiance::PassTimings() const {
+    return {{"global", impl_->msPass[0]},
+            {"push", impl_->msPass[1]},
+            {"local", impl_->msPass[2]},
+            {"pull", impl_->msPass[3]}};
+}
+
+size_t VulkanAntiradiance::TableBytes() const {
+    return impl_->iex0.Bytes() + impl_->iex1.Bytes() + impl_->lin.Bytes() +
+           impl_->irradiance.Bytes();
+}
+
+std::vector<std::string> VulkanAntiradiance::ValidationMessages() const {
+    return impl_->ctx.ValidationMessages();
+}
+
+void VulkanAntiradiance::RunPass(Pass pass, LocalMode mode) {
+    Impl& s = *impl_;
+    s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+        switch (pass) {
+            case Pass::kGlobal: s.RecordGlobal(cb); break;
+            case Pass::kPush: s.RecordPush(cb); break;
+            case Pass::kLocal: s.RecordLocal(cb, mode); break;
+            case Pass::kPull: s.RecordPull(cb, s.cur); break;
+        }
+    });
+}
+
+std::vector<float> VulkanAntiradiance::ReadIex(bool next) const {
+    const Impl& s = *impl_;
+    return ((s.cur == 0) != next ? s.iex0 : s.iex1).Download<float>();
+}
+
+std::vector<float> VulkanAntiradiance::ReadLin() const { return impl_->lin.Download<float>(); }
+
+void VulkanAntiradiance::WriteIex(const std::vector<float>& iex, bool next) {
+    Impl& s = *impl_;
+    ((s.cur == 0) != next ? s.iex0 : s.iex1).Upload(iex);
+}
+
+void VulkanAntiradiance::WriteLin(const std::vector<float>& lin) { impl_->lin.Upload(lin); }
+
+}  // namespace penumbra

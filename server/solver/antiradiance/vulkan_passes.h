@@ -1,0 +1,46 @@
+// The antiradiance passes as Vulkan compute on server/gpu: tables resident on the
+// device, ping-pong I_ex, one command buffer per iteration with per-pass timestamps.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "solver/antiradiance/model.h"
+#include "solver/solver.h"
+
+namespace penumbra {
+
+namespace gpu {
+class Context;
+}
+
+class VulkanAntiradiance {
+  public:
+    // `lavapipe`: use the CPU Vulkan device even if a GPU exists; otherwise a real GPU.
+    VulkanAntiradiance(const AntiradianceModel& model, bool lavapipe, bool validation);
+    ~VulkanAntiradiance();
+
+    void Iterate(LocalMode mode);
+    void Finish();  // waits for submitted work
+    std::vector<float> ReadLeafIrradiance();
+    std::string DeviceName() const;
+    std::vector<PassTiming> PassTimings() const;
+    size_t TableBytes() const;
+    std::vector<std::string> ValidationMessages() const;
+
+    // Single passes on the current tables, for GPU ≡ CPU twin tests.
+    enum class Pass { kGlobal, kPush, kLocal, kPull };
+    void RunPass(Pass pass, LocalMode mode = kBoth);
+    // Tables as they are now: I_ex (current), L_in, I_ex (next), irradiance.
+    std::vector<float> ReadIex(bool next) const;
+    std::vector<float> ReadLin() const;
+    void WriteIex(const std::vector<float>& iex, bool next);
+    void WriteLin(const std::vector<float>& lin);
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace penumbra

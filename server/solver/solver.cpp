@@ -1,0 +1,39 @@
+// Solver factory and the shared helpers of the solver interface.
+#include "solver/solver.h"
+
+#include "base/check.h"
+#include "solver/antiradiance/antiradiance_solver.h"
+
+namespace penumbra {
+
+std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& settings,
+                                     const ProgressFn& progress) {
+    if (settings.solver == "antiradiance")
+        return std::make_unique<AntiradianceSolver>(scene, settings, progress);
+    throw Error("unknown solver '" + settings.solver + "' (available: antiradiance)");
+}
+
+DeviceChoice ParseDevice(const std::string& name) {
+    if (name == "auto") return DeviceChoice::kAuto;
+    if (name == "gpu") return DeviceChoice::kGpu;
+    if (name == "lavapipe") return DeviceChoice::kLavapipe;
+    if (name == "cpu") return DeviceChoice::kCpu;
+    throw Error("unknown device '" + name + "' (use auto, gpu, lavapipe or cpu)");
+}
+
+Scheme ParseScheme(const std::string& name) {
+    if (name == "symmetric") return Scheme::kSymmetric;
+    if (name == "asymmetric") return Scheme::kAsymmetric;
+    throw Error("unknown scheme '" + name + "' (use symmetric or asymmetric)");
+}
+
+std::vector<glm::vec3> PrimitiveIrradiance(const Surfels& surfels,
+                                           const std::vector<glm::vec3>& surfelIrradiance,
+                                           const Scene& scene, size_t p) {
+    PENUMBRA_CHECK_EQ(surfelIrradiance.size(), surfels.size());
+    size_t count = scene.primitives[p].positions.size();
+    uint32_t first = surfels.firstSurfel[p];
+    return {surfelIrradiance.begin() + first, surfelIrradiance.begin() + first + count};
+}
+
+}  // namespace penumbra

@@ -1,0 +1,84 @@
+// The one small interface every GI solver implements (DESIGN.md): build from a scene and
+// settings, iterate, read per-surfel irradiance, report stats.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "scene/scene.h"
+#include "scene/surfels.h"
+
+namespace penumbra {
+
+enum class Scheme { kSymmetric, kAsymmetric };
+enum class DeviceChoice { kAuto, kGpu, kLavapipe, kCpu };
+
+struct SolverSettings {
+    std::string solver = "antiradiance";
+    int bins = 128;
+    float elementSize = 0.0f;  // metres; 0 picks kDefaultElementFraction × scene diameter
+    Scheme scheme = Scheme::kSymmetric;
+    int antiradianceSteps = 3;  // asymmetric: antiradiance steps after each radiance step
+    DeviceChoice device = DeviceChoice::kAuto;
+    float oracle = 1.0f;    // link refinement threshold in units of ω_bin
+    int threads = 0;        // CPU threads; 0 = all cores
+    bool validation = false;  // Vulkan validation layers (tests turn them on)
+};
+
+inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
+
+struct PassTiming {
+    std::string name;
+    double msTotal = 0.0;
+};
+
+struct SolverStats {
+    std::string solver;
+    std::string device;
+    size_t elements = 0;  // surfels (hierarchy leaves)
+    size_t nodes = 0;     // hierarchy nodes, leaves and clusters
+    size_t links = 0;
+    int bins = 0;
+    int iterations = 0;  // done so far
+    float elementSize = 0.0f;
+    double linkBuildSeconds = 0.0;
+    double setupSeconds = 0.0;  // scene → device-resident tables, links included
+    double msTotal = 0.0;       // wall time of all iterations
+    std::vector<PassTiming> passes;
+    size_t tableBytes = 0;
+    size_t linkBytes = 0;
+
+    double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
+};
+
+class Solver {
+  public:
+    virtual ~Solver() = default;
+    // Runs `n` more iterations (one global + local pass each).
+    virtual void Iterate(int n) = 0;
+    // Irradiance (the `indirect` channel: all light arriving from surfaces) per surfel.
+    virtual std::vector<glm::vec3> SurfelIrradiance() = 0;
+    virtual const Surfels& GetSurfels() const = 0;
+    virtual SolverStats Stats() const = 0;
+};
+
+using ProgressFn = std::function<void(const std::string& stage, double fraction)>;
+
+// Builds the named solver. Throws penumbra::Error for bad settings or an unusable device.
+std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& settings,
+                                     const ProgressFn& progress = {});
+
+// Parses "auto|gpu|lavapipe|cpu" and "symmetric|asymmetric"; throws penumbra::Error.
+DeviceChoice ParseDevice(const std::string& name);
+Scheme ParseScheme(const std::string& name);
+
+// Per-vertex irradiance for primitive `p` in its input vertex order.
+std::vector<glm::vec3> PrimitiveIrradiance(const Surfels& surfels,
+                                           const std::vector<glm::vec3>& surfelIrradiance,
+                                           const Scene& scene, size_t p);
+
+}  // namespace penumbra

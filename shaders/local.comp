@@ -1,0 +1,54 @@
+// Local pass at the leaves (Sec. 3.1): K reflects incident radiance into the front
+// hemisphere (Eq. 18, diffuse: I_L = a⟨n|ω⟩(L_e + ρE/π)), J sends it through the back
+// hemisphere as antiradiance (Eq. 19: I_A = a⟨n|−ω⟩L_in). I_ex = I_L − I_A.
+#version 450
+#extension GL_GOOGLE_include_directive : require
+#include "common.glsl"
+
+layout(local_size_x_id = 0) in;
+
+layout(std430, binding = 0) readonly buffer Leaves { Leaf leaves[]; };
+layout(std430, binding = 1) readonly buffer Dirs { vec4 dirs[]; };
+layout(std430, binding = 2) readonly buffer Lin { float lin[]; };
+layout(std430, binding = 3) readonly buffer IexOld { float iexOld[]; };
+layout(std430, binding = 4) writeonly buffer IexNew { float iexNew[]; };
+layout(std430, binding = 5) writeonly buffer Irradiance { float irradiance[]; };
+
+layout(push_constant) uniform Push { uint count; uint mode; float binSolidAngle; } pc;
+
+const float kInvPi = 0.31830988618379067;
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= pc.count) return;
+    Leaf leaf = leaves[i];
+    uint row = leaf.node * BINS * 3u;
+
+    // Irradiance E = ω_bin Σ ⟨n|−ω_l⟩ L_in(ω_l) over bins arriving at the front.
+    vec3 e = vec3(0.0);
+    for (uint b = 0; b < BINS; ++b) {
+        float c = dot(leaf.normal, dirs[b].xyz);
+        if (c < 0.0) e -= c * vec3(lin[row + b * 3u], lin[row + b * 3u + 1u], lin[row + b * 3u + 2u]);
+    }
+    e *= pc.binSolidAngle * leaf.cosNormIn;
+    irradiance[i * 3u] = e.x;
+    irradiance[i * 3u + 1u] = e.y;
+    irradiance[i * 3u + 2u] = e.z;
+
+    vec3 front = leaf.area * leaf.cosNormOut * (leaf.emission + leaf.albedo * e * kInvPi);
+    for (uint b = 0; b < BINS; ++b) {
+        float c = dot(leaf.normal, dirs[b].xyz);
+        uint k = row + b * 3u;
+        vec3 v;
+        if (c > 0.0) {
+            v = (pc.mode & kReflect) != 0u ? c * front : vec3(iexOld[k], iexOld[k + 1u], iexOld[k + 2u]);
+        } else {
+            v = (pc.mode & kAntiradiance) != 0u
+                    ? leaf.area * c * vec3(lin[k], lin[k + 1u], lin[k + 2u])
+                    : vec3(iexOld[k], iexOld[k + 1u], iexOld[k + 2u]);
+        }
+        iexNew[k] = v.x;
+        iexNew[k + 1u] = v.y;
+        iexNew[k + 2u] = v.z;
+    }
+}

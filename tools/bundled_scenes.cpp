@@ -1,0 +1,152 @@
+// Geometry of the bundled scenes.
+#include "bundled_scenes.h"
+
+namespace penumbra::scenes {
+namespace {
+
+constexpr float kMm = 0.001f;
+glm::vec3 Mm(float x, float y, float z) { return {x * kMm, y * kMm, z * kMm}; }
+
+}  // namespace
+
+SceneBuilder CornellBox() {
+    SceneBuilder b;
+    // Albedos and light radiance as in the widely used pbrt/Mitsuba rendition.
+    uint32_t white = b.AddMaterial("white", {0.725f, 0.71f, 0.68f});
+    uint32_t red = b.AddMaterial("red", {0.63f, 0.065f, 0.05f});
+    uint32_t green = b.AddMaterial("green", {0.14f, 0.45f, 0.091f});
+    uint32_t light = b.AddMaterial("light", {0.78f, 0.78f, 0.78f}, {17.0f, 12.0f, 4.0f});
+    glm::vec3 inside = Mm(278.0f, 274.4f, 279.6f);
+
+    b.AddQuad("floor", white, Mm(552.8f, 0, 0), Mm(0, 0, 0), Mm(0, 0, 559.2f),
+              Mm(549.6f, 0, 559.2f), inside);
+    // Ceiling around the light's opening (x 213..343, z 227..332).
+    const float y = 548.8f;
+    b.AddQuad("ceiling", white, Mm(0, y, 0), Mm(556, y, 0), Mm(556, y, 227), Mm(0, y, 227), inside);
+    b.AddQuad("ceiling", white, Mm(0, y, 332), Mm(556, y, 332), Mm(556, y, 559.2f),
+              Mm(0, y, 559.2f), inside);
+    b.AddQuad("ceiling", white, Mm(0, y, 227), Mm(213, y, 227), Mm(213, y, 332), Mm(0, y, 332),
+              inside);
+    b.AddQuad("ceiling", white, Mm(343, y, 227), Mm(556, y, 227), Mm(556, y, 332),
+              Mm(343, y, 332), inside);
+    b.AddQuad("ceiling_light", light, Mm(343, y, 227), Mm(343, y, 332), Mm(213, y, 332),
+              Mm(213, y, 227), inside);
+    b.AddQuad("back_wall", white, Mm(549.6f, 0, 559.2f), Mm(0, 0, 559.2f), Mm(0, y, 559.2f),
+              Mm(556, y, 559.2f), inside);
+    b.AddQuad("right_wall", green, Mm(0, 0, 559.2f), Mm(0, 0, 0), Mm(0, y, 0), Mm(0, y, 559.2f),
+              inside);
+    b.AddQuad("left_wall", red, Mm(552.8f, 0, 0), Mm(549.6f, 0, 559.2f), Mm(556, y, 559.2f),
+              Mm(556, y, 0), inside);
+
+    // Blocks: four sides and a top each, faces pointing away from the block's centre.
+    auto block = [&](const std::string& name, const glm::vec3 (&top)[4], float h) {
+        glm::vec3 c(0.0f);
+        for (const auto& p : top) c += p;
+        c = 0.25f * c;
+        glm::vec3 centre(c.x, 0.5f * h, c.z);
+        b.AddQuad(name, white, Mm(top[0].x, h, top[0].z), Mm(top[1].x, h, top[1].z),
+                  Mm(top[2].x, h, top[2].z), Mm(top[3].x, h, top[3].z), Mm(c.x, 2 * h, c.z));
+        for (int i = 0; i < 4; ++i) {
+            glm::vec3 a = top[i], d = top[(i + 1) % 4];
+            glm::vec3 faceCentre(0.5f * (a.x + d.x), 0.5f * h, 0.5f * (a.z + d.z));
+            glm::vec3 out = 2.0f * faceCentre - centre;
+            b.AddQuad(name, white, Mm(a.x, 0, a.z), Mm(a.x, h, a.z), Mm(d.x, h, d.z),
+                      Mm(d.x, 0, d.z), Mm(out.x, out.y, out.z));
+        }
+    };
+    const glm::vec3 shortTop[4] = {{130, 0, 65}, {82, 0, 225}, {240, 0, 272}, {290, 0, 114}};
+    const glm::vec3 tallTop[4] = {{423, 0, 247}, {265, 0, 296}, {314, 0, 456}, {472, 0, 406}};
+    block("short_block", shortTop, 165.0f);
+    block("tall_block", tallTop, 330.0f);
+    return b;
+}
+
+SceneBuilder Blocker(bool withBlocker) {
+    SceneBuilder b;
+    uint32_t grey = b.AddMaterial("grey", {0.5f, 0.5f, 0.5f});
+    uint32_t light = b.AddMaterial("light", {0.0f, 0.0f, 0.0f}, {10.0f, 10.0f, 10.0f});
+    b.AddQuad("floor", grey, {-1, 0, -1}, {1, 0, -1}, {1, 0, 1}, {-1, 0, 1}, {0, 1, 0});
+    b.AddQuad("emitter", light, {-0.25f, 1, -0.25f}, {0.25f, 1, -0.25f}, {0.25f, 1, 0.25f},
+              {-0.25f, 1, 0.25f}, {0, 0, 0});
+    if (withBlocker) b.AddBox("blocker", grey, {0, 0.5f, 0}, {0.4f, 0.05f, 0.4f});
+    return b;
+}
+
+SceneBuilder Office() {
+    SceneBuilder b;
+    uint32_t wall = b.AddMaterial("wall", {0.7f, 0.68f, 0.64f});
+    uint32_t floorMat = b.AddMaterial("carpet", {0.35f, 0.3f, 0.28f});
+    uint32_t ceiling = b.AddMaterial("ceiling", {0.8f, 0.8f, 0.8f});
+    uint32_t wood = b.AddMaterial("wood", {0.55f, 0.38f, 0.22f});
+    uint32_t metal = b.AddMaterial("metal_paint", {0.3f, 0.32f, 0.35f});
+    uint32_t fabric = b.AddMaterial("fabric", {0.2f, 0.25f, 0.5f});
+    uint32_t screen = b.AddMaterial("screen", {0.05f, 0.05f, 0.05f});
+    uint32_t fixture = b.AddMaterial("fixture", {0.8f, 0.8f, 0.8f});
+    uint32_t lamp = b.AddMaterial("lamp", {0.8f, 0.8f, 0.8f}, {40.0f, 38.0f, 34.0f});
+    const float W = 12.0f, D = 8.0f, H = 3.0f;
+    glm::vec3 inside(W / 2, H / 2, D / 2);
+    // Room shell in 0.5 m tiles.
+    b.AddTiledQuad("floor", floorMat, {0, 0, 0}, {W, 0, 0}, {0, 0, D}, 24, 16, inside);
+    b.AddTiledQuad("ceiling", ceiling, {0, H, 0}, {W, 0, 0}, {0, 0, D}, 24, 16, inside);
+    b.AddTiledQuad("wall_south", wall, {0, 0, 0}, {W, 0, 0}, {0, H, 0}, 24, 6, inside);
+    b.AddTiledQuad("wall_north", wall, {0, 0, D}, {W, 0, 0}, {0, H, 0}, 24, 6, inside);
+    b.AddTiledQuad("wall_west", wall, {0, 0, 0}, {0, 0, D}, {0, H, 0}, 16, 6, inside);
+    b.AddTiledQuad("wall_east", wall, {W, 0, 0}, {0, 0, D}, {0, H, 0}, 16, 6, inside);
+    // Ceiling fixtures: closed boxes whose underside emits.
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 2; ++j)
+            b.AddBoxWithBottom("fixture_" + std::to_string(i * 2 + j), fixture, lamp,
+                               {1.5f + 3.0f * i, H - 0.05f, 2.0f + 4.0f * j}, {1.2f, 0.06f, 0.6f});
+    // Workstations: desk, chair, monitor, computer.
+    int n = 0;
+    for (int row = 0; row < 4 && n < 22; ++row)
+        for (int col = 0; col < 6 && n < 22; ++col, ++n) {
+            std::string id = std::to_string(n);
+            float x = 1.3f + 1.9f * col, z = 1.2f + 1.8f * row;
+            float yaw = (row % 2) ? 180.0f : 0.0f;
+            float dz = (row % 2) ? -1.0f : 1.0f;
+            b.AddBox("desk_" + id, wood, {x, 0.73f, z}, {1.4f, 0.04f, 0.7f}, 0, true);
+            for (int lx = -1; lx <= 1; lx += 2)
+                for (int lz = -1; lz <= 1; lz += 2)
+                    b.AddBox("desk_" + id, metal, {x + lx * 0.65f, 0.355f, z + lz * 0.3f},
+                             {0.05f, 0.71f, 0.05f}, 0, false);
+            float cz = z - dz * 0.6f;
+            b.AddBox("chair_" + id, fabric, {x, 0.45f, cz}, {0.45f, 0.06f, 0.45f}, yaw, true);
+            b.AddBox("chair_" + id, fabric, {x, 0.75f, cz - dz * 0.22f}, {0.45f, 0.55f, 0.05f},
+                     yaw, true);
+            for (int lx = -1; lx <= 1; lx += 2)
+                for (int lz = -1; lz <= 1; lz += 2)
+                    b.AddBox("chair_" + id, metal, {x + lx * 0.19f, 0.21f, cz + lz * 0.19f},
+                             {0.03f, 0.42f, 0.03f}, 0, false);
+            b.AddBox("monitor_" + id, screen, {x, 1.0f, z + dz * 0.2f}, {0.55f, 0.35f, 0.03f},
+                     yaw, true);
+            b.AddBox("monitor_" + id, metal, {x, 0.8f, z + dz * 0.22f}, {0.06f, 0.1f, 0.06f}, 0,
+                     true);
+            b.AddBox("computer_" + id, metal, {x + 0.5f, 0.22f, z}, {0.2f, 0.44f, 0.45f}, 0,
+                     false);
+        }
+    // Shelves along the west and east walls.
+    for (int s = 0; s < 6; ++s) {
+        std::string id = std::to_string(s);
+        float x = (s < 3) ? 0.25f : W - 0.25f;
+        float z = 1.5f + 2.5f * (s % 3);
+        b.AddBox("shelf_" + id, wood, {x, 1.0f, z - 0.45f}, {0.4f, 2.0f, 0.03f}, 0, false);
+        b.AddBox("shelf_" + id, wood, {x, 1.0f, z + 0.45f}, {0.4f, 2.0f, 0.03f}, 0, false);
+        for (int k = 0; k < 5; ++k)
+            b.AddBox("shelf_" + id, wood, {x, 0.1f + 0.45f * k, z}, {0.4f, 0.03f, 0.87f});
+    }
+    // Filing cabinets by the south wall.
+    for (int c = 0; c < 8; ++c)
+        for (int k = 0; k < 3; ++k)
+            b.AddBox("cabinet_" + std::to_string(c), metal, {1.0f + 1.4f * c, 0.22f + 0.44f * k, 7.7f},
+                     {0.5f, 0.42f, 0.5f}, 0, k == 0 ? false : true);
+    return b;
+}
+
+std::vector<Bundled> All() {
+    return {{"cornell-box.gltf", &CornellBox},
+            {"blocker.gltf", [] { return Blocker(true); }},
+            {"office.gltf", &Office}};
+}
+
+}  // namespace penumbra::scenes

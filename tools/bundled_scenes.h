@@ -1,0 +1,28 @@
+// The scenes bundled in scenes/: defined here once, written as glTF by make_scenes,
+// and built in memory by tests and benchmarks.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "scene/scene_builder.h"
+
+namespace penumbra::scenes {
+
+// Cornell box from the published measurements (Cornell Program of Computer Graphics),
+// millimetres → metres, the usual RGB albedos, the ceiling light as an emitting quad
+// filling a hole in the ceiling.
+SceneBuilder CornellBox();
+// An emitting square over a floor with an opaque closed box between them.
+SceneBuilder Blocker(bool withBlocker = true);
+// Office-scale scene of the benchmark: ~5,600 input triangles (room, workstations,
+// shelves, cabinets, emissive ceiling fixtures).
+SceneBuilder Office();
+
+struct Bundled {
+    std::string file;  // name under scenes/
+    SceneBuilder (*make)();
+};
+std::vector<Bundled> All();
+
+}  // namespace penumbra::scenes
