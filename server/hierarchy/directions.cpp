@@ -139,6 +139,31 @@ uint32_t Directions::Lookup(const glm::vec3& d) const {
     return best;
 }
 
+uint32_t Directions::LookupWithin(const glm::vec3& d, const glm::vec3& a,
+                                  const glm::vec3& b) const {
+    uint32_t nearest = Lookup(d);
+    const glm::vec3 none(0.0f);
+    auto valid = [&](uint32_t j) {
+        return (a == none || glm::dot(dirs_[j], a) > 0.0f) &&
+               (b == none || glm::dot(dirs_[j], b) > 0.0f);
+    };
+    if (valid(nearest)) return nearest;
+    uint32_t best = nearest;
+    float bestDot = -2.0f;
+    for (uint32_t j : adjacent_[nearest]) {
+        float dd = glm::dot(d, dirs_[j]);
+        if (valid(j) && dd > bestDot) bestDot = dd, best = j;
+    }
+    return best;
+}
+
+float Directions::CosineNorm(const glm::vec3& n) const {
+    double sum = 0.0;
+    for (const auto& d : dirs_) sum += std::max(0.0f, glm::dot(n, d));
+    sum *= solidAngle_;
+    return sum > 0.0 ? static_cast<float>(std::numbers::pi / sum) : 0.0f;
+}
+
 // σ_0 = half the bin spacing (pre-filter against aliasing on the bin grid); each level
 // widens by √2 to follow larger senders.
 float Directions::LevelSigma(int level) const {

@@ -32,6 +32,11 @@ class Directions {
 
     // Nearest bin centre to unit direction `d`.
     uint32_t Lookup(const glm::vec3& d) const;
+    // Nearest bin to `d` among those with dot(ω_b, a) > 0 and dot(ω_b, b) > 0 (a zero
+    // vector imposes nothing), searched around the nearest bin; the nearest bin if none.
+    uint32_t LookupWithin(const glm::vec3& d, const glm::vec3& a, const glm::vec3& b) const;
+    // π / Σ_b ω_bin max(0, n·ω_b): corrects the discrete cosine integral over one side.
+    float CosineNorm(const glm::vec3& n) const;
 
     // Gaussian width (radians) of spread level k.
     float LevelSigma(int level) const;

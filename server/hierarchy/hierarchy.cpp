@@ -23,8 +23,8 @@ struct Builder {
         float area = 0.0f, maxDisc = 0.0f;
         for (size_t i = begin; i < end; ++i) {
             uint32_t id = ids[i];
-            lo = glm::min(lo, s.positions[id]);
-            hi = glm::max(hi, s.positions[id]);
+            lo = glm::min(lo, s.centroids[id]);
+            hi = glm::max(hi, s.centroids[id]);
             nlo = glm::min(nlo, s.normals[id]);
             nhi = glm::max(nhi, s.normals[id]);
             nsum += s.areas[id] * s.normals[id];
@@ -34,7 +34,7 @@ struct Builder {
         glm::vec3 centre = 0.5f * (lo + hi);
         float radius = 0.0f;
         for (size_t i = begin; i < end; ++i)
-            radius = std::max(radius, glm::length(s.positions[ids[i]] - centre));
+            radius = std::max(radius, glm::length(s.centroids[ids[i]] - centre));
         radius += maxDisc;
 
         HierarchyNode node{};
@@ -75,7 +75,7 @@ struct Builder {
             if (next[a] > best) best = next[a], axis = 3 + a;
         }
         auto key = [&](uint32_t id) {
-            return axis < 3 ? s.positions[id][axis] : s.normals[id][axis - 3];
+            return axis < 3 ? s.centroids[id][axis] : s.normals[id][axis - 3];
         };
         size_t mid = begin + (end - begin) / 2;
         std::nth_element(ids.begin() + begin, ids.begin() + mid, ids.begin() + end,

@@ -25,6 +25,8 @@ struct PendingLink {
 struct Refiner {
     const Hierarchy& h;
     const Directions& dirs;
+    const LeafNorms& norms;
+    const NearField& near;
     float threshold;  // oracle × ω_bin
 
     template <typename F>
@@ -81,7 +83,7 @@ struct Refiner {
                 return;
             }
         }
-        emit(r, MakeLink(h, dirs, r, s));
+        emit(r, MakeLink(h, dirs, norms, near, r, s));
     }
 
     template <typename Emit>
@@ -92,26 +94,132 @@ struct Refiner {
 
 }  // namespace
 
-Link MakeLink(const Hierarchy& h, const Directions& dirs, uint32_t receiver, uint32_t sender) {
+// Nodes whose members share an orientation to within ~8°: leaves and planar clusters.
+// Their links are calibrated like a single oriented surface.
+constexpr float kOrientedCos = 0.99f;
+bool Oriented(const HierarchyNode& n) { return n.coneCos >= kOrientedCos; }
+
+LeafNorms ComputeLeafNorms(const Hierarchy& h, const Directions& dirs) {
+    LeafNorms n;
+    n.in.assign(h.size(), 0.0f);
+    n.out.assign(h.size(), 0.0f);
+    tbb::parallel_for(size_t(0), h.size(), [&](size_t i) {
+        if (!Oriented(h.nodes[i])) return;
+        n.in[i] = dirs.CosineNorm(-h.nodes[i].normal);
+        n.out[i] = dirs.CosineNorm(h.nodes[i].normal);
+    });
+    return n;
+}
+
+NearField BuildNearField(const Surfels& surfels) {
+    NearField near;
+    near.surfels = &surfels;
+    const auto& tri = surfels.refinedTriangles;
+    near.offsets.assign(surfels.size() + 1, 0);
+    for (uint32_t v : tri) near.offsets[v + 1]++;
+    for (size_t i = 0; i < surfels.size(); ++i) near.offsets[i + 1] += near.offsets[i];
+    near.triangles.resize(tri.size());
+    std::vector<uint32_t> cursor(near.offsets.begin(), near.offsets.end() - 1);
+    for (uint32_t t = 0; t < tri.size(); t += 3)
+        for (int k = 0; k < 3; ++k) near.triangles[cursor[tri[t + k]]++] = t;
+    return near;
+}
+
+float NearFieldIrradiance(const NearField& near, uint32_t s, glm::vec3 p, glm::vec3 n) {
+    // Centroids of a 6×6 regular subdivision (36 equal sub-triangles) integrate linear
+    // functions exactly; φ_s at a centroid is the barycentric weight of s's corner.
+    constexpr int kDiv = 6;
+    const Surfels& sf = *near.surfels;
+    const glm::vec3 ns = sf.normals[s];
+    double sum = 0.0;
+    for (uint32_t i = near.offsets[s]; i < near.offsets[s + 1]; ++i) {
+        uint32_t t = near.triangles[i];
+        const uint32_t* v = &sf.refinedTriangles[t];
+        int corner = v[0] == s ? 0 : v[1] == s ? 1 : 2;
+        glm::vec3 a = sf.positions[v[corner]], b = sf.positions[v[(corner + 1) % 3]],
+                  c = sf.positions[v[(corner + 2) % 3]];
+        float area = 0.5f * glm::length(glm::cross(b - a, c - a));
+        float w = area / (kDiv * kDiv);
+        for (int row = 0; row < kDiv; ++row)
+            for (int col = 0; col < kDiv - row; ++col)
+                for (int up = 0; up < (col + row < kDiv - 1 ? 2 : 1); ++up) {
+                    // Barycentric (of b, c) of the centroid of sub-triangle (row, col, up).
+                    float u = (3 * col + (up ? 2 : 1)) / (3.0f * kDiv);
+                    float vv = (3 * row + (up ? 2 : 1)) / (3.0f * kDiv);
+                    float phi = 1.0f - u - vv;  // hat function of corner a
+                    glm::vec3 q = a + u * (b - a) + vv * (c - a);
+                    glm::vec3 d = p - q;
+                    float d2 = glm::dot(d, d);
+                    if (d2 <= 0.0f) continue;
+                    float inv = 1.0f / std::sqrt(d2);
+                    float cs = std::abs(glm::dot(ns, d)) * inv;
+                    float cr = std::max(0.0f, -glm::dot(n, d)) * inv;
+                    sum += w * phi * cs * cr / d2;
+                }
+    }
+    return static_cast<float>(sum);
+}
+
+Link MakeLink(const Hierarchy& h, const Directions& dirs, const LeafNorms& norms,
+              const NearField& near, uint32_t receiver, uint32_t sender) {
     const HierarchyNode& R = h.nodes[receiver];
     const HierarchyNode& S = h.nodes[sender];
     glm::vec3 d = R.center - S.center;  // direction of travel: sender → receiver
     float dist2 = glm::dot(d, d);
     float dist = std::sqrt(dist2);
+    glm::vec3 u = d / dist;
+    // A leaf sender emits radiance on its front side and antiradiance behind (Fig. 6a), and
+    // a leaf receiver takes light on its front only: the bin must lie on the same sides as
+    // the true direction, or quantisation would turn radiance into antiradiance at edges.
+    const bool orientedS = Oriented(S), orientedR = Oriented(R);
+    float cosS = orientedS ? glm::dot(S.normal, u) : 0.0f;
+    float cosR = orientedR ? -glm::dot(R.normal, u) : 0.0f;
+    glm::vec3 sideS = orientedS ? (cosS >= 0.0f ? S.normal : -S.normal) : glm::vec3(0.0f);
+    glm::vec3 sideR = orientedR ? -R.normal : glm::vec3(0.0f);
     Link link;
     link.sender = sender;
-    link.bin = static_cast<uint16_t>(dirs.Lookup(d / dist));
+    link.bin = static_cast<uint16_t>(dirs.LookupWithin(u, sideS, sideR));
     link.level = static_cast<uint16_t>(dirs.LevelFor(std::atan2(S.discRadius, dist)));
     // Eq. 17, F = 1/(d² ω_bin); d² + r_s² is the disc-to-point regularisation, exact for a
     // coaxial disc of radius r_s and negligible once the oracle has made the sender small.
-    link.formFactor = 1.0f / ((dist2 + S.discRadius * S.discRadius) * dirs.BinSolidAngle());
+    float f = 1.0f / ((dist2 + S.discRadius * S.discRadius) * dirs.BinSolidAngle());
+    // Near field: between leaves closer than a few element radii, replace the point-to-
+    // point kernel a_s cos_s cos_r / d² by the integral over the sender's area.
+    constexpr float kNearRadii = 4.0f;
+    if (S.IsLeaf() && R.IsLeaf() && near.surfels &&
+        dist < kNearRadii * (S.discRadius + R.discRadius)) {
+        float point = S.area * std::abs(cosS) * std::max(0.0f, cosR) /
+                      (dist2 + S.discRadius * S.discRadius);
+        float exact = NearFieldIrradiance(near, S.surfel, R.center, R.normal);
+        f *= point > 0.0f ? exact / point : 0.0f;
+    }
+    // Calibration of oriented ends (leaves, planar clusters): the local pass evaluates
+    // cosines at bin centres (and after the σ spread at the receiver), scaled by the
+    // per-leaf norms. Rescale F so this link carries the exact cosines of the true
+    // direction; bounded, since a bin near a horizon can have a tiny cosine.
+    constexpr float kMaxCalibration = 4.0f;
+    const glm::vec3 wb = dirs.Direction(link.bin);
+    if (orientedS) {
+        float binCos = std::abs(glm::dot(S.normal, wb));
+        float model = binCos * (cosS >= 0.0f ? norms.out[sender] : 1.0f);
+        f *= model > 0.0f ? std::min(kMaxCalibration, std::abs(cosS) / model) : 0.0f;
+    }
+    if (orientedR) {
+        float spread = 0.0f;
+        for (const BinWeight& nb : dirs.Neighbours(link.level, link.bin))
+            spread += nb.weight * std::max(0.0f, -glm::dot(R.normal, dirs.Direction(nb.bin)));
+        float model = spread * norms.in[receiver];
+        f *= model > 0.0f ? std::min(kMaxCalibration, std::max(0.0f, cosR) / model) : 0.0f;
+    }
+    link.formFactor = f;
     return link;
 }
 
-Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LinkSettings& settings,
+Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& norms,
+                 const NearField& near, const LinkSettings& settings,
                  const std::function<void(double)>& progress) {
     auto start = std::chrono::steady_clock::now();
-    Refiner refiner{h, dirs, settings.oracle * dirs.BinSolidAngle()};
+    Refiner refiner{h, dirs, norms, near, settings.oracle * dirs.BinSolidAngle()};
     std::unique_ptr<tbb::global_control> limit;
     if (settings.threads > 0)
         limit = std::make_unique<tbb::global_control>(

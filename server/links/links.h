@@ -8,6 +8,7 @@
 
 #include "hierarchy/directions.h"
 #include "hierarchy/hierarchy.h"
+#include "scene/surfels.h"
 
 namespace penumbra {
 
@@ -37,11 +38,36 @@ struct Links {
     size_t Count() const { return links.size(); }
 };
 
+// Per-leaf cosine normalisations (Directions::CosineNorm) of the local pass, indexed by
+// node; the link build calibrates leaf links against them.
+struct LeafNorms {
+    std::vector<float> in;   // of −n: the side light arrives from
+    std::vector<float> out;  // of n: the side light leaves to
+};
+LeafNorms ComputeLeafNorms(const Hierarchy& h, const Directions& dirs);
+
+// Geometry for the near field: each surfel's adjacent refined triangles, so that a link
+// between nearby leaves integrates the sender's area (its linear hat function) instead of
+// treating it as a point, which fails where surfaces meet at edges and corners.
+struct NearField {
+    const Surfels* surfels = nullptr;
+    std::vector<uint32_t> offsets;    // surfel s's triangles: [offsets[s], offsets[s+1])
+    std::vector<uint32_t> triangles;  // index of the first corner in refinedTriangles
+};
+NearField BuildNearField(const Surfels& surfels);
+
 // `progress` (may be empty) receives the fraction of work done.
-Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LinkSettings& settings,
+Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& norms,
+                 const NearField& near, const LinkSettings& settings,
                  const std::function<void(double)>& progress = {});
 
+
 // The link a receiver/sender pair would get (used for tests and dynamic updates).
-Link MakeLink(const Hierarchy& h, const Directions& dirs, uint32_t receiver, uint32_t sender);
+Link MakeLink(const Hierarchy& h, const Directions& dirs, const LeafNorms& norms,
+              const NearField& near, uint32_t receiver, uint32_t sender);
+
+// ∫ φ_s |cos_s| cos_r / d² dA over surfel `s`'s area (hat function φ_s over its
+// triangles), seen from point `p` with normal `n`: irradiance per unit sender radiance.
+float NearFieldIrradiance(const NearField& near, uint32_t s, glm::vec3 p, glm::vec3 n);
 
 }  // namespace penumbra

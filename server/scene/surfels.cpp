@@ -10,6 +10,7 @@ namespace penumbra {
 Surfels RefineScene(const Scene& scene, float elementSize) {
     if (!(elementSize > 0.0f)) throw Error("element size must be a positive number of metres");
     Surfels out;
+    std::vector<glm::vec3> moments;  // ∫ φ_s x dA per surfel
     const float maxEdge2 = elementSize * elementSize;
     for (const auto& prim : scene.primitives) {
         const uint32_t base = static_cast<uint32_t>(out.positions.size());
@@ -27,6 +28,7 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             auto it = midpoints.find(key);
             if (it != midpoints.end()) return it->second;
             uint32_t m = static_cast<uint32_t>(out.positions.size());
+            moments.emplace_back(0.0f);
             out.positions.push_back(0.5f * (out.positions[a] + out.positions[b]));
             glm::vec3 n = out.normals[a] + out.normals[b];
             float len = glm::length(n);
@@ -37,6 +39,7 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             return m;
         };
         std::vector<glm::uvec3> stack;
+        moments.resize(out.positions.size(), glm::vec3(0.0f));
         for (size_t t = 0; t + 2 < prim.indices.size(); t += 3)
             stack.emplace_back(base + prim.indices[t], base + prim.indices[t + 1],
                                base + prim.indices[t + 2]);
@@ -60,10 +63,18 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
                 continue;
             }
             float area = 0.5f * glm::length(glm::cross(p[1] - p[0], p[2] - p[0]));
-            for (int k = 0; k < 3; ++k) out.areas[tri[k]] += area / 3.0f;
+            glm::vec3 sum = p[0] + p[1] + p[2];
+            for (int k = 0; k < 3; ++k) {
+                out.areas[tri[k]] += area / 3.0f;
+                // ∫ φ_k x dA over the triangle = A (2 p_k + p_i + p_j) / 12.
+                moments[tri[k]] += area * (sum + p[k]) / 12.0f;
+            }
             out.refinedTriangles.insert(out.refinedTriangles.end(), {tri[0], tri[1], tri[2]});
         }
     }
+    out.centroids.resize(out.size());
+    for (size_t i = 0; i < out.size(); ++i)
+        out.centroids[i] = out.areas[i] > 0.0f ? moments[i] / out.areas[i] : out.positions[i];
     return out;
 }
 

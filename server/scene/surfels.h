@@ -15,6 +15,10 @@ struct Surfels {
     std::vector<glm::vec3> positions;
     std::vector<glm::vec3> normals;  // unit
     std::vector<float> areas;        // one third of the adjacent refined triangles' area
+    // Centroid of the surfel's hat function (its share of the adjacent triangles). Equal to
+    // the position inside a surface; moved into the surface for vertices on its boundary,
+    // where the position itself sees neighbouring surfaces only at grazing angles.
+    std::vector<glm::vec3> centroids;
     std::vector<uint32_t> materials;
     // Primitive p's input vertex i is surfel firstSurfel[p] + i (input vertices come first).
     std::vector<uint32_t> firstSurfel;

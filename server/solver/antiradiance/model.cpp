@@ -25,7 +25,9 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
     LinkSettings ls;
     ls.oracle = settings.oracle;
     ls.threads = settings.threads;
-    model.links = BuildLinks(model.hierarchy, model.dirs, ls, [&](double f) {
+    LeafNorms norms = ComputeLeafNorms(model.hierarchy, model.dirs);
+    NearField near = BuildNearField(model.surfels);
+    model.links = BuildLinks(model.hierarchy, model.dirs, norms, near, ls, [&](double f) {
         if (progress) progress("linking", f);
     });
 
@@ -38,8 +40,6 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
         model.rightChild[i] = nodes[i + 1].end;
     }
 
-    const float pi = std::numbers::pi_v<float>;
-    const float omega = model.dirs.BinSolidAngle();
     model.leaves.reserve(model.hierarchy.leaves.size());
     for (uint32_t node : model.hierarchy.leaves) {
         const HierarchyNode& n = nodes[node];
@@ -50,13 +50,8 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
         leaf.area = model.surfels.areas[s];
         leaf.albedo = mat.albedo;
         leaf.emission = mat.emission;
-        double in = 0.0, out = 0.0;
-        for (const auto& d : model.dirs.All()) {
-            float c = glm::dot(leaf.normal, d);
-            (c > 0.0f ? out : in) += omega * std::abs(c);
-        }
-        leaf.cosNormIn = in > 0.0 ? static_cast<float>(pi / in) : 0.0f;
-        leaf.cosNormOut = out > 0.0 ? static_cast<float>(pi / out) : 0.0f;
+        leaf.cosNormIn = norms.in[node];
+        leaf.cosNormOut = norms.out[node];
         leaf.node = node;
         leaf.parent = n.parent;
         leaf.surfel = s;
