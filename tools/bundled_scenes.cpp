@@ -99,8 +99,8 @@ SceneBuilder Office() {
                                {1.5f + 3.0f * i, H - 0.05f, 2.0f + 4.0f * j}, {1.2f, 0.06f, 0.6f});
     // Workstations: desk, chair, monitor, computer.
     int n = 0;
-    for (int row = 0; row < 4 && n < 22; ++row)
-        for (int col = 0; col < 6 && n < 22; ++col, ++n) {
+    for (int row = 0; row < 4 && n < 16; ++row)
+        for (int col = 0; col < 6 && n < 16; ++col, ++n) {
             std::string id = std::to_string(n);
             float x = 1.3f + 1.9f * col, z = 1.2f + 1.8f * row;
             float yaw = (row % 2) ? 180.0f : 0.0f;

@@ -15,7 +15,7 @@ namespace penumbra::scenes {
 SceneBuilder CornellBox();
 // An emitting square over a floor with an opaque closed box between them.
 SceneBuilder Blocker(bool withBlocker = true);
-// Office-scale scene of the benchmark: ~5,600 input triangles (room, workstations,
+// Office-scale scene of the benchmark: about 5,600 input triangles (room, workstations,
 // shelves, cabinets, emissive ceiling fixtures).
 SceneBuilder Office();
 

@@ -272,6 +272,9 @@ Scene LoadGltf(const std::string& path) {
             ctx.Fail(NodeLabel(model, ni), "node appears twice in the hierarchy (cycle or "
                                            "shared child)");
         const auto& node = model.nodes[ni];
+        if (!node.matrix.empty() && node.matrix.size() != 16)
+            ctx.Fail(NodeLabel(model, ni), "matrix has " + std::to_string(node.matrix.size()) +
+                                               " numbers, not 16");
         glm::mat4 world = parent * LocalTransform(node);
         if (!Finite(world)) ctx.Fail(NodeLabel(model, ni), "transform has NaN or infinity");
         if (node.mesh >= 0) {

@@ -1,0 +1,110 @@
+// `penumbra bake` as a real process: JSON and glTF outputs on the bundled Cornell box,
+// and clear errors with exit code 1 for bad input.
+#include <gtest/gtest.h>
+#include <tiny_gltf.h>
+
+#include <array>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sys/wait.h>
+
+#include "test_util.h"
+
+namespace penumbra {
+namespace {
+
+const std::string kPenumbra = std::string(PENUMBRA_BINARY_DIR) + "/penumbra";
+const std::string kCornell = std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf";
+
+struct ProcessResult {
+    int exitCode;
+    std::string output;
+};
+
+ProcessResult Execute(const std::string& args) {
+    std::string cmd = kPenumbra + " " + args + " 2>&1";
+    FILE* pipe = popen(cmd.c_str(), "r");
+    ProcessResult r{-1, ""};
+    std::array<char, 4096> buf;
+    while (size_t n = fread(buf.data(), 1, buf.size(), pipe)) r.output.append(buf.data(), n);
+    int status = pclose(pipe);
+    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return r;
+}
+
+TEST(BakeCli, WritesJsonWithStatsInInputVertexOrder) {
+    auto out = testing::TempDir("bake-json") / "cb.json";
+    ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
+                    " --bins 64 --iterations 4 --element-size 0.08 --device cpu");
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::ifstream in(out);
+    auto j = nlohmann::json::parse(in);
+    EXPECT_EQ(j["solver"], "antiradiance");
+    EXPECT_EQ(j["channel"], "indirect");
+    EXPECT_NE(j["units"].get<std::string>().find("lux"), std::string::npos);
+    for (const char* key : {"elements", "links", "bins", "iterations", "link_build_seconds",
+                            "device", "ms_per_iteration", "passes"})
+        EXPECT_TRUE(j["stats"].contains(key)) << key;
+    EXPECT_EQ(j["stats"]["bins"], 64);
+    EXPECT_EQ(j["stats"]["iterations"], 4);
+    EXPECT_EQ(j["stats"]["device"], "cpu");
+    EXPECT_TRUE(j["stats"]["passes"].contains("global_ms_per_iteration"));
+    ASSERT_EQ(j["primitives"].size(), 8u);  // one per node: materials differ by node
+    // The floor is a quad: 4 vertices, all lit from the ceiling light.
+    const auto& floor = j["primitives"][0];
+    EXPECT_EQ(floor["node"], "floor");
+    ASSERT_EQ(floor["irradiance"].size(), 4u);
+    for (const auto& v : floor["irradiance"]) EXPECT_GT(v[0].get<double>(), 0.0);
+}
+
+TEST(BakeCli, WritesGlbWithColor0PerPrimitive) {
+    auto out = testing::TempDir("bake-glb") / "lit.glb";
+    ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
+                    " --bins 64 --iterations 2 --element-size 0.1 --device cpu -q");
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    tinygltf::Model model;
+    tinygltf::TinyGLTF io;
+    std::string err, warn;
+    ASSERT_TRUE(io.LoadBinaryFromFile(&model, &err, &warn, out.string())) << err;
+    for (const auto& mesh : model.meshes)
+        for (const auto& prim : mesh.primitives) {
+            ASSERT_TRUE(prim.attributes.count("COLOR_0")) << mesh.name;
+            const auto& color = model.accessors[prim.attributes.at("COLOR_0")];
+            const auto& pos = model.accessors[prim.attributes.at("POSITION")];
+            EXPECT_EQ(color.count, pos.count) << mesh.name;
+            EXPECT_EQ(color.type, TINYGLTF_TYPE_VEC3);
+            EXPECT_EQ(color.componentType, TINYGLTF_COMPONENT_TYPE_FLOAT);
+        }
+}
+
+TEST(BakeCli, LavapipeDeviceRuns) {
+    auto out = testing::TempDir("bake-lvp") / "cb.json";
+    ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
+                    " --bins 32 --iterations 1 --element-size 0.15 --device lavapipe --validation");
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::ifstream in(out);
+    auto j = nlohmann::json::parse(in);
+    EXPECT_NE(j["stats"]["device"].get<std::string>().find("vulkan:"), std::string::npos);
+}
+
+TEST(BakeCli, BadInputGivesExitCodeOneAndAMessage) {
+    ProcessResult missing = Execute("bake /nonexistent.gltf -o /tmp/x.json");
+    EXPECT_EQ(missing.exitCode, 1) << missing.output;
+    EXPECT_NE(missing.output.find("/nonexistent.gltf"), std::string::npos) << missing.output;
+
+    ProcessResult bins = Execute("bake " + kCornell + " -o /tmp/x.json --bins 5");
+    EXPECT_EQ(bins.exitCode, 1) << bins.output;
+    EXPECT_NE(bins.output.find("bin count 5"), std::string::npos) << bins.output;
+
+    ProcessResult ext = Execute("bake " + kCornell + " -o /tmp/x.txt");
+    EXPECT_EQ(ext.exitCode, 1) << ext.output;
+    EXPECT_NE(ext.output.find(".json, .glb or .gltf"), std::string::npos) << ext.output;
+
+    ProcessResult device = Execute("bake " + kCornell + " -o /tmp/x.json --device tpu");
+    EXPECT_EQ(device.exitCode, 1) << device.output;
+    EXPECT_NE(device.output.find("unknown device 'tpu'"), std::string::npos) << device.output;
+}
+
+}  // namespace
+}  // namespace penumbra

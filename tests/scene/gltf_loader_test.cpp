@@ -1,0 +1,169 @@
+// glTF loading: the bundled files, and broken files that must fail naming the file,
+// the offending object and the reason.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "base/check.h"
+#include "scene/gltf_loader.h"
+#include "scene/surfels.h"
+#include "test_util.h"
+
+namespace penumbra {
+namespace {
+
+const std::string kCornell = std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf";
+
+TEST(GltfLoader, LoadsBundledCornellBox) {
+    Scene scene = LoadGltf(kCornell);
+    EXPECT_EQ(scene.TriangleCount(), 38u);
+    bool sawLight = false, sawTall = false;
+    for (const auto& p : scene.primitives) {
+        const Material& m = scene.materials[p.material];
+        if (p.node == "ceiling_light") {
+            sawLight = true;
+            // emissiveFactor (1, 12/17, 4/17) × KHR_materials_emissive_strength 17.
+            EXPECT_NEAR(m.emission.x, 17.0f, 1e-4f);
+            EXPECT_NEAR(m.emission.y, 12.0f, 1e-4f);
+            EXPECT_NEAR(m.emission.z, 4.0f, 1e-4f);
+        }
+        if (p.node == "tall_block") {
+            sawTall = true;
+            EXPECT_NEAR(m.albedo.x, 0.725f, 1e-6f);  // baseColor × (1 − metallic 0)
+        }
+        ASSERT_EQ(p.normals.size(), p.positions.size());
+    }
+    EXPECT_TRUE(sawLight);
+    EXPECT_TRUE(sawTall);
+    // Bounds 0.556 × 0.5488 × 0.5592 m: diagonal √0.9230 = 0.9607 m.
+    EXPECT_NEAR(scene.Diameter(), 0.9607f, 1e-3f);
+}
+
+TEST(GltfLoader, RefinementKeepsInputVerticesAndArea) {
+    Scene scene = LoadGltf(kCornell);
+    Surfels s = RefineScene(scene, 0.05f);
+    double area = 0.0, input = 0.0;
+    for (float a : s.areas) area += a;
+    for (const auto& p : scene.primitives)
+        for (size_t t = 0; t < p.indices.size(); t += 3)
+            input += 0.5 * glm::length(glm::cross(p.positions[p.indices[t + 1]] - p.positions[p.indices[t]],
+                                                  p.positions[p.indices[t + 2]] - p.positions[p.indices[t]]));
+    EXPECT_NEAR(area, input, 1e-4 * input);
+    for (size_t p = 0; p < scene.primitives.size(); ++p)
+        for (size_t i = 0; i < scene.primitives[p].positions.size(); ++i)
+            EXPECT_EQ(s.positions[s.firstSurfel[p] + i], scene.primitives[p].positions[i]);
+    for (size_t t = 0; t < s.refinedTriangles.size(); t += 3)
+        for (int k = 0; k < 3; ++k) {
+            glm::vec3 e = s.positions[s.refinedTriangles[t + k]] -
+                          s.positions[s.refinedTriangles[t + (k + 1) % 3]];
+            ASSERT_LE(glm::length(e), 0.05f * 1.0001f);
+        }
+}
+
+// Writes `doc` to a temp file and returns the message LoadGltf throws.
+std::string LoadError(const nlohmann::json& doc, const std::string& name) {
+    auto path = testing::TempDir("gltf") / name;
+    std::ofstream(path) << doc.dump();
+    try {
+        LoadGltf(path.string());
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "(loaded without error)";
+}
+
+nlohmann::json Cornell() {
+    std::ifstream in(kCornell);
+    return nlohmann::json::parse(in);
+}
+
+TEST(GltfLoader, MissingFileNamesThePath) {
+    try {
+        LoadGltf("/nonexistent/scene.gltf");
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("/nonexistent/scene.gltf"), std::string::npos)
+            << e.what();
+    }
+}
+
+TEST(GltfLoader, MalformedJsonIsAnError) {
+    auto path = testing::TempDir("gltf-bad") / "broken.gltf";
+    std::ofstream(path) << "{\"asset\": {\"version\": \"2.0\"}, \"nodes\": [";
+    EXPECT_THROW(LoadGltf(path.string()), Error);
+}
+
+TEST(GltfLoader, NonFiniteMatrixNamesTheNode) {
+    // JSON has no NaN; 1e39 overflows a float to infinity.
+    auto doc = Cornell();
+    doc["nodes"][0]["matrix"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 1e39, 0, 0, 1};
+    std::string msg = LoadError(doc, "inf.gltf");
+    EXPECT_NE(msg.find("inf.gltf: node 0 'floor'"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("NaN or infinity"), std::string::npos) << msg;
+}
+
+TEST(GltfLoader, MalformedMatrixIsRefused) {
+    auto doc = Cornell();
+    doc["nodes"][0]["matrix"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, nullptr, 0, 0, 1};
+    std::string msg = LoadError(doc, "matrix.gltf");
+    EXPECT_NE(msg.find("matrix.gltf"), std::string::npos) << msg;
+    EXPECT_EQ(msg.find("loaded without error"), std::string::npos) << msg;
+}
+
+TEST(GltfLoader, SingularTransformNamesTheNode) {
+    auto doc = Cornell();
+    doc["nodes"][1]["scale"] = {0.0, 1.0, 1.0};
+    std::string msg = LoadError(doc, "singular.gltf");
+    EXPECT_NE(msg.find("'ceiling'"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("singular"), std::string::npos) << msg;
+}
+
+TEST(GltfLoader, IndexPastTheVerticesIsRefused) {
+    auto doc = Cornell();
+    int acc = doc["meshes"][0]["primitives"][0]["indices"];
+    // Point the index accessor of the floor at the position data (floats as uint32).
+    doc["accessors"][acc]["bufferView"] = doc["accessors"][0]["bufferView"];
+    std::string msg = LoadError(doc, "index.gltf");
+    EXPECT_NE(msg.find("node 0 'floor'"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("past the"), std::string::npos) << msg;
+}
+
+TEST(GltfLoader, MissingPositionIsRefused) {
+    auto doc = Cornell();
+    doc["meshes"][0]["primitives"][0]["attributes"].erase("POSITION");
+    std::string msg = LoadError(doc, "nopos.gltf");
+    EXPECT_NE(msg.find("has no POSITION"), std::string::npos) << msg;
+}
+
+TEST(GltfLoader, PointsAreRefused) {
+    auto doc = Cornell();
+    doc["meshes"][0]["primitives"][0]["mode"] = 0;
+    std::string msg = LoadError(doc, "points.gltf");
+    EXPECT_NE(msg.find("only triangles are supported"), std::string::npos) << msg;
+}
+
+TEST(GltfLoader, UnsupportedRequiredExtensionIsRefused) {
+    auto doc = Cornell();
+    doc["extensionsRequired"] = {"KHR_draco_mesh_compression"};
+    doc["extensionsUsed"] = {"KHR_draco_mesh_compression"};
+    std::string msg = LoadError(doc, "draco.gltf");
+    EXPECT_NE(msg.find("KHR_draco_mesh_compression"), std::string::npos) << msg;
+}
+
+TEST(GltfLoader, AlbedoAboveOneIsRefused) {
+    auto doc = Cornell();
+    doc["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1.5, 0.5, 0.5, 1.0};
+    std::string msg = LoadError(doc, "albedo.gltf");
+    EXPECT_NE(msg.find("material 0 'white'"), std::string::npos) << msg;
+}
+
+TEST(GltfLoader, UnknownMeshIsRefused) {
+    auto doc = Cornell();
+    doc["nodes"][2]["mesh"] = 99;
+    std::string msg = LoadError(doc, "mesh.gltf");
+    EXPECT_NE(msg.find("99"), std::string::npos) << msg;
+}
+
+}  // namespace
+}  // namespace penumbra
