@@ -68,7 +68,8 @@ int main(int argc, char** argv) {
 
     auto* bake = app.add_subcommand("bake", "Light a glTF scene in-process and write per-vertex "
                                             "irradiance (.json, or .glb/.gltf with COLOR_0)");
-    std::string scenePath, outPath, device = "auto", scheme = "symmetric";
+    std::string scenePath, outPath, device = "auto", scheme = "symmetric",
+                linkOracle = "conservative";
     SolverSettings settings;
     int iterations = 8;
     bool quiet = false;
@@ -88,6 +89,12 @@ int main(int argc, char** argv) {
     bake->add_option("--oracle", settings.oracle,
                      "link refinement threshold, in units of a bin's solid angle")
         ->capture_default_str();
+    bake->add_option("--receiver-oracle", settings.receiverOracle,
+                     "receiver solid-angle threshold relative to --oracle")
+        ->capture_default_str();
+    bake->add_option("--link-oracle", linkOracle,
+                     "conservative (accurate) or paper (Sec. 3.2: fewer links)")
+        ->capture_default_str();
     bake->add_option("--threads", settings.threads, "CPU threads (0: all cores)")
         ->capture_default_str();
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
@@ -96,7 +103,10 @@ int main(int argc, char** argv) {
     CLI11_PARSE(app, argc, argv);
     try {
         if (bake->parsed())
+        {
+            settings.paperOracle = ParsePaperOracle(linkOracle);
             return Bake(scenePath, outPath, settings, iterations, device, scheme, quiet);
+        }
     } catch (const penumbra::Error& e) {
         std::fprintf(stderr, "\npenumbra: error: %s\n", e.what());
         return 1;

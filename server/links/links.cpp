@@ -27,7 +27,9 @@ struct Refiner {
     const Directions& dirs;
     const LeafNorms& norms;
     const NearField& near;
-    float threshold;  // oracle × ω_bin
+    float threshold;          // oracle × ω_bin, for the sender
+    float receiverThreshold;  // oracle × receiverOracle × ω_bin
+    bool paper;               // LinkOracle::kPaper
 
     template <typename F>
     void Children(uint32_t n, F&& f) const {
@@ -70,11 +72,15 @@ struct Refiner {
         if (!(R.IsLeaf() && S.IsLeaf())) {
             float dist2 = dist * dist;
             bool overlap = dist <= R.radius + S.radius;
-            // Oracle: solid angle of sender (and receiver) against the bin's ω_bin.
+            // Oracle: solid angle of sender (and receiver) against the bin's ω_bin. The
+            // conservative mode bounds members by the bounding sphere, refines overlapping
+            // pairs and also tests the receiver; the paper's tests the sender's area only.
             float pi = std::numbers::pi_v<float>;
-            float omegaS = pi * S.radius * S.radius / dist2;
+            float rs = paper ? S.discRadius : S.radius;
+            float omegaS = pi * rs * rs / dist2;
             float omegaR = pi * R.radius * R.radius / dist2;
-            if (overlap || std::max(omegaS, omegaR) > threshold) {
+            if ((!paper && overlap) || omegaS > threshold ||
+                (!paper && omegaR > receiverThreshold)) {
                 bool splitSender = R.IsLeaf() || (!S.IsLeaf() && S.radius >= R.radius);
                 if (splitSender)
                     Children(s, [&](uint32_t b) { pair(r, b); });
@@ -219,7 +225,9 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
                  const NearField& near, const LinkSettings& settings,
                  const std::function<void(double)>& progress) {
     auto start = std::chrono::steady_clock::now();
-    Refiner refiner{h, dirs, norms, near, settings.oracle * dirs.BinSolidAngle()};
+    Refiner refiner{h, dirs, norms, near, settings.oracle * dirs.BinSolidAngle(),
+                    settings.oracle * settings.receiverOracle * dirs.BinSolidAngle(),
+                    settings.mode == LinkOracle::kPaper};
     std::unique_ptr<tbb::global_control> limit;
     if (settings.threads > 0)
         limit = std::make_unique<tbb::global_control>(

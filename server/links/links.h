@@ -24,9 +24,18 @@ static_assert(sizeof(Link) == 12);
 static_assert(offsetof(Link, bin) == 4 && offsetof(Link, level) == 6 &&
               offsetof(Link, formFactor) == 8);
 
+enum class LinkOracle {
+    kConservative,  // bounding spheres, both ends, overlapping pairs refined (default)
+    kPaper,         // Sec. 3.2 as written: the sender's area-based solid angle only
+};
+
 struct LinkSettings {
+    LinkOracle mode = LinkOracle::kConservative;
     // Refine while sender or receiver subtends more than `oracle` × ω_bin.
     float oracle = 1.0f;
+    // Conservative mode: refine while the receiver subtends more than oracle × this ×
+    // ω_bin (a large receiver takes one direction for all its members).
+    float receiverOracle = 1.0f;
     int threads = 0;  // 0: all cores
 };
 

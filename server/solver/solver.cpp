@@ -21,6 +21,12 @@ DeviceChoice ParseDevice(const std::string& name) {
     throw Error("unknown device '" + name + "' (use auto, gpu, lavapipe or cpu)");
 }
 
+bool ParsePaperOracle(const std::string& name) {
+    if (name == "conservative") return false;
+    if (name == "paper") return true;
+    throw Error("unknown link oracle '" + name + "' (use conservative or paper)");
+}
+
 Scheme ParseScheme(const std::string& name) {
     if (name == "symmetric") return Scheme::kSymmetric;
     if (name == "asymmetric") return Scheme::kAsymmetric;

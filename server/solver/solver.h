@@ -25,6 +25,8 @@ struct SolverSettings {
     int antiradianceSteps = 3;  // asymmetric: antiradiance steps after each radiance step
     DeviceChoice device = DeviceChoice::kAuto;
     float oracle = 1.0f;    // link refinement threshold in units of ω_bin
+    float receiverOracle = 1.0f;  // receiver threshold relative to `oracle`
+    bool paperOracle = false;     // Sec. 3.2's oracle (fewer links, less accurate)
     int threads = 0;        // CPU threads; 0 = all cores
     bool validation = false;  // Vulkan validation layers (tests turn them on)
 };
@@ -74,6 +76,7 @@ std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& s
 
 // Parses "auto|gpu|lavapipe|cpu" and "symmetric|asymmetric"; throws penumbra::Error.
 DeviceChoice ParseDevice(const std::string& name);
+bool ParsePaperOracle(const std::string& name);  // "conservative" | "paper"
 Scheme ParseScheme(const std::string& name);
 
 // Per-vertex irradiance for primitive `p` in its input vertex order.

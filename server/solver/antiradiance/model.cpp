@@ -24,6 +24,8 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
 
     LinkSettings ls;
     ls.oracle = settings.oracle;
+    ls.receiverOracle = settings.receiverOracle;
+    ls.mode = settings.paperOracle ? LinkOracle::kPaper : LinkOracle::kConservative;
     ls.threads = settings.threads;
     LeafNorms norms = ComputeLeafNorms(model.hierarchy, model.dirs);
     NearField near = BuildNearField(model.surfels);
