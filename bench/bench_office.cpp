@@ -1,0 +1,152 @@
+// Office-scale benchmark of the antiradiance solver (issue 2): the paper's office has
+// 5.6K triangles, 18.2K elements, 632K links, 128 bins, 4 symmetric iterations a frame,
+// 10.1 fps on a GeForce 8800 GTX. Prints a table and writes JSON to --out.
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "base/check.h"
+#include "scene/gltf_loader.h"
+#include "solver/solver.h"
+
+namespace {
+
+using namespace penumbra;
+
+double Median(std::vector<double> v) {
+    if (v.empty()) return 0.0;
+    std::sort(v.begin(), v.end());
+    size_t n = v.size();
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+std::string CpuModel() {
+    std::ifstream in("/proc/cpuinfo");
+    std::string line;
+    while (std::getline(in, line))
+        if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
+    return "unknown";
+}
+
+nlohmann::json RunDevice(const Scene& scene, SolverSettings settings, int frames,
+                         int iterationsPerFrame) {
+    auto solver = CreateSolver(scene, settings);
+    solver->Iterate(iterationsPerFrame);  // warm-up frame
+    std::vector<double> frameMs;
+    std::map<std::string, std::vector<double>> passMs;
+    SolverStats before = solver->Stats();
+    for (int f = 0; f < frames; ++f) {
+        auto t0 = std::chrono::steady_clock::now();
+        solver->Iterate(iterationsPerFrame);
+        frameMs.push_back(
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                .count());
+        SolverStats after = solver->Stats();
+        for (size_t p = 0; p < after.passes.size(); ++p)
+            passMs[after.passes[p].name].push_back(
+                (after.passes[p].msTotal - before.passes[p].msTotal) / iterationsPerFrame);
+        before = after;
+    }
+    SolverStats s = solver->Stats();
+    double frame = Median(frameMs);
+    nlohmann::json j;
+    j["device"] = s.device;
+    j["elements"] = s.elements;
+    j["nodes"] = s.nodes;
+    j["links"] = s.links;
+    j["bins"] = s.bins;
+    j["link_build_seconds"] = s.linkBuildSeconds;
+    j["links_per_second"] = s.links / s.linkBuildSeconds;
+    j["iterations_per_frame"] = iterationsPerFrame;
+    j["frames_measured"] = frames;
+    j["frame_ms_median"] = frame;
+    j["ms_per_iteration_median"] = frame / iterationsPerFrame;
+    j["fps"] = 1000.0 / frame;
+    nlohmann::json passes;
+    for (const auto& [name, v] : passMs) passes[name + "_ms_per_iteration_median"] = Median(v);
+    j["passes"] = passes;
+    j["table_mib"] = s.tableBytes / 1048576.0;
+    j["link_mib"] = s.linkBytes / 1048576.0;
+    return j;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"penumbra office benchmark (antiradiance, issue 2)"};
+    std::string scenePath = "scenes/office.gltf", out = "bench/results";
+    std::vector<std::string> devices{"cpu", "lavapipe"};
+    int frames = 10, iterations = 4;
+    SolverSettings settings;
+    settings.bins = 128;
+    settings.elementSize = 0.5f;
+    settings.paperOracle = true;
+    settings.oracle = 2.0f;
+    app.add_option("--scene", scenePath, "office-scale glTF")->capture_default_str();
+    app.add_option("--out", out, "folder for the results JSON")->capture_default_str();
+    app.add_option("--devices", devices, "devices to run: cpu, lavapipe, gpu")
+        ->capture_default_str();
+    app.add_option("--frames", frames, "frames measured per device")->capture_default_str();
+    app.add_option("--iterations", iterations, "iterations per frame")->capture_default_str();
+    app.add_option("--bins", settings.bins)->capture_default_str();
+    app.add_option("--element-size", settings.elementSize)->capture_default_str();
+    app.add_option("--oracle", settings.oracle, "paper oracle threshold")->capture_default_str();
+    CLI11_PARSE(app, argc, argv);
+
+    try {
+        Scene scene = LoadGltf(scenePath);
+        nlohmann::json report;
+        report["benchmark"] = "office";
+        report["scene"] = scenePath;
+        report["triangles"] = scene.TriangleCount();
+        report["machine"] = {{"cpu", CpuModel()},
+                             {"threads", std::thread::hardware_concurrency()}};
+        report["settings"] = {{"bins", settings.bins},
+                              {"element_size", settings.elementSize},
+                              {"link_oracle", "paper"},
+                              {"oracle", settings.oracle},
+                              {"scheme", "symmetric"}};
+        std::printf("office: %zu triangles, %d bins, element %.2f m, paper oracle %.2f, "
+                    "%d iterations/frame, median of %d frames\n",
+                    scene.TriangleCount(), settings.bins, settings.elementSize, settings.oracle,
+                    iterations, frames);
+        std::printf("%-34s %8s %9s %8s %8s %8s %8s %8s %9s %7s %8s\n", "device", "elements",
+                    "links", "build s", "global", "push", "local", "pull", "ms/iter", "fps",
+                    "tbl MiB");
+        for (const auto& d : devices) {
+            SolverSettings s = settings;
+            s.device = ParseDevice(d);
+            nlohmann::json r;
+            try {
+                r = RunDevice(scene, s, frames, iterations);
+            } catch (const Error& e) {
+                std::printf("%-34s unavailable: %s\n", d.c_str(), e.what());
+                continue;
+            }
+            auto pass = [&](const char* n) {
+                return r["passes"].value(std::string(n) + "_ms_per_iteration_median", 0.0);
+            };
+            std::printf("%-34.34s %8zu %9zu %8.3f %8.2f %8.2f %8.2f %8.2f %9.2f %7.1f %8.1f\n",
+                        r["device"].get<std::string>().c_str(), r["elements"].get<size_t>(),
+                        r["links"].get<size_t>(), r["link_build_seconds"].get<double>(),
+                        pass("global"), pass("push"), pass("local"), pass("pull"),
+                        r["ms_per_iteration_median"].get<double>(), r["fps"].get<double>(),
+                        r["table_mib"].get<double>());
+            report["results"].push_back(r);
+        }
+        std::string path = out + "/office.json";
+        std::ofstream file(path);
+        if (!file) throw Error(path + ": cannot write");
+        file << report.dump(2) << "\n";
+        std::printf("wrote %s\n", path.c_str());
+    } catch (const Error& e) {
+        std::fprintf(stderr, "bench: %s\n", e.what());
+        return 1;
+    }
+    return 0;
+}
