@@ -2,7 +2,6 @@
 // 5.6K triangles, 18.2K elements, 632K links, 128 bins, 4 symmetric iterations a frame,
 // 10.1 fps on a GeForce 8800 GTX. Prints a table and writes JSON to --out.
 #include <CLI/CLI.hpp>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -104,17 +103,17 @@ int main(int argc, char** argv) {
         report["benchmark"] = "office";
         report["scene"] = scenePath;
         report["triangles"] = scene.TriangleCount();
-        report["machine"] = {{"cpu", CpuModel()},
-                             {"threads", std::thread::hardware_concurrency()}};
+        report["machine"] = {{"cpu", CpuModel()}, {"threads", std::thread::hardware_concurrency()}};
         report["settings"] = {{"bins", settings.bins},
                               {"element_size", settings.elementSize},
                               {"link_oracle", "paper"},
                               {"oracle", settings.oracle},
                               {"scheme", "symmetric"}};
-        std::printf("office: %zu triangles, %d bins, element %.2f m, paper oracle %.2f, "
-                    "%d iterations/frame, median of %d frames\n",
-                    scene.TriangleCount(), settings.bins, settings.elementSize, settings.oracle,
-                    iterations, frames);
+        std::printf(
+            "office: %zu triangles, %d bins, element %.2f m, paper oracle %.2f, "
+            "%d iterations/frame, median of %d frames\n",
+            scene.TriangleCount(), settings.bins, settings.elementSize, settings.oracle, iterations,
+            frames);
         std::printf("%-34s %8s %9s %8s %8s %8s %8s %8s %9s %7s %8s\n", "device", "elements",
                     "links", "build s", "global", "push", "local", "pull", "ms/iter", "fps",
                     "tbl MiB");

@@ -3,10 +3,9 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <glm/glm.hpp>
 #include <string>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "scene/surfels.h"
 

@@ -27,8 +27,8 @@ SceneBuilder CornellBox() {
               Mm(0, y, 559.2f), inside);
     b.AddQuad("ceiling", white, Mm(0, y, 227), Mm(213, y, 227), Mm(213, y, 332), Mm(0, y, 332),
               inside);
-    b.AddQuad("ceiling", white, Mm(343, y, 227), Mm(556, y, 227), Mm(556, y, 332),
-              Mm(343, y, 332), inside);
+    b.AddQuad("ceiling", white, Mm(343, y, 227), Mm(556, y, 227), Mm(556, y, 332), Mm(343, y, 332),
+              inside);
     b.AddQuad("ceiling_light", light, Mm(343, y, 227), Mm(343, y, 332), Mm(213, y, 332),
               Mm(213, y, 227), inside);
     b.AddQuad("back_wall", white, Mm(549.6f, 0, 559.2f), Mm(0, 0, 559.2f), Mm(0, y, 559.2f),
@@ -39,7 +39,7 @@ SceneBuilder CornellBox() {
               Mm(556, y, 0), inside);
 
     // Blocks: four sides and a top each, faces pointing away from the block's centre.
-    auto block = [&](const std::string& name, const glm::vec3 (&top)[4], float h) {
+    auto block = [&](const std::string& name, const glm::vec3(&top)[4], float h) {
         glm::vec3 c(0.0f);
         for (const auto& p : top) c += p;
         c = 0.25f * c;
@@ -112,18 +112,17 @@ SceneBuilder Office() {
                              {0.05f, 0.71f, 0.05f}, 0, false);
             float cz = z - dz * 0.6f;
             b.AddBox("chair_" + id, fabric, {x, 0.45f, cz}, {0.45f, 0.06f, 0.45f}, yaw, true);
-            b.AddBox("chair_" + id, fabric, {x, 0.75f, cz - dz * 0.22f}, {0.45f, 0.55f, 0.05f},
-                     yaw, true);
+            b.AddBox("chair_" + id, fabric, {x, 0.75f, cz - dz * 0.22f}, {0.45f, 0.55f, 0.05f}, yaw,
+                     true);
             for (int lx = -1; lx <= 1; lx += 2)
                 for (int lz = -1; lz <= 1; lz += 2)
                     b.AddBox("chair_" + id, metal, {x + lx * 0.19f, 0.21f, cz + lz * 0.19f},
                              {0.03f, 0.42f, 0.03f}, 0, false);
-            b.AddBox("monitor_" + id, screen, {x, 1.0f, z + dz * 0.2f}, {0.55f, 0.35f, 0.03f},
-                     yaw, true);
+            b.AddBox("monitor_" + id, screen, {x, 1.0f, z + dz * 0.2f}, {0.55f, 0.35f, 0.03f}, yaw,
+                     true);
             b.AddBox("monitor_" + id, metal, {x, 0.8f, z + dz * 0.22f}, {0.06f, 0.1f, 0.06f}, 0,
                      true);
-            b.AddBox("computer_" + id, metal, {x + 0.5f, 0.22f, z}, {0.2f, 0.44f, 0.45f}, 0,
-                     false);
+            b.AddBox("computer_" + id, metal, {x + 0.5f, 0.22f, z}, {0.2f, 0.44f, 0.45f}, 0, false);
         }
     // Shelves along the west and east walls.
     for (int s = 0; s < 6; ++s) {
@@ -138,8 +137,9 @@ SceneBuilder Office() {
     // Filing cabinets by the south wall.
     for (int c = 0; c < 8; ++c)
         for (int k = 0; k < 3; ++k)
-            b.AddBox("cabinet_" + std::to_string(c), metal, {1.0f + 1.4f * c, 0.22f + 0.44f * k, 7.7f},
-                     {0.5f, 0.42f, 0.5f}, 0, k == 0 ? false : true);
+            b.AddBox("cabinet_" + std::to_string(c), metal,
+                     {1.0f + 1.4f * c, 0.22f + 0.44f * k, 7.7f}, {0.5f, 0.42f, 0.5f}, 0,
+                     k == 0 ? false : true);
     return b;
 }
 

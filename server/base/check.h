@@ -27,18 +27,18 @@ std::string CheckOperands(const char* expr, const A& a, const B& b) {
 
 }  // namespace penumbra
 
-#define PENUMBRA_CHECK(cond)                                                   \
-    do {                                                                       \
-        if (!(cond)) ::penumbra::CheckFailed(__FILE__, __LINE__, #cond);       \
+#define PENUMBRA_CHECK(cond)                                             \
+    do {                                                                 \
+        if (!(cond)) ::penumbra::CheckFailed(__FILE__, __LINE__, #cond); \
     } while (0)
 
-#define PENUMBRA_CHECK_OP(a, op, b)                                                     \
-    do {                                                                                \
-        const auto& checkA_ = (a);                                                      \
-        const auto& checkB_ = (b);                                                      \
-        if (!(checkA_ op checkB_))                                                      \
-            ::penumbra::CheckFailed(                                                    \
-                __FILE__, __LINE__,                                                     \
+#define PENUMBRA_CHECK_OP(a, op, b)                                                      \
+    do {                                                                                 \
+        const auto& checkA_ = (a);                                                       \
+        const auto& checkB_ = (b);                                                       \
+        if (!(checkA_ op checkB_))                                                       \
+            ::penumbra::CheckFailed(                                                     \
+                __FILE__, __LINE__,                                                      \
                 ::penumbra::detail::CheckOperands(#a " " #op " " #b, checkA_, checkB_)); \
     } while (0)
 

@@ -1,7 +1,6 @@
 // The `penumbra` command line. `bake` runs a solver in-process (no server) and writes
 // per-vertex irradiance as JSON or as glTF with COLOR_0.
 #include <CLI/CLI.hpp>
-
 #include <cstdio>
 #include <iostream>
 
@@ -16,7 +15,8 @@ namespace {
 using namespace penumbra;
 
 bool EndsWith(const std::string& s, const std::string& suffix) {
-    return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+    return s.size() >= suffix.size() &&
+           s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
@@ -31,9 +31,8 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     Progress progress(!quiet && StderrIsTerminal());
     progress.Update("loading " + scenePath, 0.0);
     Scene scene = LoadGltf(scenePath);
-    auto solver = CreateSolver(scene, settings, [&](const std::string& stage, double f) {
-        progress.Update(stage, f);
-    });
+    auto solver = CreateSolver(
+        scene, settings, [&](const std::string& stage, double f) { progress.Update(stage, f); });
     solver->Iterate(iterations);
     progress.Done();
 
@@ -66,17 +65,17 @@ int main(int argc, char** argv) {
     CLI::App app{"Penumbra: a headless lighting service (antiradiance global illumination)"};
     app.require_subcommand(1);
 
-    auto* bake = app.add_subcommand("bake", "Light a glTF scene in-process and write per-vertex "
-                                            "irradiance (.json, or .glb/.gltf with COLOR_0)");
+    auto* bake = app.add_subcommand("bake",
+                                    "Light a glTF scene in-process and write per-vertex "
+                                    "irradiance (.json, or .glb/.gltf with COLOR_0)");
     std::string scenePath, outPath, device = "auto", scheme = "symmetric",
-                linkOracle = "conservative";
+                                    linkOracle = "conservative";
     SolverSettings settings;
     int iterations = 8;
     bool quiet = false;
     bake->add_option("scene", scenePath, "glTF 2.0 scene (.gltf or .glb)")->required();
     bake->add_option("-o,--output", outPath, "output file: .json, .glb or .gltf")->required();
-    bake->add_option("--solver", settings.solver, "solver (antiradiance)")
-        ->capture_default_str();
+    bake->add_option("--solver", settings.solver, "solver (antiradiance)")->capture_default_str();
     bake->add_option("--bins", settings.bins, "direction bins, 32..1024")->capture_default_str();
     bake->add_option("--iterations", iterations, "solver iterations")->capture_default_str();
     bake->add_option("--element-size", settings.elementSize,
@@ -102,8 +101,7 @@ int main(int argc, char** argv) {
 
     CLI11_PARSE(app, argc, argv);
     try {
-        if (bake->parsed())
-        {
+        if (bake->parsed()) {
             settings.paperOracle = ParsePaperOracle(linkOracle);
             return Bake(scenePath, outPath, settings, iterations, device, scheme, quiet);
         }

@@ -20,13 +20,14 @@ struct Staging {
     void* mapped = nullptr;
 
     Staging(const Context& ctx, size_t bytes) {
-        buffer = vk::raii::Buffer(ctx.Device(), vk::BufferCreateInfo({}, bytes,
-                                                                     vk::BufferUsageFlagBits::eTransferSrc |
-                                                                         vk::BufferUsageFlagBits::eTransferDst));
+        buffer = vk::raii::Buffer(ctx.Device(),
+                                  vk::BufferCreateInfo({}, bytes,
+                                                       vk::BufferUsageFlagBits::eTransferSrc |
+                                                           vk::BufferUsageFlagBits::eTransferDst));
         auto req = buffer.getMemoryRequirements();
-        uint32_t type = FindMemory(ctx, req.memoryTypeBits,
-                                   vk::MemoryPropertyFlagBits::eHostVisible |
-                                       vk::MemoryPropertyFlagBits::eHostCoherent);
+        uint32_t type = FindMemory(
+            ctx, req.memoryTypeBits,
+            vk::MemoryPropertyFlagBits::eHostVisible | vk::MemoryPropertyFlagBits::eHostCoherent);
         if (type == UINT32_MAX) throw Error("Vulkan device has no host-visible memory");
         memory = vk::raii::DeviceMemory(ctx.Device(), vk::MemoryAllocateInfo(req.size, type));
         buffer.bindMemory(*memory, 0);
@@ -36,18 +37,19 @@ struct Staging {
 
 }  // namespace
 
-Buffer::Buffer(Context& ctx, size_t bytes) : ctx_(ctx), bytes_((std::max<size_t>(bytes, 4) + 3) & ~size_t(3)) {
+Buffer::Buffer(Context& ctx, size_t bytes)
+    : ctx_(ctx), bytes_((std::max<size_t>(bytes, 4) + 3) & ~size_t(3)) {
     if (bytes_ > ctx.Limits().maxStorageBufferRange)
-        throw Error("a " + std::to_string(bytes_ >> 20) + " MiB table exceeds this Vulkan device's " +
+        throw Error("a " + std::to_string(bytes_ >> 20) +
+                    " MiB table exceeds this Vulkan device's " +
                     std::to_string(ctx.Limits().maxStorageBufferRange >> 20) +
                     " MiB storage-buffer limit; use fewer bins, a larger element size, or "
                     "--device cpu");
-    buffer_ = vk::raii::Buffer(
-        ctx.Device(),
-        vk::BufferCreateInfo({}, bytes_,
-                             vk::BufferUsageFlagBits::eStorageBuffer |
-                                 vk::BufferUsageFlagBits::eTransferSrc |
-                                 vk::BufferUsageFlagBits::eTransferDst));
+    buffer_ = vk::raii::Buffer(ctx.Device(),
+                               vk::BufferCreateInfo({}, bytes_,
+                                                    vk::BufferUsageFlagBits::eStorageBuffer |
+                                                        vk::BufferUsageFlagBits::eTransferSrc |
+                                                        vk::BufferUsageFlagBits::eTransferDst));
     auto req = buffer_.getMemoryRequirements();
     // Prefer memory that is both device-local and host-visible (lavapipe, resizable BAR).
     uint32_t type = FindMemory(ctx, req.memoryTypeBits,
@@ -55,19 +57,22 @@ Buffer::Buffer(Context& ctx, size_t bytes) : ctx_(ctx), bytes_((std::max<size_t>
                                    vk::MemoryPropertyFlagBits::eHostVisible |
                                    vk::MemoryPropertyFlagBits::eHostCoherent);
     bool mappable = type != UINT32_MAX;
-    if (!mappable) type = FindMemory(ctx, req.memoryTypeBits, vk::MemoryPropertyFlagBits::eDeviceLocal);
+    if (!mappable)
+        type = FindMemory(ctx, req.memoryTypeBits, vk::MemoryPropertyFlagBits::eDeviceLocal);
     if (type == UINT32_MAX) throw Error("Vulkan device has no usable memory type for a buffer");
     try {
         memory_ = vk::raii::DeviceMemory(ctx.Device(), vk::MemoryAllocateInfo(req.size, type));
     } catch (const vk::SystemError& e) {
-        throw Error("vkAllocateMemory (" + std::to_string(bytes_ >> 20) + " MiB) failed: " + e.what());
+        throw Error("vkAllocateMemory (" + std::to_string(bytes_ >> 20) +
+                    " MiB) failed: " + e.what());
     }
     buffer_.bindMemory(*memory_, 0);
     if (mappable) {
         mapped_ = memory_.mapMemory(0, bytes_);
         std::memset(mapped_, 0, bytes_);
     } else {
-        ctx.RunNow([&](const vk::raii::CommandBuffer& cb) { cb.fillBuffer(*buffer_, 0, bytes_, 0); });
+        ctx.RunNow(
+            [&](const vk::raii::CommandBuffer& cb) { cb.fillBuffer(*buffer_, 0, bytes_, 0); });
     }
 }
 

@@ -24,10 +24,14 @@ VKAPI_ATTR VkBool32 VKAPI_CALL OnMessage(VkDebugUtilsMessageSeverityFlagBitsEXT 
 
 int Rank(const vk::PhysicalDeviceProperties& p) {
     switch (p.deviceType) {
-        case vk::PhysicalDeviceType::eDiscreteGpu: return 3;
-        case vk::PhysicalDeviceType::eIntegratedGpu: return 2;
-        case vk::PhysicalDeviceType::eVirtualGpu: return 1;
-        default: return 0;  // CPU (lavapipe) and other
+        case vk::PhysicalDeviceType::eDiscreteGpu:
+            return 3;
+        case vk::PhysicalDeviceType::eIntegratedGpu:
+            return 2;
+        case vk::PhysicalDeviceType::eVirtualGpu:
+            return 1;
+        default:
+            return 0;  // CPU (lavapipe) and other
     }
 }
 
@@ -49,8 +53,9 @@ Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<
         for (const auto& l : context_->enumerateInstanceLayerProperties())
             if (std::strcmp(l.layerName, kValidationLayer) == 0) found = true;
         if (!found)
-            throw Error("Vulkan validation requested but VK_LAYER_KHRONOS_validation is not "
-                        "installed (Debian package vulkan-validationlayers)");
+            throw Error(
+                "Vulkan validation requested but VK_LAYER_KHRONOS_validation is not "
+                "installed (Debian package vulkan-validationlayers)");
         layers.push_back(kValidationLayer);
         extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
         validation_ = true;
@@ -112,8 +117,8 @@ Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<
         device_ = std::make_unique<vk::raii::Device>(*physical_, di);
         queue_ = std::make_unique<vk::raii::Queue>(*device_, family_, 0);
         pool_ = std::make_unique<vk::raii::CommandPool>(
-            *device_, vk::CommandPoolCreateInfo(
-                          vk::CommandPoolCreateFlagBits::eResetCommandBuffer, family_));
+            *device_,
+            vk::CommandPoolCreateInfo(vk::CommandPoolCreateFlagBits::eResetCommandBuffer, family_));
     } catch (const vk::SystemError& e) {
         throw Error(std::string("Vulkan set-up failed: ") + e.what());
     }

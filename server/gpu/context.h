@@ -8,7 +8,6 @@
 #include <optional>
 #include <string>
 #include <vector>
-
 #include <vulkan/vulkan_raii.hpp>
 
 namespace penumbra::gpu {

@@ -11,7 +11,8 @@ Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t buffe
     for (uint32_t i = 0; i < bufferCount; ++i)
         bindings.emplace_back(i, vk::DescriptorType::eStorageBuffer, 1,
                               vk::ShaderStageFlagBits::eCompute);
-    setLayout_ = vk::raii::DescriptorSetLayout(dev, vk::DescriptorSetLayoutCreateInfo({}, bindings));
+    setLayout_ =
+        vk::raii::DescriptorSetLayout(dev, vk::DescriptorSetLayoutCreateInfo({}, bindings));
     vk::PushConstantRange range(vk::ShaderStageFlagBits::eCompute, 0, pushConstantBytes);
     vk::DescriptorSetLayout raw = *setLayout_;
     vk::PipelineLayoutCreateInfo li({}, raw);
@@ -32,9 +33,10 @@ Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t buffe
         entries.emplace_back(i, i * sizeof(uint32_t), sizeof(uint32_t));
     vk::SpecializationInfo spec(static_cast<uint32_t>(entries.size()), entries.data(),
                                 specialization.size_bytes(), specialization.data());
-    vk::PipelineShaderStageCreateInfo stage({}, vk::ShaderStageFlagBits::eCompute, *module_,
-                                            "main", &spec);
-    pipeline_ = vk::raii::Pipeline(dev, nullptr, vk::ComputePipelineCreateInfo({}, stage, *layout_));
+    vk::PipelineShaderStageCreateInfo stage({}, vk::ShaderStageFlagBits::eCompute, *module_, "main",
+                                            &spec);
+    pipeline_ =
+        vk::raii::Pipeline(dev, nullptr, vk::ComputePipelineCreateInfo({}, stage, *layout_));
 }
 
 vk::raii::DescriptorSet Pipeline::MakeSet(std::span<const Buffer* const> buffers) const {

@@ -41,12 +41,24 @@ glm::vec3 CubeTexelCentre(int face, int u, int v, int res) {
     float t = ((v + 0.5f) / res) * 2.0f - 1.0f;
     glm::vec3 d;
     switch (face) {
-        case 0: d = {1, s, t}; break;
-        case 1: d = {-1, s, t}; break;
-        case 2: d = {s, 1, t}; break;
-        case 3: d = {s, -1, t}; break;
-        case 4: d = {s, t, 1}; break;
-        default: d = {s, t, -1}; break;
+        case 0:
+            d = {1, s, t};
+            break;
+        case 1:
+            d = {-1, s, t};
+            break;
+        case 2:
+            d = {s, 1, t};
+            break;
+        case 3:
+            d = {s, -1, t};
+            break;
+        case 4:
+            d = {s, t, 1};
+            break;
+        default:
+            d = {s, t, -1};
+            break;
     }
     return glm::normalize(d);
 }

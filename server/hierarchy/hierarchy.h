@@ -3,9 +3,8 @@
 #pragma once
 
 #include <cstdint>
-#include <vector>
-
 #include <glm/glm.hpp>
+#include <vector>
 
 #include "scene/surfels.h"
 
@@ -30,7 +29,7 @@ struct HierarchyNode {
 };
 
 struct Hierarchy {
-    std::vector<HierarchyNode> nodes;  // preorder; nodes[0] is the root
+    std::vector<HierarchyNode> nodes;    // preorder; nodes[0] is the root
     std::vector<uint32_t> leafOfSurfel;  // kNoParent for surfels without area
     std::vector<uint32_t> leaves;        // leaf node indices in preorder
     std::vector<uint32_t> interior;      // interior node indices in preorder

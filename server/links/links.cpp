@@ -194,8 +194,8 @@ Link MakeLink(const Hierarchy& h, const Directions& dirs, const LeafNorms& norms
     constexpr float kNearRadii = 4.0f;
     if (S.IsLeaf() && R.IsLeaf() && near.surfels &&
         dist < kNearRadii * (S.discRadius + R.discRadius)) {
-        float point = S.area * std::abs(cosS) * std::max(0.0f, cosR) /
-                      (dist2 + S.discRadius * S.discRadius);
+        float point =
+            S.area * std::abs(cosS) * std::max(0.0f, cosR) / (dist2 + S.discRadius * S.discRadius);
         float exact = NearFieldIrradiance(near, S.surfel, R.center, R.normal);
         f *= point > 0.0f ? exact / point : 0.0f;
     }
@@ -225,13 +225,17 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
                  const NearField& near, const LinkSettings& settings,
                  const std::function<void(double)>& progress) {
     auto start = std::chrono::steady_clock::now();
-    Refiner refiner{h, dirs, norms, near, settings.oracle * dirs.BinSolidAngle(),
+    Refiner refiner{h,
+                    dirs,
+                    norms,
+                    near,
+                    settings.oracle * dirs.BinSolidAngle(),
                     settings.oracle * settings.receiverOracle * dirs.BinSolidAngle(),
                     settings.mode == LinkOracle::kPaper};
     std::unique_ptr<tbb::global_control> limit;
     if (settings.threads > 0)
-        limit = std::make_unique<tbb::global_control>(
-            tbb::global_control::max_allowed_parallelism, settings.threads);
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      settings.threads);
 
     // Expand the root self-link breadth first into enough independent pairs to share.
     std::vector<std::pair<uint32_t, uint32_t>> work{{0, 0}}, next;
@@ -240,7 +244,10 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
         next.clear();
         for (auto [r, s] : work)
             refiner.Step(
-                r, s, [&](uint32_t rr, const Link& l) { seedLinks.push_back({rr, l}); },
+                r, s,
+                [&](uint32_t rr, const Link& l) {
+                    seedLinks.push_back({rr, l});
+                },
                 [&](uint32_t a, uint32_t b) { next.emplace_back(a, b); });
         work.swap(next);
     }
@@ -277,8 +284,8 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
     place(seedLinks);
     for (const auto& v : local) place(v);
     tbb::parallel_for(size_t(0), h.size(), [&](size_t r) {
-        std::sort(links.links.begin() + links.offsets[r], links.links.begin() + links.offsets[r + 1],
-                  [](const Link& a, const Link& b) {
+        std::sort(links.links.begin() + links.offsets[r],
+                  links.links.begin() + links.offsets[r + 1], [](const Link& a, const Link& b) {
                       return a.sender != b.sender ? a.sender < b.sender : a.bin < b.bin;
                   });
     });

@@ -70,7 +70,6 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
                  const NearField& near, const LinkSettings& settings,
                  const std::function<void(double)>& progress = {});
 
-
 // The link a receiver/sender pair would get (used for tests and dynamic updates).
 Link MakeLink(const Hierarchy& h, const Directions& dirs, const LeafNorms& norms,
               const NearField& near, uint32_t receiver, uint32_t sender);

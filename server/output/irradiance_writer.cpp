@@ -77,8 +77,8 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
     if (!out) throw Error(path + ": write failed");
 }
 
-void WriteIrradianceGltf(const std::string& input, const std::string& output,
-                         const Scene& scene, const IrradianceResult& result) {
+void WriteIrradianceGltf(const std::string& input, const std::string& output, const Scene& scene,
+                         const IrradianceResult& result) {
     tinygltf::Model model;
     tinygltf::TinyGLTF io;
     std::string err, warn;

@@ -2,10 +2,9 @@
 // glTF with a float RGB COLOR_0 on every primitive (for viewers).
 #pragma once
 
+#include <glm/glm.hpp>
 #include <string>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "scene/scene.h"
 #include "solver/solver.h"
@@ -32,7 +31,7 @@ std::string StatsJson(const SolverStats& stats, int indent = 2);
 
 // Copies glTF `input` to `output` (.glb or .gltf) with COLOR_0 = irradiance added to every
 // primitive; meshes shared by several nodes are duplicated so each gets its own colours.
-void WriteIrradianceGltf(const std::string& input, const std::string& output,
-                         const Scene& scene, const IrradianceResult& result);
+void WriteIrradianceGltf(const std::string& input, const std::string& output, const Scene& scene,
+                         const IrradianceResult& result);
 
 }  // namespace penumbra

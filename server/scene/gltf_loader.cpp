@@ -42,8 +42,8 @@ glm::mat4 LocalTransform(const tinygltf::Node& node) {
     }
     glm::mat4 m(1.0f);
     if (node.translation.size() == 3)
-        m = glm::translate(m, glm::vec3(node.translation[0], node.translation[1],
-                                        node.translation[2]));
+        m = glm::translate(
+            m, glm::vec3(node.translation[0], node.translation[1], node.translation[2]));
     if (node.rotation.size() == 4) {
         glm::quat q(static_cast<float>(node.rotation[3]), static_cast<float>(node.rotation[0]),
                     static_cast<float>(node.rotation[1]), static_cast<float>(node.rotation[2]));
@@ -92,8 +92,7 @@ std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, in
     return out;
 }
 
-std::vector<uint32_t> ReadIndices(const Context& ctx, const std::string& where,
-                                  int accessorIndex) {
+std::vector<uint32_t> ReadIndices(const Context& ctx, const std::string& where, int accessorIndex) {
     const auto& model = ctx.model;
     if (accessorIndex >= static_cast<int>(model.accessors.size()))
         ctx.Fail(where, "indices name accessor " + std::to_string(accessorIndex) +
@@ -103,10 +102,17 @@ std::vector<uint32_t> ReadIndices(const Context& ctx, const std::string& where,
     if (acc.type != TINYGLTF_TYPE_SCALAR) ctx.Fail(where, "indices accessor must be SCALAR");
     size_t size = 0;
     switch (acc.componentType) {
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: size = 1; break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: size = 2; break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: size = 4; break;
-        default: ctx.Fail(where, "indices must be unsigned byte, short or int");
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+            size = 1;
+            break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+            size = 2;
+            break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+            size = 4;
+            break;
+        default:
+            ctx.Fail(where, "indices must be unsigned byte, short or int");
     }
     if (acc.bufferView < 0 || acc.bufferView >= static_cast<int>(model.bufferViews.size()))
         ctx.Fail(where, "indices accessor has no buffer view");
@@ -169,8 +175,8 @@ glm::vec3 MeanTextureColor(const Context& ctx, const std::string& where, int tex
         ctx.Fail(where, "baseColorTexture has no image");
     const auto& img = ctx.model.images[tex.source];
     if (img.image.empty() || img.bits != 8 || img.component < 3)
-        ctx.Fail(where, "baseColorTexture image '" + img.uri +
-                            "' could not be decoded as 8-bit RGB(A)");
+        ctx.Fail(where,
+                 "baseColorTexture image '" + img.uri + "' could not be decoded as 8-bit RGB(A)");
     glm::dvec3 sum(0.0);
     size_t pixels = img.image.size() / img.component;
     for (size_t i = 0; i < pixels; ++i) {
@@ -264,23 +270,24 @@ Scene LoadGltf(const std::string& path) {
 
     std::vector<int> visits(model.nodes.size(), 0);
     std::function<void(int, const glm::mat4&, int)> visit = [&](int ni, const glm::mat4& parent,
-                                                                 int depth) {
+                                                                int depth) {
         if (ni < 0 || ni >= static_cast<int>(model.nodes.size()))
-            ctx.Fail("scene graph", "reference to node " + std::to_string(ni) +
-                                        ", which does not exist");
+            ctx.Fail("scene graph",
+                     "reference to node " + std::to_string(ni) + ", which does not exist");
         if (depth > 256 || ++visits[ni] > 1)
-            ctx.Fail(NodeLabel(model, ni), "node appears twice in the hierarchy (cycle or "
-                                           "shared child)");
+            ctx.Fail(NodeLabel(model, ni),
+                     "node appears twice in the hierarchy (cycle or "
+                     "shared child)");
         const auto& node = model.nodes[ni];
         if (!node.matrix.empty() && node.matrix.size() != 16)
-            ctx.Fail(NodeLabel(model, ni), "matrix has " + std::to_string(node.matrix.size()) +
-                                               " numbers, not 16");
+            ctx.Fail(NodeLabel(model, ni),
+                     "matrix has " + std::to_string(node.matrix.size()) + " numbers, not 16");
         glm::mat4 world = parent * LocalTransform(node);
         if (!Finite(world)) ctx.Fail(NodeLabel(model, ni), "transform has NaN or infinity");
         if (node.mesh >= 0) {
             if (node.mesh >= static_cast<int>(model.meshes.size()))
-                ctx.Fail(NodeLabel(model, ni), "mesh " + std::to_string(node.mesh) +
-                                                   " does not exist");
+                ctx.Fail(NodeLabel(model, ni),
+                         "mesh " + std::to_string(node.mesh) + " does not exist");
             if (std::abs(glm::determinant(glm::mat3(world))) < 1e-20f)
                 ctx.Fail(NodeLabel(model, ni), "transform is singular (zero scale)");
             glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(world)));
@@ -298,10 +305,10 @@ Scene LoadGltf(const std::string& path) {
                 out.mesh = node.mesh;
                 out.primitive = static_cast<int>(pi);
                 if (prim.material >= static_cast<int>(model.materials.size()))
-                    ctx.Fail(where, "material " + std::to_string(prim.material) +
-                                        " does not exist");
-                out.material = prim.material >= 0 ? static_cast<uint32_t>(prim.material)
-                                                  : defaultMaterial;
+                    ctx.Fail(where,
+                             "material " + std::to_string(prim.material) + " does not exist");
+                out.material =
+                    prim.material >= 0 ? static_cast<uint32_t>(prim.material) : defaultMaterial;
                 out.positions = ReadVec3(ctx, where, pos->second, "POSITION");
                 std::vector<uint32_t> seq;
                 if (prim.indices >= 0) {
@@ -345,8 +352,7 @@ Scene LoadGltf(const std::string& path) {
     };
     for (int r : roots) visit(r, glm::mat4(1.0f), 0);
 
-    if (scene.TriangleCount() == 0)
-        throw Error(path + ": the scene has no triangles to light");
+    if (scene.TriangleCount() == 0) throw Error(path + ": the scene has no triangles to light");
     return scene;
 }
 

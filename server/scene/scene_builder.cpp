@@ -17,8 +17,8 @@ uint32_t SceneBuilder::AddMaterial(const std::string& name, glm::vec3 albedo, gl
     return static_cast<uint32_t>(materials_.size() - 1);
 }
 
-void SceneBuilder::AddQuad(const std::string& node, uint32_t material, glm::vec3 p0,
-                           glm::vec3 p1, glm::vec3 p2, glm::vec3 p3, glm::vec3 towards) {
+void SceneBuilder::AddQuad(const std::string& node, uint32_t material, glm::vec3 p0, glm::vec3 p1,
+                           glm::vec3 p2, glm::vec3 p3, glm::vec3 towards) {
     if (std::find(nodeOrder_.begin(), nodeOrder_.end(), node) == nodeOrder_.end())
         nodeOrder_.push_back(node);
     Part& part = nodes_[node][material];
@@ -34,8 +34,7 @@ void SceneBuilder::AddQuad(const std::string& node, uint32_t material, glm::vec3
         part.positions.push_back(p);
         part.normals.push_back(n);
     }
-    part.indices.insert(part.indices.end(),
-                        {base, base + 1, base + 2, base, base + 2, base + 3});
+    part.indices.insert(part.indices.end(), {base, base + 1, base + 2, base, base + 2, base + 3});
 }
 
 void SceneBuilder::AddTiledQuad(const std::string& node, uint32_t material, glm::vec3 origin,

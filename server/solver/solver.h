@@ -3,11 +3,10 @@
 #pragma once
 
 #include <functional>
+#include <glm/glm.hpp>
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <glm/glm.hpp>
 
 #include "scene/scene.h"
 #include "scene/surfels.h"
@@ -24,11 +23,11 @@ struct SolverSettings {
     Scheme scheme = Scheme::kSymmetric;
     int antiradianceSteps = 3;  // asymmetric: antiradiance steps after each radiance step
     DeviceChoice device = DeviceChoice::kAuto;
-    float oracle = 1.0f;    // link refinement threshold in units of ω_bin
+    float oracle = 1.0f;          // link refinement threshold in units of ω_bin
     float receiverOracle = 1.0f;  // receiver threshold relative to `oracle`
     bool paperOracle = false;     // Sec. 3.2's oracle (fewer links, less accurate)
-    int threads = 0;        // CPU threads; 0 = all cores
-    bool validation = false;  // Vulkan validation layers (tests turn them on)
+    int threads = 0;              // CPU threads; 0 = all cores
+    bool validation = false;      // Vulkan validation layers (tests turn them on)
 };
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;

@@ -1,13 +1,13 @@
 // `penumbra bake` as a real process: JSON and glTF outputs on the bundled Cornell box,
 // and clear errors with exit code 1 for bad input.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 #include <tiny_gltf.h>
 
 #include <array>
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <sys/wait.h>
 
 #include "test_util.h"
 
@@ -36,7 +36,7 @@ ProcessResult Execute(const std::string& args) {
 TEST(BakeCli, WritesJsonWithStatsInInputVertexOrder) {
     auto out = testing::TempDir("bake-json") / "cb.json";
     ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
-                    " --bins 64 --iterations 4 --element-size 0.08 --device cpu");
+                              " --bins 64 --iterations 4 --element-size 0.08 --device cpu");
     ASSERT_EQ(r.exitCode, 0) << r.output;
     std::ifstream in(out);
     auto j = nlohmann::json::parse(in);
@@ -61,7 +61,7 @@ TEST(BakeCli, WritesJsonWithStatsInInputVertexOrder) {
 TEST(BakeCli, WritesGlbWithColor0PerPrimitive) {
     auto out = testing::TempDir("bake-glb") / "lit.glb";
     ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
-                    " --bins 64 --iterations 2 --element-size 0.1 --device cpu -q");
+                              " --bins 64 --iterations 2 --element-size 0.1 --device cpu -q");
     ASSERT_EQ(r.exitCode, 0) << r.output;
     tinygltf::Model model;
     tinygltf::TinyGLTF io;
@@ -80,8 +80,9 @@ TEST(BakeCli, WritesGlbWithColor0PerPrimitive) {
 
 TEST(BakeCli, LavapipeDeviceRuns) {
     auto out = testing::TempDir("bake-lvp") / "cb.json";
-    ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
-                    " --bins 32 --iterations 1 --element-size 0.15 --device lavapipe --validation");
+    ProcessResult r =
+        Execute("bake " + kCornell + " -o " + out.string() +
+                " --bins 32 --iterations 1 --element-size 0.15 --device lavapipe --validation");
     ASSERT_EQ(r.exitCode, 0) << r.output;
     std::ifstream in(out);
     auto j = nlohmann::json::parse(in);

@@ -1,6 +1,8 @@
 // Every Vulkan pass equals its CPU twin on lavapipe, with validation layers on and no
 // validation message allowed. Tolerance: relative 1e-5 of the table's largest value —
 // both sides sum in the same order in fp32, so only fused multiply-adds differ.
+#include "solver/antiradiance/vulkan_passes.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,7 +11,6 @@
 #include "bundled_scenes.h"
 #include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/model.h"
-#include "solver/antiradiance/vulkan_passes.h"
 
 namespace penumbra {
 namespace {

@@ -1,10 +1,11 @@
 // scenes/*.gltf are what tools/make_scenes writes: regenerate and compare byte for byte.
+#include "bundled_scenes.h"
+
 #include <gtest/gtest.h>
 
 #include <fstream>
 #include <sstream>
 
-#include "bundled_scenes.h"
 #include "test_util.h"
 
 namespace penumbra {

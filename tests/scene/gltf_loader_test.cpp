@@ -1,12 +1,13 @@
 // glTF loading: the bundled files, and broken files that must fail naming the file,
 // the offending object and the reason.
+#include "scene/gltf_loader.h"
+
 #include <gtest/gtest.h>
 
 #include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "base/check.h"
-#include "scene/gltf_loader.h"
 #include "scene/surfels.h"
 #include "test_util.h"
 
@@ -47,8 +48,9 @@ TEST(GltfLoader, RefinementKeepsInputVerticesAndArea) {
     for (float a : s.areas) area += a;
     for (const auto& p : scene.primitives)
         for (size_t t = 0; t < p.indices.size(); t += 3)
-            input += 0.5 * glm::length(glm::cross(p.positions[p.indices[t + 1]] - p.positions[p.indices[t]],
-                                                  p.positions[p.indices[t + 2]] - p.positions[p.indices[t]]));
+            input += 0.5 * glm::length(glm::cross(
+                               p.positions[p.indices[t + 1]] - p.positions[p.indices[t]],
+                               p.positions[p.indices[t + 2]] - p.positions[p.indices[t]]));
     EXPECT_NEAR(area, input, 1e-4 * input);
     for (size_t p = 0; p < scene.primitives.size(); ++p)
         for (size_t i = 0; i < scene.primitives[p].positions.size(); ++i)

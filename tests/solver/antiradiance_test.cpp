@@ -61,8 +61,8 @@ TEST_P(FormFactor, SmallPatchMatchesPointToPointFormula) {
     float expected = L * side * side * cosR * cosE / (dist * dist);
     float actual = Mean(irr[i]);
     EXPECT_NEAR(actual, expected, 0.02f * expected)
-        << "tilt " << c.tiltDegrees << "° at x=" << p.x << ": expected " << expected
-        << ", got " << actual;
+        << "tilt " << c.tiltDegrees << "° at x=" << p.x << ": expected " << expected << ", got "
+        << actual;
 }
 
 INSTANTIATE_TEST_SUITE_P(Antiradiance, FormFactor,
@@ -123,8 +123,8 @@ TEST(Antiradiance, BlockerShadowAppearsWithIterations) {
         uint32_t grey = b->AddMaterial("grey", glm::vec3(0.5f));
         uint32_t light = b->AddMaterial("light", glm::vec3(0.0f), glm::vec3(10.0f));
         b->AddQuad("floor", grey, {-1, 0, -1}, {1, 0, -1}, {1, 0, 1}, {-1, 0, 1}, {0, 1, 0});
-        b->AddQuad("emitter", light, {-0.15f, 1, -0.15f}, {0.15f, 1, -0.15f},
-                   {0.15f, 1, 0.15f}, {-0.15f, 1, 0.15f}, {0, 0, 0});
+        b->AddQuad("emitter", light, {-0.15f, 1, -0.15f}, {0.15f, 1, -0.15f}, {0.15f, 1, 0.15f},
+                   {-0.15f, 1, 0.15f}, {0, 0, 0});
         if (b == &blocked) b->AddBox("blocker", grey, {0, 0.5f, 0}, {0.5f, 0.05f, 0.5f});
     }
     SolverSettings settings = CpuSettings(256, 0.04f);

@@ -73,8 +73,8 @@ SolverStats AntiradianceSolver::Stats() const {
     s.linkBuildSeconds = model_.links.buildSeconds;
     s.setupSeconds = setupSeconds_;
     s.msTotal = msTotal_;
-    s.linkBytes = model_.links.links.size() * sizeof(Link) +
-                  model_.links.offsets.size() * sizeof(uint32_t);
+    s.linkBytes =
+        model_.links.links.size() * sizeof(Link) + model_.links.offsets.size() * sizeof(uint32_t);
     if (cpu_) {
         s.passes = {{"global", cpu_->msGlobal},
                     {"push", cpu_->msPush},

@@ -17,20 +17,35 @@ double MsSince(Clock::time_point t) {
 }
 
 // acc[bin][rgb] += Σ over receiver r's links of F · w · I_ex[sender][link bin] (the U
-// operator, Eq. 16/17 with the σ spreading of Sec. 3.1).
+// operator, Eq. 16/17 with the σ spreading of Sec. 3.1). The sender reads are random
+// rows of a large table: gather a chunk of F·I_ex values first, prefetching the next
+// chunk, then spread them (PERFORMANCE-NOTES.md).
 inline void Gather(const AntiradianceModel& m, const float* iex, uint32_t r, float* acc) {
-    const int bins = m.Bins();
+    constexpr size_t kChunk = 16;
+    const size_t bins = m.Bins();
     const Link* begin = m.links.links.data() + m.links.offsets[r];
     const Link* end = m.links.links.data() + m.links.offsets[r + 1];
-    for (const Link* l = begin; l != end; ++l) {
-        const float* src = iex + (size_t(l->sender) * bins + l->bin) * 3;
-        float v0 = l->formFactor * src[0], v1 = l->formFactor * src[1],
-              v2 = l->formFactor * src[2];
-        for (const BinWeight& nb : m.dirs.Neighbours(l->level, l->bin)) {
-            float* dst = acc + nb.bin * 3;
-            dst[0] += nb.weight * v0;
-            dst[1] += nb.weight * v1;
-            dst[2] += nb.weight * v2;
+    auto source = [&](const Link* l) { return iex + (size_t(l->sender) * bins + l->bin) * 3; };
+    for (const Link* l = begin; l < begin + kChunk && l < end; ++l) __builtin_prefetch(source(l));
+    float v[kChunk][3];
+    for (const Link* chunk = begin; chunk < end; chunk += kChunk) {
+        const size_t n = std::min<size_t>(kChunk, end - chunk);
+        for (const Link* l = chunk + kChunk; l < chunk + 2 * kChunk && l < end; ++l)
+            __builtin_prefetch(source(l));
+        for (size_t k = 0; k < n; ++k) {
+            const float* src = source(chunk + k);
+            const float f = chunk[k].formFactor;
+            v[k][0] = f * src[0];
+            v[k][1] = f * src[1];
+            v[k][2] = f * src[2];
+        }
+        for (size_t k = 0; k < n; ++k) {
+            for (const BinWeight& nb : m.dirs.Neighbours(chunk[k].level, chunk[k].bin)) {
+                float* dst = acc + nb.bin * 3;
+                dst[0] += nb.weight * v[k][0];
+                dst[1] += nb.weight * v[k][1];
+                dst[2] += nb.weight * v[k][2];
+            }
         }
     }
 }
@@ -82,15 +97,45 @@ inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf, co
     }
 }
 
+// Pull depth by depth from the deepest clusters up; the clusters of one depth are
+// independent, so each depth is split over the threads.
 void PullRows(const AntiradianceModel& m, float* iex) {
     const size_t row = size_t(m.Bins()) * 3;
-    const auto& interior = m.hierarchy.interior;
-    for (auto it = interior.rbegin(); it != interior.rend(); ++it) {
-        uint32_t n = *it;
-        float* dst = iex + n * row;
-        const float* a = iex + m.leftChild[n] * row;
-        const float* b = iex + m.rightChild[n] * row;
-        for (size_t i = 0; i < row; ++i) dst[i] = a[i] + b[i];
+    const auto& byDepth = m.hierarchy.byDepth;
+    for (size_t d = byDepth.size(); d-- > 0;) {
+        const auto& level = byDepth[d];
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, level.size(), 16),
+                          [&](const tbb::blocked_range<size_t>& range) {
+                              for (size_t i = range.begin(); i != range.end(); ++i) {
+                                  uint32_t n = level[i];
+                                  if (m.leftChild[n] == kNoParent) continue;
+                                  float* dst = iex + n * row;
+                                  const float* a = iex + m.leftChild[n] * row;
+                                  const float* b = iex + m.rightChild[n] * row;
+                                  for (size_t k = 0; k < row; ++k) dst[k] = a[k] + b[k];
+                              }
+                          });
+    }
+}
+
+// Push depth by depth from the root down: L_in[n] += L_in[parent]. `clustersOnly`
+// leaves the leaves alone (the fused back end adds the parent's row itself).
+void PushRows(const AntiradianceModel& m, float* lin, bool clustersOnly) {
+    const size_t row = size_t(m.Bins()) * 3;
+    const auto& byDepth = m.hierarchy.byDepth;
+    const auto& nodes = m.hierarchy.nodes;
+    for (size_t d = 1; d < byDepth.size(); ++d) {
+        const auto& level = byDepth[d];
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, level.size(), 16),
+                          [&](const tbb::blocked_range<size_t>& range) {
+                              for (size_t i = range.begin(); i != range.end(); ++i) {
+                                  uint32_t n = level[i];
+                                  if (clustersOnly && nodes[n].IsLeaf()) continue;
+                                  float* dst = lin + n * row;
+                                  const float* src = lin + nodes[n].parent * row;
+                                  for (size_t k = 0; k < row; ++k) dst[k] += src[k];
+                              }
+                          });
     }
 }
 
@@ -127,15 +172,7 @@ void GlobalPass(const AntiradianceModel& m, const float* iex, float* lin) {
                       });
 }
 
-void PushPass(const AntiradianceModel& m, float* lin) {
-    const size_t row = size_t(m.Bins()) * 3;
-    const auto& nodes = m.hierarchy.nodes;
-    for (size_t n = 1; n < nodes.size(); ++n) {
-        float* dst = lin + n * row;
-        const float* src = lin + nodes[n].parent * row;
-        for (size_t i = 0; i < row; ++i) dst[i] += src[i];
-    }
-}
+void PushPass(const AntiradianceModel& m, float* lin) { PushRows(m, lin, false); }
 
 void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld, float* iexNew,
                float* irradiance, LocalMode mode) {
@@ -184,15 +221,9 @@ void CpuBackend::Iterate(LocalMode mode) {
                       });
     msGlobal += MsSince(t);
 
-    // Push among clusters (preorder: a parent's row is final before its children read it).
+    // Push among clusters (depth order: a parent's row is final before its children's).
     t = Clock::now();
-    const auto& nodes = m_.hierarchy.nodes;
-    for (size_t i = 1; i < interior.size(); ++i) {
-        uint32_t n = interior[i];
-        float* dst = lin + n * row;
-        const float* src = lin + nodes[n].parent * row;
-        for (size_t k = 0; k < row; ++k) dst[k] += src[k];
-    }
+    PushRows(m_, lin, true);
     msPush += MsSince(t);
 
     // Leaves: pushed L_in of the parent + own links, then the local pass, fused so the

@@ -14,13 +14,13 @@ void InitEmission(const AntiradianceModel& m, float* iex);
 
 // Global pass (U): L_in[r] = Σ_links F · w_σ · I_ex[s][bin] for every node r.
 void GlobalPass(const AntiradianceModel& m, const float* iex, float* lin);
-// Push: L_in of every node += L_in of its parent, in preorder (parents first).
+// Push: L_in of every node += L_in of its parent, parents first (depth order).
 void PushPass(const AntiradianceModel& m, float* lin);
 // Local pass at the leaves (K: Eq. 18, J: Eq. 19). Hemispheres not in `mode` keep
 // `iexOld`. Writes per-leaf irradiance (rgb) to `irradiance`.
 void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld, float* iexNew,
                float* irradiance, LocalMode mode);
-// Pull: interior I_ex = Σ children, bottom up (reverse preorder).
+// Pull: interior I_ex = Σ children, bottom up (deepest clusters first).
 void PullPass(const AntiradianceModel& m, float* iex);
 
 // The CPU back end: ping-pong I_ex, L_in only for clusters, global + local fused per leaf.

@@ -46,8 +46,8 @@ struct VulkanAntiradiance::Impl {
     const AntiradianceModel& m;
     gpu::Context ctx;
     // Model data (read only).
-    gpu::Buffer linkOffsets, links, neighbourOffsets, neighbours, receivers, leaves, dirs,
-        parents, children, nodesByDepth;
+    gpu::Buffer linkOffsets, links, neighbourOffsets, neighbours, receivers, leaves, dirs, parents,
+        children, nodesByDepth;
     // Tables.
     gpu::Buffer iex0, iex1, lin, irradiance;
     gpu::Pipeline global, push, local, pull;
@@ -82,9 +82,9 @@ struct VulkanAntiradiance::Impl {
           pull(ctx, Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
         Upload();
         const gpu::Buffer* g0[] = {&linkOffsets, &links, &neighbourOffsets, &neighbours,
-                                   &iex0, &lin, &receivers};
+                                   &iex0,        &lin,   &receivers};
         const gpu::Buffer* g1[] = {&linkOffsets, &links, &neighbourOffsets, &neighbours,
-                                   &iex1, &lin, &receivers};
+                                   &iex1,        &lin,   &receivers};
         globalSet[0] = global.MakeSet(g0);
         globalSet[1] = global.MakeSet(g1);
         const gpu::Buffer* l0[] = {&leaves, &dirs, &lin, &iex0, &iex1, &irradiance};
@@ -99,8 +99,7 @@ struct VulkanAntiradiance::Impl {
         pushSet = push.MakeSet(ps);
         if (ctx.TimestampPeriodNs() > 0.0f)
             queries = vk::raii::QueryPool(
-                ctx.Device(),
-                vk::QueryPoolCreateInfo({}, vk::QueryType::eTimestamp, kTimestamps));
+                ctx.Device(), vk::QueryPoolCreateInfo({}, vk::QueryType::eTimestamp, kTimestamps));
     }
 
     std::vector<uint32_t> Spec() const { return {kWorkgroup, static_cast<uint32_t>(m.Bins())}; }
@@ -150,8 +149,8 @@ struct VulkanAntiradiance::Impl {
         std::vector<uint32_t> flat;
         const auto& byDepth = m.hierarchy.byDepth;
         for (size_t d = 1; d < byDepth.size(); ++d) {
-            pushLevels.push_back({static_cast<uint32_t>(flat.size()),
-                                  static_cast<uint32_t>(byDepth[d].size())});
+            pushLevels.push_back(
+                {static_cast<uint32_t>(flat.size()), static_cast<uint32_t>(byDepth[d].size())});
             flat.insert(flat.end(), byDepth[d].begin(), byDepth[d].end());
         }
         for (size_t d = byDepth.size(); d-- > 0;) {
@@ -192,8 +191,8 @@ struct VulkanAntiradiance::Impl {
     }
     void RecordLocal(const vk::raii::CommandBuffer& cb, LocalMode mode) {
         cb.bindPipeline(vk::PipelineBindPoint::eCompute, local.Handle());
-        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, local.Layout(), 0,
-                              {*localSet[cur]}, {});
+        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, local.Layout(), 0, {*localSet[cur]},
+                              {});
         LocalPush pc{static_cast<uint32_t>(m.leaves.size()), mode, m.dirs.BinSolidAngle()};
         cb.pushConstants<LocalPush>(local.Layout(), vk::ShaderStageFlagBits::eCompute, 0, pc);
         cb.dispatch(Groups(pc.count), 1, 1);
@@ -201,8 +200,8 @@ struct VulkanAntiradiance::Impl {
     // Pulls into the table the local pass just wrote (`target` parity).
     void RecordPull(const vk::raii::CommandBuffer& cb, int target) {
         cb.bindPipeline(vk::PipelineBindPoint::eCompute, pull.Handle());
-        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, pull.Layout(), 0,
-                              {*pullSet[target]}, {});
+        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, pull.Layout(), 0, {*pullSet[target]},
+                              {});
         for (const auto& level : pullLevels) {
             cb.pushConstants<RangePush>(pull.Layout(), vk::ShaderStageFlagBits::eCompute, 0, level);
             cb.dispatch(Groups(uint64_t(level.count) * m.Bins() * 3), 1, 1);
@@ -264,9 +263,7 @@ std::vector<float> VulkanAntiradiance::ReadLeafIrradiance() {
     return impl_->irradiance.Download<float>();
 }
 
-std::string VulkanAntiradiance::DeviceName() const {
-    return "vulkan:" + impl_->ctx.DeviceName();
-}
+std::string VulkanAntiradiance::DeviceName() const { return "vulkan:" + impl_->ctx.DeviceName(); }
 
 std::vector<PassTiming> VulkanAntiradiance::PassTimings() const {
     return {{"global", impl_->msPass[0]},
@@ -288,10 +285,18 @@ void VulkanAntiradiance::RunPass(Pass pass, LocalMode mode) {
     Impl& s = *impl_;
     s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
         switch (pass) {
-            case Pass::kGlobal: s.RecordGlobal(cb); break;
-            case Pass::kPush: s.RecordPush(cb); break;
-            case Pass::kLocal: s.RecordLocal(cb, mode); break;
-            case Pass::kPull: s.RecordPull(cb, s.cur); break;
+            case Pass::kGlobal:
+                s.RecordGlobal(cb);
+                break;
+            case Pass::kPush:
+                s.RecordPush(cb);
+                break;
+            case Pass::kLocal:
+                s.RecordLocal(cb, mode);
+                break;
+            case Pass::kPull:
+                s.RecordPull(cb, s.cur);
+                break;
         }
     });
 }
