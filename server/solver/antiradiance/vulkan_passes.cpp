@@ -184,7 +184,7 @@ struct VulkanAntiradiance::Impl {
         cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, push.Layout(), 0, {*pushSet}, {});
         for (const auto& level : pushLevels) {
             cb.pushConstants<RangePush>(push.Layout(), vk::ShaderStageFlagBits::eCompute, 0, level);
-            cb.dispatch(Groups(uint64_t(level.count) * m.Bins() * 3), 1, 1);
+            cb.dispatch(Groups(level.count), 1, 1);
             // Each depth reads the rows the previous depth wrote.
             gpu::ComputeBarrier(cb);
         }
@@ -204,7 +204,7 @@ struct VulkanAntiradiance::Impl {
                               {});
         for (const auto& level : pullLevels) {
             cb.pushConstants<RangePush>(pull.Layout(), vk::ShaderStageFlagBits::eCompute, 0, level);
-            cb.dispatch(Groups(uint64_t(level.count) * m.Bins() * 3), 1, 1);
+            cb.dispatch(Groups(level.count), 1, 1);
             // The next (shallower) depth sums the rows this one wrote.
             gpu::ComputeBarrier(cb);
         }
