@@ -12,18 +12,18 @@ layout(std430, binding = 1) readonly buffer Links { Link links[]; };
 layout(std430, binding = 2) readonly buffer NeighbourOffsets { uint neighbourOffsets[]; };
 layout(std430, binding = 3) readonly buffer Neighbours { BinWeight neighbours[]; };
 layout(std430, binding = 4) readonly buffer Iex { float iex[]; };
-layout(std430, binding = 5) writeonly buffer Lin { float lin[]; };
+layout(std430, binding = 5) writeonly buffer Lin { vec4 lin[]; };  // rows of BINS·3/4 vec4
 layout(std430, binding = 6) readonly buffer Receivers { uint receivers[]; };
 
 layout(push_constant) uniform Push { uint count; } pc;
 
-vec3 acc[BINS];
+float acc[BINS * 3u];
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i >= pc.count) return;
     uint r = receivers[i];
-    for (uint b = 0; b < BINS; ++b) acc[b] = vec3(0.0);
+    for (uint k = 0u; k < BINS * 3u; ++k) acc[k] = 0.0;
     uint end = linkOffsets[r + 1];
     for (uint l = linkOffsets[r]; l < end; ++l) {
         Link link = links[l];
@@ -35,13 +35,13 @@ void main() {
         uint nEnd = neighbourOffsets[o + 1u];
         for (uint j = neighbourOffsets[o]; j < nEnd; ++j) {
             BinWeight nb = neighbours[j];
-            acc[nb.bin] += nb.weight * v;
+            uint a = nb.bin * 3u;
+            acc[a] += nb.weight * v.x;
+            acc[a + 1u] += nb.weight * v.y;
+            acc[a + 2u] += nb.weight * v.z;
         }
     }
-    uint row = r * BINS * 3u;
-    for (uint b = 0; b < BINS; ++b) {
-        lin[row + b * 3u] = acc[b].x;
-        lin[row + b * 3u + 1u] = acc[b].y;
-        lin[row + b * 3u + 2u] = acc[b].z;
-    }
+    uint row = r * (BINS * 3u / 4u);
+    for (uint q = 0u; q < BINS * 3u / 4u; ++q)
+        lin[row + q] = vec4(acc[4u * q], acc[4u * q + 1u], acc[4u * q + 2u], acc[4u * q + 3u]);
 }
