@@ -9,6 +9,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "gpu/context.h"
 #include "test_util.h"
 
 namespace penumbra {
@@ -87,6 +88,20 @@ TEST(BakeCli, LavapipeDeviceRuns) {
     std::ifstream in(out);
     auto j = nlohmann::json::parse(in);
     EXPECT_NE(j["stats"]["device"].get<std::string>().find("vulkan:"), std::string::npos);
+}
+
+TEST(BakeCli, AutoDevicePicksCpuUnlessARealGpuExists) {
+    auto out = testing::TempDir("bake-auto") / "cb.json";
+    ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
+                              " --bins 32 --iterations 1 --element-size 0.15 -q");
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    std::ifstream in(out);
+    auto j = nlohmann::json::parse(in);
+    std::string device = j["stats"]["device"];
+    if (gpu::FindRealGpu(nullptr))
+        EXPECT_EQ(device.rfind("vulkan:", 0), 0u) << device;
+    else
+        EXPECT_EQ(device, "cpu") << "lavapipe only: auto must take the native back end";
 }
 
 TEST(BakeCli, BadInputGivesExitCodeOneAndAMessage) {
