@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "base/check.h"
+#include "output/irradiance_writer.h"
 #include "scene/gltf_loader.h"
 #include "solver/solver.h"
 
@@ -53,24 +54,15 @@ nlohmann::json RunDevice(const Scene& scene, SolverSettings settings, int frames
     }
     SolverStats s = solver->Stats();
     double frame = Median(frameMs);
-    nlohmann::json j;
-    j["device"] = s.device;
-    j["elements"] = s.elements;
-    j["nodes"] = s.nodes;
-    j["links"] = s.links;
-    j["bins"] = s.bins;
-    j["link_build_seconds"] = s.linkBuildSeconds;
+    nlohmann::json j = StatsToJson(s);  // totals over the whole run, as `bake` reports them
     j["links_per_second"] = s.links / s.linkBuildSeconds;
     j["iterations_per_frame"] = iterationsPerFrame;
     j["frames_measured"] = frames;
     j["frame_ms_median"] = frame;
     j["ms_per_iteration_median"] = frame / iterationsPerFrame;
     j["fps"] = 1000.0 / frame;
-    nlohmann::json passes;
-    for (const auto& [name, v] : passMs) passes[name + "_ms_per_iteration_median"] = Median(v);
-    j["passes"] = passes;
+    for (const auto& [name, v] : passMs) j["passes"][name + "_ms_per_iteration_median"] = Median(v);
     j["table_mib"] = s.tableBytes / 1048576.0;
-    j["link_mib"] = s.linkBytes / 1048576.0;
     return j;
 }
 

@@ -76,7 +76,8 @@ int main(int argc, char** argv) {
     bake->add_option("scene", scenePath, "glTF 2.0 scene (.gltf or .glb)")->required();
     bake->add_option("-o,--output", outPath, "output file: .json, .glb or .gltf")->required();
     bake->add_option("--solver", settings.solver, "solver (antiradiance)")->capture_default_str();
-    bake->add_option("--bins", settings.bins, "direction bins, 32..1024, a multiple of 4")->capture_default_str();
+    bake->add_option("--bins", settings.bins, "direction bins, 32..1024, a multiple of 4")
+        ->capture_default_str();
     bake->add_option("--iterations", iterations, "solver iterations")->capture_default_str();
     bake->add_option("--element-size", settings.elementSize,
                      "longest element edge after refinement, metres (default: scene diameter/40)");

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "base/check.h"
+#include "scene/gltf_loader.h"
 
 namespace penumbra {
 
@@ -21,9 +22,7 @@ IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver) {
     return r;
 }
 
-namespace {
-
-nlohmann::json StatsObject(const SolverStats& s) {
+nlohmann::json StatsToJson(const SolverStats& s) {
     nlohmann::json j;
     j["solver"] = s.solver;
     j["device"] = s.device;
@@ -45,12 +44,6 @@ nlohmann::json StatsObject(const SolverStats& s) {
     return j;
 }
 
-}  // namespace
-
-std::string StatsJson(const SolverStats& stats, int indent) {
-    return StatsObject(stats).dump(indent);
-}
-
 void WriteIrradianceJson(const std::string& path, const Scene& scene,
                          const IrradianceResult& result) {
     nlohmann::json j;
@@ -70,7 +63,7 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
         prims.push_back(std::move(e));
     }
     j["primitives"] = std::move(prims);
-    j["stats"] = StatsObject(result.stats);
+    j["stats"] = StatsToJson(result.stats);
     std::ofstream out(path);
     if (!out) throw Error(path + ": cannot open for writing");
     out << j.dump(1) << "\n";
@@ -80,17 +73,9 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
 void WriteIrradianceGltf(const std::string& input, const std::string& output, const Scene& scene,
                          const IrradianceResult& result) {
     tinygltf::Model model;
-    tinygltf::TinyGLTF io;
-    std::string err, warn;
-    bool binary = input.size() >= 4 && input.compare(input.size() - 4, 4, ".glb") == 0;
-    bool ok = binary ? io.LoadBinaryFromFile(&model, &err, &warn, input)
-                     : io.LoadASCIIFromFile(&model, &err, &warn, input);
-    if (!ok) throw Error(input + ": " + err);
+    ReadGltfModel(input, &model);
 
     // Give every (node, mesh) pair its own mesh so colours cannot collide.
-    std::map<int, int> meshUses;
-    for (const auto& prim : scene.primitives)
-        if (prim.primitive == 0) meshUses[prim.mesh]++;
     std::map<int, int> seen;
     std::map<int, int> meshOfNode;
     for (const auto& prim : scene.primitives) {
@@ -140,7 +125,8 @@ void WriteIrradianceGltf(const std::string& input, const std::string& output, co
     model.buffers.push_back(std::move(buffer));
     model.asset.generator = "penumbra bake";
 
-    bool outBinary = output.size() >= 4 && output.compare(output.size() - 4, 4, ".glb") == 0;
+    bool outBinary = IsGlbPath(output);
+    tinygltf::TinyGLTF io;
     // embedImages, embedBuffers, prettyPrint, writeBinary
     if (!io.WriteGltfSceneToFile(&model, output, true, true, !outBinary, outBinary))
         throw Error(output + ": cannot write glTF");

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <glm/glm.hpp>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -27,7 +28,8 @@ IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver);
 // `{"units", "solver", "channel", "primitives": [...], "stats": {...}}`.
 void WriteIrradianceJson(const std::string& path, const Scene& scene,
                          const IrradianceResult& result);
-std::string StatsJson(const SolverStats& stats, int indent = 2);
+// The `stats` object of the JSON output.
+nlohmann::json StatsToJson(const SolverStats& stats);
 
 // Copies glTF `input` to `output` (.glb or .gltf) with COLOR_0 = irradiance added to every
 // primitive; meshes shared by several nodes are duplicated so each gets its own colours.

@@ -225,18 +225,25 @@ float SrgbToLinear(float c) {
     return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
 }
 
-Scene LoadGltf(const std::string& path) {
-    tinygltf::Model model;
+bool IsGlbPath(const std::string& path) {
+    return path.size() >= 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
+}
+
+void ReadGltfModel(const std::string& path, tinygltf::Model* model) {
     tinygltf::TinyGLTF loader;
     std::string err, warn;
-    bool binary = path.size() >= 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
-    bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, path)
-                     : loader.LoadASCIIFromFile(&model, &err, &warn, path);
+    bool ok = IsGlbPath(path) ? loader.LoadBinaryFromFile(model, &err, &warn, path)
+                              : loader.LoadASCIIFromFile(model, &err, &warn, path);
     if (!ok) {
         if (err.empty()) err = "unreadable glTF";
         while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
         throw Error(path + ": " + err);
     }
+}
+
+Scene LoadGltf(const std::string& path) {
+    tinygltf::Model model;
+    ReadGltfModel(path, &model);
     Context ctx{path, model};
 
     for (const auto& ext : model.extensionsRequired) {

@@ -6,7 +6,17 @@
 
 #include "scene/scene.h"
 
+namespace tinygltf {
+class Model;
+}
+
 namespace penumbra {
+
+// True for a binary glTF (.glb) path.
+bool IsGlbPath(const std::string& path);
+
+// Reads a .gltf/.glb file into a tinygltf model; throws penumbra::Error naming the file.
+void ReadGltfModel(const std::string& path, tinygltf::Model* model);
 
 // Loads `path`. Throws penumbra::Error for unreadable, malformed or unsupported input.
 Scene LoadGltf(const std::string& path);

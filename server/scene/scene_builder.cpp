@@ -9,6 +9,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "base/check.h"
+#include "scene/gltf_loader.h"
 
 namespace penumbra {
 
@@ -194,7 +195,7 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
     model.buffers.push_back(buffer);
     model.scenes.push_back(scene);
     model.defaultScene = 0;
-    bool binary = path.size() >= 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
+    bool binary = IsGlbPath(path);
     tinygltf::TinyGLTF io;
     if (!io.WriteGltfSceneToFile(&model, path, true, true, !binary, binary))
         throw Error(path + ": cannot write glTF");
