@@ -1,9 +1,12 @@
 // CPU passes of the antiradiance solver (Sec. 3.1 global/local, Sec. 3.2 push/pull).
 #include "solver/antiradiance/cpu_passes.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstring>
 #include <numbers>
@@ -12,6 +15,15 @@ namespace penumbra::cpu {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// A cheap per-thread tick counter for splitting the fused walk's time into stages.
+inline uint64_t Ticks() {
+#if defined(__x86_64__) || defined(__i386__)
+    return __builtin_ia32_rdtsc();
+#else
+    return static_cast<uint64_t>(Clock::now().time_since_epoch().count());
+#endif
+}
 double MsSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
@@ -189,66 +201,94 @@ void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld
 
 void PullPass(const AntiradianceModel& m, float* iex) { PullRows(m, iex); }
 
+// State of one fused iteration; stage cycles are counted per thread.
+struct CpuBackend::Walk {
+    enum Stage { kGather, kPush, kLocal, kPull, kStages };
+    const AntiradianceModel& m;
+    const CpuBackend& self;
+    const float* iex;
+    float* next;
+    float* irradiance;
+    LocalMode mode;
+    size_t row;
+    tbb::enumerable_thread_specific<std::array<uint64_t, kStages>> cycles{
+        std::array<uint64_t, kStages>{}};
+
+    // Below this many nodes a subtree is walked on the current thread.
+    static constexpr uint32_t kGrain = 512;
+
+    void Visit(uint32_t node, const float* parentLin) {
+        auto& c = cycles.local();
+        float lin[Directions::kMaxBins * 3];
+        uint64_t t0 = Ticks();
+        if (parentLin)
+            std::memcpy(lin, parentLin, row * sizeof(float));
+        else
+            std::fill(lin, lin + row, 0.0f);
+        uint64_t t1 = Ticks();
+        Gather(m, iex, node, lin);
+        uint64_t t2 = Ticks();
+        c[kPush] += t1 - t0;
+        c[kGather] += t2 - t1;
+        const HierarchyNode& n = m.hierarchy.nodes[node];
+        if (n.IsLeaf()) {
+            uint32_t i = self.leafIndex_[node];
+            LocalLeaf(m, m.leaves[i], lin, iex + node * row, next + node * row, irradiance + i * 3,
+                      mode);
+            cycles.local()[kLocal] += Ticks() - t2;
+            return;
+        }
+        uint32_t left = m.leftChild[node], right = m.rightChild[node];
+        if (n.end - node > kGrain)
+            tbb::parallel_invoke([&] { Visit(left, lin); }, [&] { Visit(right, lin); });
+        else
+            Visit(left, lin), Visit(right, lin);
+        // Pull while the children's rows are hot.
+        uint64_t t3 = Ticks();
+        float* dst = next + node * row;
+        const float* a = next + left * row;
+        const float* b = next + right * row;
+        for (size_t k = 0; k < row; ++k) dst[k] = a[k] + b[k];
+        cycles.local()[kPull] += Ticks() - t3;
+    }
+};
+
 CpuBackend::CpuBackend(const AntiradianceModel& model) : m_(model) {
     iex_[0].assign(m_.TableFloats(), 0.0f);
     iex_[1].assign(m_.TableFloats(), 0.0f);
-    lin_.assign(m_.TableFloats(), 0.0f);
     irradiance_.assign(m_.leaves.size() * 3, 0.0f);
+    leafIndex_.assign(m_.Nodes(), 0);
+    for (uint32_t i = 0; i < m_.leaves.size(); ++i) leafIndex_[m_.leaves[i].node] = i;
     InitEmission(m_, iex_[0].data());
     iex_[1] = iex_[0];
 }
 
 size_t CpuBackend::TableBytes() const {
-    return (iex_[0].size() + iex_[1].size() + lin_.size() + irradiance_.size()) * sizeof(float);
+    return (iex_[0].size() + iex_[1].size() + irradiance_.size()) * sizeof(float);
 }
 
 void CpuBackend::Iterate(LocalMode mode) {
-    const size_t row = size_t(m_.Bins()) * 3;
-    const float* iex = iex_[cur_].data();
-    float* next = iex_[1 - cur_].data();
-    float* lin = lin_.data();
-    const auto& interior = m_.hierarchy.interior;
-
-    // Global pass for cluster receivers.
+    Walk walk{m_,
+              *this,
+              iex_[cur_].data(),
+              iex_[1 - cur_].data(),
+              irradiance_.data(),
+              mode,
+              size_t(m_.Bins()) * 3};
     auto t = Clock::now();
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, interior.size(), 32),
-                      [&](const tbb::blocked_range<size_t>& range) {
-                          for (size_t i = range.begin(); i != range.end(); ++i) {
-                              float* acc = lin + interior[i] * row;
-                              std::fill(acc, acc + row, 0.0f);
-                              Gather(m_, iex, interior[i], acc);
-                          }
-                      });
-    msGlobal += MsSince(t);
-
-    // Push among clusters (depth order: a parent's row is final before its children's).
-    t = Clock::now();
-    PushRows(m_, lin, true);
-    msPush += MsSince(t);
-
-    // Leaves: pushed L_in of the parent + own links, then the local pass, fused so the
-    // leaf's L_in never leaves the cache.
-    t = Clock::now();
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, m_.leaves.size(), 64),
-                      [&](const tbb::blocked_range<size_t>& range) {
-                          std::vector<float> acc(row);
-                          for (size_t i = range.begin(); i != range.end(); ++i) {
-                              const auto& leaf = m_.leaves[i];
-                              if (leaf.parent != kNoParent)
-                                  std::memcpy(acc.data(), lin + leaf.parent * row,
-                                              row * sizeof(float));
-                              else
-                                  std::fill(acc.begin(), acc.end(), 0.0f);
-                              Gather(m_, iex, leaf.node, acc.data());
-                              LocalLeaf(m_, leaf, acc.data(), iex + leaf.node * row,
-                                        next + leaf.node * row, irradiance_.data() + i * 3, mode);
-                          }
-                      });
-    msLocal += MsSince(t);
-
-    t = Clock::now();
-    PullRows(m_, next);
-    msPull += MsSince(t);
+    walk.Visit(0, nullptr);
+    double wall = MsSince(t);
+    std::array<uint64_t, Walk::kStages> sum{};
+    for (const auto& c : walk.cycles)
+        for (int k = 0; k < Walk::kStages; ++k) sum[k] += c[k];
+    double total = 0;
+    for (uint64_t v : sum) total += double(v);
+    if (total > 0) {
+        msGlobal += wall * sum[Walk::kGather] / total;
+        msPush += wall * sum[Walk::kPush] / total;
+        msLocal += wall * sum[Walk::kLocal] / total;
+        msPull += wall * sum[Walk::kPull] / total;
+    }
     cur_ = 1 - cur_;
 }
 

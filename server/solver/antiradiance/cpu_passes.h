@@ -23,21 +23,26 @@ void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld
 // Pull: interior I_ex = Σ children, bottom up (deepest clusters first).
 void PullPass(const AntiradianceModel& m, float* iex);
 
-// The CPU back end: ping-pong I_ex, L_in only for clusters, global + local fused per leaf.
+// The CPU back end: one parallel walk of the hierarchy per iteration fuses all four
+// passes. Each node's L_in = its parent's (pushed down on the stack) + its own links'
+// gather; leaves run the local pass; clusters sum their children's fresh I_ex rows while
+// they are still in cache. Only I_ex (ping-pong) lives in memory.
 class CpuBackend {
   public:
     explicit CpuBackend(const AntiradianceModel& model);
     void Iterate(LocalMode mode);
     const std::vector<float>& LeafIrradiance() const { return irradiance_; }
     size_t TableBytes() const;
-    // Milliseconds spent in each stage since construction.
+    // Milliseconds per stage since construction: each stage's share of the threads' time,
+    // scaled to the wall time of the fused walk.
     double msGlobal = 0, msPush = 0, msLocal = 0, msPull = 0;
 
   private:
+    struct Walk;
     const AntiradianceModel& m_;
     std::vector<float> iex_[2];
-    std::vector<float> lin_;  // rows of interior nodes only are used
     std::vector<float> irradiance_;
+    std::vector<uint32_t> leafIndex_;  // node → index into m_.leaves
     int cur_ = 0;
 };
 
