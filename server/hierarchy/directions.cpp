@@ -88,6 +88,8 @@ Directions::Directions(int count) : count_(count) {
         dirs_[i] = glm::normalize(glm::vec3(r * std::cos(phi), r * std::sin(phi), z));
     }
 
+    for (const auto& d : dirs_) x_.push_back(d.x), y_.push_back(d.y), z_.push_back(d.z);
+
     // Adjacency: bins within 2 spacings (enough for the greedy walk to reach the nearest).
     adjacent_.resize(count);
     for (int i = 0; i < count; ++i)

@@ -28,6 +28,10 @@ class Directions {
     float Spacing() const { return spacing_; }           // √(4π/m), angle to the nearest bin
     const glm::vec3& Direction(uint32_t bin) const { return dirs_[bin]; }
     const std::vector<glm::vec3>& All() const { return dirs_; }
+    // The same directions as three arrays (for vectorised loops over bins).
+    const float* X() const { return x_.data(); }
+    const float* Y() const { return y_.data(); }
+    const float* Z() const { return z_.data(); }
 
     // Nearest bin centre to unit direction `d`.
     uint32_t Lookup(const glm::vec3& d) const;
@@ -55,6 +59,7 @@ class Directions {
     float solidAngle_;
     float spacing_;
     std::vector<glm::vec3> dirs_;
+    std::vector<float> x_, y_, z_;
     // Cube-map table: face*res*res texels → a bin near the texel centre, refined by a
     // greedy walk over `adjacent_` to the exact nearest bin.
     int cubeRes_;

@@ -68,15 +68,18 @@ inline void Gather(const AntiradianceModel& m, const float* iex, uint32_t r, flo
 inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf, const float* lin,
                       const float* old, float* out, float* irradiance, LocalMode mode) {
     const int bins = m.Bins();
-    const auto& dirs = m.dirs.All();
+    // Cosines of all bins once, from the directions' SoA arrays (vectorises).
+    float cosine[Directions::kMaxBins];
+    const float *dx = m.dirs.X(), *dy = m.dirs.Y(), *dz = m.dirs.Z();
+    const glm::vec3 n = leaf.normal;
+    for (int b = 0; b < bins; ++b) cosine[b] = n.x * dx[b] + n.y * dy[b] + n.z * dz[b];
+
     float e0 = 0, e1 = 0, e2 = 0;
     for (int b = 0; b < bins; ++b) {
-        float c = glm::dot(leaf.normal, dirs[b]);
-        if (c < 0.0f) {
-            e0 -= c * lin[b * 3];
-            e1 -= c * lin[b * 3 + 1];
-            e2 -= c * lin[b * 3 + 2];
-        }
+        float w = std::max(0.0f, -cosine[b]);  // light arriving on the front
+        e0 += w * lin[b * 3];
+        e1 += w * lin[b * 3 + 1];
+        e2 += w * lin[b * 3 + 2];
     }
     float scale = m.dirs.BinSolidAngle() * leaf.cosNormIn;
     glm::vec3 e(e0 * scale, e1 * scale, e2 * scale);
@@ -85,26 +88,27 @@ inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf, co
     irradiance[2] = e.z;
     glm::vec3 radiance = leaf.emission + leaf.albedo * e * (1.0f / std::numbers::pi_v<float>);
     glm::vec3 front = leaf.area * leaf.cosNormOut * radiance;
+    if (mode == kBoth) {
+        // Front bins get c·front, back bins −a⟨n|−ω⟩·L_in; the other term is zero.
+        for (int b = 0; b < bins; ++b) {
+            float c = cosine[b];
+            float f = std::max(c, 0.0f), w = leaf.area * std::min(c, 0.0f);
+            out[b * 3] = f * front.x + w * lin[b * 3];
+            out[b * 3 + 1] = f * front.y + w * lin[b * 3 + 1];
+            out[b * 3 + 2] = f * front.z + w * lin[b * 3 + 2];
+        }
+        return;
+    }
     for (int b = 0; b < bins; ++b) {
-        float c = glm::dot(leaf.normal, dirs[b]);
+        float c = cosine[b];
         float* o = out + b * 3;
-        if (c > 0.0f) {
-            if (mode & kReflect) {
-                o[0] = c * front.x;
-                o[1] = c * front.y;
-                o[2] = c * front.z;
-            } else {
-                std::memcpy(o, old + b * 3, 3 * sizeof(float));
-            }
+        if (c > 0.0f ? (mode & kReflect) != 0 : (mode & kAntiradiance) != 0) {
+            float f = std::max(c, 0.0f), w = leaf.area * std::min(c, 0.0f);
+            o[0] = f * front.x + w * lin[b * 3];
+            o[1] = f * front.y + w * lin[b * 3 + 1];
+            o[2] = f * front.z + w * lin[b * 3 + 2];
         } else {
-            if (mode & kAntiradiance) {
-                float w = leaf.area * c;  // −a⟨n|−ω⟩
-                o[0] = w * lin[b * 3];
-                o[1] = w * lin[b * 3 + 1];
-                o[2] = w * lin[b * 3 + 2];
-            } else {
-                std::memcpy(o, old + b * 3, 3 * sizeof(float));
-            }
+            std::memcpy(o, old + b * 3, 3 * sizeof(float));
         }
     }
 }
