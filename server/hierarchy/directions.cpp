@@ -114,28 +114,28 @@ Directions::Directions(int count) : count_(count) {
             }
 
     // Spreading tables: for each level, bins within 2.5σ with Gaussian weights, Σ = 1.
+    offsets_.assign(kLevels * (count + 1), 0);
     for (int k = 0; k < kLevels; ++k) {
         float sigma = LevelSigma(k);
         float radius = std::min(2.5f * sigma, pi);
-        offsets_[k].assign(count + 1, 0);
         for (int b = 0; b < count; ++b) {
-            offsets_[k][b] = static_cast<uint32_t>(weights_[k].size());
+            offsets_[k * (count + 1) + b] = static_cast<uint32_t>(weights_.size());
             double sum = 0.0;
-            size_t first = weights_[k].size();
+            size_t first = weights_.size();
             for (int j = 0; j < count; ++j) {
                 float ang = AngleBetween(dirs_[b], dirs_[j]);
                 if (j != b && ang > radius) continue;
                 float w = std::exp(-0.5f * ang * ang / (sigma * sigma));
-                weights_[k].push_back({static_cast<uint32_t>(j), w});
+                weights_.push_back({static_cast<uint32_t>(j), w});
                 sum += w;
             }
-            for (size_t i = first; i < weights_[k].size(); ++i)
-                weights_[k][i].weight = static_cast<float>(weights_[k][i].weight / sum);
+            for (size_t i = first; i < weights_.size(); ++i)
+                weights_[i].weight = static_cast<float>(weights_[i].weight / sum);
             // Heaviest first: the bin itself leads its list.
-            std::sort(weights_[k].begin() + first, weights_[k].end(),
+            std::sort(weights_.begin() + first, weights_.end(),
                       [](const BinWeight& a, const BinWeight& c) { return a.weight > c.weight; });
         }
-        offsets_[k][count] = static_cast<uint32_t>(weights_[k].size());
+        offsets_[k * (count + 1) + count] = static_cast<uint32_t>(weights_.size());
     }
 }
 

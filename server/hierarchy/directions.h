@@ -47,12 +47,13 @@ class Directions {
     int LevelFor(float alpha) const;
     // Receiver bins and normalised weights (Σ = 1) that a link through `bin` spreads into.
     std::span<const BinWeight> Neighbours(int level, uint32_t bin) const {
-        const auto& off = offsets_[level];
-        return {weights_[level].data() + off[bin], off[bin + 1] - off[bin]};
+        const uint32_t* o = offsets_.data() + level * (count_ + 1) + bin;
+        return {weights_.data() + o[0], o[1] - o[0]};
     }
-    // Flattened tables for upload: offsets (m+1 per level) and (bin, weight) pairs.
-    const std::vector<uint32_t>& Offsets(int level) const { return offsets_[level]; }
-    const std::vector<BinWeight>& Weights(int level) const { return weights_[level]; }
+    // All levels in one table (as the shaders read it): level k's bin b spreads into
+    // Weights()[Offsets()[k·(m+1) + b] .. Offsets()[k·(m+1) + b + 1]).
+    const std::vector<uint32_t>& Offsets() const { return offsets_; }
+    const std::vector<BinWeight>& Weights() const { return weights_; }
 
   private:
     int count_;
@@ -65,8 +66,8 @@ class Directions {
     int cubeRes_;
     std::vector<uint32_t> cube_;
     std::vector<std::vector<uint32_t>> adjacent_;
-    std::vector<uint32_t> offsets_[kLevels];
-    std::vector<BinWeight> weights_[kLevels];
+    std::vector<uint32_t> offsets_;
+    std::vector<BinWeight> weights_;
 };
 
 }  // namespace penumbra

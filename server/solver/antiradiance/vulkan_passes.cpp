@@ -65,7 +65,7 @@ struct VulkanAntiradiance::Impl {
           linkOffsets(ctx, m.links.offsets.size() * 4),
           links(ctx, m.links.links.size() * sizeof(Link)),
           neighbourOffsets(ctx, Directions::kLevels * (m.Bins() + 1) * 4),
-          neighbours(ctx, NeighbourCount() * sizeof(BinWeight)),
+          neighbours(ctx, m.dirs.Weights().size() * sizeof(BinWeight)),
           receivers(ctx, m.Nodes() * 4),
           leaves(ctx, m.leaves.size() * sizeof(LeafAttributes)),
           dirs(ctx, m.Bins() * 16),
@@ -104,26 +104,11 @@ struct VulkanAntiradiance::Impl {
 
     std::vector<uint32_t> Spec() const { return {kWorkgroup, static_cast<uint32_t>(m.Bins())}; }
 
-    size_t NeighbourCount() const {
-        size_t n = 0;
-        for (int k = 0; k < Directions::kLevels; ++k) n += m.dirs.Weights(k).size();
-        return n;
-    }
-
     void Upload() {
         linkOffsets.Upload(m.links.offsets);
         links.Upload(m.links.links);
-        // Neighbour tables of all levels, flattened with absolute offsets.
-        std::vector<uint32_t> offs;
-        std::vector<BinWeight> all;
-        for (int k = 0; k < Directions::kLevels; ++k) {
-            uint32_t base = static_cast<uint32_t>(all.size());
-            for (uint32_t o : m.dirs.Offsets(k)) offs.push_back(base + o);
-            const auto& w = m.dirs.Weights(k);
-            all.insert(all.end(), w.begin(), w.end());
-        }
-        neighbourOffsets.Upload(offs);
-        neighbours.Upload(all);
+        neighbourOffsets.Upload(m.dirs.Offsets());
+        neighbours.Upload(m.dirs.Weights());
         // Receivers with the most links first: neighbouring lanes do similar work.
         std::vector<uint32_t> order(m.Nodes());
         std::iota(order.begin(), order.end(), 0u);
