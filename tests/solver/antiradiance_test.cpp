@@ -24,6 +24,17 @@ SolverSettings CpuSettings(int bins = 128, float elementSize = 0.05f) {
     return s;
 }
 
+// A closed 1 m room, every face pointing in: `walls` on floor and sides, `ceiling` above.
+void AddUnitRoom(SceneBuilder& b, uint32_t walls, uint32_t ceiling) {
+    const glm::vec3 inside(0.5f, 0.5f, 0.5f);
+    b.AddQuad("floor", walls, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside);
+    b.AddQuad("ceiling", ceiling, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}, inside);
+    b.AddQuad("w0", walls, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, inside);
+    b.AddQuad("w1", walls, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside);
+    b.AddQuad("w2", walls, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside);
+    b.AddQuad("w3", walls, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside);
+}
+
 // A small emitting patch of area A over a black receiver plane:
 // E = L · A · cosθr · cosθe / d². Tolerance 2% (the issue's); the patch is small
 // (0.06 m at ≥ 1 m), so the point-source formula itself is accurate to < 0.1%.
@@ -77,13 +88,7 @@ TEST(Antiradiance, WhiteFurnaceConvergesWithBlockers) {
     const float Le = 1.0f, rho = 0.5f;
     SceneBuilder b;
     uint32_t m = b.AddMaterial("furnace", glm::vec3(rho), glm::vec3(Le));
-    glm::vec3 inside(0.5f, 0.5f, 0.5f);
-    b.AddTiledQuad("floor", m, {0, 0, 0}, {1, 0, 0}, {0, 0, 1}, 1, 1, inside);
-    b.AddTiledQuad("ceiling", m, {0, 1, 0}, {1, 0, 0}, {0, 0, 1}, 1, 1, inside);
-    b.AddTiledQuad("w0", m, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 1, 1, inside);
-    b.AddTiledQuad("w1", m, {0, 0, 1}, {1, 0, 0}, {0, 1, 0}, 1, 1, inside);
-    b.AddTiledQuad("w2", m, {0, 0, 0}, {0, 0, 1}, {0, 1, 0}, 1, 1, inside);
-    b.AddTiledQuad("w3", m, {1, 0, 0}, {0, 0, 1}, {0, 1, 0}, 1, 1, inside);
+    AddUnitRoom(b, m, m);
     b.AddBox("blocker_a", m, {0.3f, 0.4f, 0.35f}, {0.2f, 0.3f, 0.25f});
     b.AddBox("blocker_b", m, {0.7f, 0.6f, 0.6f}, {0.25f, 0.1f, 0.3f}, 30.0f);
     Scene scene = b.Build();
@@ -122,13 +127,7 @@ TEST(Antiradiance, AsymmetricSchemeConvergesToTheSymmetricSolution) {
     SceneBuilder b;
     uint32_t grey = b.AddMaterial("grey", glm::vec3(0.5f));
     uint32_t light = b.AddMaterial("light", glm::vec3(0.5f), glm::vec3(4.0f));
-    glm::vec3 inside(0.5f, 0.5f, 0.5f);
-    b.AddTiledQuad("floor", grey, {0, 0, 0}, {1, 0, 0}, {0, 0, 1}, 1, 1, inside);
-    b.AddTiledQuad("ceiling", light, {0, 1, 0}, {1, 0, 0}, {0, 0, 1}, 1, 1, inside);
-    b.AddTiledQuad("w0", grey, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 1, 1, inside);
-    b.AddTiledQuad("w1", grey, {0, 0, 1}, {1, 0, 0}, {0, 1, 0}, 1, 1, inside);
-    b.AddTiledQuad("w2", grey, {0, 0, 0}, {0, 0, 1}, {0, 1, 0}, 1, 1, inside);
-    b.AddTiledQuad("w3", grey, {1, 0, 0}, {0, 0, 1}, {0, 1, 0}, 1, 1, inside);
+    AddUnitRoom(b, grey, light);
     b.AddBox("blocker", grey, {0.5f, 0.5f, 0.5f}, {0.3f, 0.05f, 0.3f});
     Scene scene = b.Build();
     SolverSettings settings = CpuSettings(128, 0.1f);
