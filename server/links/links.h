@@ -47,8 +47,9 @@ struct Links {
     size_t Count() const { return links.size(); }
 };
 
-// Per-leaf cosine normalisations (Directions::CosineNorm) of the local pass, indexed by
-// node; the link build calibrates leaf links against them.
+// Cosine normalisations (Directions::CosineNorm) of oriented nodes (leaves and planar
+// clusters), indexed by node; the local pass uses the leaves' and the link build
+// calibrates links at oriented ends against them. Zero for other nodes.
 struct LeafNorms {
     std::vector<float> in;   // of −n: the side light arrives from
     std::vector<float> out;  // of n: the side light leaves to

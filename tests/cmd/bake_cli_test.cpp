@@ -34,13 +34,25 @@ ProcessResult Execute(const std::string& args) {
     return r;
 }
 
+// Bakes the Cornell box to `name`.json with `options`; the output must parse.
+struct JsonBake {
+    ProcessResult run;
+    nlohmann::json json;
+};
+JsonBake BakeJson(const std::string& name, const std::string& options) {
+    auto out = testing::TempDir(name) / "cb.json";
+    JsonBake b{Execute("bake " + kCornell + " -o " + out.string() + " " + options), {}};
+    if (b.run.exitCode == 0) {
+        std::ifstream in(out);
+        b.json = nlohmann::json::parse(in);
+    }
+    return b;
+}
+
 TEST(BakeCli, WritesJsonWithStatsInInputVertexOrder) {
-    auto out = testing::TempDir("bake-json") / "cb.json";
-    ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
-                              " --bins 64 --iterations 4 --element-size 0.08 --device cpu");
+    auto [r, j] =
+        BakeJson("bake-json", "--bins 64 --iterations 4 --element-size 0.08 --device cpu");
     ASSERT_EQ(r.exitCode, 0) << r.output;
-    std::ifstream in(out);
-    auto j = nlohmann::json::parse(in);
     EXPECT_EQ(j["solver"], "antiradiance");
     EXPECT_EQ(j["channel"], "indirect");
     EXPECT_NE(j["units"].get<std::string>().find("lux"), std::string::npos);
@@ -80,23 +92,16 @@ TEST(BakeCli, WritesGlbWithColor0PerPrimitive) {
 }
 
 TEST(BakeCli, LavapipeDeviceRuns) {
-    auto out = testing::TempDir("bake-lvp") / "cb.json";
-    ProcessResult r =
-        Execute("bake " + kCornell + " -o " + out.string() +
-                " --bins 32 --iterations 1 --element-size 0.15 --device lavapipe --validation");
+    auto [r, j] = BakeJson("bake-lvp",
+                           "--bins 32 --iterations 1 --element-size 0.15 --device lavapipe "
+                           "--validation");
     ASSERT_EQ(r.exitCode, 0) << r.output;
-    std::ifstream in(out);
-    auto j = nlohmann::json::parse(in);
     EXPECT_NE(j["stats"]["device"].get<std::string>().find("vulkan:"), std::string::npos);
 }
 
 TEST(BakeCli, AutoDevicePicksCpuUnlessARealGpuExists) {
-    auto out = testing::TempDir("bake-auto") / "cb.json";
-    ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
-                              " --bins 32 --iterations 1 --element-size 0.15 -q");
+    auto [r, j] = BakeJson("bake-auto", "--bins 32 --iterations 1 --element-size 0.15 -q");
     ASSERT_EQ(r.exitCode, 0) << r.output;
-    std::ifstream in(out);
-    auto j = nlohmann::json::parse(in);
     std::string device = j["stats"]["device"];
     if (gpu::FindRealGpu(nullptr))
         EXPECT_EQ(device.rfind("vulkan:", 0), 0u) << device;

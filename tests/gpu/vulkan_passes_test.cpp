@@ -49,23 +49,30 @@ class VulkanTwin : public ::testing::Test {
             << what << ": at " << worst << " GPU " << gpu[worst] << " vs CPU " << cpu[worst];
     }
 
+    // CPU tables after the emitters' I_ex, the global pass and (if `push`) the push pass.
+    void CpuTables(std::vector<float>& iex, std::vector<float>& lin, bool push) const {
+        iex.assign(model_->TableFloats(), 0.0f);
+        lin.assign(model_->TableFloats(), 0.0f);
+        cpu::InitEmission(*model_, iex.data());
+        cpu::GlobalPass(*model_, iex.data(), lin.data());
+        if (push) cpu::PushPass(*model_, lin.data());
+    }
+
     Scene scene_;
     std::unique_ptr<AntiradianceModel> model_;
     std::unique_ptr<VulkanAntiradiance> gpu_;
 };
 
 TEST_F(VulkanTwin, GlobalPassMatchesCpu) {
-    std::vector<float> iex(model_->TableFloats()), lin(model_->TableFloats());
-    cpu::InitEmission(*model_, iex.data());
-    cpu::GlobalPass(*model_, iex.data(), lin.data());
+    std::vector<float> iex, lin;
+    CpuTables(iex, lin, false);
     gpu_->RunPass(Pass::kGlobal);
     ExpectTablesEqual(gpu_->ReadLin(), lin, "L_in after the global pass");
 }
 
 TEST_F(VulkanTwin, PushPassMatchesCpu) {
-    std::vector<float> iex(model_->TableFloats()), lin(model_->TableFloats());
-    cpu::InitEmission(*model_, iex.data());
-    cpu::GlobalPass(*model_, iex.data(), lin.data());
+    std::vector<float> iex, lin;
+    CpuTables(iex, lin, false);
     gpu_->WriteLin(lin);
     cpu::PushPass(*model_, lin.data());
     gpu_->RunPass(Pass::kPush);
@@ -73,10 +80,8 @@ TEST_F(VulkanTwin, PushPassMatchesCpu) {
 }
 
 TEST_F(VulkanTwin, LocalPassMatchesCpuInEveryMode) {
-    std::vector<float> iex(model_->TableFloats()), lin(model_->TableFloats());
-    cpu::InitEmission(*model_, iex.data());
-    cpu::GlobalPass(*model_, iex.data(), lin.data());
-    cpu::PushPass(*model_, lin.data());
+    std::vector<float> iex, lin;
+    CpuTables(iex, lin, true);
     for (LocalMode mode : {kBoth, kReflect, kAntiradiance}) {
         std::vector<float> next(iex.size(), 0.0f), irr(model_->leaves.size() * 3);
         cpu::LocalPass(*model_, lin.data(), iex.data(), next.data(), irr.data(), mode);
@@ -90,10 +95,8 @@ TEST_F(VulkanTwin, LocalPassMatchesCpuInEveryMode) {
 }
 
 TEST_F(VulkanTwin, PullPassMatchesCpu) {
-    std::vector<float> iex(model_->TableFloats()), lin(model_->TableFloats());
-    cpu::InitEmission(*model_, iex.data());
-    cpu::GlobalPass(*model_, iex.data(), lin.data());
-    cpu::PushPass(*model_, lin.data());
+    std::vector<float> iex, lin;
+    CpuTables(iex, lin, true);
     std::vector<float> next(iex.size(), 0.0f), irr(model_->leaves.size() * 3);
     cpu::LocalPass(*model_, lin.data(), iex.data(), next.data(), irr.data(), kBoth);
     gpu_->WriteIex(next, false);

@@ -47,7 +47,6 @@ void AntiradianceSolver::Iterate(int n) {
         ++iterations_;
         if (progress_) progress_("iterating", static_cast<double>(i + 1) / n);
     }
-    if (gpu_) gpu_->Finish();
     msTotal_ +=
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }

@@ -134,9 +134,8 @@ void PullRows(const AntiradianceModel& m, float* iex) {
     }
 }
 
-// Push depth by depth from the root down: L_in[n] += L_in[parent]. `clustersOnly`
-// leaves the leaves alone (the fused back end adds the parent's row itself).
-void PushRows(const AntiradianceModel& m, float* lin, bool clustersOnly) {
+// Push depth by depth from the root down: L_in[n] += L_in[parent].
+void PushRows(const AntiradianceModel& m, float* lin) {
     const size_t row = size_t(m.Bins()) * 3;
     const auto& byDepth = m.hierarchy.byDepth;
     const auto& nodes = m.hierarchy.nodes;
@@ -146,7 +145,6 @@ void PushRows(const AntiradianceModel& m, float* lin, bool clustersOnly) {
                           [&](const tbb::blocked_range<size_t>& range) {
                               for (size_t i = range.begin(); i != range.end(); ++i) {
                                   uint32_t n = level[i];
-                                  if (clustersOnly && nodes[n].IsLeaf()) continue;
                                   float* dst = lin + n * row;
                                   const float* src = lin + nodes[n].parent * row;
                                   for (size_t k = 0; k < row; ++k) dst[k] += src[k];
@@ -188,7 +186,7 @@ void GlobalPass(const AntiradianceModel& m, const float* iex, float* lin) {
                       });
 }
 
-void PushPass(const AntiradianceModel& m, float* lin) { PushRows(m, lin, false); }
+void PushPass(const AntiradianceModel& m, float* lin) { PushRows(m, lin); }
 
 void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld, float* iexNew,
                float* irradiance, LocalMode mode) {

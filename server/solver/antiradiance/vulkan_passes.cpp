@@ -242,8 +242,6 @@ VulkanAntiradiance::~VulkanAntiradiance() = default;
 
 void VulkanAntiradiance::Iterate(LocalMode mode) { impl_->Iterate(mode); }
 
-void VulkanAntiradiance::Finish() { impl_->ctx.Queue().waitIdle(); }
-
 std::vector<float> VulkanAntiradiance::ReadLeafIrradiance() {
     return impl_->irradiance.Download<float>();
 }

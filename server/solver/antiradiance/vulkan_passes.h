@@ -21,8 +21,7 @@ class VulkanAntiradiance {
     VulkanAntiradiance(const AntiradianceModel& model, bool lavapipe, bool validation);
     ~VulkanAntiradiance();
 
-    void Iterate(LocalMode mode);
-    void Finish();  // waits for submitted work
+    void Iterate(LocalMode mode);  // submits one iteration and waits for it
     std::vector<float> ReadLeafIrradiance();
     std::string DeviceName() const;
     std::vector<PassTiming> PassTimings() const;
