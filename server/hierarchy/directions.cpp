@@ -137,6 +137,19 @@ Directions::Directions(int count) : count_(count) {
         }
         offsets_[k * (count + 1) + count] = static_cast<uint32_t>(weights_.size());
     }
+    for (int k = 0; k < kLevels; ++k) {
+        int width = 0;
+        for (int b = 0; b < count; ++b)
+            width = std::max(width, static_cast<int>(Neighbours(k, b).size()));
+        paddedWidth_[k] = width;
+        paddedStart_[k] = padded_.size();
+        for (int b = 0; b < count; ++b) {
+            auto list = Neighbours(k, b);
+            padded_.insert(padded_.end(), list.begin(), list.end());
+            padded_.resize(padded_.size() + width - list.size(),
+                           BinWeight{static_cast<uint32_t>(b), 0.0f});
+        }
+    }
 }
 
 uint32_t Directions::Lookup(const glm::vec3& d) const {

@@ -54,6 +54,13 @@ class Directions {
     // Weights()[Offsets()[k·(m+1) + b] .. Offsets()[k·(m+1) + b + 1]).
     const std::vector<uint32_t>& Offsets() const { return offsets_; }
     const std::vector<BinWeight>& Weights() const { return weights_; }
+    // The same lists padded with zero weights to one width per level (the longest list of
+    // that level), so a loop over them has a trip count that does not change from bin to
+    // bin: PaddedWidth(k) entries from Padded() + PaddedStart(k) + bin · PaddedWidth(k).
+    int PaddedWidth(int level) const { return paddedWidth_[level]; }
+    const BinWeight* Padded(int level, uint32_t bin) const {
+        return padded_.data() + paddedStart_[level] + size_t(bin) * paddedWidth_[level];
+    }
 
   private:
     int count_;
@@ -68,6 +75,9 @@ class Directions {
     std::vector<std::vector<uint32_t>> adjacent_;
     std::vector<uint32_t> offsets_;
     std::vector<BinWeight> weights_;
+    std::vector<BinWeight> padded_;
+    int paddedWidth_[kLevels];
+    size_t paddedStart_[kLevels];
 };
 
 }  // namespace penumbra

@@ -267,7 +267,9 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
                           if (progress) progress(static_cast<double>(n) / work.size());
                       });
 
-    // Counting sort by receiver; within a receiver, by sender for locality of I_ex reads.
+    // Counting sort by receiver; within a receiver by spread level (the CPU gather's
+    // fixed-width spread loop then runs the same trip count link after link), then by
+    // sender for locality of I_ex reads.
     Links links;
     links.offsets.assign(h.size() + 1, 0);
     auto count = [&](const std::vector<PendingLink>& v) {
@@ -286,7 +288,8 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
     tbb::parallel_for(size_t(0), h.size(), [&](size_t r) {
         std::sort(links.links.begin() + links.offsets[r],
                   links.links.begin() + links.offsets[r + 1], [](const Link& a, const Link& b) {
-                      return a.sender != b.sender ? a.sender < b.sender : a.bin < b.bin;
+                      if (a.level != b.level) return a.level < b.level;
+                      return a.bin != b.bin ? a.bin < b.bin : a.sender < b.sender;
                   });
     });
     links.buildSeconds =

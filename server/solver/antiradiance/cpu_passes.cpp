@@ -62,10 +62,45 @@ inline void Gather(const AntiradianceModel& m, const float* iex, uint32_t r, flo
     }
 }
 
+// Four floats (RGB and a zero pad): one vector update per spread neighbour instead of
+// three scalar ones.
+using Rgba = float __attribute__((vector_size(16)));
+
+// Gather above into an RGBA-padded accumulator (the fused walk's stack row).
+inline void GatherRgba(const AntiradianceModel& m, const float* iex, uint32_t r, Rgba* acc) {
+    constexpr size_t kChunk = 16;
+    const size_t bins = m.Bins();
+    const Link* begin = m.links.links.data() + m.links.offsets[r];
+    const Link* end = m.links.links.data() + m.links.offsets[r + 1];
+    auto source = [&](const Link* l) { return iex + (size_t(l->sender) * bins + l->bin) * 3; };
+    for (const Link* l = begin; l < begin + kChunk && l < end; ++l) __builtin_prefetch(source(l));
+    Rgba v[kChunk];
+    for (const Link* chunk = begin; chunk < end; chunk += kChunk) {
+        const size_t n = std::min<size_t>(kChunk, end - chunk);
+        for (const Link* l = chunk + kChunk; l < chunk + 2 * kChunk && l < end; ++l)
+            __builtin_prefetch(source(l));
+        for (size_t k = 0; k < n; ++k) {
+            const float* src = source(chunk + k);
+            v[k] = chunk[k].formFactor * Rgba{src[0], src[1], src[2], 0.0f};
+        }
+        for (size_t k = 0; k < n; ++k) {
+            Rgba sum = v[k];
+            // Links of one (level, bin) are adjacent: spread their sum once.
+            while (k + 1 < n && chunk[k + 1].bin == chunk[k].bin &&
+                   chunk[k + 1].level == chunk[k].level)
+                sum += v[++k];
+            const BinWeight* nb = m.dirs.Padded(chunk[k].level, chunk[k].bin);
+            const int width = m.dirs.PaddedWidth(chunk[k].level);
+            for (int j = 0; j < width; ++j) acc[nb[j].bin] += nb[j].weight * sum;
+        }
+    }
+}
+
 // Local pass of one leaf for a diffuse BRDF f = ρ/π. Eq. 18 reduces to
 // I_L(ω_j) = a ⟨n|ω_j⟩ (L_e + ρ E / π), with E = ω_bin Σ_l ⟨n|−ω_l⟩ L_in(ω_l).
 // Eq. 19: I_A(ω_j) = a ⟨n|−ω_j⟩ L_in(ω_j); I_ex = I_L − I_A on separate hemispheres.
-inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf, const float* lin,
+// `lin` holds the leaf's L_in as RGBA rows; `old` and `out` are rows of the RGB I_ex table.
+inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf, const Rgba* lin,
                       const float* old, float* out, float* irradiance, LocalMode mode) {
     const int bins = m.Bins();
     // Cosines of all bins once, from the directions' SoA arrays (vectorises).
@@ -74,42 +109,40 @@ inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf, co
     const glm::vec3 n = leaf.normal;
     for (int b = 0; b < bins; ++b) cosine[b] = n.x * dx[b] + n.y * dy[b] + n.z * dz[b];
 
-    float e0 = 0, e1 = 0, e2 = 0;
-    for (int b = 0; b < bins; ++b) {
-        float w = std::max(0.0f, -cosine[b]);  // light arriving on the front
-        e0 += w * lin[b * 3];
-        e1 += w * lin[b * 3 + 1];
-        e2 += w * lin[b * 3 + 2];
-    }
-    float scale = m.dirs.BinSolidAngle() * leaf.cosNormIn;
-    glm::vec3 e(e0 * scale, e1 * scale, e2 * scale);
-    irradiance[0] = e.x;
-    irradiance[1] = e.y;
-    irradiance[2] = e.z;
-    glm::vec3 radiance = leaf.emission + leaf.albedo * e * (1.0f / std::numbers::pi_v<float>);
-    glm::vec3 front = leaf.area * leaf.cosNormOut * radiance;
-    if (mode == kBoth) {
-        // Front bins get c·front, back bins −a⟨n|−ω⟩·L_in; the other term is zero.
-        for (int b = 0; b < bins; ++b) {
-            float c = cosine[b];
-            float f = std::max(c, 0.0f), w = leaf.area * std::min(c, 0.0f);
-            out[b * 3] = f * front.x + w * lin[b * 3];
-            out[b * 3 + 1] = f * front.y + w * lin[b * 3 + 1];
-            out[b * 3 + 2] = f * front.z + w * lin[b * 3 + 2];
-        }
-        return;
-    }
-    for (int b = 0; b < bins; ++b) {
+    Rgba e{};
+    for (int b = 0; b < bins; ++b) e += std::max(0.0f, -cosine[b]) * lin[b];  // front light
+    e *= m.dirs.BinSolidAngle() * leaf.cosNormIn;
+    irradiance[0] = e[0];
+    irradiance[1] = e[1];
+    irradiance[2] = e[2];
+    const float scale = leaf.area * leaf.cosNormOut;
+    const Rgba front = scale * (Rgba{leaf.emission.x, leaf.emission.y, leaf.emission.z, 0.0f} +
+                                Rgba{leaf.albedo.x, leaf.albedo.y, leaf.albedo.z, 0.0f} * e *
+                                    (1.0f / std::numbers::pi_v<float>));
+    // Front bins get c·front, back bins a⟨n|ω⟩·L_in (c < 0); the other term is zero.
+    auto exitant = [&](int b) {
         float c = cosine[b];
-        float* o = out + b * 3;
-        if (c > 0.0f ? (mode & kReflect) != 0 : (mode & kAntiradiance) != 0) {
-            float f = std::max(c, 0.0f), w = leaf.area * std::min(c, 0.0f);
-            o[0] = f * front.x + w * lin[b * 3];
-            o[1] = f * front.y + w * lin[b * 3 + 1];
-            o[2] = f * front.z + w * lin[b * 3 + 2];
-        } else {
-            std::memcpy(o, old + b * 3, 3 * sizeof(float));
-        }
+        return std::max(c, 0.0f) * front + leaf.area * std::min(c, 0.0f) * lin[b];
+    };
+    auto keep = [&](int b) {
+        return cosine[b] > 0.0f ? (mode & kReflect) != 0 : (mode & kAntiradiance) != 0;
+    };
+    // 16-byte stores at a 12-byte stride: each one's pad lane is overwritten by the next
+    // bin's; the row's last bin is stored as three floats so the row's end stays put.
+    for (int b = 0; b + 1 < bins; ++b) {
+        Rgba o;
+        if (mode == kBoth || keep(b))
+            o = exitant(b);
+        else
+            o = Rgba{old[b * 3], old[b * 3 + 1], old[b * 3 + 2], 0.0f};
+        std::memcpy(out + b * 3, &o, sizeof(Rgba));
+    }
+    const int b = bins - 1;
+    if (mode == kBoth || keep(b)) {
+        Rgba o = exitant(b);
+        std::memcpy(out + b * 3, &o, 3 * sizeof(float));
+    } else {
+        std::memcpy(out + b * 3, old + b * 3, 3 * sizeof(float));
     }
 }
 
@@ -195,7 +228,11 @@ void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld
                       [&](const tbb::blocked_range<size_t>& range) {
                           for (size_t i = range.begin(); i != range.end(); ++i) {
                               const auto& leaf = m.leaves[i];
-                              LocalLeaf(m, leaf, lin + leaf.node * row, iexOld + leaf.node * row,
+                              Rgba rgba[Directions::kMaxBins];
+                              const float* l = lin + leaf.node * row;
+                              for (size_t b = 0; b < row / 3; ++b)
+                                  rgba[b] = Rgba{l[b * 3], l[b * 3 + 1], l[b * 3 + 2], 0.0f};
+                              LocalLeaf(m, leaf, rgba, iexOld + leaf.node * row,
                                         iexNew + leaf.node * row, irradiance + i * 3, mode);
                           }
                       });
@@ -219,16 +256,17 @@ struct CpuBackend::Walk {
     // Below this many nodes a subtree is walked on the current thread.
     static constexpr uint32_t kGrain = 512;
 
-    void Visit(uint32_t node, const float* parentLin) {
+    void Visit(uint32_t node, const Rgba* parentLin) {
         auto& c = cycles.local();
-        float lin[Directions::kMaxBins * 3];
+        Rgba lin[Directions::kMaxBins];
+        const size_t bins = row / 3;
         uint64_t t0 = Ticks();
         if (parentLin)
-            std::memcpy(lin, parentLin, row * sizeof(float));
+            std::memcpy(lin, parentLin, bins * sizeof(Rgba));
         else
-            std::fill(lin, lin + row, 0.0f);
+            std::fill(lin, lin + bins, Rgba{});
         uint64_t t1 = Ticks();
-        Gather(m, iex, node, lin);
+        GatherRgba(m, iex, node, lin);
         uint64_t t2 = Ticks();
         c[kPush] += t1 - t0;
         c[kGather] += t2 - t1;
