@@ -9,7 +9,8 @@ layout(local_size_x_id = 0) in;
 
 layout(std430, binding = 0) readonly buffer LinkOffsets { uint linkOffsets[]; };
 layout(std430, binding = 1) readonly buffer Links { Link links[]; };
-layout(std430, binding = 2) readonly buffer NeighbourOffsets { uint neighbourOffsets[]; };
+// Directions::Padded*: level k's list for bin b is spread[k].x + b·spread[k].y, width spread[k].y.
+layout(std430, binding = 2) readonly buffer SpreadLevels { uvec2 spread[]; };
 layout(std430, binding = 3) readonly buffer Neighbours { BinWeight neighbours[]; };
 layout(std430, binding = 4) readonly buffer Iex { float iex[]; };
 layout(std430, binding = 5) writeonly buffer Lin { vec4 lin[]; };  // rows of BINS·3/4 vec4
@@ -25,21 +26,30 @@ void main() {
     uint r = receivers[i];
     for (uint k = 0u; k < BINS * 3u; ++k) acc[k] = 0.0;
     uint end = linkOffsets[r + 1];
-    for (uint l = linkOffsets[r]; l < end; ++l) {
-        Link link = links[l];
-        uint bin = link.binLevel & 0xffffu;
-        uint level = link.binLevel >> 16;
-        uint s = (link.sender * BINS + bin) * 3u;
-        vec3 v = link.formFactor * vec3(iex[s], iex[s + 1u], iex[s + 2u]);
-        uint o = level * (BINS + 1u) + bin;
-        uint nEnd = neighbourOffsets[o + 1u];
-        for (uint j = neighbourOffsets[o]; j < nEnd; ++j) {
-            BinWeight nb = neighbours[j];
-            uint a = nb.bin * 3u;
-            acc[a] += nb.weight * v.x;
-            acc[a + 1u] += nb.weight * v.y;
-            acc[a + 2u] += nb.weight * v.z;
+    // Links come sorted by (level, bin): sum a run of equal (level, bin) and spread once.
+    uint key = 0xffffffffu;
+    vec3 v = vec3(0.0);
+    for (uint l = linkOffsets[r]; l <= end; ++l) {
+        Link link;
+        if (l < end) link = links[l];
+        if (l == end || link.binLevel != key) {
+            if (key != 0xffffffffu) {
+                uvec2 level = spread[key >> 16];
+                uint first = level.x + (key & 0xffffu) * level.y;
+                for (uint j = first; j < first + level.y; ++j) {
+                    BinWeight nb = neighbours[j];
+                    uint a = nb.bin * 3u;
+                    acc[a] += nb.weight * v.x;
+                    acc[a + 1u] += nb.weight * v.y;
+                    acc[a + 2u] += nb.weight * v.z;
+                }
+            }
+            if (l == end) break;
+            key = link.binLevel;
+            v = vec3(0.0);
         }
+        uint s = (link.sender * BINS + (link.binLevel & 0xffffu)) * 3u;
+        v += link.formFactor * vec3(iex[s], iex[s + 1u], iex[s + 2u]);
     }
     uint row = r * (BINS * 3u / 4u);
     for (uint q = 0u; q < BINS * 3u / 4u; ++q)

@@ -50,17 +50,20 @@ class Directions {
         const uint32_t* o = offsets_.data() + level * (count_ + 1) + bin;
         return {weights_.data() + o[0], o[1] - o[0]};
     }
-    // All levels in one table (as the shaders read it): level k's bin b spreads into
+    // All levels in one table: level k's bin b spreads into
     // Weights()[Offsets()[k·(m+1) + b] .. Offsets()[k·(m+1) + b + 1]).
     const std::vector<uint32_t>& Offsets() const { return offsets_; }
     const std::vector<BinWeight>& Weights() const { return weights_; }
     // The same lists padded with zero weights to one width per level (the longest list of
     // that level), so a loop over them has a trip count that does not change from bin to
-    // bin: PaddedWidth(k) entries from Padded() + PaddedStart(k) + bin · PaddedWidth(k).
+    // bin (the CPU gather and the global shader read these): PaddedWidth(k) entries from
+    // PaddedWeights()[PaddedStart(k) + bin · PaddedWidth(k)].
     int PaddedWidth(int level) const { return paddedWidth_[level]; }
+    size_t PaddedStart(int level) const { return paddedStart_[level]; }
     const BinWeight* Padded(int level, uint32_t bin) const {
         return padded_.data() + paddedStart_[level] + size_t(bin) * paddedWidth_[level];
     }
+    const std::vector<BinWeight>& PaddedWeights() const { return padded_; }
 
   private:
     int count_;

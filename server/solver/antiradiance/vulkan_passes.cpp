@@ -46,7 +46,7 @@ struct VulkanAntiradiance::Impl {
     const AntiradianceModel& m;
     gpu::Context ctx;
     // Model data (read only).
-    gpu::Buffer linkOffsets, links, neighbourOffsets, neighbours, receivers, leaves, dirs, parents,
+    gpu::Buffer linkOffsets, links, spreadLevels, neighbours, receivers, leaves, dirs, parents,
         children, nodesByDepth;
     // Tables.
     gpu::Buffer iex0, iex1, lin, irradiance;
@@ -64,8 +64,8 @@ struct VulkanAntiradiance::Impl {
           ctx(lavapipe ? gpu::DeviceKind::kLavapipe : gpu::DeviceKind::kRealGpu, validation),
           linkOffsets(ctx, m.links.offsets.size() * 4),
           links(ctx, m.links.links.size() * sizeof(Link)),
-          neighbourOffsets(ctx, Directions::kLevels * (m.Bins() + 1) * 4),
-          neighbours(ctx, m.dirs.Weights().size() * sizeof(BinWeight)),
+          spreadLevels(ctx, Directions::kLevels * 8),
+          neighbours(ctx, m.dirs.PaddedWeights().size() * sizeof(BinWeight)),
           receivers(ctx, m.Nodes() * 4),
           leaves(ctx, m.leaves.size() * sizeof(LeafAttributes)),
           dirs(ctx, m.Bins() * 16),
@@ -81,9 +81,9 @@ struct VulkanAntiradiance::Impl {
           local(ctx, Words(kSpirv_local), 6, Spec(), sizeof(LocalPush)),
           pull(ctx, Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
         Upload();
-        const gpu::Buffer* g0[] = {&linkOffsets, &links, &neighbourOffsets, &neighbours,
+        const gpu::Buffer* g0[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
                                    &iex0,        &lin,   &receivers};
-        const gpu::Buffer* g1[] = {&linkOffsets, &links, &neighbourOffsets, &neighbours,
+        const gpu::Buffer* g1[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
                                    &iex1,        &lin,   &receivers};
         globalSet[0] = global.MakeSet(g0);
         globalSet[1] = global.MakeSet(g1);
@@ -107,8 +107,11 @@ struct VulkanAntiradiance::Impl {
     void Upload() {
         linkOffsets.Upload(m.links.offsets);
         links.Upload(m.links.links);
-        neighbourOffsets.Upload(m.dirs.Offsets());
-        neighbours.Upload(m.dirs.Weights());
+        std::vector<glm::uvec2> spread;
+        for (int k = 0; k < Directions::kLevels; ++k)
+            spread.emplace_back(m.dirs.PaddedStart(k), m.dirs.PaddedWidth(k));
+        spreadLevels.Upload(spread);
+        neighbours.Upload(m.dirs.PaddedWeights());
         // Receivers with the most links first: neighbouring lanes do similar work.
         std::vector<uint32_t> order(m.Nodes());
         std::iota(order.begin(), order.end(), 0u);
