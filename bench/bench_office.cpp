@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <thread>
@@ -130,6 +131,7 @@ int main(int argc, char** argv) {
                         r["table_mib"].get<double>());
             report["results"].push_back(r);
         }
+        std::filesystem::create_directories(out);
         std::string path = out + "/office.json";
         std::ofstream file(path);
         if (!file) throw Error(path + ": cannot write");
