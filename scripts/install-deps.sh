@@ -7,7 +7,7 @@ packages=(
     build-essential cmake pkg-config
     libvulkan-dev vulkan-validationlayers mesa-vulkan-drivers glslang-tools vulkan-tools
     libtinygltf-dev nlohmann-json3-dev libstb-dev libglm-dev
-    libcli11-dev libtbb-dev libgtest-dev
+    libcli11-dev libtbb-dev libgtest-dev libembree-dev
     clang-format
 )
 

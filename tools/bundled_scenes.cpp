@@ -18,25 +18,28 @@ SceneBuilder CornellBox() {
     uint32_t light = b.AddMaterial("light", {0.78f, 0.78f, 0.78f}, {17.0f, 12.0f, 4.0f});
     glm::vec3 inside = Mm(278.0f, 274.4f, 279.6f);
 
+    // Walls as grids of input vertices (per-vertex output resolves their gradients).
+    constexpr int kWall = 8, kStrip = 6, kSide = 3, kLight = 2, kBlock = 4;
     b.AddQuad("floor", white, Mm(552.8f, 0, 0), Mm(0, 0, 0), Mm(0, 0, 559.2f),
-              Mm(549.6f, 0, 559.2f), inside);
+              Mm(549.6f, 0, 559.2f), inside, kWall);
     // Ceiling around the light's opening (x 213..343, z 227..332).
     const float y = 548.8f;
-    b.AddQuad("ceiling", white, Mm(0, y, 0), Mm(556, y, 0), Mm(556, y, 227), Mm(0, y, 227), inside);
+    b.AddQuad("ceiling", white, Mm(0, y, 0), Mm(556, y, 0), Mm(556, y, 227), Mm(0, y, 227), inside,
+              kStrip);
     b.AddQuad("ceiling", white, Mm(0, y, 332), Mm(556, y, 332), Mm(556, y, 559.2f),
-              Mm(0, y, 559.2f), inside);
+              Mm(0, y, 559.2f), inside, kStrip);
     b.AddQuad("ceiling", white, Mm(0, y, 227), Mm(213, y, 227), Mm(213, y, 332), Mm(0, y, 332),
-              inside);
+              inside, kSide);
     b.AddQuad("ceiling", white, Mm(343, y, 227), Mm(556, y, 227), Mm(556, y, 332), Mm(343, y, 332),
-              inside);
+              inside, kSide);
     b.AddQuad("ceiling_light", light, Mm(343, y, 227), Mm(343, y, 332), Mm(213, y, 332),
-              Mm(213, y, 227), inside);
+              Mm(213, y, 227), inside, kLight);
     b.AddQuad("back_wall", white, Mm(549.6f, 0, 559.2f), Mm(0, 0, 559.2f), Mm(0, y, 559.2f),
-              Mm(556, y, 559.2f), inside);
+              Mm(556, y, 559.2f), inside, kWall);
     b.AddQuad("right_wall", green, Mm(0, 0, 559.2f), Mm(0, 0, 0), Mm(0, y, 0), Mm(0, y, 559.2f),
-              inside);
+              inside, kWall);
     b.AddQuad("left_wall", red, Mm(552.8f, 0, 0), Mm(549.6f, 0, 559.2f), Mm(556, y, 559.2f),
-              Mm(556, y, 0), inside);
+              Mm(556, y, 0), inside, kWall);
 
     // Blocks: four sides and a top each, faces pointing away from the block's centre.
     auto block = [&](const std::string& name, const glm::vec3(&top)[4], float h) {
@@ -45,13 +48,14 @@ SceneBuilder CornellBox() {
         c = 0.25f * c;
         glm::vec3 centre(c.x, 0.5f * h, c.z);
         b.AddQuad(name, white, Mm(top[0].x, h, top[0].z), Mm(top[1].x, h, top[1].z),
-                  Mm(top[2].x, h, top[2].z), Mm(top[3].x, h, top[3].z), Mm(c.x, 2 * h, c.z));
+                  Mm(top[2].x, h, top[2].z), Mm(top[3].x, h, top[3].z), Mm(c.x, 2 * h, c.z),
+                  kBlock);
         for (int i = 0; i < 4; ++i) {
             glm::vec3 a = top[i], d = top[(i + 1) % 4];
             glm::vec3 faceCentre(0.5f * (a.x + d.x), 0.5f * h, 0.5f * (a.z + d.z));
             glm::vec3 out = 2.0f * faceCentre - centre;
             b.AddQuad(name, white, Mm(a.x, 0, a.z), Mm(a.x, h, a.z), Mm(d.x, h, d.z),
-                      Mm(d.x, 0, d.z), Mm(out.x, out.y, out.z));
+                      Mm(d.x, 0, d.z), Mm(out.x, out.y, out.z), kBlock);
         }
     };
     const glm::vec3 shortTop[4] = {{130, 0, 65}, {82, 0, 225}, {240, 0, 272}, {290, 0, 114}};
@@ -65,7 +69,7 @@ SceneBuilder Blocker(bool withBlocker) {
     SceneBuilder b;
     uint32_t grey = b.AddMaterial("grey", {0.5f, 0.5f, 0.5f});
     uint32_t light = b.AddMaterial("light", {0.0f, 0.0f, 0.0f}, {10.0f, 10.0f, 10.0f});
-    b.AddQuad("floor", grey, {-1, 0, -1}, {1, 0, -1}, {1, 0, 1}, {-1, 0, 1}, {0, 1, 0});
+    b.AddQuad("floor", grey, {-1, 0, -1}, {1, 0, -1}, {1, 0, 1}, {-1, 0, 1}, {0, 1, 0}, 16);
     b.AddQuad("emitter", light, {-0.25f, 1, -0.25f}, {0.25f, 1, -0.25f}, {0.25f, 1, 0.25f},
               {-0.25f, 1, 0.25f}, {0, 0, 0});
     if (withBlocker) b.AddBox("blocker", grey, {0, 0.5f, 0}, {0.4f, 0.05f, 0.4f});

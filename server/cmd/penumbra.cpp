@@ -6,7 +6,9 @@
 
 #include "base/check.h"
 #include "base/progress.h"
+#include "output/compare.h"
 #include "output/irradiance_writer.h"
+#include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
 #include "solver/solver.h"
 
@@ -19,10 +21,22 @@ bool EndsWith(const std::string& s, const std::string& suffix) {
            s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
-         int iterations, const std::string& device, const std::string& scheme, bool quiet) {
+void WriteResult(const std::string& scenePath, const std::string& outPath, const Scene& scene,
+                 const IrradianceResult& result) {
+    if (EndsWith(outPath, ".json"))
+        WriteIrradianceJson(outPath, scene, result);
+    else
+        WriteIrradianceGltf(scenePath, outPath, scene, result);
+}
+
+void CheckOutputPath(const std::string& outPath) {
     if (!EndsWith(outPath, ".json") && !EndsWith(outPath, ".glb") && !EndsWith(outPath, ".gltf"))
         throw Error("output '" + outPath + "' must end in .json, .glb or .gltf");
+}
+
+int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
+         int iterations, const std::string& device, const std::string& scheme, bool quiet) {
+    CheckOutputPath(outPath);
     settings.device = ParseDevice(device);
     settings.scheme = ParseScheme(scheme);
     if (iterations < 0 || iterations > 100000)
@@ -37,13 +51,10 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     progress.Done();
 
     IrradianceResult result = CollectIrradiance(scene, *solver);
-    if (EndsWith(outPath, ".json"))
-        WriteIrradianceJson(outPath, scene, result);
-    else
-        WriteIrradianceGltf(scenePath, outPath, scene, result);
+    WriteResult(scenePath, outPath, scene, result);
 
     if (!quiet) {
-        const SolverStats& s = result.stats;
+        const SolverStats& s = solver->Stats();
         std::fprintf(stderr,
                      "%s: %zu triangles -> %zu elements, %zu links, %d bins, element size %.4g m\n"
                      "  device %s; links built in %.3f s; %d iterations at %.2f ms each",
@@ -55,6 +66,95 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
                          s.iterations ? p.msTotal / s.iterations : 0.0);
         std::fprintf(stderr, "\n  wrote %s (channel %s; %s)\n", outPath.c_str(),
                      result.channel.c_str(), kIrradianceUnits);
+    }
+    return 0;
+}
+
+std::string Duration(double seconds) {
+    char buf[32];
+    int s = static_cast<int>(seconds + 0.5);
+    if (s >= 3600)
+        std::snprintf(buf, sizeof buf, "%dh%02dm", s / 3600, s / 60 % 60);
+    else if (s >= 60)
+        std::snprintf(buf, sizeof buf, "%dm%02ds", s / 60, s % 60);
+    else
+        std::snprintf(buf, sizeof buf, "%ds", s);
+    return buf;
+}
+
+int Reference(const std::string& scenePath, const std::string& outPath, ReferenceSettings settings,
+              bool quiet) {
+    CheckOutputPath(outPath);
+    Progress progress(!quiet && StderrIsTerminal());
+    progress.Update("loading " + scenePath, 0.0);
+    Scene scene = LoadGltf(scenePath);
+    settings.progress = [&](double f, double left) {
+        progress.Update("path tracing, " + Duration(left) + " left", f);
+    };
+    ReferenceResult ref = RenderReference(scene, settings);
+    progress.Done();
+
+    const ReferenceStats& st = ref.stats;
+    IrradianceResult result;
+    result.solver = "reference";
+    result.primitives = std::move(ref.irradiance);
+    result.standardError = std::move(ref.standardError);
+    // Relative standard error of the whole estimate: √Σσ² / √Σ|E|², like compare's RMSE.
+    double var = 0, sum2 = 0, worst = 0;
+    for (size_t p = 0; p < result.primitives.size(); ++p)
+        for (size_t i = 0; i < result.primitives[p].size(); ++i) {
+            glm::dvec3 e(result.primitives[p][i]), s(result.standardError[p][i]);
+            var += glm::dot(s, s);
+            sum2 += glm::dot(e, e);
+            double len = glm::length(e);
+            if (len > 0) worst = std::max(worst, glm::length(s) / len);
+        }
+    double relStderr = sum2 > 0 ? std::sqrt(var / sum2) : 0.0;
+    result.stats = {{"solver", "reference"},   {"device", "cpu (Embree)"},
+                    {"samples", st.samples},   {"max_depth", st.maxDepth},
+                    {"seed", st.seed},         {"threads", st.threads},
+                    {"vertices", st.vertices}, {"rays", st.rays},
+                    {"seconds", st.seconds},   {"rays_per_second", st.RaysPerSecond()},
+                    {"rel_stderr", relStderr}, {"max_vertex_rel_stderr", worst}};
+    WriteResult(scenePath, outPath, scene, result);
+    if (!quiet)
+        std::fprintf(stderr,
+                     "%s: %zu vertices x %d samples in %.2f s (%.3g rays/s, %d threads)\n"
+                     "  relative standard error %.3g%% overall, %.3g%% at the worst vertex\n"
+                     "  wrote %s (channel %s; %s)\n",
+                     scenePath.c_str(), st.vertices, st.samples, st.seconds, st.RaysPerSecond(),
+                     st.threads, 100 * relStderr, 100 * worst, outPath.c_str(),
+                     result.channel.c_str(), kIrradianceUnits);
+    return 0;
+}
+
+// Exit status when `compare --max-rmse` is exceeded.
+constexpr int kGateFailed = 4;
+
+int CompareFiles(const std::string& aPath, const std::string& bPath, bool json, double maxRmse) {
+    IrradianceFile a = ReadIrradianceJson(aPath), b = ReadIrradianceJson(bPath);
+    if (a.channel != b.channel)
+        throw Error("channels differ: " + aPath + " holds '" + a.channel + "', " + bPath +
+                    " holds '" + b.channel + "'");
+    Comparison c = Compare(a, b);
+    if (json) {
+        std::printf("%s\n", ComparisonToJson(c, b).dump(1).c_str());
+    } else {
+        std::printf("%s (%s) against %s (%s), channel %s\n", aPath.c_str(), a.solver.c_str(),
+                    bPath.c_str(), b.solver.c_str(), b.channel.c_str());
+        std::printf("%-24s %9s %10s %10s %10s\n", "node", "vertices", "rel_rmse", "mean_rel",
+                    "max_rel");
+        auto row = [](const std::string& name, const ErrorSummary& s) {
+            std::printf("%-24s %9zu %9.3f%% %9.3f%% %9.3f%%\n", name.c_str(), s.vertices,
+                        100 * s.relRmse, 100 * s.meanRel, 100 * s.maxRel);
+        };
+        for (const auto& [name, s] : c.nodes) row(name, s);
+        row("(all)", c.overall);
+    }
+    if (maxRmse >= 0 && !(c.overall.relRmse <= maxRmse)) {
+        std::fprintf(stderr, "penumbra compare: relative RMSE %.4g exceeds --max-rmse %.4g\n",
+                     c.overall.relRmse, maxRmse);
+        return kGateFailed;
     }
     return 0;
 }
@@ -100,12 +200,47 @@ int main(int argc, char** argv) {
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
 
+    auto* reference = app.add_subcommand(
+        "reference",
+        "Path-trace per-vertex irradiance with Embree (ground truth for the solvers), with a "
+        "standard error per vertex");
+    std::string refScene, refOut;
+    ReferenceSettings refSettings;
+    bool refQuiet = false;
+    reference->add_option("scene", refScene, "glTF 2.0 scene (.gltf or .glb)")->required();
+    reference->add_option("-o,--output", refOut, "output file: .json, .glb or .gltf")->required();
+    reference->add_option("--samples", refSettings.samples, "light paths per vertex (>= 2)")
+        ->capture_default_str();
+    reference
+        ->add_option("--max-depth", refSettings.maxDepth,
+                     "bounces after the vertex (Russian roulette ends most paths sooner)")
+        ->capture_default_str();
+    reference->add_option("--seed", refSettings.seed, "random seed")->capture_default_str();
+    reference->add_option("--threads", refSettings.threads, "threads (0: all cores)")
+        ->capture_default_str();
+    reference->add_flag("-q,--quiet", refQuiet, "no progress or summary on stderr");
+
+    auto* compare = app.add_subcommand(
+        "compare",
+        "Per-vertex error of irradiance file A against reference B: relative RMSE, mean and "
+        "max relative error, per node and overall (exit status 4 when --max-rmse is exceeded)");
+    std::string cmpA, cmpB;
+    bool cmpJson = false;
+    double maxRmse = -1.0;
+    compare->add_option("a", cmpA, "irradiance JSON to judge")->required();
+    compare->add_option("b", cmpB, "reference irradiance JSON")->required();
+    compare->add_flag("--json", cmpJson, "print the result as JSON");
+    compare->add_option("--max-rmse", maxRmse,
+                        "fail (exit 4) when the overall relative RMSE exceeds this (e.g. 0.1)");
+
     CLI11_PARSE(app, argc, argv);
     try {
         if (bake->parsed()) {
             settings.paperOracle = ParsePaperOracle(linkOracle);
             return Bake(scenePath, outPath, settings, iterations, device, scheme, quiet);
         }
+        if (reference->parsed()) return Reference(refScene, refOut, refSettings, refQuiet);
+        if (compare->parsed()) return CompareFiles(cmpA, cmpB, cmpJson, maxRmse);
     } catch (const penumbra::Error& e) {
         std::fprintf(stderr, "\npenumbra: error: %s\n", e.what());
         return 1;

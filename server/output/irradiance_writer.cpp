@@ -18,7 +18,8 @@ IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver) {
     std::vector<glm::vec3> surfel = solver.SurfelIrradiance();
     for (size_t p = 0; p < scene.primitives.size(); ++p)
         r.primitives.push_back(PrimitiveIrradiance(solver.GetSurfels(), surfel, scene, p));
-    r.stats = solver.Stats();
+    r.solver = solver.Stats().solver;
+    r.stats = StatsToJson(solver.Stats());
     return r;
 }
 
@@ -48,7 +49,7 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
                          const IrradianceResult& result) {
     nlohmann::json j;
     j["units"] = kIrradianceUnits;
-    j["solver"] = result.stats.solver;
+    j["solver"] = result.solver;
     j["channel"] = result.channel;
     nlohmann::json prims = nlohmann::json::array();
     for (size_t p = 0; p < scene.primitives.size(); ++p) {
@@ -60,14 +61,54 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
         nlohmann::json values = nlohmann::json::array();
         for (const auto& v : result.primitives[p]) values.push_back({v.x, v.y, v.z});
         e["irradiance"] = std::move(values);
+        if (!result.standardError.empty()) {
+            nlohmann::json errors = nlohmann::json::array();
+            for (const auto& v : result.standardError[p]) errors.push_back({v.x, v.y, v.z});
+            e["stderr"] = std::move(errors);
+        }
         prims.push_back(std::move(e));
     }
     j["primitives"] = std::move(prims);
-    j["stats"] = StatsToJson(result.stats);
+    j["stats"] = result.stats;
     std::ofstream out(path);
     if (!out) throw Error(path + ": cannot open for writing");
     out << j.dump(1) << "\n";
     if (!out) throw Error(path + ": write failed");
+}
+
+IrradianceFile ReadIrradianceJson(const std::string& path) {
+    std::ifstream in(path);
+    if (!in) throw Error(path + ": cannot open");
+    nlohmann::json j;
+    try {
+        j = nlohmann::json::parse(in);
+    } catch (const nlohmann::json::exception& e) {
+        throw Error(path + ": not JSON: " + e.what());
+    }
+    IrradianceFile file;
+    try {
+        file.solver = j.value("solver", "");
+        file.channel = j.value("channel", "");
+        const auto& prims = j.at("primitives");
+        if (!prims.is_array()) throw Error(path + ": \"primitives\" is not an array");
+        for (size_t p = 0; p < prims.size(); ++p) {
+            const auto& e = prims[p];
+            IrradianceRecord r;
+            r.node = e.at("node").get<std::string>();
+            r.mesh = e.at("mesh").get<int>();
+            r.primitive = e.at("primitive").get<int>();
+            for (const auto& v : e.at("irradiance")) {
+                if (!v.is_array() || v.size() != 3)
+                    throw Error(path + ": primitive " + std::to_string(p) + " (node '" + r.node +
+                                "'): irradiance values must be [r, g, b]");
+                r.irradiance.emplace_back(v[0].get<float>(), v[1].get<float>(), v[2].get<float>());
+            }
+            file.primitives.push_back(std::move(r));
+        }
+    } catch (const nlohmann::json::exception& e) {
+        throw Error(path + ": not an irradiance file: " + e.what());
+    }
+    return file;
 }
 
 void WriteIrradianceGltf(const std::string& input, const std::string& output, const Scene& scene,

@@ -16,20 +16,41 @@ inline constexpr const char* kIrradianceUnits =
     "irradiance in lux (lm/m^2) for emission given in nits (cd/m^2)";
 
 struct IrradianceResult {
+    std::string solver;  // "antiradiance", "reference", ...
     std::string channel = "indirect";
     // One array per scene primitive, in the primitive's input vertex order.
     std::vector<std::vector<glm::vec3>> primitives;
-    SolverStats stats;
+    // Standard error of each value, per channel, when the producer estimates one (the
+    // path-traced reference); empty otherwise.
+    std::vector<std::vector<glm::vec3>> standardError;
+    nlohmann::json stats = nlohmann::json::object();
 };
 
 // Gathers per-primitive irradiance from a solver that has run.
 IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver);
 
-// `{"units", "solver", "channel", "primitives": [...], "stats": {...}}`.
+// `{"units", "solver", "channel", "primitives": [...], "stats": {...}}`; each primitive
+// `{"node", "mesh", "primitive", "irradiance": [[r,g,b], ...]}` and, with standard
+// errors, `"stderr": [[r,g,b], ...]`.
 void WriteIrradianceJson(const std::string& path, const Scene& scene,
                          const IrradianceResult& result);
 // The `stats` object of the JSON output.
 nlohmann::json StatsToJson(const SolverStats& stats);
+
+// One primitive of an irradiance JSON file, as read back.
+struct IrradianceRecord {
+    std::string node;
+    int mesh = -1;
+    int primitive = -1;
+    std::vector<glm::vec3> irradiance;
+};
+struct IrradianceFile {
+    std::string solver, channel;
+    std::vector<IrradianceRecord> primitives;
+};
+// Reads a file written by WriteIrradianceJson; throws penumbra::Error naming the file and
+// what is wrong with it.
+IrradianceFile ReadIrradianceJson(const std::string& path);
 
 // Copies glTF `input` to `output` (.glb or .gltf) with COLOR_0 = irradiance added to every
 // primitive; meshes shared by several nodes are duplicated so each gets its own colours.

@@ -19,7 +19,7 @@ uint32_t SceneBuilder::AddMaterial(const std::string& name, glm::vec3 albedo, gl
 }
 
 void SceneBuilder::AddQuad(const std::string& node, uint32_t material, glm::vec3 p0, glm::vec3 p1,
-                           glm::vec3 p2, glm::vec3 p3, glm::vec3 towards) {
+                           glm::vec3 p2, glm::vec3 p3, glm::vec3 towards, int tiles) {
     if (std::find(nodeOrder_.begin(), nodeOrder_.end(), node) == nodeOrder_.end())
         nodeOrder_.push_back(node);
     Part& part = nodes_[node][material];
@@ -30,12 +30,31 @@ void SceneBuilder::AddQuad(const std::string& node, uint32_t material, glm::vec3
         std::swap(p1, p3);
         n = -n;
     }
+    // A (tiles+1)² grid of shared vertices, bilinear between the corners (planar quads
+    // stay planar), two triangles per tile.
+    PENUMBRA_CHECK_LE(1, tiles);
     uint32_t base = static_cast<uint32_t>(part.positions.size());
-    for (const auto& p : {p0, p1, p2, p3}) {
-        part.positions.push_back(p);
-        part.normals.push_back(n);
+    if (tiles == 1) {  // p0..p3 in order
+        for (const auto& p : {p0, p1, p2, p3}) {
+            part.positions.push_back(p);
+            part.normals.push_back(n);
+        }
+        part.indices.insert(part.indices.end(),
+                            {base, base + 1, base + 2, base, base + 2, base + 3});
+        return;
     }
-    part.indices.insert(part.indices.end(), {base, base + 1, base + 2, base, base + 2, base + 3});
+    for (int j = 0; j <= tiles; ++j)
+        for (int i = 0; i <= tiles; ++i) {
+            float u = float(i) / tiles, v = float(j) / tiles;
+            part.positions.push_back((1 - u) * (1 - v) * p0 + u * (1 - v) * p1 + u * v * p2 +
+                                     (1 - u) * v * p3);
+            part.normals.push_back(n);
+        }
+    auto at = [&](int i, int j) { return base + uint32_t(j * (tiles + 1) + i); };
+    for (int j = 0; j < tiles; ++j)
+        for (int i = 0; i < tiles; ++i)
+            part.indices.insert(part.indices.end(), {at(i, j), at(i + 1, j), at(i + 1, j + 1),
+                                                     at(i, j), at(i + 1, j + 1), at(i, j + 1)});
 }
 
 void SceneBuilder::AddTiledQuad(const std::string& node, uint32_t material, glm::vec3 origin,

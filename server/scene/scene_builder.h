@@ -14,9 +14,10 @@ class SceneBuilder {
   public:
     uint32_t AddMaterial(const std::string& name, glm::vec3 albedo, glm::vec3 emission = {});
 
-    // A planar quad p0..p3 whose normal points to the side of `towards`.
+    // A planar quad p0..p3 whose normal points to the side of `towards`, as a grid of
+    // tiles × tiles (more input vertices where per-vertex output should resolve detail).
     void AddQuad(const std::string& node, uint32_t material, glm::vec3 p0, glm::vec3 p1,
-                 glm::vec3 p2, glm::vec3 p3, glm::vec3 towards);
+                 glm::vec3 p2, glm::vec3 p3, glm::vec3 towards, int tiles = 1);
     // An axis-aligned quad grid of nx × ny tiles (more input triangles, same surface).
     void AddTiledQuad(const std::string& node, uint32_t material, glm::vec3 origin, glm::vec3 u,
                       glm::vec3 v, int nu, int nv, glm::vec3 towards);

@@ -39,7 +39,12 @@ std::vector<glm::vec3> PrimitiveIrradiance(const Surfels& surfels,
     PENUMBRA_CHECK_EQ(surfelIrradiance.size(), surfels.size());
     size_t count = scene.primitives[p].positions.size();
     uint32_t first = surfels.firstSurfel[p];
-    return {surfelIrradiance.begin() + first, surfelIrradiance.begin() + first + count};
+    std::vector<glm::vec3> out(surfelIrradiance.begin() + first,
+                               surfelIrradiance.begin() + first + count);
+    // Antiradiance that over-cancels (behind occluders, where the bins blur) can leave
+    // a slightly negative sum; irradiance cannot be negative.
+    for (auto& e : out) e = glm::max(e, glm::vec3(0.0f));
+    return out;
 }
 
 }  // namespace penumbra

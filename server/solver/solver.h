@@ -78,7 +78,7 @@ DeviceChoice ParseDevice(const std::string& name);
 bool ParsePaperOracle(const std::string& name);  // "conservative" | "paper"
 Scheme ParseScheme(const std::string& name);
 
-// Per-vertex irradiance for primitive `p` in its input vertex order.
+// Per-vertex irradiance for primitive `p` in its input vertex order, clamped at zero.
 std::vector<glm::vec3> PrimitiveIrradiance(const Surfels& surfels,
                                            const std::vector<glm::vec3>& surfelIrradiance,
                                            const Scene& scene, size_t p);

@@ -1,0 +1,52 @@
+// Ground truth for the solvers: a CPU path tracer on Embree that estimates, at every input
+// vertex, the irradiance the solvers output, with a per-vertex standard error.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <glm/glm.hpp>
+#include <vector>
+
+#include "scene/scene.h"
+
+namespace penumbra {
+
+struct ReferenceSettings {
+    int samples = 1024;  // per vertex; each sample is one light path
+    int maxDepth = 64;   // bounces after the vertex; Russian roulette ends most paths sooner
+    uint64_t seed = 1;
+    int threads = 0;  // 0: all cores
+    // Called with the fraction done (0..1) and the estimated seconds left, from any thread,
+    // never by two threads at once.
+    std::function<void(double fraction, double secondsLeft)> progress;
+};
+
+struct ReferenceStats {
+    int samples = 0;
+    int maxDepth = 0;
+    uint64_t seed = 0;
+    int threads = 0;
+    size_t vertices = 0;
+    uint64_t rays = 0;  // closest-hit and shadow rays together
+    double seconds = 0;
+    double RaysPerSecond() const { return seconds > 0 ? rays / seconds : 0.0; }
+};
+
+struct ReferenceResult {
+    // One array per scene primitive, in the primitive's input vertex order.
+    std::vector<std::vector<glm::vec3>> irradiance;
+    std::vector<std::vector<glm::vec3>> standardError;  // of each mean, per channel
+    ReferenceStats stats;
+};
+
+// Irradiance at every input vertex over the hemisphere of its normal, from every emitting
+// surface (channel `indirect`: there are no punctual lights yet). Lambertian surfaces,
+// reflecting and emitting on their front side (the side their vertex normals point to);
+// a ray that reaches a back side ends there (opaque, black). Each vertex is estimated
+// 10⁻³ × the scene's diameter inside its own surface (towards its triangles), so that a
+// vertex on an edge another wall meets sees the room, not that wall's back. Deterministic for a
+// fixed seed whatever the thread count: each vertex has its own random stream. Throws
+// penumbra::Error on an Embree failure or invalid settings.
+ReferenceResult RenderReference(const Scene& scene, const ReferenceSettings& settings);
+
+}  // namespace penumbra
