@@ -1,12 +1,16 @@
 // Helpers shared by the tests: nearest-surfel lookup and scene files in a temp folder.
 #pragma once
 
+#include <sys/wait.h>
+
+#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <glm/glm.hpp>
 #include <string>
 #include <vector>
 
+#include "scene/scene_builder.h"
 #include "scene/surfels.h"
 
 namespace penumbra::testing {
@@ -31,6 +35,33 @@ inline std::filesystem::path TempDir(const std::string& name) {
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
     return dir;
+}
+
+// A closed 1 m room, every face pointing in: `walls` on floor and sides, `ceiling` above.
+inline void AddUnitRoom(SceneBuilder& b, uint32_t walls, uint32_t ceiling, int tiles = 1) {
+    const glm::vec3 inside(0.5f, 0.5f, 0.5f);
+    b.AddQuad("floor", walls, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside, tiles);
+    b.AddQuad("ceiling", ceiling, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}, inside, tiles);
+    b.AddQuad("w0", walls, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, inside, tiles);
+    b.AddQuad("w1", walls, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside, tiles);
+    b.AddQuad("w2", walls, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, tiles);
+    b.AddQuad("w3", walls, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside, tiles);
+}
+
+// The `penumbra` binary of this build, run as a real process.
+struct ProcessResult {
+    int exitCode;
+    std::string output;  // stdout and stderr together
+};
+inline ProcessResult Execute(const std::string& args) {
+    std::string cmd = std::string(PENUMBRA_BINARY_DIR) + "/penumbra " + args + " 2>&1";
+    FILE* pipe = popen(cmd.c_str(), "r");
+    ProcessResult r{-1, ""};
+    std::array<char, 4096> buf;
+    while (size_t n = fread(buf.data(), 1, buf.size(), pipe)) r.output.append(buf.data(), n);
+    int status = pclose(pipe);
+    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return r;
 }
 
 }  // namespace penumbra::testing

@@ -147,9 +147,41 @@ SceneBuilder Office() {
     return b;
 }
 
+SceneBuilder Maze() {
+    SceneBuilder b;
+    uint32_t wall = b.AddMaterial("wall", {0.8f, 0.8f, 0.8f});
+    uint32_t floorMat = b.AddMaterial("floor", {0.6f, 0.55f, 0.5f});
+    uint32_t housing = b.AddMaterial("housing", {0.2f, 0.2f, 0.2f});
+    uint32_t light = b.AddMaterial("light", {0.0f, 0.0f, 0.0f}, {40.0f, 38.0f, 34.0f});
+    const float W = 4.0f, D = 4.0f, H = 1.0f;
+    const glm::vec3 inside(W / 2, H / 2, D / 2);
+    b.AddQuad("floor", floorMat, {0, 0, 0}, {W, 0, 0}, {W, 0, D}, {0, 0, D}, inside, 16);
+    b.AddQuad("ceiling", wall, {0, H, 0}, {W, H, 0}, {W, H, D}, {0, H, D}, inside, 16);
+    b.AddQuad("wall_south", wall, {0, 0, 0}, {W, 0, 0}, {W, H, 0}, {0, H, 0}, inside, 16);
+    b.AddQuad("wall_north", wall, {0, 0, D}, {W, 0, D}, {W, H, D}, {0, H, D}, inside, 16);
+    b.AddQuad("wall_west", wall, {0, 0, 0}, {0, 0, D}, {0, H, D}, {0, H, 0}, inside, 16);
+    b.AddQuad("wall_east", wall, {W, 0, 0}, {W, 0, D}, {W, H, D}, {W, H, 0}, inside, 16);
+    // Three partitions, 0.1 m thick, floor to ceiling, leaving a 1 m gap at alternate
+    // ends: a serpentine of four corridors along x.
+    const float t = 0.1f, gap = 1.0f;
+    b.AddBox("partition_1", wall, {(W - gap) / 2, H / 2, 1.0f}, {W - gap, H, t}, 0, false);
+    b.AddBox("partition_2", wall, {gap + (W - gap) / 2, H / 2, 2.0f}, {W - gap, H, t}, 0, false);
+    b.AddBox("partition_3", wall, {(W - gap) / 2, H / 2, 3.0f}, {W - gap, H, t}, 0, false);
+    // The lamp: a closed box in the first corridor's dead end whose only emitting face looks
+    // at the end wall (x = 0), away from the maze; all else is lit by bounces.
+    const glm::vec3 c(0.35f, 0.5f, 0.5f), size(0.1f, 0.3f, 0.4f);
+    b.AddBox("lamp_housing", housing, c, size);
+    const float x = c.x - size.x / 2 - 0.002f;
+    b.AddQuad("lamp", light, {x, c.y - size.y / 2, c.z - size.z / 2},
+              {x, c.y - size.y / 2, c.z + size.z / 2}, {x, c.y + size.y / 2, c.z + size.z / 2},
+              {x, c.y + size.y / 2, c.z - size.z / 2}, {0, c.y, c.z}, 2);
+    return b;
+}
+
 std::vector<Bundled> All() {
     return {{"cornell-box.gltf", &CornellBox},
             {"blocker.gltf", [] { return Blocker(true); }},
+            {"maze.gltf", &Maze},
             {"office.gltf", &Office}};
 }
 

@@ -15,6 +15,9 @@ namespace penumbra::scenes {
 SceneBuilder CornellBox();
 // An emitting square over a floor with an opaque closed box between them.
 SceneBuilder Blocker(bool withBlocker = true);
+// A 4 × 4 × 1 m serpentine of four corridors lit by one lamp that faces the first
+// corridor's end wall: everything else is lit only indirectly (the paper's Fig. 12 idea).
+SceneBuilder Maze();
 // Office-scale scene of the benchmark: about 5,600 input triangles (room, workstations,
 // shelves, cabinets, emissive ceiling fixtures).
 SceneBuilder Office();

@@ -131,12 +131,14 @@ int Reference(const std::string& scenePath, const std::string& outPath, Referenc
 // Exit status when `compare --max-rmse` is exceeded.
 constexpr int kGateFailed = 4;
 
-int CompareFiles(const std::string& aPath, const std::string& bPath, bool json, double maxRmse) {
+int CompareFiles(const std::string& aPath, const std::string& bPath, bool json, double maxRmse,
+                 double floor) {
+    if (!(floor > 0.0 && floor <= 1.0)) throw Error("--floor must be in (0, 1]");
     IrradianceFile a = ReadIrradianceJson(aPath), b = ReadIrradianceJson(bPath);
     if (a.channel != b.channel)
         throw Error("channels differ: " + aPath + " holds '" + a.channel + "', " + bPath +
                     " holds '" + b.channel + "'");
-    Comparison c = Compare(a, b);
+    Comparison c = Compare(a, b, floor);
     if (json) {
         std::printf("%s\n", ComparisonToJson(c, b).dump(1).c_str());
     } else {
@@ -226,12 +228,17 @@ int main(int argc, char** argv) {
         "max relative error, per node and overall (exit status 4 when --max-rmse is exceeded)");
     std::string cmpA, cmpB;
     bool cmpJson = false;
-    double maxRmse = -1.0;
+    double maxRmse = -1.0, floor = kDefaultFloor;
     compare->add_option("a", cmpA, "irradiance JSON to judge")->required();
     compare->add_option("b", cmpB, "reference irradiance JSON")->required();
     compare->add_flag("--json", cmpJson, "print the result as JSON");
     compare->add_option("--max-rmse", maxRmse,
                         "fail (exit 4) when the overall relative RMSE exceeds this (e.g. 0.1)");
+
+    compare
+        ->add_option("--floor", floor,
+                     "relative errors are taken against max(|b|, floor × mean |b|)")
+        ->capture_default_str();
 
     CLI11_PARSE(app, argc, argv);
     try {
@@ -240,7 +247,7 @@ int main(int argc, char** argv) {
             return Bake(scenePath, outPath, settings, iterations, device, scheme, quiet);
         }
         if (reference->parsed()) return Reference(refScene, refOut, refSettings, refQuiet);
-        if (compare->parsed()) return CompareFiles(cmpA, cmpB, cmpJson, maxRmse);
+        if (compare->parsed()) return CompareFiles(cmpA, cmpB, cmpJson, maxRmse, floor);
     } catch (const penumbra::Error& e) {
         std::fprintf(stderr, "\npenumbra: error: %s\n", e.what());
         return 1;

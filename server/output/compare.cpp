@@ -60,7 +60,7 @@ nlohmann::json SummaryToJson(const ErrorSummary& s, const IrradianceFile& b) {
 
 }  // namespace
 
-Comparison Compare(const IrradianceFile& a, const IrradianceFile& b) {
+Comparison Compare(const IrradianceFile& a, const IrradianceFile& b, double floorFraction) {
     if (a.primitives.size() != b.primitives.size())
         throw Error("the files hold " + std::to_string(a.primitives.size()) + " and " +
                     std::to_string(b.primitives.size()) + " primitives");
@@ -76,7 +76,7 @@ Comparison Compare(const IrradianceFile& a, const IrradianceFile& b) {
     for (const auto& r : b.primitives)
         for (const auto& v : r.irradiance) total += glm::length(glm::dvec3(v)), ++count;
     Comparison c;
-    c.floor = count ? 1e-3 * total / count : 0.0;
+    c.floor = count ? floorFraction * total / count : 0.0;
     if (c.floor <= 0) c.floor = 1e-30;
 
     Sums all;

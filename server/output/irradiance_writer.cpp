@@ -76,6 +76,15 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
     if (!out) throw Error(path + ": write failed");
 }
 
+IrradianceFile ToIrradianceFile(const Scene& scene, const IrradianceResult& result) {
+    IrradianceFile file{result.solver, result.channel, {}};
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        const auto& prim = scene.primitives[p];
+        file.primitives.push_back({prim.node, prim.mesh, prim.primitive, result.primitives[p]});
+    }
+    return file;
+}
+
 IrradianceFile ReadIrradianceJson(const std::string& path) {
     std::ifstream in(path);
     if (!in) throw Error(path + ": cannot open");

@@ -48,6 +48,8 @@ struct IrradianceFile {
     std::string solver, channel;
     std::vector<IrradianceRecord> primitives;
 };
+// The in-memory equivalent of writing `result` and reading it back.
+IrradianceFile ToIrradianceFile(const Scene& scene, const IrradianceResult& result);
 // Reads a file written by WriteIrradianceJson; throws penumbra::Error naming the file and
 // what is wrong with it.
 IrradianceFile ReadIrradianceJson(const std::string& path);

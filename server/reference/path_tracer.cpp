@@ -1,5 +1,6 @@
 // Path tracer on Embree 3: cosine-weighted bounces, next-event estimation on emitting
-// triangles chosen by power, Russian roulette after the second bounce.
+// triangles chosen by power, the two combined by MIS, Russian roulette after the second
+// bounce.
 #include "reference/path_tracer.h"
 
 #include <embree3/rtcore.h>
@@ -88,10 +89,12 @@ class Tracer {
         if (device_) rtcReleaseDevice(device_);
     }
 
-    // One sample of the irradiance at `x` over the hemisphere of `n`.
+    // One sample of the irradiance at `x` over the hemisphere of `n`: an emitter point and
+    // a cosine-sampled path, combined by multiple importance sampling (Veach 1997, power
+    // heuristic) so that neither the 1/d² of nearby emitters nor small far ones blow up.
     glm::vec3 Sample(const glm::vec3& x, const glm::vec3& n, Rng& rng, uint64_t& rays) const {
         glm::vec3 e = NextEvent(x, n, rng, rays);
-        return e + kPi * Reflected(x + eps_ * n, CosineSample(n, rng), rng, rays);
+        return e + kPi * Incoming(x, n, CosineSample(n, rng), rng, rays);
     }
 
   private:
@@ -133,8 +136,10 @@ class Tracer {
             cdf_.push_back(total);
         }
         for (auto& c : cdf_) c /= total;
+        areaPdf_.assign(tris_.size(), 0.0f);
         for (uint32_t k = 0; k < emitters_.size(); ++k)
-            emitterPdf_.push_back(float(cdf_[k] - (k ? cdf_[k - 1] : 0.0)));
+            areaPdf_[emitters_[k]] =
+                float(cdf_[k] - (k ? cdf_[k - 1] : 0.0)) / tris_[emitters_[k]].area;
 
         RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
         auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
@@ -161,15 +166,18 @@ class Tracer {
         CheckError();
     }
 
+    static float PowerHeuristic(float a, float b) { return a * a / (a * a + b * b); }
+
     // Direct irradiance at `x` (normal `n`) from one emitter point: L_e cosθ_x cosθ_y / d²
-    // over the area pdf.
+    // over the area pdf, weighted against the cosine sampling of the same direction.
     glm::vec3 NextEvent(const glm::vec3& x, const glm::vec3& n, Rng& rng, uint64_t& rays) const {
         if (emitters_.empty()) return glm::vec3(0.0f);
         float u = rng.Uniform();
         size_t k =
             std::min<size_t>(std::lower_bound(cdf_.begin(), cdf_.end(), double(u)) - cdf_.begin(),
                              emitters_.size() - 1);
-        const Triangle& t = tris_[emitters_[k]];
+        const uint32_t ti = emitters_[k];
+        const Triangle& t = tris_[ti];
         float a = rng.Uniform(), b = rng.Uniform();
         if (a + b > 1.0f) a = 1.0f - a, b = 1.0f - b;
         glm::vec3 y = t.p0 + a * t.e1 + b * t.e2;
@@ -182,37 +190,51 @@ class Tracer {
         glm::vec3 from = x + eps_ * n, to = y + eps_ * t.normal;
         ++rays;
         if (Occluded(from, to - from)) return glm::vec3(0.0f);
+        float pdfArea = areaPdf_[ti];
+        float weight = PowerHeuristic(pdfArea * dist2 / cy, cx / kPi);
         const glm::vec3& le = scene_.materials[t.material].emission;
-        return le * (cx * cy / dist2 * t.area / emitterPdf_[k]);
+        return le * (weight * cx * cy / (dist2 * pdfArea));
     }
 
-    // Radiance reflected towards `origin` by whatever the ray (origin, dir) hits, emission
-    // excluded (next-event estimation counts it).
-    glm::vec3 Reflected(glm::vec3 origin, glm::vec3 dir, Rng& rng, uint64_t& rays) const {
+    // Radiance arriving at `x` (normal `n`) from direction `dir`, sampled with pdf cosθ/π:
+    // the emission of what the ray hits (MIS-weighted against NextEvent) and the light that
+    // surface reflects, followed bounce by bounce.
+    glm::vec3 Incoming(glm::vec3 x, glm::vec3 n, glm::vec3 dir, Rng& rng, uint64_t& rays) const {
         glm::vec3 radiance(0.0f), throughput(1.0f);
-        for (int depth = 0; depth < s_.maxDepth; ++depth) {
+        for (int depth = 0; depth <= s_.maxDepth; ++depth) {
             RTCRayHit rh;
-            Ray(rh.ray, origin, dir, std::numeric_limits<float>::infinity());
+            Ray(rh.ray, x + eps_ * n, dir, std::numeric_limits<float>::infinity());
             rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
             RTCIntersectContext ctx;
             rtcInitIntersectContext(&ctx);
             rtcIntersect1(rtcScene_, &ctx, &rh);
             ++rays;
             if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;
-            const Triangle& t = tris_[rh.hit.primID];
-            if (glm::dot(t.normal, dir) >= 0.0f) break;  // a back side: opaque and black
-            const glm::vec3& rho = scene_.materials[t.material].albedo;
+            const uint32_t ti = rh.hit.primID;
+            const Triangle& t = tris_[ti];
+            float cy = -glm::dot(t.normal, dir);
+            if (cy <= 0.0f) break;  // a back side: opaque and black
+            const Material& mat = scene_.materials[t.material];
+            if (areaPdf_[ti] > 0.0f) {
+                float dist = rh.ray.tfar;
+                float pdfLight = areaPdf_[ti] * dist * dist / cy;
+                float weight = PowerHeuristic(glm::dot(n, dir) / kPi, pdfLight);
+                radiance += throughput * weight * mat.emission;
+            }
+            if (depth == s_.maxDepth) break;
+            const glm::vec3& rho = mat.albedo;
             if (rho.x <= 0.0f && rho.y <= 0.0f && rho.z <= 0.0f) break;
-            glm::vec3 y = t.p0 + rh.hit.u * t.e1 + rh.hit.v * t.e2;
-            radiance += throughput * rho * (1.0f / kPi) * NextEvent(y, t.normal, rng, rays);
+            x = t.p0 + rh.hit.u * t.e1 + rh.hit.v * t.e2;
+            n = t.normal;
+            // Reflected: L_r = ρ/π · (E_next-event + π · L_in(cosine-sampled direction)).
+            radiance += throughput * rho * (1.0f / kPi) * NextEvent(x, n, rng, rays);
             throughput *= rho;
             if (depth >= 2) {
                 float q = std::min(0.95f, std::max({throughput.x, throughput.y, throughput.z}));
                 if (rng.Uniform() >= q) break;
                 throughput /= q;
             }
-            origin = y + eps_ * t.normal;
-            dir = CosineSample(t.normal, rng);
+            dir = CosineSample(n, rng);
         }
         return radiance;
     }
@@ -246,7 +268,7 @@ class Tracer {
     std::vector<Triangle> tris_;
     std::vector<uint32_t> emitters_;
     std::vector<double> cdf_;
-    std::vector<float> emitterPdf_;
+    std::vector<float> areaPdf_;  // per triangle: P(chosen) / area; 0 for non-emitters
 };
 
 }  // namespace

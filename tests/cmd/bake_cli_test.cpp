@@ -1,7 +1,6 @@
 // `penumbra bake` as a real process: JSON and glTF outputs on the bundled Cornell box,
 // and clear errors with exit code 1 for bad input.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 #include <tiny_gltf.h>
 
 #include <array>
@@ -15,24 +14,9 @@
 namespace penumbra {
 namespace {
 
-const std::string kPenumbra = std::string(PENUMBRA_BINARY_DIR) + "/penumbra";
 const std::string kCornell = std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf";
-
-struct ProcessResult {
-    int exitCode;
-    std::string output;
-};
-
-ProcessResult Execute(const std::string& args) {
-    std::string cmd = kPenumbra + " " + args + " 2>&1";
-    FILE* pipe = popen(cmd.c_str(), "r");
-    ProcessResult r{-1, ""};
-    std::array<char, 4096> buf;
-    while (size_t n = fread(buf.data(), 1, buf.size(), pipe)) r.output.append(buf.data(), n);
-    int status = pclose(pipe);
-    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return r;
-}
+using testing::Execute;
+using testing::ProcessResult;
 
 // Bakes the Cornell box to `name`.json with `options`; the output must parse.
 struct JsonBake {

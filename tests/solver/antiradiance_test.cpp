@@ -13,6 +13,7 @@
 namespace penumbra {
 namespace {
 
+using testing::AddUnitRoom;
 using testing::Mean;
 using testing::NearestSurfel;
 
@@ -22,17 +23,6 @@ SolverSettings CpuSettings(int bins = 128, float elementSize = 0.05f) {
     s.elementSize = elementSize;
     s.device = DeviceChoice::kCpu;
     return s;
-}
-
-// A closed 1 m room, every face pointing in: `walls` on floor and sides, `ceiling` above.
-void AddUnitRoom(SceneBuilder& b, uint32_t walls, uint32_t ceiling) {
-    const glm::vec3 inside(0.5f, 0.5f, 0.5f);
-    b.AddQuad("floor", walls, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside);
-    b.AddQuad("ceiling", ceiling, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}, inside);
-    b.AddQuad("w0", walls, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, inside);
-    b.AddQuad("w1", walls, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside);
-    b.AddQuad("w2", walls, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside);
-    b.AddQuad("w3", walls, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside);
 }
 
 // A small emitting patch of area A over a black receiver plane:
