@@ -1,0 +1,210 @@
+// Accuracy sweep (issue 3): the antiradiance solver against the Embree reference on the
+// bundled scenes at several bin counts, iteration counts and element sizes, with the time
+// each took; the reference's own noise, rays per second and time to 1% standard error; and
+// the time the path tracer needs to reach the solver's error. Prints Markdown tables (the
+// ones in docs/ACCURACY.md) and writes bench/results/accuracy.{md,json}.
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "base/check.h"
+#include "output/compare.h"
+#include "output/irradiance_writer.h"
+#include "reference/path_tracer.h"
+#include "scene/gltf_loader.h"
+#include "solver/solver.h"
+
+namespace {
+
+using namespace penumbra;
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+IrradianceFile ReferenceFile(const Scene& scene, const ReferenceResult& r) {
+    IrradianceResult res;
+    res.solver = "reference";
+    res.primitives = r.irradiance;
+    return ToIrradianceFile(scene, res);
+}
+
+// √Σσ² / √Σ|E|² over all vertices: the reference's relative noise, on compare's scale.
+double RelativeStderr(const ReferenceResult& r) {
+    double var = 0, sum2 = 0;
+    for (size_t p = 0; p < r.irradiance.size(); ++p)
+        for (size_t i = 0; i < r.irradiance[p].size(); ++i) {
+            glm::dvec3 e(r.irradiance[p][i]), s(r.standardError[p][i]);
+            var += glm::dot(s, s);
+            sum2 += glm::dot(e, e);
+        }
+    return sum2 > 0 ? std::sqrt(var / sum2) : 0.0;
+}
+
+struct Run {
+    int bins, iterations;
+    float elementSize;
+    double rmse, meanRel, seconds, msPerIteration;
+    size_t elements, links;
+};
+
+Run Solve(const Scene& scene, const IrradianceFile& truth, int bins, int iterations,
+          float elementSize) {
+    SolverSettings s;
+    s.bins = bins;
+    s.elementSize = elementSize;
+    s.device = DeviceChoice::kCpu;
+    auto t = Clock::now();
+    auto solver = CreateSolver(scene, s);
+    solver->Iterate(iterations);
+    double seconds = Seconds(t);
+    IrradianceResult r = CollectIrradiance(scene, *solver);
+    Comparison c = Compare(ToIrradianceFile(scene, r), truth);
+    SolverStats st = solver->Stats();
+    return {bins,  iterations, elementSize, c.overall.relRmse, c.overall.meanRel,
+            seconds, st.MsPerIteration(), st.elements, st.links};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"penumbra accuracy sweep against the Embree reference (issue 3)"};
+    std::string sceneDir = "scenes", out = "bench/results";
+    std::vector<std::string> scenes{"cornell-box", "blocker", "maze"};
+    int truthSamples = 16384;
+    app.add_option("--scenes", scenes, "bundled scene names")->capture_default_str();
+    app.add_option("--scene-dir", sceneDir, "folder of the scenes")->capture_default_str();
+    app.add_option("--out", out, "folder for accuracy.md and accuracy.json")
+        ->capture_default_str();
+    app.add_option("--truth-samples", truthSamples, "reference samples per vertex")
+        ->capture_default_str();
+    CLI11_PARSE(app, argc, argv);
+
+    try {
+        std::ostringstream md;
+        nlohmann::json report;
+        report["truth_samples"] = truthSamples;
+        for (const std::string& name : scenes) {
+            std::fprintf(stderr, "%s: reference at %d samples...\n", name.c_str(), truthSamples);
+            Scene scene = LoadGltf(sceneDir + "/" + name + ".gltf");
+            ReferenceSettings rs;
+            rs.samples = truthSamples;
+            rs.seed = 12345;
+            ReferenceResult truthRef = RenderReference(scene, rs);
+            IrradianceFile truth = ReferenceFile(scene, truthRef);
+            double truthNoise = RelativeStderr(truthRef);
+            nlohmann::json js;
+            js["vertices"] = truthRef.stats.vertices;
+            js["reference"] = {{"samples", truthSamples},
+                               {"seconds", truthRef.stats.seconds},
+                               {"rays_per_second", truthRef.stats.RaysPerSecond()},
+                               {"rel_stderr", truthNoise}};
+
+            md << "### " << name << " (" << truthRef.stats.vertices << " vertices)\n\n";
+            char line[512];
+            std::snprintf(line, sizeof line,
+                          "Reference: %d samples per vertex in %.1f s, %.3g rays/s on %d "
+                          "threads, relative standard error %.2f%%.\n\n",
+                          truthSamples, truthRef.stats.seconds, truthRef.stats.RaysPerSecond(),
+                          truthRef.stats.threads, 100 * truthNoise);
+            md << line;
+            // Standard error falls as 1/√N: samples and time for 1% overall.
+            double n1 = truthSamples * (truthNoise / 0.01) * (truthNoise / 0.01);
+            double t1 = truthRef.stats.seconds * n1 / truthSamples;
+            std::snprintf(line, sizeof line,
+                          "Time to 1%% relative standard error: about %.0f samples per vertex, "
+                          "%.2f s.\n\n",
+                          n1, t1);
+            md << line;
+            js["reference"]["samples_for_1pct"] = n1;
+            js["reference"]["seconds_for_1pct"] = t1;
+            md << "| bins | iterations | element m | elements | links | rel. RMSE | mean rel. | "
+                  "ms/iteration | seconds (build + solve) |\n|---|---|---|---|---|---|---|---|---|\n";
+            std::vector<Run> runs;
+            for (int bins : {64, 128, 256, 512}) runs.push_back(Solve(scene, truth, bins, 8, 0.1f));
+            for (int it : {2, 4}) runs.push_back(Solve(scene, truth, 128, it, 0.1f));
+            // Finer elements only while the element count stays modest (≤ diameter/120).
+            for (float es : {0.05f, 0.025f})
+                if (es >= scene.Diameter() / 120.0f)
+                    runs.push_back(Solve(scene, truth, 128, 8, es));
+            for (const Run& r : runs) {
+                std::fprintf(stderr, "  bins %d it %d element %.3f: RMSE %.4f in %.2f s\n", r.bins,
+                             r.iterations, r.elementSize, r.rmse, r.seconds);
+                std::snprintf(line, sizeof line,
+                              "| %d | %d | %.3f | %zu | %zu | %.1f%% | %.1f%% | %.2f | %.2f |\n",
+                              r.bins, r.iterations, r.elementSize, r.elements, r.links,
+                              100 * r.rmse, 100 * r.meanRel, r.msPerIteration, r.seconds);
+                md << line;
+                js["solver"].push_back({{"bins", r.bins},
+                                        {"iterations", r.iterations},
+                                        {"element_size", r.elementSize},
+                                        {"elements", r.elements},
+                                        {"links", r.links},
+                                        {"rel_rmse", r.rmse},
+                                        {"mean_rel", r.meanRel},
+                                        {"ms_per_iteration", r.msPerIteration},
+                                        {"seconds", r.seconds}});
+            }
+            // The path tracer at growing sample counts against the same truth (another seed).
+            md << "\nPath tracer alone (seed differs from the truth's): samples, rel. RMSE "
+                  "against the truth, seconds.\n\n| samples | rel. RMSE | seconds |\n|---|---|---|\n";
+            std::vector<std::pair<double, double>> pt;  // (rmse, seconds)
+            for (int n = 4; n <= truthSamples / 4; n *= 4) {
+                ReferenceSettings s;
+                s.samples = n;
+                s.seed = 777;
+                ReferenceResult r = RenderReference(scene, s);
+                double rmse = Compare(ReferenceFile(scene, r), truth).overall.relRmse;
+                pt.emplace_back(rmse, r.stats.seconds);
+                std::snprintf(line, sizeof line, "| %d | %.1f%% | %.3f |\n", n, 100 * rmse,
+                              r.stats.seconds);
+                md << line;
+                js["path_tracer"].push_back(
+                    {{"samples", n}, {"rel_rmse", rmse}, {"seconds", r.stats.seconds}});
+            }
+            // Headline: the solver's best converged setting versus the path tracer's time to
+            // the same error (first sample count at or under it).
+            const Run* best = &runs[0];
+            for (const Run& r : runs)
+                if (r.rmse < best->rmse) best = &r;
+            double ptSeconds = -1;
+            for (auto [rmse, sec] : pt)
+                if (rmse <= best->rmse) {
+                    ptSeconds = sec;
+                    break;
+                }
+            if (ptSeconds >= 0)
+                std::snprintf(line, sizeof line,
+                              "\nHeadline: the solver's lowest error here, %.1f%% (%d bins, %d "
+                              "iterations, %.3f m), took %.2f s; the path tracer reached it in "
+                              "%.3f s.\n\n",
+                              100 * best->rmse, best->bins, best->iterations, best->elementSize,
+                              best->seconds, ptSeconds);
+            else
+                std::snprintf(line, sizeof line,
+                              "\nHeadline: the solver's lowest error here, %.1f%%, took %.2f s; "
+                              "the path tracer did not reach it within %d samples.\n\n",
+                              100 * best->rmse, best->seconds, truthSamples / 4);
+            md << line;
+            js["headline"] = {{"solver_rel_rmse", best->rmse},
+                              {"solver_seconds", best->seconds},
+                              {"path_tracer_seconds", ptSeconds}};
+            report["scenes"][name] = js;
+        }
+        std::filesystem::create_directories(out);
+        std::ofstream(out + "/accuracy.md") << md.str();
+        std::ofstream(out + "/accuracy.json") << report.dump(1) << "\n";
+        std::printf("%s", md.str().c_str());
+        std::fprintf(stderr, "wrote %s/accuracy.md and accuracy.json\n", out.c_str());
+    } catch (const penumbra::Error& e) {
+        std::fprintf(stderr, "bench: %s\n", e.what());
+        return 1;
+    }
+    return 0;
+}
