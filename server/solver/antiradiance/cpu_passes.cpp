@@ -28,45 +28,14 @@ double MsSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-// acc[bin][rgb] += Σ over receiver r's links of F · w · I_ex[sender][link bin] (the U
-// operator, Eq. 16/17 with the σ spreading of Sec. 3.1). The sender reads are random
-// rows of a large table: gather a chunk of F·I_ex values first, prefetching the next
-// chunk, then spread them (PERFORMANCE-NOTES.md).
-inline void Gather(const AntiradianceModel& m, const float* iex, uint32_t r, float* acc) {
-    constexpr size_t kChunk = 16;
-    const size_t bins = m.Bins();
-    const Link* begin = m.links.links.data() + m.links.offsets[r];
-    const Link* end = m.links.links.data() + m.links.offsets[r + 1];
-    auto source = [&](const Link* l) { return iex + (size_t(l->sender) * bins + l->bin) * 3; };
-    for (const Link* l = begin; l < begin + kChunk && l < end; ++l) __builtin_prefetch(source(l));
-    float v[kChunk][3];
-    for (const Link* chunk = begin; chunk < end; chunk += kChunk) {
-        const size_t n = std::min<size_t>(kChunk, end - chunk);
-        for (const Link* l = chunk + kChunk; l < chunk + 2 * kChunk && l < end; ++l)
-            __builtin_prefetch(source(l));
-        for (size_t k = 0; k < n; ++k) {
-            const float* src = source(chunk + k);
-            const float f = chunk[k].formFactor;
-            v[k][0] = f * src[0];
-            v[k][1] = f * src[1];
-            v[k][2] = f * src[2];
-        }
-        for (size_t k = 0; k < n; ++k) {
-            for (const BinWeight& nb : m.dirs.Neighbours(chunk[k].level, chunk[k].bin)) {
-                float* dst = acc + nb.bin * 3;
-                dst[0] += nb.weight * v[k][0];
-                dst[1] += nb.weight * v[k][1];
-                dst[2] += nb.weight * v[k][2];
-            }
-        }
-    }
-}
-
 // Four floats (RGB and a zero pad): one vector update per spread neighbour instead of
 // three scalar ones.
 using Rgba = float __attribute__((vector_size(16)));
 
-// Gather above into an RGBA-padded accumulator (the fused walk's stack row).
+// acc[bin] += Σ over receiver r's links of F · w · I_ex[sender][link bin] (the U operator,
+// Eq. 16/17 with the σ spreading of Sec. 3.1), RGB in the first three lanes. The sender
+// reads are random rows of a large table: gather a chunk of F·I_ex values first,
+// prefetching the next chunk, then spread them (PERFORMANCE-NOTES.md).
 inline void GatherRgba(const AntiradianceModel& m, const float* iex, uint32_t r, Rgba* acc) {
     constexpr size_t kChunk = 16;
     const size_t bins = m.Bins();
@@ -211,10 +180,13 @@ void GlobalPass(const AntiradianceModel& m, const float* iex, float* lin) {
     const size_t row = size_t(m.Bins()) * 3;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, m.Nodes(), 64),
                       [&](const tbb::blocked_range<size_t>& range) {
+                          Rgba acc[Directions::kMaxBins];
                           for (size_t r = range.begin(); r != range.end(); ++r) {
-                              float* acc = lin + r * row;
-                              std::fill(acc, acc + row, 0.0f);
-                              Gather(m, iex, static_cast<uint32_t>(r), acc);
+                              std::fill(acc, acc + row / 3, Rgba{});
+                              GatherRgba(m, iex, static_cast<uint32_t>(r), acc);
+                              float* out = lin + r * row;
+                              for (size_t b = 0; b < row / 3; ++b)
+                                  for (int c = 0; c < 3; ++c) out[b * 3 + c] = acc[b][c];
                           }
                       });
 }
