@@ -67,7 +67,7 @@ Run Solve(const Scene& scene, const IrradianceFile& truth, int bins, int iterati
     IrradianceResult r = CollectIrradiance(scene, *solver);
     Comparison c = Compare(ToIrradianceFile(scene, r), truth);
     SolverStats st = solver->Stats();
-    return {bins,  iterations, elementSize, c.overall.relRmse, c.overall.meanRel,
+    return {bins,    iterations,          elementSize, c.overall.relRmse, c.overall.meanRel,
             seconds, st.MsPerIteration(), st.elements, st.links};
 }
 
@@ -80,8 +80,7 @@ int main(int argc, char** argv) {
     int truthSamples = 16384;
     app.add_option("--scenes", scenes, "bundled scene names")->capture_default_str();
     app.add_option("--scene-dir", sceneDir, "folder of the scenes")->capture_default_str();
-    app.add_option("--out", out, "folder for accuracy.md and accuracy.json")
-        ->capture_default_str();
+    app.add_option("--out", out, "folder for accuracy.md and accuracy.json")->capture_default_str();
     app.add_option("--truth-samples", truthSamples, "reference samples per vertex")
         ->capture_default_str();
     CLI11_PARSE(app, argc, argv);
@@ -125,7 +124,8 @@ int main(int argc, char** argv) {
             js["reference"]["samples_for_1pct"] = n1;
             js["reference"]["seconds_for_1pct"] = t1;
             md << "| bins | iterations | element m | elements | links | rel. RMSE | mean rel. | "
-                  "ms/iteration | seconds (build + solve) |\n|---|---|---|---|---|---|---|---|---|\n";
+                  "ms/iteration | seconds (build + solve) "
+                  "|\n|---|---|---|---|---|---|---|---|---|\n";
             std::vector<Run> runs;
             for (int bins : {64, 128, 256, 512}) runs.push_back(Solve(scene, truth, bins, 8, 0.1f));
             for (int it : {2, 4}) runs.push_back(Solve(scene, truth, 128, it, 0.1f));
@@ -153,7 +153,8 @@ int main(int argc, char** argv) {
             }
             // The path tracer at growing sample counts against the same truth (another seed).
             md << "\nPath tracer alone (seed differs from the truth's): samples, rel. RMSE "
-                  "against the truth, seconds.\n\n| samples | rel. RMSE | seconds |\n|---|---|---|\n";
+                  "against the truth, seconds.\n\n| samples | rel. RMSE | seconds "
+                  "|\n|---|---|---|\n";
             std::vector<std::pair<double, double>> pt;  // (rmse, seconds)
             for (int n = 4; n <= truthSamples / 4; n *= 4) {
                 ReferenceSettings s;

@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <glm/glm.hpp>
@@ -46,6 +47,19 @@ inline void AddUnitRoom(SceneBuilder& b, uint32_t walls, uint32_t ceiling, int t
     b.AddQuad("w1", walls, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside, tiles);
     b.AddQuad("w2", walls, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, tiles);
     b.AddQuad("w3", walls, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside, tiles);
+}
+
+// A square emitter of side `side` centred at (0, height, 0) whose normal is −y tilted by
+// `tiltDegrees` about +z; returns that normal.
+inline glm::vec3 AddTiltedEmitter(SceneBuilder& b, uint32_t material, float tiltDegrees, float side,
+                                  float height) {
+    float t = glm::radians(tiltDegrees);
+    glm::vec3 n(std::sin(t), -std::cos(t), 0.0f);
+    glm::vec3 u = glm::normalize(glm::cross(n, glm::vec3(0, 0, 1))) * (side / 2);
+    glm::vec3 v(0, 0, side / 2);
+    glm::vec3 o(0, height, 0);
+    b.AddQuad("emitter", material, o - u - v, o + u - v, o + u + v, o - u + v, o + n);
+    return n;
 }
 
 // The `penumbra` binary of this build, run as a real process.

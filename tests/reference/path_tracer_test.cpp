@@ -32,6 +32,15 @@ size_t NearestVertex(const Primitive& prim, glm::vec3 p) {
     return best;
 }
 
+// The unit room with white (ρ 0.7) walls under an emitting ceiling, tiles × tiles a face.
+Scene LitRoom(int tiles) {
+    SceneBuilder b;
+    uint32_t white = b.AddMaterial("white", glm::vec3(0.7f));
+    uint32_t light = b.AddMaterial("light", glm::vec3(0.0f), glm::vec3(5.0f));
+    AddUnitRoom(b, white, light, tiles);
+    return b.Build();
+}
+
 // E = L · A · cosθr · cosθe / d² for a 0.06 m emitting square 1 m over a black floor (the
 // point formula is within 0.3% of the exact integral here). The 2%, and within
 // four standard errors of the estimate.
@@ -43,12 +52,8 @@ TEST(Reference, SmallPatchMatchesPointToPointFormula) {
             uint32_t black = b.AddMaterial("black", glm::vec3(0.0f));
             uint32_t emit = b.AddMaterial("emit", glm::vec3(0.0f), glm::vec3(L));
             b.AddQuad("floor", black, {-2, 0, -2}, {2, 0, -2}, {2, 0, 2}, {-2, 0, 2}, {0, 1, 0}, 8);
-            float t = glm::radians(tilt);
-            glm::vec3 n(std::sin(t), -std::cos(t), 0.0f);
-            glm::vec3 u = glm::normalize(glm::cross(n, glm::vec3(0, 0, 1))) * (side / 2);
-            glm::vec3 v(0, 0, side / 2);
-            glm::vec3 o(0, height, 0);
-            b.AddQuad("emitter", emit, o - u - v, o + u - v, o + u + v, o - u + v, o + n);
+            const glm::vec3 n = testing::AddTiltedEmitter(b, emit, tilt, side, height);
+            const glm::vec3 o(0, height, 0);
             Scene scene = b.Build();
             ReferenceResult r = RenderReference(scene, Settings(4000));
             const Primitive& floor = scene.primitives[0];
@@ -90,11 +95,7 @@ TEST(Reference, WhiteFurnace) {
 // Sixteen times the samples → a quarter of the standard error (√16), within 10%; and the
 // low-sample estimates scatter around the high-sample ones as their standard errors say.
 TEST(Reference, StandardErrorShrinksAsInverseSqrtN) {
-    SceneBuilder b;
-    uint32_t white = b.AddMaterial("white", glm::vec3(0.7f));
-    uint32_t light = b.AddMaterial("light", glm::vec3(0.0f), glm::vec3(5.0f));
-    AddUnitRoom(b, white, light, 4);
-    Scene scene = b.Build();
+    Scene scene = LitRoom(4);
     ReferenceResult lo = RenderReference(scene, Settings(64, 7));
     ReferenceResult hi = RenderReference(scene, Settings(1024, 8));
     double seLo = 0, seHi = 0;
@@ -114,11 +115,7 @@ TEST(Reference, StandardErrorShrinksAsInverseSqrtN) {
 }
 
 TEST(Reference, DeterministicForASeedWhateverTheThreadCount) {
-    SceneBuilder b;
-    uint32_t white = b.AddMaterial("white", glm::vec3(0.7f));
-    uint32_t light = b.AddMaterial("light", glm::vec3(0.0f), glm::vec3(5.0f));
-    AddUnitRoom(b, white, light, 2);
-    Scene scene = b.Build();
+    Scene scene = LitRoom(2);
     ReferenceSettings one = Settings(32, 3), two = Settings(32, 3), other = Settings(32, 4);
     one.threads = 1;
     two.threads = 2;

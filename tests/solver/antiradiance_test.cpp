@@ -44,12 +44,8 @@ TEST_P(FormFactor, SmallPatchMatchesPointToPointFormula) {
     uint32_t emit = b.AddMaterial("emit", glm::vec3(0.0f), glm::vec3(L));
     b.AddQuad("floor", black, {-2, 0, -2}, {2, 0, -2}, {2, 0, 2}, {-2, 0, 2}, {0, 1, 0});
     // Emitter centred at (0, h, 0), normal = −y rotated by the tilt about z.
-    float t = glm::radians(c.tiltDegrees);
-    glm::vec3 n(std::sin(t), -std::cos(t), 0.0f);
-    glm::vec3 u = glm::normalize(glm::cross(n, glm::vec3(0, 0, 1))) * (side / 2);
-    glm::vec3 v(0, 0, side / 2);
-    glm::vec3 o(0, height, 0);
-    b.AddQuad("emitter", emit, o - u - v, o + u - v, o + u + v, o - u + v, o + n);
+    const glm::vec3 n = testing::AddTiltedEmitter(b, emit, c.tiltDegrees, side, height);
+    const glm::vec3 o(0, height, 0);
     Scene scene = b.Build();
     auto solver = CreateSolver(scene, CpuSettings(c.bins, 0.1f));
     solver->Iterate(1);
