@@ -57,6 +57,8 @@ SceneBuilder CornellBox() {
             b.AddQuad(name, white, Mm(a.x, 0, a.z), Mm(a.x, h, a.z), Mm(d.x, h, d.z),
                       Mm(d.x, 0, d.z), Mm(out.x, out.y, out.z), kBlock);
         }
+        // Movable by the service, about the centre of its base, anywhere inside the box.
+        b.SetDynamic(name, Mm(c.x, 0, c.z), Mm(0, 0, 0), Mm(556, y, 559.2f));
     };
     const glm::vec3 shortTop[4] = {{130, 0, 65}, {82, 0, 225}, {240, 0, 272}, {290, 0, 114}};
     const glm::vec3 tallTop[4] = {{423, 0, 247}, {265, 0, 296}, {314, 0, 456}, {472, 0, 406}};
@@ -72,7 +74,10 @@ SceneBuilder Blocker(bool withBlocker) {
     b.AddQuad("floor", grey, {-1, 0, -1}, {1, 0, -1}, {1, 0, 1}, {-1, 0, 1}, {0, 1, 0}, 16);
     b.AddQuad("emitter", light, {-0.25f, 1, -0.25f}, {0.25f, 1, -0.25f}, {0.25f, 1, 0.25f},
               {-0.25f, 1, 0.25f}, {0, 0, 0});
-    if (withBlocker) b.AddBox("blocker", grey, {0, 0.5f, 0}, {0.4f, 0.05f, 0.4f});
+    if (withBlocker) {
+        b.AddBox("blocker", grey, {0, 0.5f, 0}, {0.4f, 0.05f, 0.4f});
+        b.SetDynamic("blocker", {0, 0.5f, 0});  // no bounds given: anywhere in the scene
+    }
     return b;
 }
 

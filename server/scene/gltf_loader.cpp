@@ -187,6 +187,40 @@ glm::vec3 MeanTextureColor(const Context& ctx, const std::string& where, int tex
     return pixels ? glm::vec3(sum / static_cast<double>(pixels)) : glm::vec3(1.0f);
 }
 
+// `extras.penumbra` of a node: {"dynamic": bool, "bounds": {"min": [x,y,z], "max": [x,y,z]}}.
+void ReadPenumbraExtras(const Context& ctx, const std::string& where, const tinygltf::Value& extras,
+                        SceneNode& out) {
+    if (!extras.IsObject() || !extras.Has("penumbra")) return;
+    const tinygltf::Value& pen = extras.Get("penumbra");
+    if (!pen.IsObject()) ctx.Fail(where, "extras.penumbra must be an object");
+    if (pen.Has("dynamic")) {
+        if (!pen.Get("dynamic").IsBool())
+            ctx.Fail(where, "extras.penumbra.dynamic must be true or false");
+        out.dynamic = pen.Get("dynamic").Get<bool>();
+    }
+    if (!pen.Has("bounds")) return;
+    const tinygltf::Value& b = pen.Get("bounds");
+    auto corner = [&](const char* key) {
+        if (!b.IsObject() || !b.Has(key) || !b.Get(key).IsArray() || b.Get(key).ArrayLen() != 3)
+            ctx.Fail(where, std::string("extras.penumbra.bounds.") + key +
+                                " must be an array of 3 numbers");
+        glm::vec3 v;
+        for (int i = 0; i < 3; ++i) {
+            const tinygltf::Value& c = b.Get(key).Get(i);
+            if (!c.IsNumber() || !std::isfinite(c.GetNumberAsDouble()))
+                ctx.Fail(where, std::string("extras.penumbra.bounds.") + key +
+                                    " must hold finite numbers");
+            v[i] = static_cast<float>(c.GetNumberAsDouble());
+        }
+        return v;
+    };
+    out.boundsMin = corner("min");
+    out.boundsMax = corner("max");
+    if (glm::any(glm::greaterThan(out.boundsMin, out.boundsMax)))
+        ctx.Fail(where, "extras.penumbra.bounds.min exceeds max");
+    out.hasMotionBounds = true;
+}
+
 Material ReadMaterial(const Context& ctx, int index) {
     const auto& m = ctx.model.materials[index];
     std::string where = "material " + std::to_string(index) + " '" + m.name + "'";
@@ -276,8 +310,11 @@ Scene LoadGltf(const std::string& path) {
     }
 
     std::vector<int> visits(model.nodes.size(), 0);
-    std::function<void(int, const glm::mat4&, int)> visit = [&](int ni, const glm::mat4& parent,
-                                                                int depth) {
+    scene.nodes.resize(model.nodes.size());
+    for (size_t i = 0; i < model.nodes.size(); ++i)
+        scene.nodes[i].name =
+            model.nodes[i].name.empty() ? "node" + std::to_string(i) : model.nodes[i].name;
+    std::function<void(int, int, int)> visit = [&](int ni, int parentIndex, int depth) {
         if (ni < 0 || ni >= static_cast<int>(model.nodes.size()))
             ctx.Fail("scene graph",
                      "reference to node " + std::to_string(ni) + ", which does not exist");
@@ -289,8 +326,18 @@ Scene LoadGltf(const std::string& path) {
         if (!node.matrix.empty() && node.matrix.size() != 16)
             ctx.Fail(NodeLabel(model, ni),
                      "matrix has " + std::to_string(node.matrix.size()) + " numbers, not 16");
-        glm::mat4 world = parent * LocalTransform(node);
+        SceneNode& sn = scene.nodes[ni];
+        sn.parent = parentIndex;
+        sn.local = LocalTransform(node);
+        glm::mat4 parent = parentIndex >= 0 ? scene.nodes[parentIndex].world : glm::mat4(1.0f);
+        glm::mat4 world = parent * sn.local;
         if (!Finite(world)) ctx.Fail(NodeLabel(model, ni), "transform has NaN or infinity");
+        sn.world = world;
+        ReadPenumbraExtras(ctx, NodeLabel(model, ni), node.extras, sn);
+        if (parentIndex >= 0) {
+            scene.nodes[parentIndex].children.push_back(ni);
+            sn.dynamic = sn.dynamic || scene.nodes[parentIndex].dynamic;
+        }
         if (node.mesh >= 0) {
             if (node.mesh >= static_cast<int>(model.meshes.size()))
                 ctx.Fail(NodeLabel(model, ni),
@@ -307,7 +354,7 @@ Scene LoadGltf(const std::string& path) {
                 auto pos = prim.attributes.find("POSITION");
                 if (pos == prim.attributes.end()) ctx.Fail(where, "has no POSITION attribute");
                 Primitive out;
-                out.node = node.name.empty() ? "node" + std::to_string(ni) : node.name;
+                out.node = sn.name;
                 out.nodeIndex = ni;
                 out.mesh = node.mesh;
                 out.primitive = static_cast<int>(pi);
@@ -329,35 +376,38 @@ Scene LoadGltf(const std::string& path) {
                     if (idx >= out.positions.size())
                         ctx.Fail(where, "index " + std::to_string(idx) + " is past the " +
                                             std::to_string(out.positions.size()) + " vertices");
-                for (auto& p : out.positions) {
+                for (const auto& p : out.positions)
                     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
                         ctx.Fail(where, "POSITION has NaN or infinity");
-                    p = glm::vec3(world * glm::vec4(p, 1.0f));
-                }
-                if (flips)
-                    for (size_t t = 0; t + 2 < out.indices.size(); t += 3)
-                        std::swap(out.indices[t + 1], out.indices[t + 2]);
                 auto nrm = prim.attributes.find("NORMAL");
                 if (nrm != prim.attributes.end()) {
                     out.normals = ReadVec3(ctx, where, nrm->second, "NORMAL");
                     if (out.normals.size() != out.positions.size())
                         ctx.Fail(where, "NORMAL and POSITION counts differ");
-                    for (auto& n : out.normals) {
-                        glm::vec3 w = normalMatrix * n;
-                        float len = glm::length(w);
+                    for (const auto& n : out.normals) {
+                        float len = glm::length(normalMatrix * n);
                         if (!std::isfinite(len) || len == 0.0f)
                             ctx.Fail(where, "NORMAL has a zero, NaN or infinite vector");
-                        n = w / len;
                     }
                 } else {
-                    ComputeVertexNormals(out);
+                    ComputeVertexNormals(out);  // in the mesh's own space
                 }
+                // Keep the mesh-space vertices (moves re-place them), then go to world space.
+                out.objectPositions = out.positions;
+                out.objectNormals = out.normals;
+                for (auto& p : out.positions) p = glm::vec3(world * glm::vec4(p, 1.0f));
+                for (auto& n : out.normals) n = glm::normalize(normalMatrix * n);
+                if (flips)
+                    for (size_t t = 0; t + 2 < out.indices.size(); t += 3)
+                        std::swap(out.indices[t + 1], out.indices[t + 2]);
+                scene.nodes[ni].primitives.push_back(
+                    static_cast<uint32_t>(scene.primitives.size()));
                 scene.primitives.push_back(std::move(out));
             }
         }
-        for (int c : node.children) visit(c, world, depth + 1);
+        for (int c : node.children) visit(c, ni, depth + 1);
     };
-    for (int r : roots) visit(r, glm::mat4(1.0f), 0);
+    for (int r : roots) visit(r, -1, 0);
 
     if (scene.TriangleCount() == 0) throw Error(path + ": the scene has no triangles to light");
     return scene;

@@ -1,7 +1,10 @@
 // Scene bounds, counts and normal generation.
 #include "scene/scene.h"
 
+#include <cmath>
 #include <limits>
+
+#include "base/check.h"
 
 namespace penumbra {
 
@@ -34,6 +37,66 @@ size_t Scene::TriangleCount() const {
     size_t n = 0;
     for (const auto& p : primitives) n += p.indices.size() / 3;
     return n;
+}
+
+int FindNode(const Scene& scene, const std::string& name) {
+    for (size_t i = 0; i < scene.nodes.size(); ++i)
+        if (scene.nodes[i].name == name) return static_cast<int>(i);
+    return -1;
+}
+
+namespace {
+
+bool IsFinite(const glm::mat4& m) {
+    for (int c = 0; c < 4; ++c)
+        for (int r = 0; r < 4; ++r)
+            if (!std::isfinite(m[c][r])) return false;
+    return true;
+}
+
+// World transforms of `node`'s subtree under `parentWorld`, written into `world`.
+void PlaceSubtree(const Scene& scene, int node, const glm::mat4& parentWorld,
+                  const glm::mat4& local, std::vector<std::pair<int, glm::mat4>>& world) {
+    glm::mat4 w = parentWorld * local;
+    world.emplace_back(node, w);
+    for (int c : scene.nodes[node].children) PlaceSubtree(scene, c, w, scene.nodes[c].local, world);
+}
+
+}  // namespace
+
+void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
+    if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
+        throw Error("node index " + std::to_string(node) + " does not exist");
+    const SceneNode& n = scene.nodes[node];
+    if (!IsFinite(local)) throw Error("transform of '" + n.name + "' has NaN or infinity");
+    glm::mat4 parentWorld = n.parent >= 0 ? scene.nodes[n.parent].world : glm::mat4(1.0f);
+    // Check every new world matrix before changing anything.
+    std::vector<std::pair<int, glm::mat4>> world;
+    PlaceSubtree(scene, node, parentWorld, local, world);
+    for (const auto& [i, w] : world) {
+        if (!IsFinite(w)) throw Error("transform of '" + n.name + "' overflows to infinity");
+        if (scene.nodes[i].primitives.empty()) continue;
+        float det = glm::determinant(glm::mat3(w));
+        if (!(std::abs(det) >= 1e-12f))
+            throw Error("transform of '" + n.name + "' is singular (zero scale)");
+        // Triangle winding was fixed for the file's handedness at load time.
+        if ((det < 0.0f) != (glm::determinant(glm::mat3(scene.nodes[i].world)) < 0.0f))
+            throw Error("transform of '" + n.name +
+                        "' would mirror it (a negative scale); mirroring a loaded node is not "
+                        "supported");
+    }
+    scene.nodes[node].local = local;
+    for (const auto& [i, w] : world) {
+        scene.nodes[i].world = w;
+        glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(w)));
+        for (uint32_t pi : scene.nodes[i].primitives) {
+            Primitive& p = scene.primitives[pi];
+            for (size_t v = 0; v < p.positions.size(); ++v) {
+                p.positions[v] = glm::vec3(w * glm::vec4(p.objectPositions[v], 1.0f));
+                p.normals[v] = glm::normalize(normalMatrix * p.objectNormals[v]);
+            }
+        }
+    }
 }
 
 void ComputeVertexNormals(Primitive& primitive) {

@@ -104,12 +104,32 @@ void SceneBuilder::AddBoxWithBottom(const std::string& node, uint32_t material,
             {centre.x - h.x, y, centre.z + h.z}, {centre.x, y - 1.0f, centre.z});
 }
 
+void SceneBuilder::SetDynamic(const std::string& node, glm::vec3 origin) {
+    dynamic_[node] = Motion{origin};
+}
+
+void SceneBuilder::SetDynamic(const std::string& node, glm::vec3 origin, glm::vec3 boundsMin,
+                              glm::vec3 boundsMax) {
+    dynamic_[node] = Motion{origin, true, boundsMin, boundsMax};
+}
+
 Scene SceneBuilder::Build() const {
     Scene scene;
     scene.source = "(built in memory)";
     scene.materials = materials_;
     int nodeIndex = 0;
     for (const auto& name : nodeOrder_) {
+        SceneNode node;
+        node.name = name;
+        glm::vec3 origin(0.0f);
+        if (auto it = dynamic_.find(name); it != dynamic_.end()) {
+            node.dynamic = true;
+            origin = it->second.origin;
+            node.hasMotionBounds = it->second.hasBounds;
+            node.boundsMin = it->second.boundsMin;
+            node.boundsMax = it->second.boundsMax;
+        }
+        node.local = node.world = glm::translate(glm::mat4(1.0f), origin);
         int primIndex = 0;
         for (const auto& [material, part] : nodes_.at(name)) {
             Primitive p;
@@ -121,8 +141,12 @@ Scene SceneBuilder::Build() const {
             p.positions = part.positions;
             p.normals = part.normals;
             p.indices = part.indices;
+            for (const auto& v : part.positions) p.objectPositions.push_back(v - origin);
+            p.objectNormals = part.normals;
+            node.primitives.push_back(static_cast<uint32_t>(scene.primitives.size()));
             scene.primitives.push_back(std::move(p));
         }
+        scene.nodes.push_back(std::move(node));
         ++nodeIndex;
     }
     return scene;
@@ -171,7 +195,11 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
     for (const auto& name : nodeOrder_) {
         tinygltf::Mesh mesh;
         mesh.name = name;
-        for (const auto& [material, part] : nodes_.at(name)) {
+        auto motion = dynamic_.find(name);
+        glm::vec3 origin = motion != dynamic_.end() ? motion->second.origin : glm::vec3(0.0f);
+        for (const auto& [material, shared] : nodes_.at(name)) {
+            Part part = shared;
+            for (auto& v : part.positions) v -= origin;
             tinygltf::Primitive prim;
             prim.material = static_cast<int>(material);
             prim.mode = TINYGLTF_MODE_TRIANGLES;
@@ -208,6 +236,25 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
         tinygltf::Node node;
         node.name = name;
         node.mesh = static_cast<int>(model.meshes.size() - 1);
+        if (motion != dynamic_.end()) {
+            node.translation = {origin.x, origin.y, origin.z};
+            tinygltf::Value::Object pen;
+            pen["dynamic"] = tinygltf::Value(true);
+            if (motion->second.hasBounds) {
+                auto array = [](glm::vec3 v) {
+                    return tinygltf::Value(tinygltf::Value::Array{tinygltf::Value(double(v.x)),
+                                                                  tinygltf::Value(double(v.y)),
+                                                                  tinygltf::Value(double(v.z))});
+                };
+                tinygltf::Value::Object bounds;
+                bounds["min"] = array(motion->second.boundsMin);
+                bounds["max"] = array(motion->second.boundsMax);
+                pen["bounds"] = tinygltf::Value(bounds);
+            }
+            tinygltf::Value::Object extras;
+            extras["penumbra"] = tinygltf::Value(pen);
+            node.extras = tinygltf::Value(extras);
+        }
         model.nodes.push_back(node);
         scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
     }

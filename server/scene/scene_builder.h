@@ -29,6 +29,12 @@ class SceneBuilder {
     void AddBoxWithBottom(const std::string& node, uint32_t material, uint32_t bottomMaterial,
                           glm::vec3 centre, glm::vec3 size);
 
+    // Marks `node` movable (extras.penumbra.dynamic): its glTF translation is `origin`, so
+    // moves rotate about it, and `boundsMin/Max` (world space) bound its motion when given.
+    void SetDynamic(const std::string& node, glm::vec3 origin);
+    void SetDynamic(const std::string& node, glm::vec3 origin, glm::vec3 boundsMin,
+                    glm::vec3 boundsMax);
+
     Scene Build() const;
     // Writes .gltf (buffers embedded as base64) or .glb. Throws penumbra::Error.
     void WriteGltf(const std::string& path) const;
@@ -38,6 +44,12 @@ class SceneBuilder {
         std::vector<glm::vec3> positions, normals;
         std::vector<uint32_t> indices;
     };
+    struct Motion {
+        glm::vec3 origin{0.0f};
+        bool hasBounds = false;
+        glm::vec3 boundsMin{0.0f}, boundsMax{0.0f};
+    };
+    std::map<std::string, Motion> dynamic_;
     std::vector<Material> materials_;
     std::vector<std::string> nodeOrder_;
     std::map<std::string, std::map<uint32_t, Part>> nodes_;

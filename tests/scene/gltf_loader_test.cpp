@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <glm/gtc/matrix_transform.hpp>
+#include <limits>
 #include <nlohmann/json.hpp>
 
 #include "base/check.h"
@@ -166,6 +168,73 @@ TEST(GltfLoader, UnknownMeshIsRefused) {
     doc["nodes"][2]["mesh"] = 99;
     std::string msg = LoadError(doc, "mesh.gltf");
     EXPECT_NE(msg.find("99"), std::string::npos) << msg;
+}
+
+// --- Dynamic nodes and moves (extras.penumbra, SetNodeTransform) ------------------------------
+
+TEST(GltfLoader, ReadsDynamicNodesAndMotionBounds) {
+    Scene scene = LoadGltf(kCornell);
+    int tall = FindNode(scene, "tall_block"), floor = FindNode(scene, "floor");
+    ASSERT_GE(tall, 0);
+    ASSERT_GE(floor, 0);
+    EXPECT_TRUE(scene.nodes[tall].dynamic);
+    EXPECT_TRUE(scene.nodes[tall].hasMotionBounds);
+    EXPECT_NEAR(scene.nodes[tall].boundsMax.y, 0.5488f, 1e-4f);
+    EXPECT_FALSE(scene.nodes[floor].dynamic);
+    EXPECT_EQ(scene.nodes[tall].primitives.size(), 1u);
+    EXPECT_EQ(FindNode(scene, "no_such_node"), -1);
+}
+
+TEST(GltfLoader, BadMotionBoundsAreRefused) {
+    auto doc = Cornell();
+    doc["nodes"][0]["extras"] = {{"penumbra", {{"dynamic", "yes"}}}};
+    std::string msg = LoadError(doc, "dyn.gltf");
+    EXPECT_NE(msg.find("extras.penumbra.dynamic must be true or false"), std::string::npos) << msg;
+    doc["nodes"][0]["extras"] = {
+        {"penumbra", {{"dynamic", true}, {"bounds", {{"min", {0, 0}}, {"max", {1, 1, 1}}}}}}};
+    msg = LoadError(doc, "bounds.gltf");
+    EXPECT_NE(msg.find("bounds.min must be an array of 3 numbers"), std::string::npos) << msg;
+}
+
+TEST(SceneTransform, MovingANodeMovesItsGeometryExactly) {
+    Scene scene = LoadGltf(kCornell);
+    int tall = FindNode(scene, "tall_block");
+    const Primitive& p = scene.primitives[scene.nodes[tall].primitives[0]];
+    std::vector<glm::vec3> before = p.positions, normalsBefore = p.normals;
+    glm::mat4 local = scene.nodes[tall].local;
+    glm::mat4 moved = glm::translate(glm::mat4(1.0f), glm::vec3(0.05f, 0.0f, 0.0f)) * local;
+    SetNodeTransform(scene, tall, moved);
+    for (size_t i = 0; i < before.size(); ++i) {
+        EXPECT_NEAR(p.positions[i].x, before[i].x + 0.05f, 1e-6f);
+        EXPECT_NEAR(p.positions[i].y, before[i].y, 1e-6f);
+        EXPECT_NEAR(glm::dot(p.normals[i], normalsBefore[i]), 1.0f, 1e-6f);
+    }
+    // Back to where it was: the original vertices, not an accumulated drift.
+    SetNodeTransform(scene, tall, local);
+    for (size_t i = 0; i < before.size(); ++i)
+        EXPECT_NEAR(glm::length(p.positions[i] - before[i]), 0.0f, 1e-6f);
+}
+
+TEST(SceneTransform, BadMatricesAreRefusedAndChangeNothing) {
+    Scene scene = LoadGltf(kCornell);
+    int tall = FindNode(scene, "tall_block");
+    const Primitive& p = scene.primitives[scene.nodes[tall].primitives[0]];
+    std::vector<glm::vec3> before = p.positions;
+    auto message = [&](const glm::mat4& m) {
+        try {
+            SetNodeTransform(scene, tall, m);
+        } catch (const Error& e) {
+            return std::string(e.what());
+        }
+        return std::string("(accepted)");
+    };
+    glm::mat4 nan(1.0f);
+    nan[3][0] = std::numeric_limits<float>::quiet_NaN();
+    EXPECT_NE(message(nan).find("NaN"), std::string::npos) << message(nan);
+    EXPECT_NE(message(glm::mat4(0.0f)).find("singular"), std::string::npos);
+    glm::mat4 mirror = glm::scale(glm::mat4(1.0f), glm::vec3(-1.0f, 1.0f, 1.0f));
+    EXPECT_NE(message(mirror).find("mirror"), std::string::npos) << message(mirror);
+    EXPECT_EQ(p.positions, before);
 }
 
 }  // namespace
