@@ -64,6 +64,11 @@ class Solver {
     // Irradiance (the `indirect` channel: all light arriving from surfaces) per surfel.
     virtual std::vector<glm::vec3> SurfelIrradiance() = 0;
     virtual const Surfels& GetSurfels() const = 0;
+    // Re-reads every surfel's albedo and emission from `scene` (the scene it was built from,
+    // with materials or primitive material assignments changed, geometry unchanged). The
+    // solution moves towards the new one from the next iteration on (Sec. 3.3: the
+    // iteration continues from the current radiance).
+    virtual void UpdateMaterials(const Scene& scene) = 0;
     virtual SolverStats Stats() const = 0;
 };
 

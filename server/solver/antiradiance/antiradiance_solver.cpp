@@ -59,6 +59,23 @@ std::vector<glm::vec3> AntiradianceSolver::SurfelIrradiance() {
     return out;
 }
 
+void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
+    PENUMBRA_CHECK_EQ(scene.primitives.size(), model_.surfels.firstSurfel.size());
+    // Surfels of primitive p are the contiguous range [firstSurfel[p], firstSurfel[p + 1]).
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        size_t end = p + 1 < scene.primitives.size() ? model_.surfels.firstSurfel[p + 1]
+                                                     : model_.surfels.size();
+        for (size_t s = model_.surfels.firstSurfel[p]; s < end; ++s)
+            model_.surfels.materials[s] = scene.primitives[p].material;
+    }
+    for (LeafAttributes& leaf : model_.leaves) {
+        const Material& mat = scene.materials[model_.surfels.materials[leaf.surfel]];
+        leaf.albedo = mat.albedo;
+        leaf.emission = mat.emission;
+    }
+    if (gpu_) gpu_->UploadLeaves();  // the CPU back end reads model_.leaves directly
+}
+
 SolverStats AntiradianceSolver::Stats() const {
     SolverStats s;
     s.solver = "antiradiance";

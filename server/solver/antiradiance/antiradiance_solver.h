@@ -21,6 +21,7 @@ class AntiradianceSolver : public Solver {
     void Iterate(int n) override;
     std::vector<glm::vec3> SurfelIrradiance() override;
     const Surfels& GetSurfels() const override { return model_.surfels; }
+    void UpdateMaterials(const Scene& scene) override;
     SolverStats Stats() const override;
 
     const AntiradianceModel& Model() const { return model_; }

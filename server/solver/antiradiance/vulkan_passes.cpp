@@ -249,6 +249,8 @@ std::vector<float> VulkanAntiradiance::ReadLeafIrradiance() {
     return impl_->irradiance.Download<float>();
 }
 
+void VulkanAntiradiance::UploadLeaves() { impl_->leaves.Upload(impl_->m.leaves); }
+
 std::string VulkanAntiradiance::DeviceName() const { return "vulkan:" + impl_->ctx.DeviceName(); }
 
 std::vector<PassTiming> VulkanAntiradiance::PassTimings() const {

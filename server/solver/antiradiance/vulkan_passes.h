@@ -23,6 +23,8 @@ class VulkanAntiradiance {
 
     void Iterate(LocalMode mode);  // submits one iteration and waits for it
     std::vector<float> ReadLeafIrradiance();
+    // Copies the model's per-leaf attributes (albedo, emission) to the device again.
+    void UploadLeaves();
     std::string DeviceName() const;
     std::vector<PassTiming> PassTimings() const;
     size_t TableBytes() const;
