@@ -1,11 +1,12 @@
-// The `penumbra` command line. `bake` runs a solver in-process (no server) and writes
-// per-vertex irradiance as JSON or as glTF with COLOR_0.
+// The `penumbra` command line. `bake`, `reference` and `compare` run in-process; the service
+// commands (load, watch, move, light, ...) talk to penumbra-server (cmd/service_cli.h).
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <iostream>
 
 #include "base/check.h"
 #include "base/progress.h"
+#include "cmd/service_cli.h"
 #include "output/compare.h"
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
@@ -166,6 +167,7 @@ int CompareFiles(const std::string& aPath, const std::string& bPath, bool json, 
 int main(int argc, char** argv) {
     CLI::App app{"Penumbra: a headless lighting service (antiradiance global illumination)"};
     app.require_subcommand(1);
+    cli::ServiceCommands service(app);
 
     auto* bake = app.add_subcommand("bake",
                                     "Light a glTF scene in-process and write per-vertex "
@@ -241,6 +243,7 @@ int main(int argc, char** argv) {
         ->capture_default_str();
 
     CLI11_PARSE(app, argc, argv);
+    if (service.Parsed()) return service.Run();
     try {
         if (bake->parsed()) {
             settings.paperOracle = ParsePaperOracle(linkOracle);

@@ -287,6 +287,7 @@ Scene LoadGltf(const std::string& path) {
 
     Scene scene;
     scene.source = path;
+    scene.punctualLights = static_cast<int>(model.lights.size());
     scene.materials.reserve(model.materials.size() + 1);
     for (size_t i = 0; i < model.materials.size(); ++i)
         scene.materials.push_back(ReadMaterial(ctx, static_cast<int>(i)));

@@ -50,6 +50,9 @@ struct Scene {
     std::vector<Material> materials;
     std::vector<Primitive> primitives;
     std::vector<SceneNode> nodes;  // indexed like the file's nodes (Primitive::nodeIndex)
+    // KHR_lights_punctual lights in the file. Not lit yet (issue 5): their direct light is
+    // missing from every channel, so services refuse the `direct` and `total` channels.
+    int punctualLights = 0;
 
     glm::vec3 BoundsMin() const;
     glm::vec3 BoundsMax() const;

@@ -1,0 +1,349 @@
+// Client: one blocking socket, a reader thread that routes replies by request id and
+// pushed frames to the subscriber callback.
+#include "client/client.h"
+
+#include <asio.hpp>
+#include <condition_variable>
+#include <map>
+#include <mutex>
+#include <thread>
+
+#include "protocol/frame.h"
+
+namespace penumbra::client {
+
+namespace fb = protocol::fb;
+using protocol::MessageType;
+
+const NodeInfo* SceneInfo::Node(const std::string& name) const {
+    for (const auto& n : nodes)
+        if (n.name == name) return &n;
+    return nullptr;
+}
+
+namespace {
+
+std::string Str(const flatbuffers::String* s) { return s ? s->str() : std::string(); }
+
+Frame ToFrame(const protocol::Message& m) {
+    const auto* f = m.As<fb::Frame>();
+    Frame out;
+    out.scene = Str(f->scene());
+    out.frame = f->frame();
+    out.lastEdit = f->last_edit();
+    out.iterations = f->iterations();
+    out.frameMs = f->frame_ms();
+    out.editLatencyMs = f->edit_latency_ms();
+    out.converged = f->converged();
+    out.channel = static_cast<Channel>(f->channel());
+    out.note = Str(f->note());
+    out.wireBytes = protocol::kHeaderBytes + m.payload.size();
+    if (f->passes())
+        for (const auto* p : *f->passes()) out.passes.emplace_back(Str(p->name()), p->ms());
+    if (f->primitives())
+        for (const auto* p : *f->primitives()) {
+            Frame::Primitive prim;
+            prim.node = Str(p->node());
+            prim.mesh = p->mesh();
+            prim.primitive = p->primitive();
+            if (p->f32()) prim.rgb.assign(p->f32()->begin(), p->f32()->end());
+            if (p->f16()) {
+                prim.rgb.reserve(p->f16()->size());
+                for (uint16_t h : *p->f16()) prim.rgb.push_back(protocol::HalfToFloat(h));
+            }
+            out.primitives.push_back(std::move(prim));
+        }
+    return out;
+}
+
+SceneInfo ToSceneInfo(const protocol::Message& m) {
+    const auto* s = m.As<fb::SceneInfo>();
+    SceneInfo out;
+    out.scene = Str(s->scene());
+    out.solver = Str(s->solver());
+    out.device = Str(s->device());
+    out.elements = s->elements();
+    out.links = s->links();
+    out.buildSeconds = s->build_seconds();
+    out.reused = s->reused();
+    if (s->nodes())
+        for (const auto* n : *s->nodes()) {
+            NodeInfo node;
+            node.name = Str(n->name());
+            node.dynamic = n->dynamic();
+            node.emissive = n->emissive();
+            if (n->matrix() && n->matrix()->size() == 16)
+                for (int i = 0; i < 16; ++i) node.matrix[i] = n->matrix()->Get(i);
+            if (n->primitives())
+                for (const auto* p : *n->primitives())
+                    node.primitives.push_back(
+                        {p->mesh(), p->primitive(), p->vertices(), Str(p->material())});
+            out.nodes.push_back(std::move(node));
+        }
+    if (s->materials())
+        for (const auto* m2 : *s->materials()) {
+            MaterialInfo mat;
+            mat.name = Str(m2->name());
+            if (m2->albedo())
+                mat.albedo = {m2->albedo()->x(), m2->albedo()->y(), m2->albedo()->z()};
+            if (m2->emission())
+                mat.emission = {m2->emission()->x(), m2->emission()->y(), m2->emission()->z()};
+            out.materials.push_back(mat);
+        }
+    return out;
+}
+
+}  // namespace
+
+struct Client::Impl {
+    asio::io_context io;
+    asio::generic::stream_protocol::socket socket{io};
+    std::thread reader;
+    std::mutex mutex;  // guards everything below and serialises writes
+    std::condition_variable replied;
+    std::map<uint32_t, std::optional<protocol::Message>> waiting;
+    uint32_t nextId = 1;
+    bool open = true;
+    std::string lostReason = "connection closed";
+    FrameCallback callback;
+    uint16_t version = 0;
+
+    void Connect(const std::string& url) {
+        std::error_code ec;
+        if (url.rfind("unix://", 0) == 0) {
+            asio::local::stream_protocol::socket s(io);
+            s.connect(asio::local::stream_protocol::endpoint(url.substr(7)), ec);
+            if (ec) throw ClientError(0, "cannot connect to " + url + ": " + ec.message());
+            socket = asio::generic::stream_protocol::socket(std::move(s));
+        } else if (url.rfind("tcp://", 0) == 0) {
+            std::string rest = url.substr(6);
+            size_t colon = rest.rfind(':');
+            if (colon == std::string::npos)
+                throw ClientError(0, "'" + url + "': expected tcp://HOST:PORT");
+            asio::ip::tcp::resolver resolver(io);
+            auto endpoints = resolver.resolve(rest.substr(0, colon), rest.substr(colon + 1), ec);
+            if (ec) throw ClientError(0, "cannot resolve " + url + ": " + ec.message());
+            asio::ip::tcp::socket s(io);
+            asio::connect(s, endpoints, ec);
+            if (ec) throw ClientError(0, "cannot connect to " + url + ": " + ec.message());
+            s.set_option(asio::ip::tcp::no_delay(true), ec);
+            socket = asio::generic::stream_protocol::socket(std::move(s));
+        } else {
+            throw ClientError(0, "'" + url + "': expected tcp://HOST:PORT or unix:///PATH");
+        }
+        reader = std::thread([this] { Read(); });
+    }
+
+    void Read() {
+        // Frames from the server can be large (irradiance of big scenes): no payload limit
+        // beyond the protocol's ceiling.
+        protocol::Decoder decoder(protocol::kMaxPayloadCeiling);
+        std::vector<uint8_t> buf(256 * 1024);
+        std::string reason = "the server closed the connection";
+        while (true) {
+            std::error_code ec;
+            size_t n = socket.read_some(asio::buffer(buf), ec);
+            if (ec) {
+                if (ec != asio::error::eof) reason = "connection lost: " + ec.message();
+                break;
+            }
+            decoder.Feed(buf.data(), n);
+            protocol::Message m;
+            protocol::Decoder::Result r;
+            bool bad = false;
+            while ((r = decoder.Next(m)) == protocol::Decoder::Result::kMessage) {
+                if (m.header.type == MessageType::kFrame && m.header.requestId == 0) {
+                    FrameCallback cb;
+                    {
+                        std::lock_guard lock(mutex);
+                        cb = callback;
+                    }
+                    if (cb) cb(ToFrame(m));
+                    continue;
+                }
+                std::lock_guard lock(mutex);
+                auto it = waiting.find(m.header.requestId);
+                if (it != waiting.end()) {
+                    it->second = std::move(m);
+                    replied.notify_all();
+                } else if (m.header.type == MessageType::kError) {
+                    // An unsolicited error (the server is full, or closing us): keep it as
+                    // the reason the connection ends.
+                    reason = Str(m.As<fb::Error>()->message());
+                }
+            }
+            if (r == protocol::Decoder::Result::kError) {
+                reason = "bad data from the server: " + decoder.error();
+                bad = true;
+            }
+            if (bad) break;
+        }
+        std::lock_guard lock(mutex);
+        open = false;
+        lostReason = reason;
+        replied.notify_all();
+    }
+
+    // Sends one request and waits for its reply; Error replies throw.
+    protocol::Message Call(MessageType type, flatbuffers::FlatBufferBuilder& b,
+                           MessageType expect) {
+        std::unique_lock lock(mutex);
+        if (!open) throw ClientError(0, lostReason);
+        uint32_t id = nextId++;
+        waiting[id];
+        auto bytes = protocol::EncodeFrame(type, id, b);
+        std::error_code ec;
+        asio::write(socket, asio::buffer(bytes), ec);
+        if (ec) {
+            waiting.erase(id);
+            throw ClientError(
+                0, "cannot send " + std::string(protocol::MessageName(type)) + ": " + ec.message());
+        }
+        replied.wait(lock, [&] { return waiting[id].has_value() || !open; });
+        std::optional<protocol::Message> reply = std::move(waiting[id]);
+        waiting.erase(id);
+        if (!reply) throw ClientError(0, lostReason);
+        if (reply->header.type == MessageType::kError) {
+            const auto* e = reply->As<fb::Error>();
+            throw ClientError(static_cast<uint16_t>(e->code()), Str(e->message()));
+        }
+        if (reply->header.type != expect)
+            throw ClientError(0, std::string("expected ") + protocol::MessageName(expect) +
+                                     ", got " + protocol::MessageName(reply->header.type));
+        return std::move(*reply);
+    }
+};
+
+Client::Client(const std::string& url, const std::string& clientName)
+    : impl_(std::make_unique<Impl>()) {
+    impl_->Connect(url);
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateHelloDirect(b, clientName.c_str(), protocol::kMinProtocolVersion,
+                                   protocol::kMaxProtocolVersion));
+    auto m = impl_->Call(MessageType::kHello, b, MessageType::kWelcome);
+    impl_->version = m.As<fb::Welcome>()->version();
+}
+
+Client::~Client() {
+    try {
+        Close();
+    } catch (...) {
+    }
+}
+
+void Client::Close() {
+    if (!impl_->reader.joinable()) return;
+    if (Connected()) {
+        flatbuffers::FlatBufferBuilder b;
+        b.Finish(fb::CreateBye(b));
+        try {
+            impl_->Call(MessageType::kBye, b, MessageType::kBye);
+        } catch (const ClientError&) {
+        }
+    }
+    std::error_code ec;
+    impl_->socket.shutdown(asio::socket_base::shutdown_both, ec);
+    impl_->reader.join();
+    impl_->socket.close(ec);
+}
+
+void Client::Wait() {
+    std::unique_lock lock(impl_->mutex);
+    impl_->replied.wait(lock, [&] { return !impl_->open; });
+}
+
+bool Client::Connected() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->open;
+}
+
+uint16_t Client::ProtocolVersion() const { return impl_->version; }
+
+SceneInfo Client::Load(const LoadOptions& o) {
+    flatbuffers::FlatBufferBuilder b(1024 + o.glb.size());
+    b.Finish(fb::CreateLoadSceneDirect(
+        b, o.path.empty() ? nullptr : o.path.c_str(), o.glb.empty() ? nullptr : &o.glb,
+        o.name.empty() ? nullptr : o.name.c_str(), o.solver.c_str(), o.bins, o.iterationsPerFrame,
+        o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload));
+    return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo));
+}
+
+SceneInfo Client::Info(const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateGetSceneInfoDirect(b, scene.c_str()));
+    return ToSceneInfo(impl_->Call(MessageType::kGetSceneInfo, b, MessageType::kSceneInfo));
+}
+
+uint64_t Client::SetTransform(const std::string& node, const std::array<float, 16>& matrix,
+                              const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    std::vector<float> m(matrix.begin(), matrix.end());
+    b.Finish(fb::CreateSetTransformDirect(b, scene.c_str(), node.c_str(), &m));
+    return impl_->Call(MessageType::kSetTransform, b, MessageType::kEditAck)
+        .As<fb::EditAck>()
+        ->edit_id();
+}
+
+uint64_t Client::SetLight(const std::string& light, std::optional<std::array<float, 3>> color,
+                          std::optional<float> intensity, const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    fb::Vec3 c = color ? fb::Vec3((*color)[0], (*color)[1], (*color)[2]) : fb::Vec3();
+    b.Finish(fb::CreateSetLightDirect(b, scene.c_str(), light.c_str(), color ? &c : nullptr,
+                                      intensity ? *intensity : -1.0f));
+    return impl_->Call(MessageType::kSetLight, b, MessageType::kEditAck)
+        .As<fb::EditAck>()
+        ->edit_id();
+}
+
+uint64_t Client::SetMaterial(const std::string& material,
+                             std::optional<std::array<float, 3>> albedo,
+                             std::optional<std::array<float, 3>> emission,
+                             const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    fb::Vec3 a = albedo ? fb::Vec3((*albedo)[0], (*albedo)[1], (*albedo)[2]) : fb::Vec3();
+    fb::Vec3 e = emission ? fb::Vec3((*emission)[0], (*emission)[1], (*emission)[2]) : fb::Vec3();
+    b.Finish(fb::CreateSetMaterialDirect(b, scene.c_str(), material.c_str(), albedo ? &a : nullptr,
+                                         emission ? &e : nullptr));
+    return impl_->Call(MessageType::kSetMaterial, b, MessageType::kEditAck)
+        .As<fb::EditAck>()
+        ->edit_id();
+}
+
+void Client::Subscribe(FrameCallback callback, Channel channel, Format format,
+                       const std::string& scene) {
+    {
+        std::lock_guard lock(impl_->mutex);
+        impl_->callback = std::move(callback);
+    }
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateSubscribeDirect(b, scene.c_str(), static_cast<fb::Channel>(channel),
+                                       static_cast<fb::Format>(format)));
+    impl_->Call(MessageType::kSubscribe, b, MessageType::kOk);
+}
+
+void Client::Unsubscribe(const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateUnsubscribeDirect(b, scene.c_str()));
+    impl_->Call(MessageType::kUnsubscribe, b, MessageType::kOk);
+}
+
+Frame Client::Get(Channel channel, Format format, const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateGetIrradianceDirect(b, scene.c_str(), static_cast<fb::Channel>(channel),
+                                           static_cast<fb::Format>(format)));
+    return ToFrame(impl_->Call(MessageType::kGetIrradiance, b, MessageType::kFrame));
+}
+
+uint64_t Client::Step(int iterations, const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateStepDirect(b, scene.c_str(), iterations));
+    return impl_->Call(MessageType::kStep, b, MessageType::kOk).As<fb::Ok>()->frame();
+}
+
+std::string Client::Stats(const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateGetStatsDirect(b, scene.c_str()));
+    return Str(impl_->Call(MessageType::kGetStats, b, MessageType::kStats).As<fb::Stats>()->json());
+}
+
+}  // namespace penumbra::client

@@ -1,0 +1,126 @@
+// The Penumbra C++ client library: connect, load, edit, subscribe, get. Depends on
+// protocol/ only; what the CLI uses and what an external renderer links.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace penumbra::client {
+
+// A failed request (the server's error code and message) or a lost connection (code 0).
+class ClientError : public std::runtime_error {
+  public:
+    ClientError(uint16_t code, const std::string& message)
+        : std::runtime_error(message), code_(code) {}
+    uint16_t code() const { return code_; }  // protocol::fb::ErrorCode; 0 = connection
+
+  private:
+    uint16_t code_;
+};
+
+enum class Channel : uint8_t { kIndirect = 0, kDirect = 1, kTotal = 2 };
+enum class Format : uint8_t { kFloat32 = 0, kFloat16 = 1 };
+
+struct PrimitiveInfo {
+    int mesh = -1, primitive = -1;
+    uint32_t vertices = 0;
+    std::string material;
+};
+struct NodeInfo {
+    std::string name;
+    bool dynamic = false, emissive = false;
+    std::array<float, 16> matrix{};  // local transform, column-major
+    std::vector<PrimitiveInfo> primitives;
+};
+struct MaterialInfo {
+    std::string name;
+    std::array<float, 3> albedo{}, emission{};
+};
+struct SceneInfo {
+    std::string scene, solver, device;
+    std::vector<NodeInfo> nodes;
+    std::vector<MaterialInfo> materials;
+    uint32_t elements = 0;
+    uint64_t links = 0;
+    double buildSeconds = 0.0;
+    bool reused = false;
+    const NodeInfo* Node(const std::string& name) const;
+};
+
+struct Frame {
+    std::string scene;
+    uint64_t frame = 0, lastEdit = 0, iterations = 0;
+    double frameMs = 0.0, editLatencyMs = 0.0;
+    bool converged = false;
+    Channel channel = Channel::kIndirect;
+    std::vector<std::pair<std::string, double>> passes;  // device ms per pass
+    std::string note;
+    struct Primitive {
+        std::string node;
+        int mesh = -1, primitive = -1;
+        std::vector<float> rgb;  // 3 per vertex, in the primitive's vertex order (f16 widened)
+    };
+    std::vector<Primitive> primitives;
+    size_t wireBytes = 0;  // size of the message as received
+};
+
+struct LoadOptions {
+    std::string path;          // under the server's scene root
+    std::vector<uint8_t> glb;  // or an uploaded binary glTF
+    std::string name;          // session name for an upload
+    std::string solver = "antiradiance";
+    int bins = 128;
+    int iterationsPerFrame = 4;
+    float elementSize = 0.0f;  // 0: automatic
+    std::string device;        // "" = server default
+    bool reload = false;
+};
+
+class Client {
+  public:
+    // Connects to "tcp://HOST:PORT" or "unix:///PATH" and says Hello. Throws ClientError.
+    explicit Client(const std::string& url, const std::string& clientName = "penumbra-client");
+    ~Client();  // says Bye if still connected
+    Client(const Client&) = delete;
+    Client& operator=(const Client&) = delete;
+
+    // Every call below blocks until its reply and throws ClientError on an Error reply.
+    // `scene` "" means the server's newest loaded scene.
+    SceneInfo Load(const LoadOptions& options);
+    SceneInfo Info(const std::string& scene = "");
+    // Edits return their edit id; frames with lastEdit ≥ id include them.
+    uint64_t SetTransform(const std::string& node, const std::array<float, 16>& matrix,
+                          const std::string& scene = "");
+    uint64_t SetLight(const std::string& light, std::optional<std::array<float, 3>> color,
+                      std::optional<float> intensity, const std::string& scene = "");
+    uint64_t SetMaterial(const std::string& material, std::optional<std::array<float, 3>> albedo,
+                         std::optional<std::array<float, 3>> emission,
+                         const std::string& scene = "");
+    // Frames arrive on the client's reader thread; keep the callback short.
+    using FrameCallback = std::function<void(const Frame&)>;
+    void Subscribe(FrameCallback callback, Channel channel = Channel::kIndirect,
+                   Format format = Format::kFloat32, const std::string& scene = "");
+    void Unsubscribe(const std::string& scene = "");
+    Frame Get(Channel channel = Channel::kIndirect, Format format = Format::kFloat32,
+              const std::string& scene = "");
+    uint64_t Step(int iterations, const std::string& scene = "");  // returns the frame number
+    std::string Stats(const std::string& scene = "");              // JSON text
+    void Close();                                                  // Bye, then disconnect
+    // Waits until the connection ends (the server closed it or Close() was called).
+    void Wait();
+    bool Connected() const;
+
+    uint16_t ProtocolVersion() const;
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace penumbra::client

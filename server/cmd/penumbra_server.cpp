@@ -1,0 +1,92 @@
+// penumbra-server: keeps scenes resident on the device and streams per-vertex irradiance to
+// clients over TCP and Unix sockets (protocol/SPEC.md). Only wiring lives here.
+#include <CLI/CLI.hpp>
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+
+#include "base/check.h"
+#include "net/server.h"
+#include "service/service.h"
+
+int main(int argc, char** argv) {
+    using namespace penumbra;
+    CLI::App app{"penumbra-server: a headless lighting service (protocol/SPEC.md)"};
+    std::vector<std::string> listen;
+    std::string sceneRoot = ".", device = "auto", readyFile;
+    bool allowRemote = false, quiet = false;
+    net::NetLimits netLimits;
+    service::ServiceLimits serviceLimits;
+    app.add_option("--listen", listen,
+                   "tcp://HOST:PORT or unix:///PATH; repeat for several (default "
+                   "tcp://127.0.0.1:7450)");
+    app.add_option("--scene-root", sceneRoot, "folder that LoadScene paths are relative to")
+        ->check(CLI::ExistingDirectory);
+    app.add_flag("--allow-remote", allowRemote, "allow TCP addresses other than loopback");
+    app.add_option("--device", device, "default solver device: auto|gpu|lavapipe|cpu");
+    app.add_option("--max-clients", netLimits.maxClients, "connections at once")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 100000));
+    app.add_option("--max-frame-bytes", netLimits.maxFrameBytes,
+                   "largest request payload accepted (bytes)")
+        ->capture_default_str()
+        ->check(CLI::Range(uint32_t(1024), protocol::kMaxPayloadCeiling));
+    app.add_option("--max-scenes", serviceLimits.maxScenes, "scenes loaded at once")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 1000));
+    app.add_option("--max-scene-triangles", serviceLimits.maxSceneTriangles,
+                   "largest scene accepted (input triangles)")
+        ->capture_default_str();
+    app.add_option("--ready-file", readyFile,
+                   "write the bound addresses here, one per line, once listening");
+    app.add_flag("-q,--quiet", quiet, "no log lines on stderr");
+    CLI11_PARSE(app, argc, argv);
+    if (listen.empty()) listen.push_back("tcp://127.0.0.1:7450");
+    serviceLimits.maxUploadBytes = netLimits.maxFrameBytes;
+
+    try {
+        SolverSettings defaults;
+        defaults.device = ParseDevice(device);
+        service::Service service(sceneRoot, serviceLimits, defaults);
+        asio::io_context io;
+        net::Server server(io, service, netLimits);
+        std::vector<std::string> bound;
+        for (const auto& url : listen)
+            bound.push_back(server.Listen(net::ParseListenAddress(url), allowRemote));
+
+        asio::signal_set signals(io, SIGINT, SIGTERM);
+        signals.async_wait([&](std::error_code ec, int signal) {
+            if (ec) return;
+            if (!quiet)
+                std::fprintf(stderr, "penumbra-server: %s, shutting down\n",
+                             signal == SIGTERM ? "SIGTERM" : "SIGINT");
+            server.Stop();
+            io.stop();
+        });
+        std::signal(SIGPIPE, SIG_IGN);  // a vanished client is a write error, not a crash
+
+        if (!quiet) {
+            for (const auto& b : bound)
+                std::fprintf(stderr, "penumbra-server: listening on %s\n", b.c_str());
+            std::fprintf(stderr, "penumbra-server: scene root %s\n", sceneRoot.c_str());
+        }
+        if (!readyFile.empty()) {
+            std::string tmp = readyFile + ".tmp";
+            {
+                std::ofstream out(tmp);
+                for (const auto& b : bound) out << b << "\n";
+            }
+            std::rename(tmp.c_str(), readyFile.c_str());  // appears complete or not at all
+        }
+        io.run();
+        if (!quiet) std::fprintf(stderr, "penumbra-server: stopped\n");
+    } catch (const Error& e) {
+        std::fprintf(stderr, "penumbra-server: %s\n", e.what());
+        return 2;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "penumbra-server: internal error: %s\n", e.what());
+        return 3;
+    }
+    return 0;
+}

@@ -1,0 +1,578 @@
+// Service commands of the CLI: argument handling, the embedded server and each command's
+// output. The protocol work is the client library's.
+#include "cmd/service_cli.h"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <glm/gtc/matrix_transform.hpp>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "base/check.h"
+#include "client/client.h"
+#include "net/server.h"
+#include "output/irradiance_writer.h"
+#include "scene/gltf_loader.h"
+#include "service/service.h"
+
+namespace penumbra::cli {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+// An in-process server on a private Unix socket: the CLI's embedded mode.
+class EmbeddedServer {
+  public:
+    EmbeddedServer(const fs::path& sceneRoot, const std::string& device) {
+        SolverSettings defaults;
+        defaults.device = ParseDevice(device);
+        service_ =
+            std::make_unique<service::Service>(sceneRoot, service::ServiceLimits{}, defaults);
+        server_ = std::make_unique<net::Server>(io_, *service_, net::NetLimits{});
+        char dir[] = "/tmp/penumbra-embedded-XXXXXX";
+        if (!mkdtemp(dir)) throw Error("cannot create a private folder for the embedded server");
+        dir_ = dir;
+        net::ListenAddress a;
+        a.kind = net::ListenAddress::Kind::kUnix;
+        a.path = (dir_ / "socket").string();
+        url_ = server_->Listen(a);
+        thread_ = std::thread([this] { io_.run(); });
+    }
+    ~EmbeddedServer() {
+        asio::post(io_, [this] {
+            server_->Stop();
+            io_.stop();
+        });
+        thread_.join();
+        server_.reset();
+        std::error_code ec;
+        fs::remove_all(dir_, ec);
+    }
+    const std::string& Url() const { return url_; }
+
+  private:
+    asio::io_context io_;
+    std::unique_ptr<service::Service> service_;
+    std::unique_ptr<net::Server> server_;
+    fs::path dir_;
+    std::string url_;
+    std::thread thread_;
+};
+
+std::array<float, 3> Triple(const std::vector<float>& v, const char* what) {
+    if (v.size() != 3) throw Error(std::string(what) + " needs three numbers, e.g. 1,0.9,0.8");
+    return {v[0], v[1], v[2]};
+}
+
+client::Channel ParseChannel(const std::string& s) {
+    if (s == "indirect") return client::Channel::kIndirect;
+    if (s == "direct") return client::Channel::kDirect;
+    if (s == "total") return client::Channel::kTotal;
+    throw Error("channel must be indirect, direct or total, not '" + s + "'");
+}
+
+const char* ChannelName(client::Channel c) {
+    return c == client::Channel::kDirect  ? "direct"
+           : c == client::Channel::kTotal ? "total"
+                                          : "indirect";
+}
+
+client::Format ParseFormat(const std::string& s) {
+    if (s == "f32" || s == "float32") return client::Format::kFloat32;
+    if (s == "f16" || s == "float16") return client::Format::kFloat16;
+    throw Error("format must be f32 or f16, not '" + s + "'");
+}
+
+// Splits a script line into words; "double quotes" group words with spaces.
+std::vector<std::string> SplitWords(const std::string& line) {
+    std::vector<std::string> words;
+    std::string w;
+    bool quoted = false, any = false;
+    for (char c : line) {
+        if (c == '"') {
+            quoted = !quoted;
+            any = true;
+        } else if (!quoted && (c == ' ' || c == '\t')) {
+            if (any) words.push_back(w);
+            w.clear();
+            any = false;
+        } else {
+            w += c;
+            any = true;
+        }
+    }
+    if (quoted) throw Error("unterminated quote");
+    if (any) words.push_back(w);
+    return words;
+}
+
+void PrintFrame(const client::Frame& f, double fps) {
+    double device = 0.0;
+    for (const auto& p : f.passes) device += p.second;
+    std::printf("frame %6llu  edit %3llu  %7.2f ms  device %7.2f ms  %5.1f fps",
+                (unsigned long long)f.frame, (unsigned long long)f.lastEdit, f.frameMs, device,
+                fps);
+    if (f.editLatencyMs > 0.0) std::printf("  latency %7.1f ms", f.editLatencyMs);
+    if (f.converged) std::printf("  converged");
+    if (!f.note.empty()) std::printf("  (%s)", f.note.c_str());
+    std::printf("\n");
+    std::fflush(stdout);
+}
+
+}  // namespace
+
+struct ServiceCommands::State {
+    bool forScript = false;
+    std::string connect, session, embeddedScene, device = "auto";
+    bool quiet = false;
+
+    CLI::App *load = nullptr, *info = nullptr, *watch = nullptr, *move = nullptr, *light = nullptr,
+             *material = nullptr, *get = nullptr, *step = nullptr, *stats = nullptr,
+             *script = nullptr, *wait = nullptr, *sleep = nullptr;
+
+    client::LoadOptions loadOptions;
+    std::string loadPath;
+    bool upload = false;
+
+    int watchFrames = 0;
+    double timeout = 0.0;
+    bool untilConverged = false;
+    std::string channel = "indirect", format = "f32";
+
+    std::string node;
+    std::vector<float> translate, matrix, color, albedo, emission;
+    float rotateY = 0.0f;
+    float intensity = -1.0f;
+
+    std::string output, gltf;
+    int stepIterations = 1;
+    std::string scriptFile;
+    double sleepSeconds = 0.0;
+
+    uint64_t lastEdit = 0;  // newest edit this run sent (for `wait`)
+
+    int Execute(client::Client& c);
+    int RunScript(client::Client& c);
+    int Wait(client::Client& c, uint64_t edit, double timeoutSeconds);
+};
+
+ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_unique<State>()) {
+    State& s = *s_;
+    s.forScript = forScript;
+    if (!forScript) {
+        app.add_option("--connect", s.connect,
+                       "server address for the service commands: tcp://HOST:PORT or "
+                       "unix:///PATH");
+        app.add_option("--session", s.session,
+                       "scene session on the server (default: the newest loaded)");
+    }
+
+    s.load = app.add_subcommand("load", "Load a scene on the server (or join its session)");
+    s.load->add_option("path", s.loadPath, "glTF path under the server's --scene-root")->required();
+    s.load->add_flag("--upload", s.upload, "send the local file as a .glb instead of a path");
+    s.load->add_option("--solver", s.loadOptions.solver, "solver (antiradiance)")
+        ->capture_default_str();
+    s.load->add_option("--bins", s.loadOptions.bins, "direction bins (32…1024)")
+        ->capture_default_str();
+    s.load
+        ->add_option("--iterations-per-frame", s.loadOptions.iterationsPerFrame,
+                     "solver iterations per streamed frame")
+        ->capture_default_str();
+    s.load->add_option("--element-size", s.loadOptions.elementSize,
+                       "metres (0: scene diameter / 40)");
+    s.load->add_option("--device", s.loadOptions.device, "auto|gpu|lavapipe|cpu");
+    s.load->add_flag("--reload", s.loadOptions.reload, "rebuild even if already loaded");
+
+    s.info = app.add_subcommand("info", "Print the scene's nodes, lights and materials");
+
+    s.watch = app.add_subcommand(
+        "watch", "Subscribe and print each frame: number, edit id, ms, fps, edit latency");
+    s.watch->add_option("--frames", s.watchFrames, "stop after this many frames (0: no limit)");
+    s.watch->add_option("--timeout", s.timeout, "stop after this many seconds (0: no limit)");
+    s.watch->add_flag("--until-converged", s.untilConverged, "stop at the first converged frame");
+    s.watch->add_option("--channel", s.channel, "indirect|direct|total")->capture_default_str();
+    s.watch->add_option("--format", s.format, "f32|f16")->capture_default_str();
+
+    s.move = app.add_subcommand(
+        "move", "Move a dynamic node: new local = translate × current × rotate-y (or --matrix)");
+    s.move->add_option("node", s.node, "node name")->required();
+    s.move->add_option("--translate", s.translate, "x,y,z metres, in the parent's space")
+        ->delimiter(',');
+    s.move->add_option("--rotate-y", s.rotateY, "degrees about the node's own y axis");
+    s.move->add_option("--matrix", s.matrix, "16 numbers, column-major: the new local transform")
+        ->delimiter(',');
+
+    s.light = app.add_subcommand("light", "Change an emissive node's light: colour × intensity");
+    s.light->add_option("name", s.node, "light (emissive node) name")->required();
+    s.light->add_option("--intensity", s.intensity, "peak emitted radiance (nits)");
+    s.light->add_option("--color", s.color, "r,g,b (scaled so its peak is 1 by intensity)")
+        ->delimiter(',');
+
+    s.material = app.add_subcommand("material", "Change a material's albedo or emission");
+    s.material->add_option("name", s.node, "material name")->required();
+    s.material->add_option("--albedo", s.albedo, "r,g,b in [0, 1]")->delimiter(',');
+    s.material->add_option("--emission", s.emission, "r,g,b nits")->delimiter(',');
+
+    s.get = app.add_subcommand("get", "Write the current irradiance (.json, or .glb/.gltf)");
+    s.get->add_option("-o,--output", s.output, "output: .json, .glb or .gltf")->required();
+    s.get->add_option("--gltf", s.gltf,
+                      "the scene's glTF file, needed for .glb/.gltf output (COLOR_0 is added)");
+    s.get->add_option("--channel", s.channel, "indirect|direct|total")->capture_default_str();
+
+    s.step = app.add_subcommand("step", "Run N solver iterations now, as one frame");
+    s.step->add_option("iterations", s.stepIterations, "iterations")->capture_default_str();
+
+    s.stats = app.add_subcommand("stats", "Print server and scene statistics (JSON)");
+
+    s.wait = app.add_subcommand(
+        "wait", "Wait until a frame includes every edit sent so far and has converged");
+    s.wait->add_option("--timeout", s.timeout, "seconds (default 60)");
+
+    if (forScript) {
+        s.sleep = app.add_subcommand("sleep", "Pause the script");
+        s.sleep->add_option("seconds", s.sleepSeconds)->required();
+    } else {
+        s.script = app.add_subcommand(
+            "script",
+            "Run service commands from a file, one per line (docs/CLI.md); without --connect, "
+            "on an embedded server that loads --scene");
+        s.script->add_option("file", s.scriptFile, "script file ('-' for stdin)")->required();
+        s.script->add_option("--scene", s.embeddedScene,
+                             "glTF to load in an embedded in-process server (no --connect)");
+        s.script->add_option("--device", s.device, "embedded server's device")
+            ->capture_default_str();
+    }
+    for (CLI::App* c :
+         {s.load, s.info, s.watch, s.move, s.light, s.material, s.get, s.step, s.stats, s.wait})
+        c->add_flag("-q,--quiet", s.quiet, "print less");
+}
+
+ServiceCommands::~ServiceCommands() = default;
+
+bool ServiceCommands::Parsed() const {
+    for (CLI::App* c : {s_->load, s_->info, s_->watch, s_->move, s_->light, s_->material, s_->get,
+                        s_->step, s_->stats, s_->script, s_->wait, s_->sleep})
+        if (c && c->parsed()) return true;
+    return false;
+}
+
+int ServiceCommands::Run() {
+    State& s = *s_;
+    try {
+        std::unique_ptr<EmbeddedServer> embedded;
+        std::string url = s.connect;
+        if (url.empty()) {
+            if (!(s.script && s.script->parsed() && !s.embeddedScene.empty()))
+                throw Error(
+                    "this command talks to a server: give --connect tcp://HOST:PORT (or "
+                    "unix:///PATH), or run a script with --scene FILE on an embedded server");
+            fs::path scene = fs::absolute(s.embeddedScene);
+            if (!fs::is_regular_file(scene)) throw Error(s.embeddedScene + ": no such file");
+            embedded = std::make_unique<EmbeddedServer>(scene.parent_path(), s.device);
+            url = embedded->Url();
+            client::Client c(url, "penumbra-cli");
+            client::LoadOptions o;
+            o.path = scene.filename().string();
+            auto info = c.Load(o);
+            if (!s.quiet)
+                std::printf("embedded server: loaded %s (%u elements, %llu links, %.2f s, %s)\n",
+                            info.scene.c_str(), info.elements, (unsigned long long)info.links,
+                            info.buildSeconds, info.device.c_str());
+            s.gltf = scene.string();
+            return s.Execute(c);
+        }
+        client::Client c(url, "penumbra-cli");
+        return s.Execute(c);
+    } catch (const client::ClientError& e) {
+        std::fprintf(stderr, "penumbra: %s%s\n", e.code() ? "refused: " : "", e.what());
+        return e.code() ? kExitRefused : kExitConnection;
+    } catch (const Error& e) {
+        std::fprintf(stderr, "penumbra: error: %s\n", e.what());
+        return kExitRefused;
+    }
+}
+
+int ServiceCommands::State::Wait(client::Client& c, uint64_t edit, double timeoutSeconds) {
+    auto deadline = Clock::now() + std::chrono::duration<double>(timeoutSeconds);
+    while (true) {
+        auto j = nlohmann::json::parse(c.Stats(session));
+        // Stats of one scene ("" = the newest): {"scenes": [...]} or the scene itself.
+        const nlohmann::json& sc = j.contains("scenes") ? j["scenes"].back() : j;
+        if (sc["last_applied_edit"].get<uint64_t>() >= edit && sc["pending_edits"] == 0 &&
+            !sc["rebuilding"].get<bool>() && sc["converged"].get<bool>())
+            return kExitOk;
+        if (Clock::now() > deadline) {
+            std::fprintf(stderr, "penumbra: wait: timed out after %.1f s (edit %llu)\n",
+                         timeoutSeconds, (unsigned long long)edit);
+            return kExitTimeout;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+}
+
+int ServiceCommands::State::Execute(client::Client& c) {
+    if (load && load->parsed()) {
+        client::LoadOptions o = loadOptions;
+        if (upload) {
+            std::ifstream in(loadPath, std::ios::binary);
+            if (!in) throw Error(loadPath + ": cannot read");
+            if (!IsGlbPath(loadPath)) throw Error("--upload sends binary glTF: give a .glb file");
+            o.glb.assign(std::istreambuf_iterator<char>(in), {});
+            o.name = fs::path(loadPath).filename().string();
+        } else {
+            o.path = loadPath;
+        }
+        auto info = c.Load(o);
+        std::string dynamic, lights;
+        for (const auto& n : info.nodes) {
+            if (n.dynamic) dynamic += (dynamic.empty() ? "" : ", ") + n.name;
+            if (n.emissive) lights += (lights.empty() ? "" : ", ") + n.name;
+        }
+        std::printf("%s %s: %u elements, %llu links, solver %s on %s, built in %.2f s\n",
+                    info.reused ? "joined" : "loaded", info.scene.c_str(), info.elements,
+                    (unsigned long long)info.links, info.solver.c_str(), info.device.c_str(),
+                    info.buildSeconds);
+        if (!quiet)
+            std::printf("  movable: %s\n  lights: %s\n",
+                        dynamic.empty() ? "(none)" : dynamic.c_str(),
+                        lights.empty() ? "(none)" : lights.c_str());
+        return kExitOk;
+    }
+    if (info && info->parsed()) {
+        auto i = c.Info(session);
+        std::printf("scene %s: solver %s on %s, %u elements, %llu links\n", i.scene.c_str(),
+                    i.solver.c_str(), i.device.c_str(), i.elements, (unsigned long long)i.links);
+        for (const auto& n : i.nodes) {
+            uint32_t vertices = 0;
+            for (const auto& p : n.primitives) vertices += p.vertices;
+            std::printf("  node %-20s %zu primitives, %u vertices%s%s\n", n.name.c_str(),
+                        n.primitives.size(), vertices, n.dynamic ? ", dynamic" : "",
+                        n.emissive ? ", light" : "");
+        }
+        for (const auto& m : i.materials)
+            std::printf("  material %-16s albedo %.3g %.3g %.3g  emission %.3g %.3g %.3g\n",
+                        m.name.c_str(), m.albedo[0], m.albedo[1], m.albedo[2], m.emission[0],
+                        m.emission[1], m.emission[2]);
+        return kExitOk;
+    }
+    if (watch && watch->parsed()) {
+        std::mutex m;
+        std::condition_variable cv;
+        int seen = 0;
+        bool done = false;
+        std::deque<Clock::time_point> arrivals;
+        c.Subscribe(
+            [&](const client::Frame& f) {
+                std::lock_guard lock(m);
+                if (done) return;
+                auto now = Clock::now();
+                arrivals.push_back(now);
+                while (arrivals.size() > 10) arrivals.pop_front();
+                double fps = 0.0;
+                if (arrivals.size() > 1)
+                    fps = (arrivals.size() - 1) /
+                          std::chrono::duration<double>(arrivals.back() - arrivals.front()).count();
+                PrintFrame(f, fps);
+                ++seen;
+                if ((watchFrames > 0 && seen >= watchFrames) || (untilConverged && f.converged))
+                    done = true;
+                cv.notify_all();
+            },
+            ParseChannel(channel), ParseFormat(format), session);
+        std::unique_lock lock(m);
+        auto stop = [&] { return done || !c.Connected(); };
+        if (timeout > 0.0) {
+            if (!cv.wait_for(lock, std::chrono::duration<double>(timeout), stop)) {
+                done = true;
+                if (!quiet) std::printf("watch: %.1f s passed, %d frames\n", timeout, seen);
+                return kExitOk;
+            }
+        } else {
+            while (!stop()) cv.wait_for(lock, std::chrono::milliseconds(200));
+        }
+        done = true;
+        if (!c.Connected()) {
+            std::fprintf(stderr, "penumbra: watch: the server closed the connection\n");
+            return kExitConnection;
+        }
+        return kExitOk;
+    }
+    if (move && move->parsed()) {
+        std::array<float, 16> out{};
+        if (!matrix.empty()) {
+            if (matrix.size() != 16) throw Error("--matrix needs 16 numbers");
+            std::copy(matrix.begin(), matrix.end(), out.begin());
+        } else {
+            auto i = c.Info(session);
+            const client::NodeInfo* n = i.Node(node);
+            if (!n) throw Error("no node '" + node + "' in scene " + i.scene);
+            glm::mat4 current;
+            for (int k = 0; k < 16; ++k) current[k / 4][k % 4] = n->matrix[k];
+            glm::mat4 t(1.0f);
+            if (!translate.empty()) {
+                auto v = Triple(translate, "--translate");
+                t = glm::translate(t, glm::vec3(v[0], v[1], v[2]));
+            }
+            glm::mat4 r = glm::rotate(glm::mat4(1.0f), glm::radians(rotateY), glm::vec3(0, 1, 0));
+            glm::mat4 next = t * current * r;
+            for (int k = 0; k < 16; ++k) out[k] = next[k / 4][k % 4];
+        }
+        lastEdit = c.SetTransform(node, out, session);
+        if (!quiet) std::printf("edit %llu: move %s\n", (unsigned long long)lastEdit, node.c_str());
+        return kExitOk;
+    }
+    if (light && light->parsed()) {
+        std::optional<std::array<float, 3>> col;
+        if (!color.empty()) col = Triple(color, "--color");
+        std::optional<float> in;
+        if (intensity >= 0.0f) in = intensity;
+        if (!col && !in) throw Error("light: give --intensity and/or --color");
+        lastEdit = c.SetLight(node, col, in, session);
+        if (!quiet)
+            std::printf("edit %llu: light %s\n", (unsigned long long)lastEdit, node.c_str());
+        return kExitOk;
+    }
+    if (material && material->parsed()) {
+        std::optional<std::array<float, 3>> a, e;
+        if (!albedo.empty()) a = Triple(albedo, "--albedo");
+        if (!emission.empty()) e = Triple(emission, "--emission");
+        if (!a && !e) throw Error("material: give --albedo and/or --emission");
+        lastEdit = c.SetMaterial(node, a, e, session);
+        if (!quiet)
+            std::printf("edit %llu: material %s\n", (unsigned long long)lastEdit, node.c_str());
+        return kExitOk;
+    }
+    if (get && get->parsed()) {
+        client::Frame f = c.Get(ParseChannel(channel), client::Format::kFloat32, session);
+        // The bake formats: a Scene carries each primitive's key (and, for glTF output, its
+        // geometry, read from the local file).
+        Scene scene;
+        bool json = output.size() >= 5 && output.compare(output.size() - 5, 5, ".json") == 0;
+        if (!json) {
+            if (gltf.empty())
+                throw Error("glTF output needs the scene file: add --gltf FILE (or write .json)");
+            scene = LoadGltf(gltf);
+            if (scene.primitives.size() != f.primitives.size())
+                throw Error(gltf + " has " + std::to_string(scene.primitives.size()) +
+                            " primitives, the server's scene " +
+                            std::to_string(f.primitives.size()) + ": not the same scene");
+        } else {
+            for (const auto& p : f.primitives) {
+                Primitive prim;
+                prim.node = p.node;
+                prim.mesh = p.mesh;
+                prim.primitive = p.primitive;
+                scene.primitives.push_back(prim);
+            }
+        }
+        IrradianceResult result;
+        auto stats = nlohmann::json::parse(c.Stats(session));
+        const nlohmann::json& sc = stats.contains("scenes") ? stats["scenes"].back() : stats;
+        result.solver = sc["solver"].value("solver", "antiradiance");
+        result.channel = ChannelName(f.channel);
+        result.stats = sc["solver"];
+        result.stats["frame"] = f.frame;
+        result.stats["last_edit"] = f.lastEdit;
+        for (size_t p = 0; p < f.primitives.size(); ++p) {
+            const auto& rgb = f.primitives[p].rgb;
+            if (!json && rgb.size() != scene.primitives[p].positions.size() * 3)
+                throw Error(gltf + ": primitive " + std::to_string(p) +
+                            " has a different vertex count than the server's scene");
+            std::vector<glm::vec3> v(rgb.size() / 3);
+            for (size_t i = 0; i < v.size(); ++i)
+                v[i] = glm::vec3(rgb[i * 3], rgb[i * 3 + 1], rgb[i * 3 + 2]);
+            result.primitives.push_back(std::move(v));
+        }
+        if (json)
+            WriteIrradianceJson(output, scene, result);
+        else
+            WriteIrradianceGltf(gltf, output, scene, result);
+        if (!quiet)
+            std::printf("wrote %s (frame %llu, edit %llu, channel %s)\n", output.c_str(),
+                        (unsigned long long)f.frame, (unsigned long long)f.lastEdit,
+                        result.channel.c_str());
+        return kExitOk;
+    }
+    if (step && step->parsed()) {
+        uint64_t frame = c.Step(stepIterations, session);
+        if (!quiet) std::printf("frame %llu\n", (unsigned long long)frame);
+        return kExitOk;
+    }
+    if (stats && stats->parsed()) {
+        std::printf("%s\n", nlohmann::json::parse(c.Stats(session)).dump(2).c_str());
+        return kExitOk;
+    }
+    if (wait && wait->parsed()) return Wait(c, lastEdit, timeout > 0.0 ? timeout : 60.0);
+    if (sleep && sleep->parsed()) {
+        if (!(sleepSeconds >= 0.0) || sleepSeconds > 3600) throw Error("sleep: 0…3600 seconds");
+        std::this_thread::sleep_for(std::chrono::duration<double>(sleepSeconds));
+        return kExitOk;
+    }
+    if (script && script->parsed()) return RunScript(c);
+    return kExitOk;
+}
+
+int ServiceCommands::State::RunScript(client::Client& c) {
+    std::ifstream file;
+    std::istream* in = &std::cin;
+    if (scriptFile != "-") {
+        file.open(scriptFile);
+        if (!file) throw Error(scriptFile + ": cannot read");
+        in = &file;
+    }
+    std::string line;
+    int number = 0;
+    uint64_t lastSent = 0;
+    while (std::getline(*in, line)) {
+        ++number;
+        size_t hash = line.find('#');
+        if (hash != std::string::npos) line.resize(hash);
+        std::vector<std::string> words;
+        try {
+            words = SplitWords(line);
+        } catch (const Error& e) {
+            throw Error(scriptFile + ":" + std::to_string(number) + ": " + e.what());
+        }
+        if (words.empty()) continue;
+        CLI::App lineApp{"script line"};
+        lineApp.require_subcommand(1);
+        ServiceCommands commands(lineApp, /*forScript=*/true);
+        State& ls = *commands.s_;
+        std::vector<std::string> reversed(words.rbegin(), words.rend());
+        try {
+            lineApp.parse(reversed);
+        } catch (const CLI::ParseError& e) {
+            throw Error(scriptFile + ":" + std::to_string(number) + ": '" + line +
+                        "': " + e.what());
+        }
+        ls.session = session;
+        ls.gltf = ls.gltf.empty() ? gltf : ls.gltf;
+        ls.lastEdit = lastSent;
+        if (!quiet) std::printf("> %s\n", line.c_str());
+        int rc;
+        try {
+            rc = ls.Execute(c);
+        } catch (const client::ClientError& e) {
+            if (e.code() == 0) throw;
+            throw Error(scriptFile + ":" + std::to_string(number) + ": " + e.what());
+        } catch (const Error& e) {
+            throw Error(scriptFile + ":" + std::to_string(number) + ": " + e.what());
+        }
+        if (rc != kExitOk) return rc;
+        lastSent = std::max(lastSent, ls.lastEdit);
+    }
+    return kExitOk;
+}
+
+}  // namespace penumbra::cli

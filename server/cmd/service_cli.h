@@ -1,0 +1,35 @@
+// The service commands of the `penumbra` CLI (load, info, watch, move, light, material,
+// get, step, stats, script), run through the client library against a server given by
+// --connect, or against an embedded in-process server when --scene names a glTF instead.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <memory>
+#include <string>
+
+namespace penumbra::cli {
+
+// Exit statuses of the service commands (docs/CLI.md).
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitRefused = 1;     // the server answered with an error, or bad input
+inline constexpr int kExitInternal = 3;    // a bug
+inline constexpr int kExitTimeout = 4;     // watch/wait ran out of time
+inline constexpr int kExitConnection = 5;  // could not connect, or the connection was lost
+
+class ServiceCommands {
+  public:
+    // Adds the commands to `app`. `forScript`: the subset a script line may use.
+    ServiceCommands(CLI::App& app, bool forScript = false);
+    ~ServiceCommands();
+
+    // True when one of these commands was parsed.
+    bool Parsed() const;
+    // Runs the parsed command: connects (or starts the embedded server), runs, disconnects.
+    int Run();
+
+  private:
+    struct State;
+    std::unique_ptr<State> s_;
+};
+
+}  // namespace penumbra::cli

@@ -1,0 +1,99 @@
+// The socket side of penumbra-server: Asio acceptors on TCP and Unix sockets, one
+// Connection per client that decodes frames (protocol/), dispatches them to the Service and
+// streams subscribed frames back. One I/O thread; slow work runs on a small pool.
+#pragma once
+
+#include <asio.hpp>
+#include <atomic>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "protocol/frame.h"
+#include "service/service.h"
+
+namespace penumbra::net {
+
+struct NetLimits {
+    size_t maxClients = 64;
+    uint32_t maxFrameBytes = protocol::kDefaultMaxPayloadBytes;
+    size_t maxQueuedFrames = 2;  // per subscriber; older unsent frames are dropped
+};
+
+// "tcp://HOST:PORT" or "unix:///PATH".
+struct ListenAddress {
+    enum class Kind { kTcp, kUnix } kind = Kind::kTcp;
+    std::string host;  // tcp
+    uint16_t port = 0;
+    std::string path;  // unix
+};
+// Throws penumbra::Error with what is wrong with `url`.
+ListenAddress ParseListenAddress(const std::string& url);
+
+class Connection;
+
+class Server {
+  public:
+    Server(asio::io_context& io, service::Service& service, NetLimits limits);
+    ~Server();
+
+    // Binds and starts accepting. A TCP address other than loopback needs `allowRemote`.
+    // Returns the bound address as a URL (port 0 becomes the chosen port). Throws
+    // penumbra::Error naming the address and the reason.
+    std::string Listen(const ListenAddress& address, bool allowRemote = false);
+    // Stops accepting, closes every connection, shuts the service down. I/O thread only
+    // (post it there from elsewhere).
+    void Stop();
+
+    asio::io_context& Io() { return io_; }
+    service::Service& GetService() { return service_; }
+    const NetLimits& Limits() const { return limits_; }
+    asio::thread_pool& Blocking() { return blocking_; }
+    bool Stopping() const { return stopping_; }
+    nlohmann::json StatsJson() const;
+
+    // Encoded Frame messages (request id 0), shared by all subscribers asking for the same
+    // channel and format of the same frame.
+    std::shared_ptr<const std::vector<uint8_t>> EncodedFrame(const service::FramePtr& frame,
+                                                             service::Channel channel,
+                                                             protocol::fb::Format format);
+
+    // Connection bookkeeping (I/O thread).
+    void Forget(Connection* connection);
+    std::atomic<uint64_t> framesSent{0}, framesDropped{0}, protocolErrors{0};
+
+  private:
+    void Accept(std::shared_ptr<asio::ip::tcp::acceptor> acceptor);
+    void Accept(std::shared_ptr<asio::local::stream_protocol::acceptor> acceptor);
+    void Adopt(asio::generic::stream_protocol::socket socket);
+
+    asio::io_context& io_;
+    service::Service& service_;
+    NetLimits limits_;
+    asio::thread_pool blocking_{2};
+    std::vector<std::shared_ptr<asio::ip::tcp::acceptor>> tcp_;
+    std::vector<std::shared_ptr<asio::local::stream_protocol::acceptor>> unix_;
+    std::vector<std::string> unixPaths_;
+    std::map<Connection*, std::weak_ptr<Connection>> connections_;
+    bool stopping_ = false;
+    uint64_t nextConnection_ = 1;
+
+    std::mutex encodedMutex_;
+    struct EncodedKey {
+        std::string scene;
+        uint64_t frame;
+        bool converged;  // a replayed frame may differ from the original in this flag
+        int channel, format;
+        auto operator<=>(const EncodedKey&) const = default;
+    };
+    std::map<EncodedKey, std::shared_ptr<const std::vector<uint8_t>>> encoded_;
+};
+
+// Builds the Frame payload of `frame` in `channel` and `format`.
+void BuildFramePayload(flatbuffers::FlatBufferBuilder& b, const service::FrameData& frame,
+                       service::Channel channel, protocol::fb::Format format);
+
+}  // namespace penumbra::net

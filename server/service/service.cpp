@@ -1,0 +1,168 @@
+// Scene sessions by name, loading under the scene root, limits.
+#include "service/service.h"
+
+#include <fstream>
+#include <random>
+
+#include "base/check.h"
+#include "scene/gltf_loader.h"
+
+namespace penumbra::service {
+
+namespace fs = std::filesystem;
+
+Service::Service(fs::path sceneRoot, ServiceLimits limits, SolverSettings defaults)
+    : root_(fs::weakly_canonical(sceneRoot)), limits_(limits), defaults_(std::move(defaults)) {}
+
+Service::~Service() { Shutdown(); }
+
+fs::path Service::Resolve(const std::string& relative) const {
+    if (relative.empty()) throw ServiceError(ErrorKind::kInvalidArgument, "no scene path given");
+    fs::path p(relative);
+    if (p.is_absolute())
+        throw ServiceError(ErrorKind::kOutsideRoot,
+                           "'" + relative + "' is absolute; give a path under the scene root");
+    // Canonical form resolves "..", "." and symlinks; what remains must lie under the root.
+    std::error_code ec;
+    fs::path full = fs::weakly_canonical(root_ / p, ec);
+    if (ec) throw ServiceError(ErrorKind::kNotFound, "'" + relative + "': " + ec.message());
+    auto [r, f] = std::mismatch(root_.begin(), root_.end(), full.begin(), full.end());
+    if (r != root_.end())
+        throw ServiceError(ErrorKind::kOutsideRoot,
+                           "'" + relative + "' lies outside the scene root");
+    if (!fs::is_regular_file(full, ec))
+        throw ServiceError(ErrorKind::kNotFound,
+                           "no scene file '" + relative + "' under the scene root");
+    return full;
+}
+
+LoadResult Service::Load(const LoadRequest& request) {
+    // Name the session and find the file before anything slow happens.
+    std::string name;
+    fs::path file;
+    bool upload = !request.glb.empty();
+    if (upload) {
+        if (!request.path.empty())
+            throw ServiceError(ErrorKind::kInvalidArgument,
+                               "give either a scene path or an uploaded .glb, not both");
+        if (request.glb.size() > limits_.maxUploadBytes)
+            throw ServiceError(ErrorKind::kLimitReached,
+                               "uploaded .glb of " + std::to_string(request.glb.size()) +
+                                   " bytes exceeds the limit of " +
+                                   std::to_string(limits_.maxUploadBytes));
+        name = request.name.empty() ? "upload.glb" : request.name;
+    } else {
+        file = Resolve(request.path);
+        name = fs::relative(file, root_).generic_string();
+    }
+    {
+        std::lock_guard lock(mutex_);
+        if (shutdown_) throw ServiceError(ErrorKind::kShuttingDown, "the server is shutting down");
+        auto it = sessions_.find(name);
+        if (it != sessions_.end() && !request.reload) return {it->second, true};
+        size_t others = sessions_.size() - (it != sessions_.end() ? 1 : 0);
+        if (others + loading_ >= limits_.maxScenes)
+            throw ServiceError(ErrorKind::kLimitReached,
+                               "already " + std::to_string(others + loading_) +
+                                   " scenes loaded or loading (--max-scenes " +
+                                   std::to_string(limits_.maxScenes) + ")");
+        ++loading_;
+    }
+    struct Done {
+        Service* s;
+        ~Done() {
+            std::lock_guard lock(s->mutex_);
+            --s->loading_;
+        }
+    } done{this};
+
+    Scene scene;
+    try {
+        if (upload) {
+            // tinygltf reads files: the upload goes through a private temporary one.
+            fs::path tmp = fs::temp_directory_path() /
+                           ("penumbra-upload-" + std::to_string(std::random_device{}()) + ".glb");
+            {
+                std::ofstream out(tmp, std::ios::binary);
+                out.write(reinterpret_cast<const char*>(request.glb.data()),
+                          static_cast<std::streamsize>(request.glb.size()));
+                if (!out) throw Error("cannot stage the upload in " + tmp.string());
+            }
+            try {
+                scene = LoadGltf(tmp.string());
+            } catch (...) {
+                fs::remove(tmp);
+                throw;
+            }
+            fs::remove(tmp);
+            scene.source = name;
+        } else {
+            scene = LoadGltf(file.string());
+            scene.source = name;
+        }
+    } catch (const Error& e) {
+        throw ServiceError(ErrorKind::kLoadFailed, e.what());
+    }
+    if (scene.TriangleCount() > limits_.maxSceneTriangles)
+        throw ServiceError(
+            ErrorKind::kLimitReached,
+            name + " has " + std::to_string(scene.TriangleCount()) + " triangles; the limit is " +
+                std::to_string(limits_.maxSceneTriangles) + " (--max-scene-triangles)");
+    std::shared_ptr<Session> session;
+    try {
+        session = std::make_shared<Session>(name, std::move(scene), request.settings);
+    } catch (const Error& e) {
+        throw ServiceError(ErrorKind::kInvalidArgument, name + ": " + e.what());
+    }
+    std::shared_ptr<Session> replaced;
+    {
+        std::lock_guard lock(mutex_);
+        if (shutdown_) throw ServiceError(ErrorKind::kShuttingDown, "the server is shutting down");
+        auto it = sessions_.find(name);
+        if (it != sessions_.end()) replaced = it->second;
+        sessions_[name] = session;
+        std::erase(order_, name);
+        order_.push_back(name);
+    }
+    return {session, false};  // `replaced` stops once its last user lets go
+}
+
+std::shared_ptr<Session> Service::Find(const std::string& name) const {
+    std::lock_guard lock(mutex_);
+    if (sessions_.empty())
+        throw ServiceError(ErrorKind::kNoScene, "no scene is loaded; send LoadScene first");
+    if (name.empty()) return sessions_.at(order_.back());
+    auto it = sessions_.find(name);
+    if (it == sessions_.end()) {
+        std::string names;
+        for (const auto& n : order_) names += (names.empty() ? "" : ", ") + n;
+        throw ServiceError(ErrorKind::kNoScene,
+                           "no scene '" + name + "' is loaded; loaded: " + names);
+    }
+    return it->second;
+}
+
+nlohmann::json Service::StatsJson() const {
+    std::vector<std::shared_ptr<Session>> sessions;
+    {
+        std::lock_guard lock(mutex_);
+        for (const auto& n : order_) sessions.push_back(sessions_.at(n));
+    }
+    nlohmann::json j;
+    j["scenes"] = nlohmann::json::array();
+    for (const auto& s : sessions) j["scenes"].push_back(s->StatsJson());
+    return j;
+}
+
+void Service::Shutdown() {
+    std::map<std::string, std::shared_ptr<Session>> sessions;
+    {
+        std::lock_guard lock(mutex_);
+        shutdown_ = true;
+        sessions.swap(sessions_);
+        order_.clear();
+    }
+    sessions.clear();  // sessions still held by a request finish with it
+}
+
+}  // namespace penumbra::service

@@ -1,0 +1,66 @@
+// The lighting service: loaded scene sessions by name, scene loading confined to the scene
+// root, and the limits a server enforces. Thread-safe; knows nothing of sockets.
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "service/session.h"
+
+namespace penumbra::service {
+
+struct ServiceLimits {
+    size_t maxScenes = 4;  // sessions loaded at once
+    size_t maxSceneTriangles = 2'000'000;
+    size_t maxUploadBytes = 64u << 20;  // an uploaded .glb
+};
+
+struct LoadRequest {
+    std::string path;          // relative to the scene root
+    std::vector<uint8_t> glb;  // or an uploaded .glb
+    std::string name;          // session name for an upload
+    SessionSettings settings;
+    bool reload = false;
+};
+
+struct LoadResult {
+    std::shared_ptr<Session> session;
+    bool reused = false;
+};
+
+class Service {
+  public:
+    Service(std::filesystem::path sceneRoot, ServiceLimits limits, SolverSettings defaults = {});
+    ~Service();
+
+    // Loads (or joins) the scene's session. Blocks while the solver builds. Throws
+    // ServiceError: kOutsideRoot, kLoadFailed, kLimitReached, kInvalidArgument.
+    LoadResult Load(const LoadRequest& request);
+    // The named session; "" means the only one loaded, or the newest if several are.
+    std::shared_ptr<Session> Find(const std::string& name) const;
+    // A path under the scene root, refusing absolute paths, ".." escapes and symlinks that
+    // lead outside it. Throws ServiceError(kOutsideRoot / kNotFound).
+    std::filesystem::path Resolve(const std::string& relative) const;
+    nlohmann::json StatsJson() const;
+    // Drops every session (their workers stop); later loads are refused.
+    void Shutdown();
+
+    const ServiceLimits& Limits() const { return limits_; }
+    const SolverSettings& Defaults() const { return defaults_; }
+
+  private:
+    const std::filesystem::path root_;
+    const ServiceLimits limits_;
+    const SolverSettings defaults_;
+    mutable std::mutex mutex_;
+    std::map<std::string, std::shared_ptr<Session>> sessions_;
+    std::vector<std::string> order_;  // load order, newest last
+    size_t loading_ = 0;
+    bool shutdown_ = false;
+};
+
+}  // namespace penumbra::service

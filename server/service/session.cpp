@@ -1,0 +1,481 @@
+// The shared scene session: edit validation, the frame loop, link rebuilds on moves.
+#include "service/session.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "base/check.h"
+#include "output/irradiance_writer.h"
+
+namespace penumbra::service {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+bool FiniteNonNegative(glm::vec3 v) {
+    for (int i = 0; i < 3; ++i)
+        if (!std::isfinite(v[i]) || v[i] < 0.0f) return false;
+    return true;
+}
+
+std::string NodeList(const Scene& scene, bool dynamicOnly) {
+    std::string out;
+    for (const auto& n : scene.nodes) {
+        if (n.primitives.empty() && n.children.empty()) continue;
+        if (dynamicOnly && !n.dynamic) continue;
+        out += (out.empty() ? "" : ", ") + n.name;
+    }
+    return out.empty() ? "(none)" : out;
+}
+
+// Gives every primitive of `node` a material of its own (a copy named material@node) so a
+// light edit changes that node only; returns the materials it now uses.
+std::vector<uint32_t> OwnMaterials(Scene& scene, int node) {
+    std::vector<uint32_t> used;
+    for (uint32_t pi : scene.nodes[node].primitives) {
+        Primitive& p = scene.primitives[pi];
+        bool shared = false;
+        for (size_t q = 0; q < scene.primitives.size() && !shared; ++q)
+            shared =
+                scene.primitives[q].material == p.material && scene.primitives[q].nodeIndex != node;
+        if (shared) {
+            Material copy = scene.materials[p.material];
+            copy.name += "@" + scene.nodes[node].name;
+            scene.materials.push_back(copy);
+            uint32_t fresh = static_cast<uint32_t>(scene.materials.size() - 1);
+            for (uint32_t pj : scene.nodes[node].primitives)
+                if (scene.primitives[pj].material == p.material)
+                    scene.primitives[pj].material = fresh;
+        }
+        if (std::find(used.begin(), used.end(), p.material) == used.end())
+            used.push_back(p.material);
+    }
+    return used;
+}
+
+bool Outside(const Scene& scene, const SceneNode& node) {
+    if (!node.hasMotionBounds) return false;
+    const float slack = 1e-4f * std::max(scene.Diameter(), 1e-3f);
+    for (uint32_t pi : node.primitives)
+        for (const auto& v : scene.primitives[pi].positions)
+            if (glm::any(glm::lessThan(v, node.boundsMin - slack)) ||
+                glm::any(glm::greaterThan(v, node.boundsMax + slack)))
+                return true;
+    return false;
+}
+
+}  // namespace
+
+Session::Session(std::string name, Scene scene, SessionSettings settings,
+                 const ProgressFn& progress)
+    : name_(std::move(name)), settings_(std::move(settings)) {
+    if (settings_.iterationsPerFrame < 1 || settings_.iterationsPerFrame > 64)
+        throw Error("iterations per frame must be between 1 and 64");
+    auto start = Clock::now();
+    solver_ = CreateSolver(scene, settings_.solver, progress);
+    buildSeconds_ = MsSince(start) / 1000.0;
+    solverStatsRaw_ = solver_->Stats();
+    solverStats_ = StatsToJson(solverStatsRaw_);
+    for (const auto& n : scene.nodes)
+        for (uint32_t pi : n.primitives)
+            if (glm::any(glm::greaterThan(scene.materials[scene.primitives[pi].material].emission,
+                                          glm::vec3(0.0f))) &&
+                std::find(lightNodes_.begin(), lightNodes_.end(), n.name) == lightNodes_.end())
+                lightNodes_.push_back(n.name);
+    auto layout = std::make_shared<std::vector<PrimitiveKey>>();
+    for (const auto& p : scene.primitives) layout->push_back({p.node, p.mesh, p.primitive});
+    layout_ = layout;
+    validated_ = scene;
+    applied_ = std::move(scene);
+    worker_ = std::thread([this] { Run(); });
+}
+
+Session::~Session() {
+    {
+        std::lock_guard lock(mutex_);
+        stop_ = true;
+    }
+    wake_.notify_all();
+    frameMade_.notify_all();
+    if (worker_.joinable()) worker_.join();
+    if (rebuild_ && rebuild_->thread.joinable()) rebuild_->thread.join();
+    for (auto& [n, promise] : steps_)
+        promise.set_exception(std::make_exception_ptr(
+            ServiceError(ErrorKind::kShuttingDown, "the session closed before the step ran")));
+}
+
+// --- Edits ----------------------------------------------------------------------------------
+
+uint64_t Session::Queue(std::function<void(Scene&)> apply, bool moves, std::string what) {
+    // Caller holds mutex_ and has applied `apply` to validated_ already.
+    uint64_t id = nextEdit_++;
+    pending_.push_back(Pending{id, Clock::now(), std::move(apply), moves, std::move(what)});
+    wake_.notify_all();
+    return id;
+}
+
+uint64_t Session::Submit(const TransformEdit& edit) {
+    std::lock_guard lock(mutex_);
+    int node = FindNode(validated_, edit.node);
+    if (node < 0)
+        throw ServiceError(ErrorKind::kNotFound,
+                           "no node '" + edit.node + "' in scene '" + name_ +
+                               "'; movable nodes: " + NodeList(validated_, true));
+    if (!validated_.nodes[node].dynamic)
+        throw ServiceError(ErrorKind::kStaticNode,
+                           "node '" + edit.node +
+                               "' is static; mark it extras.penumbra.dynamic in the glTF to move "
+                               "it (movable nodes: " +
+                               NodeList(validated_, true) + ")");
+    try {
+        SetNodeTransform(validated_, node, edit.local);
+    } catch (const Error& e) {
+        throw ServiceError(ErrorKind::kInvalidArgument, e.what());
+    }
+    glm::mat4 local = edit.local;
+    std::string what = "moved " + edit.node;
+    if (Outside(validated_, validated_.nodes[node])) what += " (outside its motion bounds)";
+    return Queue([node, local](Scene& s) { SetNodeTransform(s, node, local); }, true, what);
+}
+
+uint64_t Session::Submit(const LightEdit& edit) {
+    std::lock_guard lock(mutex_);
+    if (std::find(lightNodes_.begin(), lightNodes_.end(), edit.light) == lightNodes_.end()) {
+        std::string lights;
+        for (const auto& l : lightNodes_) lights += (lights.empty() ? "" : ", ") + l;
+        throw ServiceError(
+            ErrorKind::kNotFound,
+            "no light '" + edit.light + "' in scene '" + name_ +
+                "'; lights (emissive nodes): " + (lights.empty() ? "(none)" : lights) +
+                (validated_.punctualLights ? "; punctual lights are not supported yet" : ""));
+    }
+    if (edit.intensity && (!std::isfinite(*edit.intensity) || *edit.intensity < 0.0f))
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "light intensity must be a finite number ≥ 0");
+    if (edit.color && !FiniteNonNegative(*edit.color))
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "light colour must be three finite numbers ≥ 0");
+    int node = FindNode(validated_, edit.light);
+    LightEdit e = edit;
+    // Emission = colour × intensity, where the current emission E splits into intensity
+    // max(E) and colour E / max(E); an absent part keeps its current value.
+    auto apply = [node, e](Scene& s) {
+        for (uint32_t m : OwnMaterials(s, node)) {
+            glm::vec3& emission = s.materials[m].emission;
+            float peak = std::max(emission.x, std::max(emission.y, emission.z));
+            glm::vec3 color = peak > 0.0f ? emission / peak : glm::vec3(1.0f);
+            if (e.color) color = *e.color;
+            float intensity = e.intensity ? *e.intensity : peak;
+            emission = color * intensity;
+        }
+    };
+    apply(validated_);
+    return Queue(apply, false, "light " + edit.light);
+}
+
+uint64_t Session::Submit(const MaterialEdit& edit) {
+    std::lock_guard lock(mutex_);
+    std::vector<uint32_t> matches;
+    for (size_t i = 0; i < validated_.materials.size(); ++i)
+        if (validated_.materials[i].name == edit.material ||
+            validated_.materials[i].name.rfind(edit.material + "@", 0) == 0)
+            matches.push_back(static_cast<uint32_t>(i));
+    if (matches.empty()) {
+        std::string names;
+        for (const auto& m : validated_.materials) names += (names.empty() ? "" : ", ") + m.name;
+        throw ServiceError(ErrorKind::kNotFound, "no material '" + edit.material + "' in scene '" +
+                                                     name_ + "'; materials: " + names);
+    }
+    if (edit.albedo && (!FiniteNonNegative(*edit.albedo) ||
+                        glm::any(glm::greaterThan(*edit.albedo, glm::vec3(1.0f)))))
+        throw ServiceError(
+            ErrorKind::kInvalidArgument,
+            "albedo must be three numbers in [0, 1] (above 1 a surface creates light)");
+    if (edit.emission && !FiniteNonNegative(*edit.emission))
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "emission must be three finite numbers ≥ 0");
+    MaterialEdit e = edit;
+    auto apply = [matches, e](Scene& s) {
+        for (uint32_t m : matches) {
+            if (e.albedo) s.materials[m].albedo = *e.albedo;
+            if (e.emission) s.materials[m].emission = *e.emission;
+        }
+    };
+    apply(validated_);
+    return Queue(apply, false, "material " + edit.material);
+}
+
+// --- Frames ---------------------------------------------------------------------------------
+
+int Session::AddSubscriber(FrameSink sink) {
+    FramePtr first;
+    int id;
+    {
+        std::lock_guard lock(mutex_);
+        id = nextSubscriber_++;
+        subscribers_[id] = sink;
+        first = latest_;
+        // The replayed frame counts as converged only if nothing is waiting to apply.
+        if (first && first->converged && (!converged_ || !pending_.empty() || rebuild_)) {
+            auto copy = std::make_shared<FrameData>(*first);
+            copy->converged = false;
+            first = copy;
+        }
+    }
+    if (first) sink(first);
+    return id;
+}
+
+void Session::RemoveSubscriber(int id) {
+    std::lock_guard lock(mutex_);
+    subscribers_.erase(id);
+}
+
+FramePtr Session::Latest() {
+    std::unique_lock lock(mutex_);
+    frameMade_.wait(lock, [&] { return latest_ || stop_; });
+    if (!latest_) throw ServiceError(ErrorKind::kShuttingDown, "the session is closing");
+    return latest_;
+}
+
+uint64_t Session::Step(int iterations) {
+    if (iterations < 1 || iterations > 10000)
+        throw ServiceError(ErrorKind::kInvalidArgument, "step needs 1 to 10000 iterations");
+    std::future<uint64_t> done;
+    {
+        std::lock_guard lock(mutex_);
+        if (stop_) throw ServiceError(ErrorKind::kShuttingDown, "the session is closing");
+        std::promise<uint64_t> promise;
+        done = promise.get_future();
+        steps_.emplace_back(iterations, std::move(promise));
+    }
+    wake_.notify_all();
+    return done.get();
+}
+
+Scene Session::SceneSnapshot() const {
+    std::lock_guard lock(mutex_);
+    return validated_;
+}
+
+SolverStats Session::SolverStatistics() const {
+    std::lock_guard lock(mutex_);
+    return solverStatsRaw_;
+}
+
+nlohmann::json Session::StatsJson() const {
+    std::lock_guard lock(mutex_);
+    nlohmann::json j;
+    j["scene"] = name_;
+    j["frames"] = frames_;
+    j["edits"] = nextEdit_ - 1;
+    j["last_applied_edit"] = appliedEdit_;
+    j["pending_edits"] = pending_.size();
+    j["link_rebuilds"] = rebuilds_;
+    j["rebuilding"] = rebuild_ != nullptr;
+    j["subscribers"] = subscribers_.size();
+    j["converged"] = converged_;
+    j["iterations_per_frame"] = settings_.iterationsPerFrame;
+    j["build_seconds"] = buildSeconds_;
+    // Frames in the last second: the rate while the scene changes, 0 while idle.
+    auto now = Clock::now();
+    size_t recent = 0;
+    for (auto t : recentFrames_)
+        if (now - t < std::chrono::seconds(1)) ++recent;
+    j["fps"] = recent;
+    j["last_frame_ms"] = latest_ ? latest_->frameMs : 0.0;
+    j["solver"] = solverStats_;
+    if (!lastError_.empty()) j["last_error"] = lastError_;
+    return j;
+}
+
+std::vector<std::vector<glm::vec3>> Session::ChannelOf(const FrameData& frame, Channel channel) {
+    if (channel != Channel::kDirect) return frame.irradiance;  // total = indirect + 0
+    std::vector<std::vector<glm::vec3>> zero(frame.irradiance.size());
+    for (size_t p = 0; p < zero.size(); ++p)
+        zero[p].assign(frame.irradiance[p].size(), glm::vec3(0));
+    return zero;
+}
+
+std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene) const {
+    return CreateSolver(scene, settings_.solver);
+}
+
+void Session::ProduceFrame(int iterations, std::string note) {
+    // Worker thread only, without mutex_: solver_ and applied_ belong to the worker.
+    auto start = Clock::now();
+    solver_->Iterate(iterations);
+    std::vector<glm::vec3> surfels = solver_->SurfelIrradiance();
+    double changed = 0.0, total = 0.0;
+    bool comparable = lastSurfels_.size() == surfels.size();
+    for (size_t i = 0; i < surfels.size(); ++i) {
+        total += std::abs(surfels[i].x) + std::abs(surfels[i].y) + std::abs(surfels[i].z);
+        if (comparable) {
+            glm::vec3 d = surfels[i] - lastSurfels_[i];
+            changed += std::abs(d.x) + std::abs(d.y) + std::abs(d.z);
+        }
+    }
+    double change = comparable ? (total > 0.0 ? changed / total : 0.0) : 1.0;
+    auto frame = std::make_shared<FrameData>();
+    frame->scene = name_;
+    frame->layout = layout_;
+    frame->note = std::move(note);
+    frame->irradiance.resize(applied_.primitives.size());
+    for (size_t p = 0; p < applied_.primitives.size(); ++p)
+        frame->irradiance[p] = PrimitiveIrradiance(solver_->GetSurfels(), surfels, applied_, p);
+    SolverStats stats = solver_->Stats();
+    passTotals_.resize(stats.passes.size(), 0.0);
+    for (size_t i = 0; i < stats.passes.size(); ++i) {
+        frame->passes.push_back({stats.passes[i].name, stats.passes[i].msTotal - passTotals_[i]});
+        passTotals_[i] = stats.passes[i].msTotal;
+    }
+    frame->iterations = stats.iterations;
+    lastSurfels_ = std::move(surfels);
+
+    std::vector<FrameSink> sinks;
+    {
+        std::lock_guard lock(mutex_);
+        frame->frame = ++frames_;
+        frame->lastEdit = appliedEdit_;
+        if (!latencyReported_) {
+            frame->editLatencyMs = MsSince(appliedReceived_);
+            latencyReported_ = true;
+        }
+        ++framesSinceEdit_;
+        converged_ =
+            change < settings_.convergedChange || framesSinceEdit_ >= settings_.maxFramesPerEdit;
+        frame->converged = converged_;
+        frame->frameMs = MsSince(start);
+        latest_ = frame;
+        solverStatsRaw_ = stats;
+        solverStats_ = StatsToJson(stats);
+        auto now = Clock::now();
+        recentFrames_.push_back(now);
+        while (recentFrames_.size() > 1 && now - recentFrames_.front() > std::chrono::seconds(1))
+            recentFrames_.pop_front();
+        for (const auto& [id, sink] : subscribers_) sinks.push_back(sink);
+    }
+    frameMade_.notify_all();
+    for (const auto& sink : sinks) sink(frame);
+}
+
+void Session::Run() {
+    std::unique_lock lock(mutex_);
+    while (true) {
+        wake_.wait(lock, [&] {
+            return stop_ || (rebuild_ && rebuild_->done) || (!rebuild_ && !pending_.empty()) ||
+                   !steps_.empty() || !converged_;
+        });
+        if (stop_) return;
+        std::string note;
+
+        // A finished link rebuild swaps in at this frame boundary.
+        if (rebuild_ && rebuild_->done) {
+            rebuild_->thread.join();
+            if (rebuild_->result) {
+                solver_ = std::move(rebuild_->result);
+                applied_ = std::move(rebuild_->scene);
+                passTotals_.clear();
+                lastSurfels_.clear();  // a new solver: its first frame is never "converged"
+                ++rebuilds_;
+                note = "links rebuilt: " + rebuild_->what;
+            } else {
+                // The edits were valid but the device could not take them (memory, say):
+                // report it and keep serving the scene as it was.
+                note = "link rebuild failed (" + rebuild_->error + "); the edits up to " +
+                       std::to_string(rebuild_->lastEdit) + " are not applied";
+                validated_ = applied_;
+                for (auto& p : pending_) p.apply(validated_);
+            }
+            appliedEdit_ = rebuild_->lastEdit;
+            appliedReceived_ = rebuild_->received;
+            latencyReported_ = false;
+            converged_ = false;
+            framesSinceEdit_ = 0;
+            rebuild_.reset();
+        }
+
+        // Pending edits apply together, atomically, between two frames. While links are
+        // being rebuilt later edits wait, so frames name their edits in order.
+        if (!rebuild_ && !pending_.empty()) {
+            Scene next = applied_;
+            bool moves = false;
+            std::string what;
+            for (auto& p : pending_) {
+                p.apply(next);
+                moves = moves || p.moves;
+                if (p.moves) what += (what.empty() ? "" : ", ") + p.what;
+            }
+            uint64_t last = pending_.back().id;
+            auto received = pending_.back().received;
+            pending_.clear();
+            if (moves) {
+                rebuild_ = std::make_unique<Rebuild>();
+                rebuild_->scene = std::move(next);
+                rebuild_->lastEdit = last;
+                rebuild_->received = received;
+                rebuild_->what = what;
+                Rebuild* r = rebuild_.get();
+                r->thread = std::thread([this, r] {
+                    std::unique_ptr<Solver> built;
+                    std::string error;
+                    try {
+                        built = BuildSolver(r->scene);
+                    } catch (const std::exception& e) {
+                        error = e.what();
+                    }
+                    std::lock_guard guard(mutex_);
+                    r->result = std::move(built);
+                    r->error = error;
+                    r->done = true;
+                    wake_.notify_all();
+                });
+            } else {
+                applied_ = std::move(next);
+                lock.unlock();
+                solver_->UpdateMaterials(applied_);
+                lock.lock();
+                appliedEdit_ = last;
+                appliedReceived_ = received;
+                latencyReported_ = false;
+                converged_ = false;
+                framesSinceEdit_ = 0;
+            }
+        }
+
+        // A device failure stops this session's frames, not the server: it is reported in
+        // stats and to the step that hit it, and the next edit tries again.
+        auto produce = [&](int iterations) -> std::exception_ptr {
+            lock.unlock();
+            std::exception_ptr failure;
+            try {
+                ProduceFrame(iterations, note);
+            } catch (const std::exception& e) {
+                failure = std::current_exception();
+                lock.lock();
+                lastError_ = e.what();
+                converged_ = true;
+                return failure;
+            }
+            lock.lock();
+            return failure;
+        };
+        if (!steps_.empty()) {
+            auto [iterations, promise] = std::move(steps_.front());
+            steps_.pop_front();
+            if (auto failure = produce(iterations))
+                promise.set_exception(failure);
+            else
+                promise.set_value(frames_);
+        } else if (!converged_) {
+            produce(settings_.iterationsPerFrame);
+        }
+    }
+}
+
+}  // namespace penumbra::service

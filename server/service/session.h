@@ -1,0 +1,201 @@
+// One loaded scene shared by every client (DESIGN.md, Protocol principles): the solver on
+// its device, a worker thread that applies edits atomically between frames, produces frames
+// while the scene changes and idles once it has converged.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <future>
+#include <glm/glm.hpp>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "scene/scene.h"
+#include "solver/solver.h"
+
+namespace penumbra::service {
+
+// Errors a request can earn; the net layer maps them to protocol error codes.
+enum class ErrorKind {
+    kInvalidArgument,
+    kNotFound,
+    kNoScene,
+    kOutsideRoot,
+    kLoadFailed,
+    kStaticNode,
+    kUnsupported,
+    kLimitReached,
+    kShuttingDown
+};
+
+class ServiceError : public std::runtime_error {
+  public:
+    ServiceError(ErrorKind kind, const std::string& message)
+        : std::runtime_error(message), kind_(kind) {}
+    ErrorKind kind() const { return kind_; }
+
+  private:
+    ErrorKind kind_;
+};
+
+enum class Channel { kIndirect, kDirect, kTotal };
+
+struct SessionSettings {
+    SolverSettings solver;
+    int iterationsPerFrame = 4;
+    // The scene counts as converged (and the worker idles) when a frame changes the
+    // irradiance by less than this fraction: Σ|ΔE| / Σ|E| over all surfels.
+    double convergedChange = 1e-3;
+    // Frames after the last edit at most, even if the change never falls below the bound.
+    int maxFramesPerEdit = 400;
+};
+
+// Which glTF primitive an irradiance array belongs to.
+struct PrimitiveKey {
+    std::string node;
+    int mesh = -1, primitive = -1;
+};
+
+// One frame as the session produced it; shared (read-only) by every subscriber.
+struct FrameData {
+    std::string scene;
+    uint64_t frame = 0;
+    uint64_t lastEdit = 0;
+    uint64_t iterations = 0;
+    double frameMs = 0.0;
+    double editLatencyMs = 0.0;
+    bool converged = false;
+    std::vector<PassTiming> passes;  // device ms of each pass in this frame
+    std::string note;
+    // `indirect` irradiance per scene primitive, in the primitive's input vertex order.
+    std::vector<std::vector<glm::vec3>> irradiance;
+    std::shared_ptr<const std::vector<PrimitiveKey>> layout;  // one key per primitive
+};
+using FramePtr = std::shared_ptr<const FrameData>;
+
+// Edits, validated on submission and applied by the worker between frames.
+struct TransformEdit {
+    std::string node;
+    glm::mat4 local{1.0f};
+};
+struct LightEdit {
+    std::string light;  // an emissive node
+    std::optional<glm::vec3> color;
+    std::optional<float> intensity;
+};
+struct MaterialEdit {
+    std::string material;
+    std::optional<glm::vec3> albedo;
+    std::optional<glm::vec3> emission;
+};
+
+class Session {
+  public:
+    // Builds the solver (seconds on large scenes) and starts the worker. Throws
+    // penumbra::Error for bad settings or an unusable device.
+    Session(std::string name, Scene scene, SessionSettings settings,
+            const ProgressFn& progress = {});
+    ~Session();  // stops the worker; subscribers get no further frames
+
+    const std::string& Name() const { return name_; }
+    const SessionSettings& Settings() const { return settings_; }
+
+    // Validates the edit against the scene as it will be once earlier edits apply and
+    // queues it; returns its edit id. Throws ServiceError (unknown node, static node,
+    // NaN or singular matrix, negative intensity...).
+    uint64_t Submit(const TransformEdit& edit);
+    uint64_t Submit(const LightEdit& edit);
+    uint64_t Submit(const MaterialEdit& edit);
+
+    using FrameSink = std::function<void(const FramePtr&)>;
+    // Every later frame goes to `sink` (on the worker thread: keep it short). The newest
+    // frame so far, if any, is delivered at once so a watcher starts with a picture.
+    int AddSubscriber(FrameSink sink);
+    void RemoveSubscriber(int id);
+
+    // The newest frame, waiting for the first one if none exists yet.
+    FramePtr Latest();
+    // Runs `iterations` more solver iterations now (even when converged), as one frame;
+    // returns that frame's number once it exists.
+    uint64_t Step(int iterations);
+
+    // Scene as of the newest applied edits (copy, for SceneInfo replies).
+    Scene SceneSnapshot() const;
+    SolverStats SolverStatistics() const;
+    nlohmann::json StatsJson() const;
+    double BuildSeconds() const { return buildSeconds_; }
+    // Irradiance of `channel` for a frame: `direct` is zero while punctual lights are not
+    // implemented, which is exact only for scenes without them (checked by the caller).
+    static std::vector<std::vector<glm::vec3>> ChannelOf(const FrameData& frame, Channel channel);
+
+  private:
+    struct Pending {
+        uint64_t id;
+        std::chrono::steady_clock::time_point received;
+        std::function<void(Scene&)> apply;  // changes the working scene
+        bool moves = false;                 // geometry changed: links must be rebuilt
+        std::string what;                   // for the frame note
+    };
+    // Links rebuilt on a thread of their own while the old solver keeps producing frames.
+    struct Rebuild {
+        std::thread thread;
+        Scene scene;
+        uint64_t lastEdit = 0;
+        std::chrono::steady_clock::time_point received;
+        std::string what;
+        bool done = false;  // set by the thread, under mutex_
+        std::unique_ptr<Solver> result;
+        std::string error;
+    };
+
+    uint64_t Queue(std::function<void(Scene&)> apply, bool moves, std::string what);
+    void Run();
+    void ProduceFrame(int iterations, std::string note);
+    std::unique_ptr<Solver> BuildSolver(const Scene& scene) const;
+
+    const std::string name_;
+    const SessionSettings settings_;
+    double buildSeconds_ = 0.0;
+
+    mutable std::mutex mutex_;  // guards everything below
+    std::condition_variable wake_;
+    std::condition_variable frameMade_;
+    bool stop_ = false;
+    Scene validated_;  // the scene with every submitted edit applied (for validation)
+    Scene applied_;    // the scene the solver has (edits up to appliedEdit_)
+    std::unique_ptr<Solver> solver_;
+    std::unique_ptr<Rebuild> rebuild_;
+    std::deque<Pending> pending_;
+    std::deque<std::pair<int, std::promise<uint64_t>>> steps_;
+    uint64_t nextEdit_ = 1;
+    uint64_t appliedEdit_ = 0;
+    std::chrono::steady_clock::time_point appliedReceived_{};
+    bool latencyReported_ = true;
+    std::map<int, FrameSink> subscribers_;
+    int nextSubscriber_ = 1;
+    FramePtr latest_;
+    bool converged_ = false;
+    int framesSinceEdit_ = 0;
+    std::vector<glm::vec3> lastSurfels_;
+    uint64_t frames_ = 0, rebuilds_ = 0;
+    std::deque<std::chrono::steady_clock::time_point> recentFrames_;  // for fps
+    std::vector<double> passTotals_;                                  // ms, as of last frame
+    std::shared_ptr<const std::vector<PrimitiveKey>> layout_;
+    std::vector<std::string> lightNodes_;  // nodes that emitted light when loaded
+    nlohmann::json solverStats_;           // as of the newest frame (worker writes)
+    SolverStats solverStatsRaw_;
+    std::string lastError_;
+    std::thread worker_;
+};
+
+}  // namespace penumbra::service

@@ -1,0 +1,135 @@
+// The scene session without sockets: edits apply between frames, frames name the last edit
+// they include, a move rebuilds links and converges to a fresh bake of the moved scene.
+#include "service/session.h"
+
+#include <gtest/gtest.h>
+
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "scene/gltf_loader.h"
+#include "test_util.h"
+
+namespace penumbra::service {
+namespace {
+
+const std::string kBlocker = std::string(PENUMBRA_SOURCE_DIR) + "/scenes/blocker.gltf";
+
+SessionSettings Settings() {
+    SessionSettings s;
+    s.solver.device = DeviceChoice::kCpu;
+    s.solver.bins = 64;
+    s.solver.elementSize = 0.1f;
+    s.iterationsPerFrame = 4;
+    s.convergedChange = 1e-4;
+    return s;
+}
+
+// Waits for a converged frame that includes edit `edit`; `notes` collects the notes of the
+// frames on the way.
+FramePtr WaitFor(Session& session, uint64_t edit, std::string* notes = nullptr) {
+    std::mutex m;
+    std::condition_variable cv;
+    FramePtr got;
+    int id = session.AddSubscriber([&](const FramePtr& f) {
+        std::lock_guard lock(m);
+        if (notes && !f->note.empty()) *notes += f->note + "; ";
+        if (f->lastEdit >= edit && f->converged) got = f;
+        cv.notify_all();
+    });
+    std::unique_lock lock(m);
+    bool ok = cv.wait_for(lock, std::chrono::seconds(60), [&] { return got != nullptr; });
+    lock.unlock();
+    session.RemoveSubscriber(id);
+    EXPECT_TRUE(ok) << "no converged frame with edit " << edit << " within 60 s";
+    return got;
+}
+
+TEST(Session, FirstFramesConvergeAndIdle) {
+    Session session("blocker", LoadGltf(kBlocker), Settings());
+    FramePtr f = WaitFor(session, 0);
+    ASSERT_TRUE(f);
+    EXPECT_EQ(f->lastEdit, 0u);
+    EXPECT_GT(f->frame, 1u);
+    EXPECT_EQ(f->irradiance.size(), 3u);  // floor, emitter, blocker
+    uint64_t frames = f->frame;
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    EXPECT_EQ(session.Latest()->frame, frames) << "a converged session must idle";
+}
+
+TEST(Session, MoveConvergesToAFreshBakeOfTheMovedScene) {
+    Scene scene = LoadGltf(kBlocker);
+    Session session("blocker", scene, Settings());
+    WaitFor(session, 0);
+    int node = FindNode(scene, "blocker");
+    glm::mat4 moved =
+        glm::translate(glm::mat4(1.0f), glm::vec3(0.4f, 0.1f, 0.0f)) * scene.nodes[node].local;
+    uint64_t edit = session.Submit(TransformEdit{"blocker", moved});
+    EXPECT_EQ(edit, 1u);
+    std::string notes;
+    FramePtr f = WaitFor(session, edit, &notes);
+    ASSERT_TRUE(f);
+    EXPECT_NE(notes.find("links rebuilt: moved blocker"), std::string::npos) << notes;
+
+    SetNodeTransform(scene, node, moved);
+    auto fresh = CreateSolver(scene, Settings().solver);
+    fresh->Iterate(int(f->iterations));
+    // Same scene, same settings, same iteration count: the rebuilt session is a fresh bake
+    // (it restarts from the emission), so the floor matches to float round-off.
+    auto floor = PrimitiveIrradiance(fresh->GetSurfels(), fresh->SurfelIrradiance(), scene, 0);
+    ASSERT_EQ(floor.size(), f->irradiance[0].size());
+    double worst = 0.0, peak = 0.0;
+    for (size_t i = 0; i < floor.size(); ++i) {
+        worst = std::max(worst, double(glm::length(floor[i] - f->irradiance[0][i])));
+        peak = std::max(peak, double(glm::length(floor[i])));
+    }
+    EXPECT_LT(worst, 1e-3 * peak) << "max |session − fresh| " << worst << " of " << peak;
+}
+
+TEST(Session, EditsAreValidatedOnSubmission) {
+    Session session("blocker", LoadGltf(kBlocker), Settings());
+    auto kind = [&](auto edit) {
+        try {
+            session.Submit(edit);
+        } catch (const ServiceError& e) {
+            return e.kind();
+        }
+        return ErrorKind::kShuttingDown;  // stands for "accepted"
+    };
+    EXPECT_EQ(kind(TransformEdit{"nope", glm::mat4(1.0f)}), ErrorKind::kNotFound);
+    EXPECT_EQ(kind(TransformEdit{"floor", glm::mat4(1.0f)}), ErrorKind::kStaticNode);
+    glm::mat4 nan(1.0f);
+    nan[3][1] = std::nanf("");
+    EXPECT_EQ(kind(TransformEdit{"blocker", nan}), ErrorKind::kInvalidArgument);
+    EXPECT_EQ(kind(TransformEdit{"blocker", glm::mat4(0.0f)}), ErrorKind::kInvalidArgument);
+    EXPECT_EQ(kind(LightEdit{"floor", std::nullopt, 2.0f}), ErrorKind::kNotFound);
+    EXPECT_EQ(kind(LightEdit{"emitter", std::nullopt, -1.0f}), ErrorKind::kInvalidArgument);
+    EXPECT_EQ(kind(MaterialEdit{"grey", glm::vec3(1.5f), std::nullopt}),
+              ErrorKind::kInvalidArgument);
+    EXPECT_EQ(kind(MaterialEdit{"unobtainium", glm::vec3(0.5f), std::nullopt}),
+              ErrorKind::kNotFound);
+}
+
+TEST(Session, DimmingTheLightScalesIrradiance) {
+    Session session("blocker", LoadGltf(kBlocker), Settings());
+    FramePtr before = WaitFor(session, 0);
+    uint64_t edit = session.Submit(LightEdit{"emitter", std::nullopt, 5.0f});  // from 10
+    FramePtr after = WaitFor(session, edit);
+    ASSERT_TRUE(before && after);
+    // Light is linear in the emission: every floor vertex halves (to the convergence bound).
+    for (size_t i = 0; i < before->irradiance[0].size(); i += 7) {
+        float b = testing::Mean(before->irradiance[0][i]),
+              a = testing::Mean(after->irradiance[0][i]);
+        EXPECT_NEAR(a, 0.5f * b, 2e-3f * b + 1e-6f) << "floor vertex " << i;
+    }
+}
+
+TEST(Session, StepRunsIterationsEvenWhenConverged) {
+    Session session("blocker", LoadGltf(kBlocker), Settings());
+    FramePtr f = WaitFor(session, 0);
+    uint64_t frame = session.Step(3);
+    EXPECT_EQ(frame, f->frame + 1);
+    EXPECT_EQ(session.Latest()->iterations, f->iterations + 3);
+}
+
+}  // namespace
+}  // namespace penumbra::service
