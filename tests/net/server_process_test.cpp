@@ -1,0 +1,419 @@
+// penumbra-server as a real process on loopback TCP and a Unix socket, with the client
+// library and the CLI as its clients: shared sessions, edits seen by watchers, raw bad bytes,
+// clients that vanish, refused requests, SIGTERM.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <asio.hpp>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <fstream>
+#include <glm/glm.hpp>
+#include <mutex>
+#include <thread>
+
+#include "client/client.h"
+#include "output/irradiance_writer.h"
+#include "protocol/frame.h"
+#include "scene/gltf_loader.h"
+#include "test_util.h"
+
+namespace penumbra {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fb = protocol::fb;
+
+// Starts penumbra-server on a Unix socket and an ephemeral loopback TCP port.
+class ServerProcess {
+  public:
+    explicit ServerProcess(const std::string& name, const std::string& extra = "") {
+        dir_ = testing::TempDir("server-" + name);
+        unixUrl_ = "unix://" + (dir_ / "s.sock").string();
+        std::string ready = (dir_ / "ready").string();
+        std::string cmd = std::string(PENUMBRA_BINARY_DIR) + "/penumbra-server --listen " +
+                          unixUrl_ + " --listen tcp://127.0.0.1:0 --scene-root " +
+                          PENUMBRA_SOURCE_DIR + "/scenes --device cpu --ready-file " + ready + " " +
+                          extra;
+        pid_ = fork();
+        if (pid_ == 0) {
+            std::string log = (dir_ / "server.log").string();
+            execl("/bin/sh", "sh", "-c", ("exec " + cmd + " 2>" + log).c_str(), nullptr);
+            _exit(127);
+        }
+        for (int i = 0; i < 300 && !std::filesystem::exists(ready); ++i)
+            std::this_thread::sleep_for(20ms);
+        std::ifstream in(ready);
+        std::string line;
+        while (std::getline(in, line))
+            if (line.rfind("tcp://", 0) == 0) tcpUrl_ = line;
+        EXPECT_FALSE(tcpUrl_.empty()) << "server did not become ready: " << Log();
+    }
+    ~ServerProcess() {
+        if (pid_ > 0) {
+            kill(pid_, SIGKILL);
+            waitpid(pid_, nullptr, 0);
+        }
+    }
+    // Sends SIGTERM and returns the exit status (-1 if it did not exit within 10 s).
+    int Terminate() {
+        kill(pid_, SIGTERM);
+        for (int i = 0; i < 500; ++i) {
+            int status;
+            if (waitpid(pid_, &status, WNOHANG) == pid_) {
+                pid_ = -1;
+                return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+            }
+            std::this_thread::sleep_for(20ms);
+        }
+        return -1;
+    }
+    std::string Log() const {
+        std::ifstream in(dir_ / "server.log");
+        return {std::istreambuf_iterator<char>(in), {}};
+    }
+    const std::string& Unix() const { return unixUrl_; }
+    const std::string& Tcp() const { return tcpUrl_; }
+    std::filesystem::path Dir() const { return dir_; }
+    std::string SocketPath() const { return unixUrl_.substr(7); }
+
+  private:
+    std::filesystem::path dir_;
+    std::string unixUrl_, tcpUrl_;
+    pid_t pid_ = -1;
+};
+
+client::LoadOptions Cornell() {
+    client::LoadOptions o;
+    o.path = "cornell-box.gltf";
+    o.bins = 64;
+    o.elementSize = 0.06f;
+    o.device = "cpu";
+    return o;
+}
+
+// Collects the frames a subscription delivers.
+struct Watcher {
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<client::Frame> frames;
+    void operator()(const client::Frame& f) {
+        std::lock_guard lock(m);
+        frames.push_back(f);
+        cv.notify_all();
+    }
+    // The first converged frame that includes edit `edit` (waits up to 60 s).
+    std::optional<client::Frame> Until(uint64_t edit) {
+        std::unique_lock lock(m);
+        std::optional<client::Frame> got;
+        cv.wait_for(lock, 60s, [&] {
+            for (const auto& f : frames)
+                if (f.lastEdit >= edit && f.converged) {
+                    got = f;
+                    return true;
+                }
+            return false;
+        });
+        return got;
+    }
+    size_t Count() {
+        std::lock_guard lock(m);
+        return frames.size();
+    }
+};
+
+float MeanOf(const client::Frame& f, const std::string& node) {
+    double sum = 0.0;
+    size_t n = 0;
+    for (const auto& p : f.primitives)
+        if (p.node == node)
+            for (size_t i = 0; i < p.rgb.size(); ++i) sum += p.rgb[i], ++n;
+    return n ? float(sum / n) : 0.0f;
+}
+
+// Floor vertices within `radius` (xz) of `centre`: their mean irradiance.
+float FloorNear(const client::Frame& f, const client::SceneInfo& info, glm::vec2 centre,
+                float radius, const std::vector<glm::vec3>& positions) {
+    (void)info;
+    double sum = 0.0;
+    size_t n = 0;
+    for (const auto& p : f.primitives) {
+        if (p.node != "floor") continue;
+        for (size_t v = 0; v < positions.size() && v * 3 + 2 < p.rgb.size(); ++v)
+            if (glm::length(glm::vec2(positions[v].x, positions[v].z) - centre) < radius)
+                sum += (p.rgb[v * 3] + p.rgb[v * 3 + 1] + p.rgb[v * 3 + 2]) / 3.0, ++n;
+    }
+    return n ? float(sum / n) : -1.0f;
+}
+
+TEST(ServerProcess, TwoClientsOneEditsOneWatchesOverTcpAndUnix) {
+    ServerProcess server("two-clients");
+    client::Client editor(server.Tcp(), "editor");
+    client::Client viewer(server.Unix(), "viewer");
+    EXPECT_EQ(editor.ProtocolVersion(), 1);
+    client::SceneInfo info = editor.Load(Cornell());
+    EXPECT_FALSE(info.reused);
+    ASSERT_TRUE(info.Node("tall_block"));
+    EXPECT_TRUE(info.Node("tall_block")->dynamic);
+    // The viewer joins the same session instead of building another.
+    client::SceneInfo joined = viewer.Load(Cornell());
+    EXPECT_TRUE(joined.reused);
+
+    Watcher watch;
+    viewer.Subscribe(std::ref(watch));
+    auto start = watch.Until(0);
+    ASSERT_TRUE(start) << "no converged first frame";
+
+    // Floor positions (in the file's vertex order) to locate "under the block".
+    Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
+    const auto& floorPos = scene.primitives[0].positions;
+    ASSERT_EQ(scene.primitives[0].node, "floor");
+    const glm::vec2 oldSpot(0.3685f, 0.3513f), newSpot(0.3685f - 0.15f, 0.3513f + 0.1f);
+
+    // Move the tall block: the floor where it stood brightens, where it went darkens.
+    const client::NodeInfo* tall = info.Node("tall_block");
+    std::array<float, 16> m = tall->matrix;
+    m[12] -= 0.15f;
+    m[14] += 0.1f;
+    uint64_t moveEdit = editor.SetTransform("tall_block", m);
+    auto moved = watch.Until(moveEdit);
+    ASSERT_TRUE(moved) << "the watcher never saw a converged frame with edit " << moveEdit;
+    EXPECT_GE(moved->lastEdit, moveEdit);
+    float oldBefore = FloorNear(*start, info, oldSpot, 0.05f, floorPos);
+    float oldAfter = FloorNear(*moved, info, oldSpot, 0.05f, floorPos);
+    float newBefore = FloorNear(*start, info, newSpot, 0.05f, floorPos);
+    float newAfter = FloorNear(*moved, info, newSpot, 0.05f, floorPos);
+    // Under the block the floor was dark (the block stands on it); uncovered, it is lit.
+    EXPECT_GT(oldAfter, 0.0f);
+    EXPECT_GT(oldAfter, 5.0f * oldBefore)
+        << "floor where the block stood: " << oldBefore << " → " << oldAfter;
+    EXPECT_LT(newAfter, 0.8f * newBefore)
+        << "floor under the block's new place: " << newBefore << " → " << newAfter;
+    // Some frame on the way said the links were rebuilt.
+    bool noted = false;
+    {
+        std::lock_guard lock(watch.m);
+        for (const auto& f : watch.frames) noted = noted || f.note.find("links rebuilt") == 0;
+    }
+    EXPECT_TRUE(noted);
+
+    // Dim the light to a quarter: everything darkens to a quarter (light is linear).
+    uint64_t dimEdit = editor.SetLight("ceiling_light", std::nullopt, 17.0f / 4.0f);
+    EXPECT_GT(dimEdit, moveEdit);
+    auto dimmed = watch.Until(dimEdit);
+    ASSERT_TRUE(dimmed);
+    for (const char* node : {"floor", "back_wall", "left_wall", "tall_block"}) {
+        float before = MeanOf(*moved, node), after = MeanOf(*dimmed, node);
+        EXPECT_NEAR(after, 0.25f * before, 0.01f * before) << node;
+    }
+    // The editor's Get sees the same state as the watcher's stream, in f16 too.
+    client::Frame got = editor.Get(client::Channel::kIndirect, client::Format::kFloat16);
+    EXPECT_GE(got.lastEdit, dimEdit);
+    EXPECT_NEAR(MeanOf(got, "floor"), MeanOf(*dimmed, "floor"), 2e-3f * MeanOf(*dimmed, "floor"));
+}
+
+TEST(ServerProcess, GarbageOnOneConnectionDoesNotDisturbAnother) {
+    ServerProcess server("garbage");
+    client::Client viewer(server.Unix(), "viewer");
+    viewer.Load(Cornell());
+    Watcher watch;
+    viewer.Subscribe(std::ref(watch));
+    ASSERT_TRUE(watch.Until(0));
+
+    asio::io_context io;
+    asio::local::stream_protocol::socket raw(io);
+    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
+    std::string junk = "GET / HTTP/1.1\r\nHost: x\r\n\r\n";
+    asio::write(raw, asio::buffer(junk));
+    // The reply is an Error frame (bad magic), then the server closes the connection.
+    std::vector<uint8_t> reply;
+    std::error_code ec;
+    std::array<uint8_t, 4096> buf;
+    while (!ec) {
+        size_t n = raw.read_some(asio::buffer(buf), ec);
+        reply.insert(reply.end(), buf.begin(), buf.begin() + n);
+    }
+    EXPECT_EQ(ec, asio::error::eof);
+    protocol::Decoder d;
+    d.Feed(reply.data(), reply.size());
+    protocol::Message m;
+    ASSERT_EQ(d.Next(m), protocol::Decoder::Result::kMessage);
+    ASSERT_EQ(m.header.type, protocol::MessageType::kError);
+    EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::BadMagic);
+
+    // Meanwhile the viewer keeps receiving frames for a new edit.
+    uint64_t edit = viewer.SetLight("ceiling_light", std::array<float, 3>{1, 1, 1}, 10.0f);
+    EXPECT_TRUE(watch.Until(edit));
+}
+
+TEST(ServerProcess, OversizedFrameGetsAnErrorAndTheConnectionCloses) {
+    ServerProcess server("oversized", "--max-frame-bytes 4096");
+    asio::io_context io;
+    asio::local::stream_protocol::socket raw(io);
+    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
+    // A header announcing 1 MiB: refused from the header alone, before any payload.
+    std::vector<uint8_t> header = {'P', 'N', 'B', 'R', 1, 0, 10, 0, 0, 0, 16, 0, 7, 0, 0, 0};
+    asio::write(raw, asio::buffer(header));
+    std::vector<uint8_t> reply;
+    std::error_code ec;
+    std::array<uint8_t, 4096> buf;
+    while (!ec) {
+        size_t n = raw.read_some(asio::buffer(buf), ec);
+        reply.insert(reply.end(), buf.begin(), buf.begin() + n);
+    }
+    protocol::Decoder d;
+    d.Feed(reply.data(), reply.size());
+    protocol::Message m;
+    ASSERT_EQ(d.Next(m), protocol::Decoder::Result::kMessage);
+    EXPECT_EQ(m.header.requestId, 7u);
+    EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::TooLarge);
+    EXPECT_NE(std::string(m.As<fb::Error>()->message()->c_str()).find("4096"), std::string::npos);
+}
+
+TEST(ServerProcess, RequestsBeforeHelloAreRefused) {
+    ServerProcess server("hello");
+    asio::io_context io;
+    asio::local::stream_protocol::socket raw(io);
+    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateGetStatsDirect(b, ""));
+    auto bytes = protocol::EncodeFrame(protocol::MessageType::kGetStats, 3, b);
+    asio::write(raw, asio::buffer(bytes));
+    std::vector<uint8_t> reply(4096);
+    size_t n = asio::read(raw, asio::buffer(reply), asio::transfer_at_least(16));
+    protocol::Decoder d;
+    d.Feed(reply.data(), n);
+    protocol::Message m;
+    while (d.Next(m) == protocol::Decoder::Result::kNeedMore) {
+        n = raw.read_some(asio::buffer(reply));
+        d.Feed(reply.data(), n);
+    }
+    EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::HelloRequired);
+}
+
+TEST(ServerProcess, BadRequestsGetClearErrorsAndTheConnectionStays) {
+    ServerProcess server("bad-requests");
+    client::Client c(server.Tcp());
+    auto code = [&](auto call) -> int {
+        try {
+            call();
+        } catch (const client::ClientError& e) {
+            return e.code();
+        }
+        return -1;
+    };
+    EXPECT_EQ(code([&] { c.Info(); }), int(fb::ErrorCode::NoScene));
+    client::LoadOptions outside = Cornell();
+    outside.path = "../CMakeLists.txt";
+    EXPECT_EQ(code([&] { c.Load(outside); }), int(fb::ErrorCode::OutsideRoot));
+    outside.path = "/etc/passwd";
+    EXPECT_EQ(code([&] { c.Load(outside); }), int(fb::ErrorCode::OutsideRoot));
+    outside.path = "no-such.gltf";
+    EXPECT_EQ(code([&] { c.Load(outside); }), int(fb::ErrorCode::NotFound));
+    c.Load(Cornell());
+    std::array<float, 16> nan{};
+    nan.fill(std::nanf(""));
+    EXPECT_EQ(code([&] { c.SetTransform("tall_block", nan); }),
+              int(fb::ErrorCode::InvalidArgument));
+    std::array<float, 16> zero{};
+    EXPECT_EQ(code([&] { c.SetTransform("tall_block", zero); }),
+              int(fb::ErrorCode::InvalidArgument));
+    std::array<float, 16> id{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    EXPECT_EQ(code([&] { c.SetTransform("no_such_node", id); }), int(fb::ErrorCode::NotFound));
+    EXPECT_EQ(code([&] { c.SetTransform("floor", id); }), int(fb::ErrorCode::StaticNode));
+    EXPECT_EQ(code([&] { c.SetLight("floor", std::nullopt, 1.0f); }), int(fb::ErrorCode::NotFound));
+    // After all that, the same connection still works.
+    EXPECT_NO_THROW(c.Stats());
+    EXPECT_TRUE(c.Connected());
+}
+
+TEST(ServerProcess, AClientKilledMidStreamHarmsNoOne) {
+    ServerProcess server("killed");
+    client::Client viewer(server.Unix(), "viewer");
+    viewer.Load(Cornell());
+    Watcher watch;
+    viewer.Subscribe(std::ref(watch));
+    ASSERT_TRUE(watch.Until(0));
+    // A CLI watcher process, killed with SIGKILL while frames stream to it.
+    std::string cmd = std::string(PENUMBRA_BINARY_DIR) + "/penumbra --connect " + server.Tcp() +
+                      " watch --timeout 30 > /dev/null 2>&1";
+    pid_t pid = fork();
+    if (pid == 0) {
+        execl("/bin/sh", "sh", "-c", ("exec " + cmd).c_str(), nullptr);
+        _exit(127);
+    }
+    std::array<float, 16> id{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0.2f, 0, 0.2f, 1};
+    viewer.SetTransform("short_block", id);  // frames flow while the process is killed
+    std::this_thread::sleep_for(300ms);
+    kill(pid, SIGKILL);
+    waitpid(pid, nullptr, 0);
+    uint64_t edit = viewer.SetLight("ceiling_light", std::nullopt, 12.0f);
+    EXPECT_TRUE(watch.Until(edit));
+    EXPECT_NO_THROW(viewer.Stats());
+}
+
+TEST(ServerProcess, CliCommandsAndScriptAgainstTheServer) {
+    ServerProcess server("cli");
+    std::string connect = "--connect " + server.Unix() + " ";
+    auto load = testing::Execute(connect + "load cornell-box.gltf --bins 64 --element-size 0.06");
+    ASSERT_EQ(load.exitCode, 0) << load.output;
+    EXPECT_NE(load.output.find("movable: short_block, tall_block"), std::string::npos)
+        << load.output;
+    auto dir = server.Dir();
+    std::ofstream(dir / "edits.txt") << "# a scripted edit session\n"
+                                        "move tall_block --translate 0.05,0,0 --rotate-y 15\n"
+                                        "light ceiling_light --intensity 8 --color 1,0.9,0.8\n"
+                                        "wait --timeout 60\n"
+                                        "get -o " +
+                                            (dir / "after.json").string() + "\n";
+    auto script = testing::Execute(connect + "script " + (dir / "edits.txt").string());
+    ASSERT_EQ(script.exitCode, 0) << script.output;
+    auto file = ReadIrradianceJson((dir / "after.json").string());
+    EXPECT_EQ(file.primitives.size(), 8u);  // one per node of the Cornell box
+    // Refusals exit 1 with the reason; an unreachable server exits 5.
+    auto refused = testing::Execute(connect + "move floor --translate 1,0,0");
+    EXPECT_EQ(refused.exitCode, 1);
+    EXPECT_NE(refused.output.find("static"), std::string::npos) << refused.output;
+    auto gone = testing::Execute("--connect unix:///nonexistent/socket stats");
+    EXPECT_EQ(gone.exitCode, 5) << gone.output;
+    std::ofstream(dir / "bad.txt") << "move tall_block --translate 1,2\n";
+    auto bad = testing::Execute(connect + "script " + (dir / "bad.txt").string());
+    EXPECT_EQ(bad.exitCode, 1);
+    EXPECT_NE(bad.output.find("bad.txt:1"), std::string::npos) << bad.output;
+}
+
+TEST(ServerProcess, SigtermShutsDownCleanly) {
+    ServerProcess server("sigterm");
+    client::Client c(server.Unix());
+    c.Load(Cornell());
+    Watcher watch;
+    c.Subscribe(std::ref(watch));
+    ASSERT_TRUE(watch.Until(0));
+    EXPECT_EQ(server.Terminate(), 0) << server.Log();
+    c.Wait();  // the server closed our connection
+    EXPECT_FALSE(c.Connected());
+    EXPECT_FALSE(std::filesystem::exists(server.SocketPath())) << "socket file left behind";
+    EXPECT_NE(server.Log().find("SIGTERM"), std::string::npos) << server.Log();
+}
+
+TEST(EmbeddedMode, ScriptRunsWithoutAServer) {
+    auto dir = testing::TempDir("embedded");
+    std::ofstream(dir / "edits.txt") << "light emitter --intensity 4\n"
+                                        "wait\n"
+                                        "get -o " +
+                                            (dir / "lit.glb").string() + "\n";
+    auto r = testing::Execute("script " + (dir / "edits.txt").string() + " --scene " +
+                              PENUMBRA_SOURCE_DIR + "/scenes/blocker.gltf");
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("embedded server: loaded blocker.gltf"), std::string::npos) << r.output;
+    EXPECT_TRUE(std::filesystem::exists(dir / "lit.glb"));
+    auto none = testing::Execute("move tall_block --translate 1,0,0");
+    EXPECT_EQ(none.exitCode, 1);
+    EXPECT_NE(none.output.find("--connect"), std::string::npos) << none.output;
+}
+
+}  // namespace
+}  // namespace penumbra
