@@ -2,6 +2,7 @@
 #pragma once
 
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
 #include <cmath>
@@ -30,9 +31,11 @@ inline size_t NearestSurfel(const Surfels& s, glm::vec3 p, glm::vec3 normal) {
 
 inline float Mean(glm::vec3 v) { return (v.x + v.y + v.z) / 3.0f; }
 
-// A fresh temporary folder for one test.
+// A fresh temporary folder for one test. Named by the process too: ctest runs the tests of
+// one executable as parallel processes, which must not share (and delete) a folder.
 inline std::filesystem::path TempDir(const std::string& name) {
-    auto dir = std::filesystem::temp_directory_path() / ("penumbra-test-" + name);
+    auto dir = std::filesystem::temp_directory_path() /
+               ("penumbra-test-" + name + "-" + std::to_string(::getpid()));
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
     return dir;
