@@ -146,6 +146,7 @@ struct ServiceCommands::State {
     bool upload = false;
 
     int watchFrames = 0;
+    uint64_t minEdit = 0;
     double timeout = 0.0;
     bool untilConverged = false;
     std::string channel = "indirect", format = "f32";
@@ -200,7 +201,10 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
         "watch", "Subscribe and print each frame: number, edit id, ms, fps, edit latency");
     s.watch->add_option("--frames", s.watchFrames, "stop after this many frames (0: no limit)");
     s.watch->add_option("--timeout", s.timeout, "stop after this many seconds (0: no limit)");
-    s.watch->add_flag("--until-converged", s.untilConverged, "stop at the first converged frame");
+    s.watch->add_flag("--until-converged", s.untilConverged,
+                      "stop at the first converged frame (that includes --min-edit)");
+    s.watch->add_option("--min-edit", s.minEdit,
+                        "with --until-converged: the frame must include this edit id");
     s.watch->add_option("--channel", s.channel, "indirect|direct|total")->capture_default_str();
     s.watch->add_option("--format", s.format, "f32|f16")->capture_default_str();
 
@@ -252,6 +256,7 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
                              "glTF to load in an embedded in-process server (no --connect)");
         s.script->add_option("--device", s.device, "embedded server's device")
             ->capture_default_str();
+        s.script->add_flag("-q,--quiet", s.quiet, "do not echo the script's lines");
     }
     for (CLI::App* c :
          {s.load, s.info, s.watch, s.move, s.light, s.material, s.get, s.step, s.stats, s.wait})
@@ -385,7 +390,8 @@ int ServiceCommands::State::Execute(client::Client& c) {
                           std::chrono::duration<double>(arrivals.back() - arrivals.front()).count();
                 PrintFrame(f, fps);
                 ++seen;
-                if ((watchFrames > 0 && seen >= watchFrames) || (untilConverged && f.converged))
+                if ((watchFrames > 0 && seen >= watchFrames) ||
+                    (untilConverged && f.converged && f.lastEdit >= minEdit))
                     done = true;
                 cv.notify_all();
             },
@@ -569,6 +575,7 @@ int ServiceCommands::State::RunScript(client::Client& c) {
         } catch (const Error& e) {
             throw Error(scriptFile + ":" + std::to_string(number) + ": " + e.what());
         }
+        std::fflush(stdout);
         if (rc != kExitOk) return rc;
         lastSent = std::max(lastSent, ls.lastEdit);
     }
