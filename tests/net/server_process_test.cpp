@@ -149,6 +149,29 @@ float FloorNear(const client::Frame& f, const client::SceneInfo& info, glm::vec2
     return n ? float(sum / n) : -1.0f;
 }
 
+// Sends `bytes` on a raw connection to the server's Unix socket, reads until the server
+// closes it, and decodes the first frame of the reply (`closed`: it ended with EOF).
+protocol::Message RawExchange(const ServerProcess& server, const std::vector<uint8_t>& bytes,
+                              bool* closed) {
+    asio::io_context io;
+    asio::local::stream_protocol::socket raw(io);
+    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
+    asio::write(raw, asio::buffer(bytes));
+    std::vector<uint8_t> reply;
+    std::error_code ec;
+    std::array<uint8_t, 4096> buf;
+    while (!ec) {
+        size_t n = raw.read_some(asio::buffer(buf), ec);
+        reply.insert(reply.end(), buf.begin(), buf.begin() + n);
+    }
+    *closed = ec == asio::error::eof;
+    protocol::Decoder d;
+    d.Feed(reply.data(), reply.size());
+    protocol::Message m;
+    EXPECT_EQ(d.Next(m), protocol::Decoder::Result::kMessage) << reply.size() << " bytes";
+    return m;
+}
+
 TEST(ServerProcess, TwoClientsOneEditsOneWatchesOverTcpAndUnix) {
     ServerProcess server("two-clients");
     client::Client editor(server.Tcp(), "editor");
@@ -223,24 +246,11 @@ TEST(ServerProcess, GarbageOnOneConnectionDoesNotDisturbAnother) {
     viewer.Subscribe(std::ref(watch));
     ASSERT_TRUE(watch.Until(0));
 
-    asio::io_context io;
-    asio::local::stream_protocol::socket raw(io);
-    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
-    std::string junk = "GET / HTTP/1.1\r\nHost: x\r\n\r\n";
-    asio::write(raw, asio::buffer(junk));
     // The reply is an Error frame (bad magic), then the server closes the connection.
-    std::vector<uint8_t> reply;
-    std::error_code ec;
-    std::array<uint8_t, 4096> buf;
-    while (!ec) {
-        size_t n = raw.read_some(asio::buffer(buf), ec);
-        reply.insert(reply.end(), buf.begin(), buf.begin() + n);
-    }
-    EXPECT_EQ(ec, asio::error::eof);
-    protocol::Decoder d;
-    d.Feed(reply.data(), reply.size());
-    protocol::Message m;
-    ASSERT_EQ(d.Next(m), protocol::Decoder::Result::kMessage);
+    std::string junk = "GET / HTTP/1.1\r\nHost: x\r\n\r\n";
+    bool closed = false;
+    protocol::Message m = RawExchange(server, {junk.begin(), junk.end()}, &closed);
+    EXPECT_TRUE(closed);
     ASSERT_EQ(m.header.type, protocol::MessageType::kError);
     EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::BadMagic);
 
@@ -251,23 +261,11 @@ TEST(ServerProcess, GarbageOnOneConnectionDoesNotDisturbAnother) {
 
 TEST(ServerProcess, OversizedFrameGetsAnErrorAndTheConnectionCloses) {
     ServerProcess server("oversized", "--max-frame-bytes 4096");
-    asio::io_context io;
-    asio::local::stream_protocol::socket raw(io);
-    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
     // A header announcing 1 MiB: refused from the header alone, before any payload.
     std::vector<uint8_t> header = {'P', 'N', 'B', 'R', 1, 0, 10, 0, 0, 0, 16, 0, 7, 0, 0, 0};
-    asio::write(raw, asio::buffer(header));
-    std::vector<uint8_t> reply;
-    std::error_code ec;
-    std::array<uint8_t, 4096> buf;
-    while (!ec) {
-        size_t n = raw.read_some(asio::buffer(buf), ec);
-        reply.insert(reply.end(), buf.begin(), buf.begin() + n);
-    }
-    protocol::Decoder d;
-    d.Feed(reply.data(), reply.size());
-    protocol::Message m;
-    ASSERT_EQ(d.Next(m), protocol::Decoder::Result::kMessage);
+    bool closed = false;
+    protocol::Message m = RawExchange(server, header, &closed);
+    EXPECT_TRUE(closed);
     EXPECT_EQ(m.header.requestId, 7u);
     EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::TooLarge);
     EXPECT_NE(std::string(m.As<fb::Error>()->message()->c_str()).find("4096"), std::string::npos);
