@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check bench accuracy format clean
+.PHONY: all deps build demo check bench bench-service accuracy format clean
 
 all: build
 
@@ -25,6 +25,9 @@ check: build
 
 bench: build
 	$(BUILD)/bench/penumbra-bench-office --out bench/results
+
+bench-service: build
+	$(BUILD)/bench/penumbra-bench-service --out bench/results
 
 accuracy: build
 	$(BUILD)/bench/penumbra-bench-accuracy --out bench/results

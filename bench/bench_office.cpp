@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "base/check.h"
+#include "bench_util.h"
 #include "output/irradiance_writer.h"
 #include "scene/gltf_loader.h"
 #include "solver/solver.h"
@@ -24,14 +25,6 @@ double Median(std::vector<double> v) {
     std::sort(v.begin(), v.end());
     size_t n = v.size();
     return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-std::string CpuModel() {
-    std::ifstream in("/proc/cpuinfo");
-    std::string line;
-    while (std::getline(in, line))
-        if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
-    return "unknown";
 }
 
 nlohmann::json RunDevice(const Scene& scene, SolverSettings settings, int frames,
@@ -96,7 +89,8 @@ int main(int argc, char** argv) {
         report["benchmark"] = "office";
         report["scene"] = scenePath;
         report["triangles"] = scene.TriangleCount();
-        report["machine"] = {{"cpu", CpuModel()}, {"threads", std::thread::hardware_concurrency()}};
+        report["machine"] = {{"cpu", bench::CpuModel()},
+                             {"threads", std::thread::hardware_concurrency()}};
         report["settings"] = {{"bins", settings.bins},
                               {"element_size", settings.elementSize},
                               {"link_oracle", "paper"},

@@ -264,7 +264,8 @@ SceneInfo Client::Load(const LoadOptions& o) {
     b.Finish(fb::CreateLoadSceneDirect(
         b, o.path.empty() ? nullptr : o.path.c_str(), o.glb.empty() ? nullptr : &o.glb,
         o.name.empty() ? nullptr : o.name.c_str(), o.solver.c_str(), o.bins, o.iterationsPerFrame,
-        o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload));
+        o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload,
+        o.linkOracle.empty() ? nullptr : o.linkOracle.c_str(), o.oracle, o.convergedChange));
     return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo));
 }
 

@@ -194,6 +194,13 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
                        "metres (0: scene diameter / 40)");
     s.load->add_option("--device", s.loadOptions.device, "auto|gpu|lavapipe|cpu");
     s.load->add_flag("--reload", s.loadOptions.reload, "rebuild even if already loaded");
+    s.load->add_option("--link-oracle", s.loadOptions.linkOracle, "conservative|paper");
+    s.load->add_option("--oracle", s.loadOptions.oracle, "link refinement threshold")
+        ->capture_default_str();
+    s.load
+        ->add_option("--converged-change", s.loadOptions.convergedChange,
+                     "idle once a frame changes irradiance by less (0: stream forever)")
+        ->capture_default_str();
 
     s.info = app.add_subcommand("info", "Print the scene's nodes, lights and materials");
 

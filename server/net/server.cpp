@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <deque>
 #include <filesystem>
+#include <limits>
 
 #include "base/check.h"
 
@@ -356,6 +357,22 @@ class Connection : public std::enable_shared_from_this<Connection> {
                     throw ServiceError(ErrorKind::kInvalidArgument,
                                        "iterations per frame must be 1…64");
                 req.settings.iterationsPerFrame = l->iterations_per_frame();
+                if (!(l->oracle() > 0.0f) || !std::isfinite(l->oracle()))
+                    throw ServiceError(ErrorKind::kInvalidArgument, "oracle must be > 0");
+                req.settings.solver.oracle = l->oracle();
+                if (!(l->converged_change() >= 0.0f))
+                    throw ServiceError(ErrorKind::kInvalidArgument,
+                                       "converged_change must be ≥ 0 (0: never idle)");
+                req.settings.convergedChange = l->converged_change();
+                if (req.settings.convergedChange == 0.0)
+                    req.settings.maxFramesPerEdit = std::numeric_limits<int>::max();
+                if (!Str(l->link_oracle()).empty()) {
+                    try {
+                        req.settings.solver.paperOracle = ParsePaperOracle(Str(l->link_oracle()));
+                    } catch (const Error& e) {
+                        throw ServiceError(ErrorKind::kInvalidArgument, e.what());
+                    }
+                }
                 if (!Str(l->device()).empty()) {
                     try {
                         req.settings.solver.device = ParseDevice(Str(l->device()));

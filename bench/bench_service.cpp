@@ -1,0 +1,279 @@
+// Service benchmark (issue 4): a real server (in-process, on a Unix socket) and real
+// clients. Per scene and device it measures streamed frames per second with 1, 4 and 16
+// subscribers, the protocol + server overhead over the solver's own time, and the
+// edit-to-frame latency (client sends an edit, client receives the frame that includes
+// it), p50 and p99, for light edits and for moves. Prints a table and writes
+// bench/results/service.json.
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "bench_util.h"
+#include "client/client.h"
+#include "net/server.h"
+#include "service/service.h"
+
+namespace penumbra {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+namespace fs = std::filesystem;
+
+double Ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
+
+double Percentile(std::vector<double> v, double p) {
+    if (v.empty()) return 0.0;
+    std::sort(v.begin(), v.end());
+    size_t i = std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5));
+    return v[i];
+}
+
+// A server with its I/O thread, on a private Unix socket.
+struct InProcessServer {
+    asio::io_context io;
+    service::Service service;
+    net::Server server;
+    std::string url;
+    std::thread thread;
+    fs::path dir;
+
+    explicit InProcessServer(const fs::path& root)
+        : service(root, service::ServiceLimits{}), server(io, service, net::NetLimits{}) {
+        char tmpl[] = "/tmp/penumbra-bench-XXXXXX";
+        dir = mkdtemp(tmpl);
+        net::ListenAddress a;
+        a.kind = net::ListenAddress::Kind::kUnix;
+        a.path = (dir / "s.sock").string();
+        url = server.Listen(a);
+        thread = std::thread([this] { io.run(); });
+    }
+    ~InProcessServer() {
+        asio::post(io, [this] {
+            server.Stop();
+            io.stop();
+        });
+        thread.join();
+        fs::remove_all(dir);
+    }
+};
+
+// Counts the frames a subscriber receives and remembers the newest.
+struct Counter {
+    std::mutex m;
+    std::condition_variable cv;
+    size_t frames = 0;
+    uint64_t lastEdit = 0;
+    std::vector<Clock::time_point> arrivals;
+    std::vector<double> solverMs, frameMs;
+    void operator()(const client::Frame& f) {
+        std::lock_guard lock(m);
+        ++frames;
+        lastEdit = std::max(lastEdit, f.lastEdit);
+        arrivals.push_back(Clock::now());
+        double s = 0.0;
+        for (const auto& p : f.passes) s += p.second;
+        solverMs.push_back(s);
+        frameMs.push_back(f.frameMs);
+        cv.notify_all();
+    }
+    // Waits until a frame with lastEdit ≥ edit arrives; returns when it did.
+    Clock::time_point WaitEdit(uint64_t edit) {
+        std::unique_lock lock(m);
+        cv.wait_for(lock, std::chrono::seconds(120), [&] { return lastEdit >= edit; });
+        return Clock::now();
+    }
+};
+
+struct Case {
+    std::string name, path, device, oracle;
+    float elementSize;
+    float oracleValue;
+    std::string light, mover;
+};
+
+nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int edits, int moves) {
+    client::Client editor(srv.url, "bench-editor");
+    client::LoadOptions o;
+    o.path = c.path;
+    o.device = c.device;
+    o.elementSize = c.elementSize;
+    o.linkOracle = c.oracle;
+    o.oracle = c.oracleValue;
+    o.convergedChange = 0.0f;  // stream continuously: every frame is a frame to deliver
+    o.reload = true;
+    auto start = Clock::now();
+    client::SceneInfo info = editor.Load(o);
+    double loadS = Ms(Clock::now() - start) / 1000.0;
+    std::printf("%s on %s: %u elements, %llu links, loaded in %.2f s\n", c.name.c_str(),
+                info.device.c_str(), info.elements, (unsigned long long)info.links, loadS);
+    nlohmann::json out;
+    out["scene"] = c.name;
+    out["device"] = info.device;
+    out["elements"] = info.elements;
+    out["links"] = info.links;
+    out["subscribers"] = nlohmann::json::array();
+
+    // Streaming: frames per second at each subscriber, against the solver's own time.
+    std::printf("  %-11s %9s %11s %11s %11s %9s\n", "subscribers", "fps", "frame int.", "solver ms",
+                "overhead", "vs 1 sub");
+    double fpsOne = 0.0;
+    for (int n : {1, 4, 16}) {
+        std::vector<std::unique_ptr<client::Client>> clients;
+        std::vector<std::unique_ptr<Counter>> counters;
+        for (int i = 0; i < n; ++i) {
+            clients.push_back(std::make_unique<client::Client>(srv.url, "bench-sub"));
+            counters.push_back(std::make_unique<Counter>());
+            Counter* counter = counters.back().get();
+            clients.back()->Subscribe([counter](const client::Frame& f) { (*counter)(f); });
+        }
+        std::this_thread::sleep_for(std::chrono::duration<double>(std::min(1.0, seconds / 4)));
+        auto t0 = Clock::now();
+        std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+        auto t1 = Clock::now();
+        double elapsed = Ms(t1 - t0) / 1000.0;
+        // Each subscriber's rate over the window; the slowest one is what the table shows.
+        double fpsWorst = 1e30, solver = 0.0;
+        for (int i = 0; i < n; ++i) {
+            Counter& k = *counters[i];
+            std::lock_guard lock(k.m);
+            size_t inWindow = 0;
+            std::vector<double> s;
+            for (size_t f = 0; f < k.arrivals.size(); ++f)
+                if (k.arrivals[f] >= t0 && k.arrivals[f] < t1) {
+                    ++inWindow;
+                    s.push_back(k.solverMs[f]);
+                }
+            fpsWorst = std::min(fpsWorst, inWindow / elapsed);
+            if (i == 0) solver = Percentile(s, 0.5);
+        }
+        double interval = fpsWorst > 0 ? 1000.0 / fpsWorst : 0.0;
+        double fpsMin = fpsWorst;
+        if (n == 1) fpsOne = fpsMin;
+        double overhead = solver > 0 ? interval / solver - 1.0 : 0.0;
+        double cost = fpsOne > 0 ? fpsOne / std::max(fpsWorst, 1e-9) - 1.0 : 0.0;
+        std::printf("  %-11d %9.2f %8.1f ms %8.1f ms %10.1f%% %8.1f%%\n", n, fpsWorst, interval,
+                    solver, overhead * 100.0, cost * 100.0);
+        out["subscribers"].push_back({{"subscribers", n},
+                                      {"fps_slowest_subscriber", fpsWorst},
+                                      {"frame_interval_ms", interval},
+                                      {"solver_ms_per_frame_p50", solver},
+                                      {"overhead_vs_solver", overhead},
+                                      {"cost_vs_one_subscriber", cost}});
+        for (auto& cl : clients) cl->Close();
+    }
+
+    // Latency: one watcher; the editor alternates the light's intensity (or moves a block)
+    // and waits for the frame that includes each edit.
+    Counter watch;
+    client::Client watcher(srv.url, "bench-watch");
+    watcher.Subscribe([&](const client::Frame& f) { watch(f); });
+    std::vector<double> lightMs, moveMs;
+    for (int i = 0; i < edits; ++i) {
+        auto t0 = Clock::now();
+        uint64_t id = editor.SetLight(c.light, std::nullopt, i % 2 ? 10.0f : 12.0f);
+        lightMs.push_back(Ms(watch.WaitEdit(id) - t0));
+        // Let edits land at different phases of the frame.
+        std::this_thread::sleep_for(std::chrono::milliseconds(7 * (i % 5)));
+    }
+    const client::NodeInfo* mover = info.Node(c.mover);
+    for (int i = 0; mover && i < moves; ++i) {
+        std::array<float, 16> m = mover->matrix;
+        m[12] += (i % 2 ? -0.02f : 0.02f);
+        auto t0 = Clock::now();
+        uint64_t id = editor.SetTransform(c.mover, m);
+        moveMs.push_back(Ms(watch.WaitEdit(id) - t0));
+    }
+    double frame = out["subscribers"][0]["frame_interval_ms"].get<double>();
+    std::printf(
+        "  edit→frame latency: light p50 %.1f ms, p99 %.1f ms (frame %.1f ms; goal p50 ≤ %.1f)\n",
+        Percentile(lightMs, 0.5), Percentile(lightMs, 0.99), frame, frame + 5.0);
+    if (!moveMs.empty())
+        std::printf(
+            "                      move  p50 %.1f ms, p99 %.1f ms (every move rebuilds the "
+            "links)\n",
+            Percentile(moveMs, 0.5), Percentile(moveMs, 0.99));
+    out["latency_ms"] = {{"light_p50", Percentile(lightMs, 0.5)},
+                         {"light_p99", Percentile(lightMs, 0.99)},
+                         {"light_samples", lightMs.size()},
+                         {"move_p50", Percentile(moveMs, 0.5)},
+                         {"move_p99", Percentile(moveMs, 0.99)},
+                         {"move_samples", moveMs.size()},
+                         {"goal_p50", frame + 5.0}};
+    watcher.Close();
+    editor.Close();
+    return out;
+}
+
+}  // namespace
+}  // namespace penumbra
+
+int main(int argc, char** argv) {
+    using namespace penumbra;
+    CLI::App app{"penumbra-bench-service: streaming fps, overhead and edit latency"};
+    std::string outDir = "bench/results", devices = "lavapipe,cpu", scenes = "cornell,office";
+    double seconds = 4.0;
+    int edits = 30, moves = 5;
+    app.add_option("--out", outDir, "results folder")->capture_default_str();
+    app.add_option("--devices", devices, "comma list of lavapipe, cpu, gpu")->capture_default_str();
+    app.add_option("--scenes", scenes, "comma list of cornell, office")->capture_default_str();
+    app.add_option("--seconds", seconds, "streaming window per subscriber count")
+        ->capture_default_str();
+    app.add_option("--edits", edits, "light edits timed")->capture_default_str();
+    app.add_option("--moves", moves, "moves timed")->capture_default_str();
+    CLI11_PARSE(app, argc, argv);
+
+    auto has = [](const std::string& list, const std::string& x) {
+        return ("," + list + ",").find("," + x + ",") != std::string::npos;
+    };
+    // The Cornell box at 5 cm elements; the office as the solver benchmark has it (paper
+    // oracle at 2.15: 626K links).
+    std::vector<Case> cases;
+    for (const std::string device : {"lavapipe", "cpu", "gpu"}) {
+        if (!has(devices, device)) continue;
+        if (has(scenes, "cornell"))
+            cases.push_back({"cornell-box", "cornell-box.gltf", device, "", 0.05f, 1.0f,
+                             "ceiling_light", "tall_block"});
+        if (has(scenes, "office"))
+            cases.push_back({"office", "office.gltf", device, "paper", 0.5f, 2.15f, "", ""});
+    }
+    nlohmann::json report;
+    report["machine"] = {{"cpu", bench::CpuModel()},
+                         {"threads", std::thread::hardware_concurrency()}};
+    report["cases"] = nlohmann::json::array();
+    try {
+        InProcessServer srv(fs::path(PENUMBRA_SOURCE_DIR) / "scenes");
+        for (auto c : cases) {
+            if (c.light.empty()) {
+                // The office's lights are emissive fixtures: take the first emissive node.
+                client::Client probe(srv.url, "bench-probe");
+                client::LoadOptions o;
+                o.path = c.path;
+                o.device = "cpu";
+                o.elementSize = 2.0f;
+                o.linkOracle = "paper";
+                o.oracle = 4.0f;
+                o.reload = true;
+                for (const auto& n : probe.Load(o).nodes)
+                    if (n.emissive) {
+                        c.light = n.name;
+                        break;
+                    }
+            }
+            report["cases"].push_back(RunCase(srv, c, seconds, edits, c.mover.empty() ? 0 : moves));
+        }
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "penumbra-bench-service: %s\n", e.what());
+        return 1;
+    }
+    fs::create_directories(outDir);
+    std::ofstream(fs::path(outDir) / "service.json") << report.dump(2) << "\n";
+    std::printf("wrote %s/service.json\n", outDir.c_str());
+    return 0;
+}
