@@ -111,6 +111,7 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
     auto start = Clock::now();
     client::SceneInfo info = editor.Load(o);
     double loadS = Ms(Clock::now() - start) / 1000.0;
+    std::setvbuf(stdout, nullptr, _IOLBF, 0);
     std::printf("%s on %s: %u elements, %llu links, loaded in %.2f s\n", c.name.c_str(),
                 info.device.c_str(), info.elements, (unsigned long long)info.links, loadS);
     nlohmann::json out;
@@ -248,8 +249,9 @@ int main(int argc, char** argv) {
                          {"threads", std::thread::hardware_concurrency()}};
     report["cases"] = nlohmann::json::array();
     try {
-        InProcessServer srv(fs::path(PENUMBRA_SOURCE_DIR) / "scenes");
         for (auto c : cases) {
+            // A server of its own per case: no other session competes for the cores.
+            InProcessServer srv(fs::path(PENUMBRA_SOURCE_DIR) / "scenes");
             if (c.light.empty()) {
                 // The office's lights are emissive fixtures: take the first emissive node.
                 client::Client probe(srv.url, "bench-probe");
@@ -259,7 +261,6 @@ int main(int argc, char** argv) {
                 o.elementSize = 2.0f;
                 o.linkOracle = "paper";
                 o.oracle = 4.0f;
-                o.reload = true;
                 for (const auto& n : probe.Load(o).nodes)
                     if (n.emissive) {
                         c.light = n.name;

@@ -115,6 +115,7 @@ uint64_t Session::Queue(std::function<void(Scene&)> apply, bool moves, std::stri
     // Caller holds mutex_ and has applied `apply` to validated_ already.
     uint64_t id = nextEdit_++;
     pending_.push_back(Pending{id, Clock::now(), std::move(apply), moves, std::move(what)});
+    if (!rebuild_) editWaiting_ = true;
     wake_.notify_all();
     return id;
 }
@@ -306,10 +307,13 @@ std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene) const {
     return CreateSolver(scene, settings_.solver);
 }
 
-void Session::ProduceFrame(int iterations, std::string note) {
+void Session::ProduceFrame(int iterations, std::string note, bool interruptible) {
     // Worker thread only, without mutex_: solver_ and applied_ belong to the worker.
     auto start = Clock::now();
-    solver_->Iterate(iterations);
+    for (int i = 0; i < iterations; ++i) {
+        solver_->Iterate(1);
+        if (interruptible && editWaiting_.load(std::memory_order_relaxed)) break;
+    }
     std::vector<glm::vec3> surfels = solver_->SurfelIrradiance();
     double changed = 0.0, total = 0.0;
     bool comparable = lastSurfels_.size() == surfels.size();
@@ -414,6 +418,7 @@ void Session::Run() {
             uint64_t last = pending_.back().id;
             auto received = pending_.back().received;
             pending_.clear();
+            editWaiting_ = false;
             if (moves) {
                 rebuild_ = std::make_unique<Rebuild>();
                 rebuild_->scene = std::move(next);
@@ -450,11 +455,11 @@ void Session::Run() {
 
         // A device failure stops this session's frames, not the server: it is reported in
         // stats and to the step that hit it, and the next edit tries again.
-        auto produce = [&](int iterations) -> std::exception_ptr {
+        auto produce = [&](int iterations, bool interruptible) -> std::exception_ptr {
             lock.unlock();
             std::exception_ptr failure;
             try {
-                ProduceFrame(iterations, note);
+                ProduceFrame(iterations, note, interruptible);
             } catch (const std::exception& e) {
                 failure = std::current_exception();
                 lock.lock();
@@ -468,12 +473,12 @@ void Session::Run() {
         if (!steps_.empty()) {
             auto [iterations, promise] = std::move(steps_.front());
             steps_.pop_front();
-            if (auto failure = produce(iterations))
+            if (auto failure = produce(iterations, false))
                 promise.set_exception(failure);
             else
                 promise.set_value(frames_);
         } else if (!converged_) {
-            produce(settings_.iterationsPerFrame);
+            produce(settings_.iterationsPerFrame, true);
         }
     }
 }

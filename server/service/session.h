@@ -160,7 +160,9 @@ class Session {
 
     uint64_t Queue(std::function<void(Scene&)> apply, bool moves, std::string what);
     void Run();
-    void ProduceFrame(int iterations, std::string note);
+    // `interruptible`: end the frame early, after the current iteration, when an edit that
+    // can apply at once arrives (it then waits at most one iteration, not a whole frame).
+    void ProduceFrame(int iterations, std::string note, bool interruptible);
     std::unique_ptr<Solver> BuildSolver(const Scene& scene) const;
 
     const std::string name_;
@@ -195,6 +197,7 @@ class Session {
     nlohmann::json solverStats_;           // as of the newest frame (worker writes)
     SolverStats solverStatsRaw_;
     std::string lastError_;
+    std::atomic<bool> editWaiting_{false};  // an edit is queued and no rebuild runs
     std::thread worker_;
 };
 
