@@ -155,8 +155,7 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
             if (i == 0) solver = Percentile(s, 0.5);
         }
         double interval = fpsWorst > 0 ? 1000.0 / fpsWorst : 0.0;
-        double fpsMin = fpsWorst;
-        if (n == 1) fpsOne = fpsMin;
+        if (n == 1) fpsOne = fpsWorst;
         double overhead = solver > 0 ? interval / solver - 1.0 : 0.0;
         double cost = fpsOne > 0 ? fpsOne / std::max(fpsWorst, 1e-9) - 1.0 : 0.0;
         std::printf("  %-11d %9.2f %8.1f ms %8.1f ms %10.1f%% %8.1f%%\n", n, fpsWorst, interval,

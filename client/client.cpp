@@ -150,7 +150,6 @@ struct Client::Impl {
             decoder.Feed(buf.data(), n);
             protocol::Message m;
             protocol::Decoder::Result r;
-            bool bad = false;
             while ((r = decoder.Next(m)) == protocol::Decoder::Result::kMessage) {
                 if (m.header.type == MessageType::kFrame && m.header.requestId == 0) {
                     FrameCallback cb;
@@ -174,9 +173,8 @@ struct Client::Impl {
             }
             if (r == protocol::Decoder::Result::kError) {
                 reason = "bad data from the server: " + decoder.error();
-                bad = true;
+                break;
             }
-            if (bad) break;
         }
         std::lock_guard lock(mutex);
         open = false;

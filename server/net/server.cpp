@@ -59,8 +59,6 @@ std::optional<glm::vec3> Vec(const fb::Vec3* v) {
     return glm::vec3(v->x(), v->y(), v->z());
 }
 
-bool IsLoopback(const asio::ip::address& a) { return a.is_loopback(); }
-
 void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& session,
                     bool reused) {
     Scene scene = session.SceneSnapshot();
@@ -97,20 +95,27 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
 
 void BuildFramePayload(flatbuffers::FlatBufferBuilder& b, const service::FrameData& frame,
                        service::Channel channel, fb::Format format) {
-    auto values = service::Session::ChannelOf(frame, channel);
+    // Channels: punctual lights are not implemented yet, so `direct` is zero and `total`
+    // equals `indirect` (exact only without them; the connection refuses the others).
+    const bool zero = channel == service::Channel::kDirect;
     std::vector<flatbuffers::Offset<fb::PrimitiveIrradiance>> prims;
-    prims.reserve(values.size());
-    for (size_t p = 0; p < values.size(); ++p) {
-        const auto& rgb = values[p];
+    prims.reserve(frame.irradiance.size());
+    for (size_t p = 0; p < frame.irradiance.size(); ++p) {
+        const auto& rgb = frame.irradiance[p];
+        const float* values = reinterpret_cast<const float*>(rgb.data());
+        const size_t n = rgb.size() * 3;
         flatbuffers::Offset<flatbuffers::Vector<float>> f32 = 0;
         flatbuffers::Offset<flatbuffers::Vector<uint16_t>> f16 = 0;
         if (format == fb::Format::Float16) {
             uint16_t* out = nullptr;
-            f16 = b.CreateUninitializedVector(rgb.size() * 3, &out);
-            for (size_t i = 0; i < rgb.size(); ++i)
-                for (int c = 0; c < 3; ++c) out[i * 3 + c] = protocol::FloatToHalf(rgb[i][c]);
+            f16 = b.CreateUninitializedVector(n, &out);
+            for (size_t i = 0; i < n; ++i) out[i] = protocol::FloatToHalf(zero ? 0.0f : values[i]);
+        } else if (zero) {
+            float* out = nullptr;
+            f32 = b.CreateUninitializedVector(n, &out);
+            std::fill(out, out + n, 0.0f);
         } else {
-            f32 = b.CreateVector(reinterpret_cast<const float*>(rgb.data()), rgb.size() * 3);
+            f32 = b.CreateVector(values, n);
         }
         const service::PrimitiveKey& key = (*frame.layout)[p];
         prims.push_back(fb::CreatePrimitiveIrradiance(b, b.CreateSharedString(key.node), key.mesh,
@@ -501,7 +506,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     }
 
     void CheckChannel(const service::Session& session, service::Channel channel) {
-        if (channel != service::Channel::kIndirect && session.SceneSnapshot().punctualLights > 0)
+        if (channel != service::Channel::kIndirect && session.PunctualLights() > 0)
             throw ServiceError(ErrorKind::kUnsupported,
                                "the scene has punctual lights, which this server does not light "
                                "yet; only the indirect channel is exact");
@@ -586,7 +591,7 @@ std::string Server::Listen(const ListenAddress& address, bool allowRemote) {
         asio::ip::address ip =
             asio::ip::make_address(address.host == "localhost" ? "127.0.0.1" : address.host, ec);
         if (ec) throw Error("tcp://" + address.host + ": not an IP address (" + ec.message() + ")");
-        if (!IsLoopback(ip) && !allowRemote)
+        if (!ip.is_loopback() && !allowRemote)
             throw Error("tcp://" + address.host + ":" + std::to_string(address.port) +
                         " is not a loopback address; pass --allow-remote to listen on it");
         auto acceptor = std::make_shared<asio::ip::tcp::acceptor>(io_);

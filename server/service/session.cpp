@@ -80,7 +80,6 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     solver_ = CreateSolver(scene, settings_.solver, progress);
     buildSeconds_ = MsSince(start) / 1000.0;
     solverStatsRaw_ = solver_->Stats();
-    solverStats_ = StatsToJson(solverStatsRaw_);
     for (const auto& n : scene.nodes)
         for (uint32_t pi : n.primitives)
             if (glm::any(glm::greaterThan(scene.materials[scene.primitives[pi].material].emission,
@@ -90,6 +89,7 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     auto layout = std::make_shared<std::vector<PrimitiveKey>>();
     for (const auto& p : scene.primitives) layout->push_back({p.node, p.mesh, p.primitive});
     layout_ = layout;
+    punctualLights_ = scene.punctualLights;
     validated_ = scene;
     applied_ = std::move(scene);
     worker_ = std::thread([this] { Run(); });
@@ -290,17 +290,9 @@ nlohmann::json Session::StatsJson() const {
         if (now - t < std::chrono::seconds(1)) ++recent;
     j["fps"] = recent;
     j["last_frame_ms"] = latest_ ? latest_->frameMs : 0.0;
-    j["solver"] = solverStats_;
+    j["solver"] = StatsToJson(solverStatsRaw_);
     if (!lastError_.empty()) j["last_error"] = lastError_;
     return j;
-}
-
-std::vector<std::vector<glm::vec3>> Session::ChannelOf(const FrameData& frame, Channel channel) {
-    if (channel != Channel::kDirect) return frame.irradiance;  // total = indirect + 0
-    std::vector<std::vector<glm::vec3>> zero(frame.irradiance.size());
-    for (size_t p = 0; p < zero.size(); ++p)
-        zero[p].assign(frame.irradiance[p].size(), glm::vec3(0));
-    return zero;
 }
 
 std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene) const {
@@ -357,7 +349,6 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
         frame->frameMs = MsSince(start);
         latest_ = frame;
         solverStatsRaw_ = stats;
-        solverStats_ = StatsToJson(stats);
         auto now = Clock::now();
         recentFrames_.push_back(now);
         while (recentFrames_.size() > 1 && now - recentFrames_.front() > std::chrono::seconds(1))

@@ -134,9 +134,8 @@ class Session {
     SolverStats SolverStatistics() const;
     nlohmann::json StatsJson() const;
     double BuildSeconds() const { return buildSeconds_; }
-    // Irradiance of `channel` for a frame: `direct` is zero while punctual lights are not
-    // implemented, which is exact only for scenes without them (checked by the caller).
-    static std::vector<std::vector<glm::vec3>> ChannelOf(const FrameData& frame, Channel channel);
+    // KHR_lights_punctual lights in the file (not lit yet: only `indirect` is exact).
+    int PunctualLights() const { return punctualLights_; }
 
   private:
     struct Pending {
@@ -168,6 +167,7 @@ class Session {
     const std::string name_;
     const SessionSettings settings_;
     double buildSeconds_ = 0.0;
+    int punctualLights_ = 0;
 
     mutable std::mutex mutex_;  // guards everything below
     std::condition_variable wake_;
@@ -194,7 +194,6 @@ class Session {
     std::vector<double> passTotals_;                                  // ms, as of last frame
     std::shared_ptr<const std::vector<PrimitiveKey>> layout_;
     std::vector<std::string> lightNodes_;  // nodes that emitted light when loaded
-    nlohmann::json solverStats_;           // as of the newest frame (worker writes)
     SolverStats solverStatsRaw_;
     std::string lastError_;
     std::atomic<bool> editWaiting_{false};  // an edit is queued and no rebuild runs

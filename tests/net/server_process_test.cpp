@@ -125,6 +125,14 @@ struct Watcher {
     }
 };
 
+// Loads the Cornell box through `c`, subscribes `watch` and waits for the first converged
+// frame; false if none came.
+bool LoadAndWatch(client::Client& c, Watcher& watch) {
+    c.Load(Cornell());
+    c.Subscribe(std::ref(watch));
+    return watch.Until(0).has_value();
+}
+
 float MeanOf(const client::Frame& f, const std::string& node) {
     double sum = 0.0;
     size_t n = 0;
@@ -135,9 +143,8 @@ float MeanOf(const client::Frame& f, const std::string& node) {
 }
 
 // Floor vertices within `radius` (xz) of `centre`: their mean irradiance.
-float FloorNear(const client::Frame& f, const client::SceneInfo& info, glm::vec2 centre,
-                float radius, const std::vector<glm::vec3>& positions) {
-    (void)info;
+float FloorNear(const client::Frame& f, glm::vec2 centre, float radius,
+                const std::vector<glm::vec3>& positions) {
     double sum = 0.0;
     size_t n = 0;
     for (const auto& p : f.primitives) {
@@ -205,10 +212,10 @@ TEST(ServerProcess, TwoClientsOneEditsOneWatchesOverTcpAndUnix) {
     auto moved = watch.Until(moveEdit);
     ASSERT_TRUE(moved) << "the watcher never saw a converged frame with edit " << moveEdit;
     EXPECT_GE(moved->lastEdit, moveEdit);
-    float oldBefore = FloorNear(*start, info, oldSpot, 0.05f, floorPos);
-    float oldAfter = FloorNear(*moved, info, oldSpot, 0.05f, floorPos);
-    float newBefore = FloorNear(*start, info, newSpot, 0.05f, floorPos);
-    float newAfter = FloorNear(*moved, info, newSpot, 0.05f, floorPos);
+    float oldBefore = FloorNear(*start, oldSpot, 0.05f, floorPos);
+    float oldAfter = FloorNear(*moved, oldSpot, 0.05f, floorPos);
+    float newBefore = FloorNear(*start, newSpot, 0.05f, floorPos);
+    float newAfter = FloorNear(*moved, newSpot, 0.05f, floorPos);
     // Under the block the floor was dark (the block stands on it); uncovered, it is lit.
     EXPECT_GT(oldAfter, 0.0f);
     EXPECT_GT(oldAfter, 5.0f * oldBefore)
@@ -241,10 +248,8 @@ TEST(ServerProcess, TwoClientsOneEditsOneWatchesOverTcpAndUnix) {
 TEST(ServerProcess, GarbageOnOneConnectionDoesNotDisturbAnother) {
     ServerProcess server("garbage");
     client::Client viewer(server.Unix(), "viewer");
-    viewer.Load(Cornell());
     Watcher watch;
-    viewer.Subscribe(std::ref(watch));
-    ASSERT_TRUE(watch.Until(0));
+    ASSERT_TRUE(LoadAndWatch(viewer, watch));
 
     // The reply is an Error frame (bad magic), then the server closes the connection.
     std::string junk = "GET / HTTP/1.1\r\nHost: x\r\n\r\n";
@@ -331,10 +336,8 @@ TEST(ServerProcess, BadRequestsGetClearErrorsAndTheConnectionStays) {
 TEST(ServerProcess, AClientKilledMidStreamHarmsNoOne) {
     ServerProcess server("killed");
     client::Client viewer(server.Unix(), "viewer");
-    viewer.Load(Cornell());
     Watcher watch;
-    viewer.Subscribe(std::ref(watch));
-    ASSERT_TRUE(watch.Until(0));
+    ASSERT_TRUE(LoadAndWatch(viewer, watch));
     // A CLI watcher process, killed with SIGKILL while frames stream to it.
     std::string cmd = std::string(PENUMBRA_BINARY_DIR) + "/penumbra --connect " + server.Tcp() +
                       " watch --timeout 30 > /dev/null 2>&1";
@@ -386,10 +389,8 @@ TEST(ServerProcess, CliCommandsAndScriptAgainstTheServer) {
 TEST(ServerProcess, SigtermShutsDownCleanly) {
     ServerProcess server("sigterm");
     client::Client c(server.Unix());
-    c.Load(Cornell());
     Watcher watch;
-    c.Subscribe(std::ref(watch));
-    ASSERT_TRUE(watch.Until(0));
+    ASSERT_TRUE(LoadAndWatch(c, watch));
     EXPECT_EQ(server.Terminate(), 0) << server.Log();
     c.Wait();  // the server closed our connection
     EXPECT_FALSE(c.Connected());
