@@ -1,5 +1,6 @@
 // Local pass at the leaves (Sec. 3.1): K reflects incident radiance into the front
-// hemisphere (Eq. 18, diffuse: I_L = a⟨n|ω⟩(L_e + ρE/π)), J sends it through the back
+// hemisphere (Eq. 18, diffuse: I_L = a⟨n|ω⟩(L_e + ρ(E + E_d)/π), E_d the shadow-mapped
+// direct light of Sec. 3.3, which makes no antiradiance), J sends it through the back
 // hemisphere as antiradiance (Eq. 19: I_A = a⟨n|−ω⟩L_in). I_ex = I_L − I_A.
 #version 450
 #extension GL_GOOGLE_include_directive : require
@@ -13,6 +14,7 @@ layout(std430, binding = 2) readonly buffer Lin { float lin[]; };
 layout(std430, binding = 3) readonly buffer IexOld { float iexOld[]; };
 layout(std430, binding = 4) writeonly buffer IexNew { float iexNew[]; };
 layout(std430, binding = 5) writeonly buffer Irradiance { float irradiance[]; };
+layout(std430, binding = 6) readonly buffer Direct { vec4 direct[]; };
 
 layout(push_constant) uniform Push { uint count; uint mode; float binSolidAngle; } pc;
 
@@ -35,7 +37,7 @@ void main() {
     irradiance[i * 3u + 1u] = e.y;
     irradiance[i * 3u + 2u] = e.z;
 
-    vec3 front = leaf.area * leaf.cosNormOut * (leaf.emission + leaf.albedo * e * kInvPi);
+    vec3 front = leaf.area * leaf.cosNormOut * (leaf.emission + leaf.albedo * (e + direct[i].xyz) * kInvPi);
     for (uint b = 0; b < BINS; ++b) {
         float c = dot(leaf.normal, dirs[b].xyz);
         uint k = row + b * 3u;

@@ -10,6 +10,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
+#include <numbers>
 #include <sstream>
 
 #include "base/check.h"
@@ -253,6 +254,47 @@ Material ReadMaterial(const Context& ctx, int index) {
     return out;
 }
 
+// KHR_lights_punctual light `index`, checked; placed by the caller.
+PunctualLight ReadLight(const Context& ctx, int index) {
+    if (index < 0 || index >= static_cast<int>(ctx.model.lights.size()))
+        ctx.Fail("KHR_lights_punctual", "light " + std::to_string(index) + " does not exist");
+    const tinygltf::Light& in = ctx.model.lights[index];
+    std::string where = "light " + std::to_string(index);
+    if (!in.name.empty()) where += " '" + in.name + "'";
+    PunctualLight light;
+    light.name = in.name;
+    if (in.type == "point")
+        light.type = LightType::kPoint;
+    else if (in.type == "spot")
+        light.type = LightType::kSpot;
+    else if (in.type == "directional")
+        light.type = LightType::kDirectional;
+    else
+        ctx.Fail(where, "type '" + in.type + "' is not point, spot or directional");
+    if (!in.color.empty()) {
+        if (in.color.size() != 3) ctx.Fail(where, "color needs 3 numbers");
+        for (int c = 0; c < 3; ++c) {
+            if (!std::isfinite(in.color[c]) || in.color[c] < 0.0)
+                ctx.Fail(where, "color must be finite and not negative");
+            light.color[c] = static_cast<float>(in.color[c]);
+        }
+    }
+    if (!std::isfinite(in.intensity) || in.intensity < 0.0)
+        ctx.Fail(where, "intensity must be finite and not negative");
+    light.intensity = static_cast<float>(in.intensity);
+    if (!std::isfinite(in.range) || in.range < 0.0)
+        ctx.Fail(where, "range must be a positive number of metres");
+    light.range = light.type == LightType::kDirectional ? 0.0f : static_cast<float>(in.range);
+    if (light.type == LightType::kSpot) {
+        double inner = in.spot.innerConeAngle, outer = in.spot.outerConeAngle;
+        if (!(inner >= 0.0 && inner < outer && outer <= std::numbers::pi / 2 + 1e-6))
+            ctx.Fail(where, "spot cone angles need 0 <= innerConeAngle < outerConeAngle <= pi/2");
+        light.innerCone = static_cast<float>(inner);
+        light.outerCone = static_cast<float>(outer);
+    }
+    return light;
+}
+
 }  // namespace
 
 float SrgbToLinear(float c) {
@@ -287,7 +329,6 @@ Scene LoadGltf(const std::string& path) {
 
     Scene scene;
     scene.source = path;
-    scene.punctualLights = static_cast<int>(model.lights.size());
     scene.materials.reserve(model.materials.size() + 1);
     for (size_t i = 0; i < model.materials.size(); ++i)
         scene.materials.push_back(ReadMaterial(ctx, static_cast<int>(i)));
@@ -335,6 +376,21 @@ Scene LoadGltf(const std::string& path) {
         if (!Finite(world)) ctx.Fail(NodeLabel(model, ni), "transform has NaN or infinity");
         sn.world = world;
         ReadPenumbraExtras(ctx, NodeLabel(model, ni), node.extras, sn);
+        if (auto ext = node.extensions.find("KHR_lights_punctual"); ext != node.extensions.end()) {
+            const tinygltf::Value& index = ext->second.Get("light");
+            if (!index.IsInt())
+                ctx.Fail(NodeLabel(model, ni), "KHR_lights_punctual needs an integer 'light'");
+            PunctualLight light = ReadLight(ctx, index.Get<int>());
+            light.node = ni;
+            if (light.name.empty()) light.name = sn.name;
+            try {
+                PlaceLight(light, world);
+            } catch (const Error& e) {
+                ctx.Fail(NodeLabel(model, ni),
+                         "transform is singular (the light has no direction)");
+            }
+            scene.lights.push_back(light);
+        }
         if (parentIndex >= 0) {
             scene.nodes[parentIndex].children.push_back(ni);
             sn.dynamic = sn.dynamic || scene.nodes[parentIndex].dynamic;

@@ -1,6 +1,7 @@
 // Scene bounds, counts and normal generation.
 #include "scene/scene.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -64,6 +65,39 @@ void PlaceSubtree(const Scene& scene, int node, const glm::mat4& parentWorld,
 
 }  // namespace
 
+float LightAttenuation(const PunctualLight& light, const glm::vec3& toPoint, float d) {
+    if (light.type == LightType::kDirectional) return 1.0f;
+    float a = 1.0f;
+    if (light.range > 0.0f) {
+        float x = d / light.range;
+        float w = std::clamp(1.0f - x * x * x * x, 0.0f, 1.0f);
+        a = w * w;
+    }
+    if (light.type == LightType::kSpot) {
+        float cosOuter = std::cos(light.outerCone);
+        float scale = 1.0f / std::max(1e-3f, std::cos(light.innerCone) - cosOuter);
+        float t = std::clamp((glm::dot(light.direction, toPoint) - cosOuter) * scale, 0.0f, 1.0f);
+        a *= t * t;
+    }
+    return a;
+}
+
+void PlaceLight(PunctualLight& light, const glm::mat4& world) {
+    light.position = glm::vec3(world[3]);
+    glm::vec3 d = glm::mat3(world) * glm::vec3(0.0f, 0.0f, -1.0f);
+    float len = glm::length(d);
+    if (!(len > 1e-12f) || !std::isfinite(len))
+        throw Error("light '" + light.name + "' has a singular transform (no direction)");
+    light.direction = d / len;
+}
+
+int FindLight(const Scene& scene, const std::string& name) {
+    for (size_t i = 0; i < scene.lights.size(); ++i)
+        if (scene.nodes[scene.lights[i].node].name == name || scene.lights[i].name == name)
+            return static_cast<int>(i);
+    return -1;
+}
+
 void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
     if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
         throw Error("node index " + std::to_string(node) + " does not exist");
@@ -75,6 +109,11 @@ void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
     PlaceSubtree(scene, node, parentWorld, local, world);
     for (const auto& [i, w] : world) {
         if (!IsFinite(w)) throw Error("transform of '" + n.name + "' overflows to infinity");
+        for (const PunctualLight& light : scene.lights)
+            if (light.node == i) {
+                PunctualLight moved = light;
+                PlaceLight(moved, w);  // throws for a singular transform
+            }
         if (scene.nodes[i].primitives.empty()) continue;
         float det = glm::determinant(glm::mat3(w));
         if (!(std::abs(det) >= 1e-12f))
@@ -88,6 +127,8 @@ void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
     scene.nodes[node].local = local;
     for (const auto& [i, w] : world) {
         scene.nodes[i].world = w;
+        for (PunctualLight& light : scene.lights)
+            if (light.node == i) PlaceLight(light, w);
         glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(w)));
         for (uint32_t pi : scene.nodes[i].primitives) {
             Primitive& p = scene.primitives[pi];

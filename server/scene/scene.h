@@ -45,14 +45,34 @@ struct SceneNode {
     std::vector<uint32_t> primitives;  // indices into Scene::primitives
 };
 
+// A KHR_lights_punctual light placed by a node. Lights shine down the node's −Z axis.
+enum class LightType { kPoint, kSpot, kDirectional };
+
+struct PunctualLight {
+    std::string name;  // the glTF light's name, else the node's
+    int node = -1;     // the node that places it (its name is the object name in the protocol)
+    LightType type = LightType::kPoint;
+    glm::vec3 color{1.0f};
+    float intensity = 1.0f;  // candela (point, spot) or lux (directional), as given
+    float range = 0.0f;      // metres; 0 = infinite
+    float innerCone = 0.0f;  // radians, spot only
+    float outerCone = 0.7853982f;
+    glm::vec3 position{0.0f};                // world space (point, spot)
+    glm::vec3 direction{0.0f, 0.0f, -1.0f};  // world space, unit, where the light travels
+};
+
+// Intensity scale of a light towards a point at distance `d` along `toPoint` (unit, from the
+// light), without the 1/d² and the receiver's cosine: the KHR_lights_punctual spot cone
+// (smooth between the cone angles) and range window ((1 − (d/range)⁴)² clamped, the
+// extension's recommended falloff). 1 for directional lights.
+float LightAttenuation(const PunctualLight& light, const glm::vec3& toPoint, float d);
+
 struct Scene {
     std::string source;  // file it came from, for messages
     std::vector<Material> materials;
     std::vector<Primitive> primitives;
-    std::vector<SceneNode> nodes;  // indexed like the file's nodes (Primitive::nodeIndex)
-    // KHR_lights_punctual lights in the file. Not lit yet (issue 5): their direct light is
-    // missing from every channel, so services refuse the `direct` and `total` channels.
-    int punctualLights = 0;
+    std::vector<SceneNode> nodes;       // indexed like the file's nodes (Primitive::nodeIndex)
+    std::vector<PunctualLight> lights;  // KHR_lights_punctual, one per node that places one
 
     glm::vec3 BoundsMin() const;
     glm::vec3 BoundsMax() const;
@@ -64,7 +84,14 @@ struct Scene {
 // Index of the node called `name`, or -1.
 int FindNode(const Scene& scene, const std::string& name);
 
-// Replaces node `node`'s local transform and re-places the geometry of its subtree.
+// Sets the light's world position and direction from its node's world matrix; throws
+// penumbra::Error when the matrix has no direction (singular).
+void PlaceLight(PunctualLight& light, const glm::mat4& world);
+
+// Index of the light placed by the node called `name`, or -1.
+int FindLight(const Scene& scene, const std::string& name);
+
+// Replaces node `node`'s local transform and re-places the geometry and lights of its subtree.
 // Throws penumbra::Error for a non-finite or singular matrix (the scene is unchanged then).
 void SetNodeTransform(Scene& scene, int node, const glm::mat4& local);
 

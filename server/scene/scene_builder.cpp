@@ -7,6 +7,8 @@
 #include <cmath>
 #include <cstring>
 #include <glm/gtc/matrix_transform.hpp>
+#define GLM_ENABLE_EXPERIMENTAL
+#include <glm/gtx/quaternion.hpp>
 
 #include "base/check.h"
 #include "scene/gltf_loader.h"
@@ -113,6 +115,20 @@ void SceneBuilder::SetDynamic(const std::string& node, glm::vec3 origin, glm::ve
     dynamic_[node] = Motion{origin, true, boundsMin, boundsMax};
 }
 
+void SceneBuilder::AddLight(const PunctualLight& light) {
+    if (light.name.empty() || nodes_.count(light.name))
+        throw Error("a light needs a name that no other node has");
+    lights_.push_back(light);
+    lights_.back().direction = glm::normalize(light.direction);
+}
+
+namespace {
+// The rotation that turns −Z into `direction` (unit).
+glm::quat LightRotation(const glm::vec3& direction) {
+    return glm::rotation(glm::vec3(0.0f, 0.0f, -1.0f), direction);
+}
+}  // namespace
+
 Scene SceneBuilder::Build() const {
     Scene scene;
     scene.source = "(built in memory)";
@@ -148,6 +164,17 @@ Scene SceneBuilder::Build() const {
         }
         scene.nodes.push_back(std::move(node));
         ++nodeIndex;
+    }
+    for (const PunctualLight& light : lights_) {
+        SceneNode node;
+        node.name = light.name;
+        node.local = node.world = glm::translate(glm::mat4(1.0f), light.position) *
+                                  glm::mat4_cast(LightRotation(light.direction));
+        PunctualLight placed = light;
+        placed.node = nodeIndex++;
+        PlaceLight(placed, node.world);
+        scene.nodes.push_back(std::move(node));
+        scene.lights.push_back(placed);
     }
     return scene;
 }
@@ -255,6 +282,29 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
             extras["penumbra"] = tinygltf::Value(pen);
             node.extras = tinygltf::Value(extras);
         }
+        model.nodes.push_back(node);
+        scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
+    }
+    for (const PunctualLight& light : lights_) {
+        tinygltf::Light out;
+        out.name = light.name;
+        out.type = light.type == LightType::kPoint  ? "point"
+                   : light.type == LightType::kSpot ? "spot"
+                                                    : "directional";
+        out.color = {light.color.x, light.color.y, light.color.z};
+        out.intensity = light.intensity;
+        out.range = light.range;
+        out.spot.innerConeAngle = light.innerCone;
+        out.spot.outerConeAngle = light.outerCone;
+        model.lights.push_back(out);
+        tinygltf::Node node;
+        node.name = light.name;
+        glm::quat q = LightRotation(light.direction);
+        node.translation = {light.position.x, light.position.y, light.position.z};
+        node.rotation = {q.x, q.y, q.z, q.w};
+        tinygltf::Value::Object ext;
+        ext["light"] = tinygltf::Value(static_cast<int>(model.lights.size() - 1));
+        node.extensions["KHR_lights_punctual"] = tinygltf::Value(ext);
         model.nodes.push_back(node);
         scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
     }

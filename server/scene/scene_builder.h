@@ -35,6 +35,10 @@ class SceneBuilder {
     void SetDynamic(const std::string& node, glm::vec3 origin, glm::vec3 boundsMin,
                     glm::vec3 boundsMax);
 
+    // A KHR_lights_punctual light on its own node called `light.name`, placed at
+    // `light.position` and turned so that its −Z axis is `light.direction`.
+    void AddLight(const PunctualLight& light);
+
     Scene Build() const;
     // Writes .gltf (buffers embedded as base64) or .glb. Throws penumbra::Error.
     void WriteGltf(const std::string& path) const;
@@ -50,6 +54,7 @@ class SceneBuilder {
         glm::vec3 boundsMin{0.0f}, boundsMax{0.0f};
     };
     std::map<std::string, Motion> dynamic_;
+    std::vector<PunctualLight> lights_;
     std::vector<Material> materials_;
     std::vector<std::string> nodeOrder_;
     std::map<std::string, std::map<uint32_t, Part>> nodes_;

@@ -89,7 +89,7 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     auto layout = std::make_shared<std::vector<PrimitiveKey>>();
     for (const auto& p : scene.primitives) layout->push_back({p.node, p.mesh, p.primitive});
     layout_ = layout;
-    punctualLights_ = scene.punctualLights;
+    punctualLights_ = static_cast<int>(scene.lights.size());
     validated_ = scene;
     applied_ = std::move(scene);
     worker_ = std::thread([this] { Run(); });
@@ -153,7 +153,7 @@ uint64_t Session::Submit(const LightEdit& edit) {
             ErrorKind::kNotFound,
             "no light '" + edit.light + "' in scene '" + name_ +
                 "'; lights (emissive nodes): " + (lights.empty() ? "(none)" : lights) +
-                (validated_.punctualLights ? "; punctual lights are not supported yet" : ""));
+                (!validated_.lights.empty() ? "; punctual lights are not supported yet" : ""));
     }
     if (edit.intensity && (!std::isfinite(*edit.intensity) || *edit.intensity < 0.0f))
         throw ServiceError(ErrorKind::kInvalidArgument,

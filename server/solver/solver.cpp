@@ -33,6 +33,19 @@ Scheme ParseScheme(const std::string& name) {
     throw Error("unknown scheme '" + name + "' (use symmetric or asymmetric)");
 }
 
+Channel ParseChannel(const std::string& name) {
+    if (name == "indirect") return Channel::kIndirect;
+    if (name == "direct") return Channel::kDirect;
+    if (name == "total") return Channel::kTotal;
+    throw Error("unknown channel '" + name + "' (use indirect, direct or total)");
+}
+
+const char* ChannelName(Channel channel) {
+    return channel == Channel::kDirect  ? "direct"
+           : channel == Channel::kTotal ? "total"
+                                        : "indirect";
+}
+
 std::vector<glm::vec3> PrimitiveIrradiance(const Surfels& surfels,
                                            const std::vector<glm::vec3>& surfelIrradiance,
                                            const Scene& scene, size_t p) {

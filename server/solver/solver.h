@@ -14,6 +14,10 @@
 namespace penumbra {
 
 enum class Scheme { kSymmetric, kAsymmetric };
+// What a solver reports (DESIGN.md, Channels): `direct` is the shadowed direct light of
+// punctual lights, `indirect` everything else (emitters, environment, every bounce),
+// `total` their sum.
+enum class Channel { kIndirect, kDirect, kTotal };
 enum class DeviceChoice { kAuto, kGpu, kLavapipe, kCpu };
 
 struct SolverSettings {
@@ -28,6 +32,7 @@ struct SolverSettings {
     bool paperOracle = false;     // Sec. 3.2's oracle (fewer links, less accurate)
     int threads = 0;              // CPU threads; 0 = all cores
     bool validation = false;      // Vulkan validation layers (tests turn them on)
+    int shadowMapSize = 1024;     // texels per side of each shadow map (cube face)
 };
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
@@ -52,6 +57,10 @@ struct SolverStats {
     std::vector<PassTiming> passes;
     size_t tableBytes = 0;
     size_t linkBytes = 0;
+    int lights = 0;         // punctual lights
+    int shadowViews = 0;    // shadow maps rendered per light update (cube faces count 6)
+    double msShadow = 0.0;  // last shadow pass
+    double msDirect = 0.0;  // last direct-light initialisation
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };
@@ -61,14 +70,18 @@ class Solver {
     virtual ~Solver() = default;
     // Runs `n` more iterations (one global + local pass each).
     virtual void Iterate(int n) = 0;
-    // Irradiance (the `indirect` channel: all light arriving from surfaces) per surfel.
-    virtual std::vector<glm::vec3> SurfelIrradiance() = 0;
+    // Irradiance per surfel in lux: `indirect` (all light arriving from surfaces),
+    // `direct` (punctual lights, shadowed) or `total`.
+    virtual std::vector<glm::vec3> SurfelIrradiance(Channel channel = Channel::kIndirect) = 0;
     virtual const Surfels& GetSurfels() const = 0;
     // Re-reads every surfel's albedo and emission from `scene` (the scene it was built from,
     // with materials or primitive material assignments changed, geometry unchanged). The
     // solution moves towards the new one from the next iteration on (Sec. 3.3: the
     // iteration continues from the current radiance).
     virtual void UpdateMaterials(const Scene& scene) = 0;
+    // Re-reads the punctual lights of `scene` (same geometry; lights moved, recoloured,
+    // dimmed): one shadow pass and a new direct light; the iteration continues.
+    virtual void UpdateLights(const Scene& scene) = 0;
     virtual SolverStats Stats() const = 0;
 };
 
@@ -82,6 +95,8 @@ std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& s
 DeviceChoice ParseDevice(const std::string& name);
 bool ParsePaperOracle(const std::string& name);  // "conservative" | "paper"
 Scheme ParseScheme(const std::string& name);
+Channel ParseChannel(const std::string& name);  // "indirect" | "direct" | "total"
+const char* ChannelName(Channel channel);
 
 // Per-vertex irradiance for primitive `p` in its input vertex order, clamped at zero.
 std::vector<glm::vec3> PrimitiveIrradiance(const Surfels& surfels,

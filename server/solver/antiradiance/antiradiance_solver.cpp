@@ -30,6 +30,17 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
                                                     settings.validation);
         deviceName_ = gpu_->DeviceName();
     }
+    if (!scene.lights.empty()) {
+        if (progress) progress("shadow maps", 0.0);
+        std::vector<uint32_t> order;
+        for (const LeafAttributes& leaf : model_.leaves) order.push_back(leaf.surfel);
+        direct_ = std::make_unique<direct::CpuDirect>(
+            scene, direct::MakeReceivers(model_.surfels, order), settings.shadowMapSize);
+        lights_ = static_cast<int>(scene.lights.size());
+        shadowViews_ =
+            static_cast<int>(direct::PlanShadows(scene, settings.shadowMapSize).views.size());
+        CopyDirect();
+    }
     setupSeconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
@@ -51,12 +62,37 @@ void AntiradianceSolver::Iterate(int n) {
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-std::vector<glm::vec3> AntiradianceSolver::SurfelIrradiance() {
-    std::vector<float> leaf = cpu_ ? cpu_->LeafIrradiance() : gpu_->ReadLeafIrradiance();
+std::vector<glm::vec3> AntiradianceSolver::SurfelIrradiance(Channel channel) {
+    std::vector<float> leaf;
+    if (channel != Channel::kDirect)
+        leaf = cpu_ ? cpu_->LeafIrradiance() : gpu_->ReadLeafIrradiance();
     std::vector<glm::vec3> out(model_.surfels.size(), glm::vec3(0.0f));
-    for (size_t i = 0; i < model_.leaves.size(); ++i)
-        out[model_.leaves[i].surfel] = glm::vec3(leaf[i * 3], leaf[i * 3 + 1], leaf[i * 3 + 2]);
+    for (size_t i = 0; i < model_.leaves.size(); ++i) {
+        glm::vec3 e(0.0f);
+        if (channel != Channel::kDirect)
+            e = glm::vec3(leaf[i * 3], leaf[i * 3 + 1], leaf[i * 3 + 2]);
+        if (channel != Channel::kIndirect) e += glm::vec3(model_.leafDirect[i]);
+        out[model_.leaves[i].surfel] = e;
+    }
     return out;
+}
+
+void AntiradianceSolver::CopyDirect() {
+    const std::vector<float>& e = direct_->Irradiance();
+    for (size_t i = 0; i < model_.leafDirect.size(); ++i)
+        model_.leafDirect[i] = glm::vec4(e[i * 4], e[i * 4 + 1], e[i * 4 + 2], 0.0f);
+    if (gpu_) gpu_->UploadDirect();  // the CPU back end reads model_.leafDirect directly
+}
+
+void AntiradianceSolver::UpdateLights(const Scene& scene) {
+    if (!direct_) {
+        if (scene.lights.empty()) return;
+        throw Error("the scene was loaded without punctual lights; lights cannot be added");
+    }
+    if (scene.lights.size() != static_cast<size_t>(lights_))
+        throw Error("the number of punctual lights cannot change in a loaded scene");
+    direct_->Update(scene);
+    CopyDirect();
 }
 
 void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
@@ -91,6 +127,12 @@ SolverStats AntiradianceSolver::Stats() const {
     s.msTotal = msTotal_;
     s.linkBytes =
         model_.links.links.size() * sizeof(Link) + model_.links.offsets.size() * sizeof(uint32_t);
+    s.lights = lights_;
+    if (direct_) {
+        s.shadowViews = shadowViews_;
+        s.msShadow = direct_->msShadow;
+        s.msDirect = direct_->msDirect;
+    }
     if (cpu_) {
         s.passes = {{"global", cpu_->msGlobal},
                     {"push", cpu_->msPush},

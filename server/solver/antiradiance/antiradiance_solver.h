@@ -4,6 +4,7 @@
 
 #include <memory>
 
+#include "direct/direct_light.h"
 #include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/model.h"
 #include "solver/solver.h"
@@ -19,9 +20,10 @@ class AntiradianceSolver : public Solver {
     ~AntiradianceSolver() override;
 
     void Iterate(int n) override;
-    std::vector<glm::vec3> SurfelIrradiance() override;
+    std::vector<glm::vec3> SurfelIrradiance(Channel channel = Channel::kIndirect) override;
     const Surfels& GetSurfels() const override { return model_.surfels; }
     void UpdateMaterials(const Scene& scene) override;
+    void UpdateLights(const Scene& scene) override;
     SolverStats Stats() const override;
 
     const AntiradianceModel& Model() const { return model_; }
@@ -32,6 +34,10 @@ class AntiradianceSolver : public Solver {
     AntiradianceModel model_;
     std::unique_ptr<cpu::CpuBackend> cpu_;
     std::unique_ptr<VulkanAntiradiance> gpu_;
+    std::unique_ptr<direct::CpuDirect> direct_;  // only when the scene has punctual lights
+    int shadowViews_ = 0;
+    int lights_ = 0;
+    void CopyDirect();
     std::string deviceName_;
     int iterations_ = 0;
     double msTotal_ = 0.0;

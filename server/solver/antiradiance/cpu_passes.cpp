@@ -66,11 +66,13 @@ inline void GatherRgba(const AntiradianceModel& m, const float* iex, uint32_t r,
 }
 
 // Local pass of one leaf for a diffuse BRDF f = ρ/π. Eq. 18 reduces to
-// I_L(ω_j) = a ⟨n|ω_j⟩ (L_e + ρ E / π), with E = ω_bin Σ_l ⟨n|−ω_l⟩ L_in(ω_l).
+// I_L(ω_j) = a ⟨n|ω_j⟩ (L_e + ρ (E + E_d) / π), with E = ω_bin Σ_l ⟨n|−ω_l⟩ L_in(ω_l)
+// and E_d the shadow-mapped direct light (Sec. 3.3), which J never sees.
 // Eq. 19: I_A(ω_j) = a ⟨n|−ω_j⟩ L_in(ω_j); I_ex = I_L − I_A on separate hemispheres.
 // `lin` holds the leaf's L_in as RGBA rows; `old` and `out` are rows of the RGB I_ex table.
-inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf, const Rgba* lin,
-                      const float* old, float* out, float* irradiance, LocalMode mode) {
+inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf,
+                      const glm::vec4& direct, const Rgba* lin, const float* old, float* out,
+                      float* irradiance, LocalMode mode) {
     const int bins = m.Bins();
     // Cosines of all bins once, from the directions' SoA arrays (vectorises).
     float cosine[Directions::kMaxBins];
@@ -86,7 +88,8 @@ inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf, co
     irradiance[2] = e[2];
     const float scale = leaf.area * leaf.cosNormOut;
     const Rgba front = scale * (Rgba{leaf.emission.x, leaf.emission.y, leaf.emission.z, 0.0f} +
-                                Rgba{leaf.albedo.x, leaf.albedo.y, leaf.albedo.z, 0.0f} * e *
+                                Rgba{leaf.albedo.x, leaf.albedo.y, leaf.albedo.z, 0.0f} *
+                                    (e + Rgba{direct.x, direct.y, direct.z, 0.0f}) *
                                     (1.0f / std::numbers::pi_v<float>));
     // Front bins get c·front, back bins a⟨n|ω⟩·L_in (c < 0); the other term is zero.
     auto exitant = [&](int b) {
@@ -204,7 +207,7 @@ void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld
                               const float* l = lin + leaf.node * row;
                               for (size_t b = 0; b < row / 3; ++b)
                                   rgba[b] = Rgba{l[b * 3], l[b * 3 + 1], l[b * 3 + 2], 0.0f};
-                              LocalLeaf(m, leaf, rgba, iexOld + leaf.node * row,
+                              LocalLeaf(m, leaf, m.leafDirect[i], rgba, iexOld + leaf.node * row,
                                         iexNew + leaf.node * row, irradiance + i * 3, mode);
                           }
                       });
@@ -245,8 +248,8 @@ struct CpuBackend::Walk {
         const HierarchyNode& n = m.hierarchy.nodes[node];
         if (n.IsLeaf()) {
             uint32_t i = self.leafIndex_[node];
-            LocalLeaf(m, m.leaves[i], lin, iex + node * row, next + node * row, irradiance + i * 3,
-                      mode);
+            LocalLeaf(m, m.leaves[i], m.leafDirect[i], lin, iex + node * row, next + node * row,
+                      irradiance + i * 3, mode);
             cycles.local()[kLocal] += Ticks() - t2;
             return;
         }

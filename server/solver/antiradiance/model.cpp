@@ -59,6 +59,7 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
         leaf.surfel = s;
         model.leaves.push_back(leaf);
     }
+    model.leafDirect.assign(model.leaves.size(), glm::vec4(0.0f));
     return model;
 }
 

@@ -41,7 +41,11 @@ struct AntiradianceModel {
     Directions dirs{128};
     Links links;
     std::vector<LeafAttributes> leaves;  // in hierarchy leaf (preorder) order
-    std::vector<uint32_t> leftChild;     // per node; kNoParent for leaves
+    // Direct irradiance E_d of punctual lights per leaf (RGB, w = 0), shadowed (Sec. 3.3):
+    // reflected by the local pass like the gathered irradiance, but never sent through
+    // as antiradiance. Zero without punctual lights.
+    std::vector<glm::vec4> leafDirect;
+    std::vector<uint32_t> leftChild;  // per node; kNoParent for leaves
     std::vector<uint32_t> rightChild;
 
     size_t Nodes() const { return hierarchy.size(); }

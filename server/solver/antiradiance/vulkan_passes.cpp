@@ -49,7 +49,7 @@ struct VulkanAntiradiance::Impl {
     gpu::Buffer linkOffsets, links, spreadLevels, neighbours, receivers, leaves, dirs, parents,
         children, nodesByDepth;
     // Tables.
-    gpu::Buffer iex0, iex1, lin, irradiance;
+    gpu::Buffer iex0, iex1, lin, irradiance, direct;
     gpu::Pipeline global, push, local, pull;
     vk::raii::DescriptorSet globalSet[2]{nullptr, nullptr}, localSet[2]{nullptr, nullptr},
         pullSet[2]{nullptr, nullptr}, pushSet{nullptr};
@@ -76,9 +76,10 @@ struct VulkanAntiradiance::Impl {
           iex1(ctx, m.TableFloats() * 4),
           lin(ctx, m.TableFloats() * 4),
           irradiance(ctx, m.leaves.size() * 12),
+          direct(ctx, m.leaves.size() * sizeof(glm::vec4)),
           global(ctx, Words(kSpirv_global), 7, Spec(), sizeof(uint32_t)),
           push(ctx, Words(kSpirv_push), 3, Spec(), sizeof(RangePush)),
-          local(ctx, Words(kSpirv_local), 6, Spec(), sizeof(LocalPush)),
+          local(ctx, Words(kSpirv_local), 7, Spec(), sizeof(LocalPush)),
           pull(ctx, Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
         Upload();
         const gpu::Buffer* g0[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
@@ -87,8 +88,8 @@ struct VulkanAntiradiance::Impl {
                                    &iex1,        &lin,   &receivers};
         globalSet[0] = global.MakeSet(g0);
         globalSet[1] = global.MakeSet(g1);
-        const gpu::Buffer* l0[] = {&leaves, &dirs, &lin, &iex0, &iex1, &irradiance};
-        const gpu::Buffer* l1[] = {&leaves, &dirs, &lin, &iex1, &iex0, &irradiance};
+        const gpu::Buffer* l0[] = {&leaves, &dirs, &lin, &iex0, &iex1, &irradiance, &direct};
+        const gpu::Buffer* l1[] = {&leaves, &dirs, &lin, &iex1, &iex0, &irradiance, &direct};
         localSet[0] = local.MakeSet(l0);
         localSet[1] = local.MakeSet(l1);
         const gpu::Buffer* p0[] = {&iex0, &children, &nodesByDepth};
@@ -121,6 +122,7 @@ struct VulkanAntiradiance::Impl {
         });
         receivers.Upload(order);
         leaves.Upload(m.leaves);
+        direct.Upload(m.leafDirect);
         std::vector<glm::vec4> d;
         for (const auto& v : m.dirs.All()) d.emplace_back(v, 0.0f);
         dirs.Upload(d);
@@ -250,6 +252,8 @@ std::vector<float> VulkanAntiradiance::ReadLeafIrradiance() {
 }
 
 void VulkanAntiradiance::UploadLeaves() { impl_->leaves.Upload(impl_->m.leaves); }
+
+void VulkanAntiradiance::UploadDirect() { impl_->direct.Upload(impl_->m.leafDirect); }
 
 std::string VulkanAntiradiance::DeviceName() const { return "vulkan:" + impl_->ctx.DeviceName(); }
 

@@ -25,6 +25,8 @@ class VulkanAntiradiance {
     std::vector<float> ReadLeafIrradiance();
     // Copies the model's per-leaf attributes (albedo, emission) to the device again.
     void UploadLeaves();
+    // Copies the model's per-leaf direct irradiance (E_d) to the device again.
+    void UploadDirect();
     std::string DeviceName() const;
     std::vector<PassTiming> PassTimings() const;
     size_t TableBytes() const;

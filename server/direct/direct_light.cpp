@@ -1,0 +1,331 @@
+// Shadow views of punctual lights, and the CPU twins of the shadow and direct passes.
+// shaders/shadow.{vert,frag} and shaders/direct.comp are the Vulkan side of the same
+// arithmetic; keep them in step.
+#include "direct/direct_light.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "base/check.h"
+
+namespace penumbra::direct {
+namespace {
+
+double MsSince(std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
+}
+
+// An up vector that is not parallel to `forward`.
+glm::vec3 UpFor(const glm::vec3& forward) {
+    return std::abs(forward.y) > 0.9f ? glm::vec3(0.0f, 0.0f, 1.0f) : glm::vec3(0.0f, 1.0f, 0.0f);
+}
+
+GpuShadowView PerspectiveView(const glm::vec3& eye, const glm::vec3& forward, float tanHalf,
+                              float nearZ, float farZ, int size) {
+    GpuShadowView v{};
+    glm::mat4 view = glm::lookAtRH(eye, eye + forward, UpFor(forward));
+    glm::mat4 proj = glm::perspectiveRH_ZO(2.0f * std::atan(tanHalf), 1.0f, nearZ, farZ);
+    v.viewProj = proj * view;
+    v.eye = glm::vec4(eye, 0.0f);
+    v.forward = glm::vec4(forward, 2.0f * tanHalf / static_cast<float>(size));
+    return v;
+}
+
+// Branchless orthonormal basis around a unit normal (Duff et al. 2017); direct.glsl has
+// the same lines.
+void TangentBasis(const glm::vec3& n, glm::vec3& t, glm::vec3& b) {
+    float sign = std::copysign(1.0f, n.z);
+    float a = -1.0f / (sign + n.z);
+    float c = n.x * n.y * a;
+    t = glm::vec3(1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x);
+    b = glm::vec3(c, sign + n.y * n.y * a, -n.y);
+}
+
+// Which of a light's views sees world point q.
+int ViewOf(const GpuLight& light, const glm::vec3& q) {
+    int first = static_cast<int>(light.cone.z);
+    if (light.cone.w < 6.0f) return first;
+    glm::vec3 v = q - glm::vec3(light.position);
+    glm::vec3 a = glm::abs(v);
+    if (a.x >= a.y && a.x >= a.z) return first + (v.x >= 0.0f ? 0 : 1);
+    if (a.y >= a.z) return first + (v.y >= 0.0f ? 2 : 3);
+    return first + (v.z >= 0.0f ? 4 : 5);
+}
+
+// Fraction of a bilinear 2×2 footprint around q that the light reaches. `toLight` is the
+// unit direction to the light, n the receiver's normal (for the offset against acne).
+float TapVisibility(const Plan& plan, const float* maps, const GpuLight& light, glm::vec3 q,
+                    const glm::vec3& n, const glm::vec3& toLight) {
+    const GpuShadowView& view = plan.views[ViewOf(light, q)];
+    const int size = plan.mapSize;
+    float texel =
+        view.eye.w > 0.5f
+            ? view.forward.w
+            : view.forward.w *
+                  std::max(glm::dot(q - glm::vec3(view.eye), glm::vec3(view.forward)), 0.0f);
+    q += n * (2.0f * texel) + toLight * texel;
+    glm::vec4 clip = view.viewProj * glm::vec4(q, 1.0f);
+    if (!(clip.w > 0.0f)) return 1.0f;
+    glm::vec3 ndc = glm::vec3(clip) / clip.w;
+    if (std::abs(ndc.x) > 1.0f || std::abs(ndc.y) > 1.0f || ndc.z < 0.0f || ndc.z > 1.0f)
+        return 1.0f;
+    float u = (ndc.x * 0.5f + 0.5f) * size - 0.5f, v = (ndc.y * 0.5f + 0.5f) * size - 0.5f;
+    float fu = std::floor(u), fv = std::floor(v);
+    float wu = u - fu, wv = v - fv;
+    int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
+    const float* map = maps + size_t(&view - plan.views.data()) * size * size;
+    auto lit = [&](int x, int y) {
+        x = std::clamp(x, 0, size - 1);
+        y = std::clamp(y, 0, size - 1);
+        return ndc.z <= map[size_t(y) * size + x] ? 1.0f : 0.0f;
+    };
+    return (1.0f - wv) * ((1.0f - wu) * lit(x0, y0) + wu * lit(x0 + 1, y0)) +
+           wv * ((1.0f - wu) * lit(x0, y0 + 1) + wu * lit(x0 + 1, y0 + 1));
+}
+
+// One screen-space triangle: texel coordinates and NDC depth.
+struct ScreenTriangle {
+    glm::vec3 a, b, c;
+    float minX, maxX, minY, maxY;
+};
+
+// Clips a clip-space triangle to z >= 0 (the ZO near plane) and appends the resulting
+// screen triangles (one polygon, fanned).
+void ClipAndProject(const glm::vec4 in[3], int size, std::vector<ScreenTriangle>& out) {
+    glm::vec4 poly[4];
+    int n = 0;
+    for (int i = 0; i < 3; ++i) {
+        const glm::vec4& p = in[i];
+        const glm::vec4& q = in[(i + 1) % 3];
+        bool pIn = p.z >= 0.0f, qIn = q.z >= 0.0f;
+        if (pIn) poly[n++] = p;
+        if (pIn != qIn) poly[n++] = p + (q - p) * (p.z / (p.z - q.z));
+    }
+    if (n < 3) return;
+    glm::vec3 s[4];
+    for (int i = 0; i < n; ++i) {
+        if (!(poly[i].w > 0.0f)) return;
+        glm::vec3 ndc = glm::vec3(poly[i]) / poly[i].w;
+        s[i] = glm::vec3((ndc.x * 0.5f + 0.5f) * size, (ndc.y * 0.5f + 0.5f) * size, ndc.z);
+    }
+    for (int i = 1; i + 1 < n; ++i) {
+        ScreenTriangle t{s[0], s[i], s[i + 1], 0, 0, 0, 0};
+        t.minX = std::min({t.a.x, t.b.x, t.c.x});
+        t.maxX = std::max({t.a.x, t.b.x, t.c.x});
+        t.minY = std::min({t.a.y, t.b.y, t.c.y});
+        t.maxY = std::max({t.a.y, t.b.y, t.c.y});
+        if (t.maxX < 0.0f || t.minX > size || t.maxY < 0.0f || t.minY > size) continue;
+        out.push_back(t);
+    }
+}
+
+// Depth-only rasterisation of `tris` into rows [y0, y1) of `map`: pixel centres at
+// (x + ½, y + ½), both windings, nearest depth kept, depths outside [0, 1] dropped.
+void RasterRows(const std::vector<ScreenTriangle>& tris, int size, int y0, int y1, float* map) {
+    for (const ScreenTriangle& t : tris) {
+        if (t.maxY < y0 || t.minY > y1) continue;
+        float area = (t.b.x - t.a.x) * (t.c.y - t.a.y) - (t.b.y - t.a.y) * (t.c.x - t.a.x);
+        if (area == 0.0f || !std::isfinite(area)) continue;
+        float inv = 1.0f / area;
+        int xa = std::max(0, static_cast<int>(std::floor(t.minX - 0.5f)));
+        int xb = std::min(size - 1, static_cast<int>(std::ceil(t.maxX - 0.5f)));
+        int ya = std::max(y0, static_cast<int>(std::floor(t.minY - 0.5f)));
+        int yb = std::min(y1 - 1, static_cast<int>(std::ceil(t.maxY - 0.5f)));
+        for (int y = ya; y <= yb; ++y) {
+            float py = y + 0.5f;
+            for (int x = xa; x <= xb; ++x) {
+                float px = x + 0.5f;
+                // Barycentric weights, made positive for either winding by 1/area.
+                float w0 = ((t.b.x - px) * (t.c.y - py) - (t.b.y - py) * (t.c.x - px)) * inv;
+                float w1 = ((t.c.x - px) * (t.a.y - py) - (t.c.y - py) * (t.a.x - px)) * inv;
+                float w2 = 1.0f - w0 - w1;
+                if (w0 < 0.0f || w1 < 0.0f || w2 < 0.0f) continue;
+                float z = w0 * t.a.z + w1 * t.b.z + w2 * t.c.z;
+                if (z < 0.0f || z > 1.0f) continue;
+                float& d = map[size_t(y) * size + x];
+                d = std::min(d, z);
+            }
+        }
+    }
+}
+
+}  // namespace
+
+Plan PlanShadows(const Scene& scene, int mapSize) {
+    if (mapSize < 16 || mapSize > 8192) throw Error("shadow map size must be 16…8192 texels");
+    Plan plan;
+    plan.mapSize = mapSize;
+    glm::vec3 lo = scene.BoundsMin(), hi = scene.BoundsMax();
+    glm::vec3 centre = 0.5f * (lo + hi);
+    float radius = 0.5f * glm::length(hi - lo) * 1.01f + 1e-4f;
+    float margin = 1.0f + 4.0f / static_cast<float>(mapSize);  // texels past the cone's edge
+    for (const PunctualLight& light : scene.lights) {
+        GpuLight g{};
+        float type = light.type == LightType::kPoint  ? 0.0f
+                     : light.type == LightType::kSpot ? 1.0f
+                                                      : 2.0f;
+        g.position = glm::vec4(light.position, type);
+        g.direction = glm::vec4(light.direction, light.range);
+        g.radiant = glm::vec4(light.color * light.intensity, 0.0f);
+        float cosOuter = std::cos(light.outerCone);
+        g.cone = glm::vec4(cosOuter, 1.0f / std::max(1e-3f, std::cos(light.innerCone) - cosOuter),
+                           static_cast<float>(plan.views.size()), 1.0f);
+        if (light.type == LightType::kDirectional) {
+            GpuShadowView v{};
+            glm::vec3 eye = centre - light.direction * (2.0f * radius);
+            glm::mat4 view = glm::lookAtRH(eye, centre, UpFor(light.direction));
+            glm::mat4 proj =
+                glm::orthoRH_ZO(-radius, radius, -radius, radius, radius, 3.0f * radius);
+            v.viewProj = proj * view;
+            v.eye = glm::vec4(eye, 1.0f);
+            v.forward = glm::vec4(light.direction, 2.0f * radius / static_cast<float>(mapSize));
+            plan.views.push_back(v);
+        } else {
+            float farZ = 0.0f;
+            for (int c = 0; c < 8; ++c) {
+                glm::vec3 corner((c & 1) ? hi.x : lo.x, (c & 2) ? hi.y : lo.y,
+                                 (c & 4) ? hi.z : lo.z);
+                farZ = std::max(farZ, glm::length(corner - light.position));
+            }
+            float nearZ = std::max(1e-4f, 1e-3f * radius);
+            farZ = std::max(farZ * 1.01f, 2.0f * nearZ);
+            if (light.type == LightType::kSpot && light.outerCone <= kMaxSpotViewCone) {
+                plan.views.push_back(PerspectiveView(light.position, light.direction,
+                                                     std::tan(light.outerCone) * margin, nearZ,
+                                                     farZ, mapSize));
+            } else {
+                static const glm::vec3 kAxes[6] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                                   {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
+                for (const glm::vec3& axis : kAxes)
+                    plan.views.push_back(
+                        PerspectiveView(light.position, axis, margin, nearZ, farZ, mapSize));
+                g.cone.w = 6.0f;
+            }
+        }
+        plan.lights.push_back(g);
+    }
+    return plan;
+}
+
+std::vector<glm::vec3> SceneTriangles(const Scene& scene) {
+    std::vector<glm::vec3> tris;
+    tris.reserve(scene.TriangleCount() * 3);
+    for (const Primitive& p : scene.primitives)
+        for (uint32_t i : p.indices) tris.push_back(p.positions[i]);
+    return tris;
+}
+
+std::vector<GpuReceiver> MakeReceivers(const Surfels& surfels, const std::vector<uint32_t>& order) {
+    std::vector<GpuReceiver> out;
+    out.reserve(order.size());
+    for (uint32_t s : order) {
+        GpuReceiver r{};
+        r.position = glm::vec4(surfels.positions[s], 0.5f * std::sqrt(surfels.areas[s]));
+        r.normal = glm::vec4(surfels.normals[s], 0.0f);
+        r.centroid = glm::vec4(surfels.centroids[s], 0.0f);
+        out.push_back(r);
+    }
+    return out;
+}
+
+void RasterShadowMaps(const Plan& plan, const std::vector<glm::vec3>& triangles,
+                      std::vector<float>& maps) {
+    const int size = plan.mapSize;
+    maps.assign(plan.MapTexels(), 1.0f);
+    std::vector<std::vector<ScreenTriangle>> screen(plan.views.size());
+    tbb::parallel_for(size_t(0), plan.views.size(), [&](size_t v) {
+        const glm::mat4& m = plan.views[v].viewProj;
+        for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+            glm::vec4 clip[3] = {m * glm::vec4(triangles[t], 1.0f),
+                                 m * glm::vec4(triangles[t + 1], 1.0f),
+                                 m * glm::vec4(triangles[t + 2], 1.0f)};
+            ClipAndProject(clip, size, screen[v]);
+        }
+    });
+    constexpr int kBand = 32;
+    const int bands = (size + kBand - 1) / kBand;
+    tbb::parallel_for(size_t(0), plan.views.size() * bands, [&](size_t job) {
+        size_t v = job / bands;
+        int y0 = static_cast<int>(job % bands) * kBand;
+        RasterRows(screen[v], size, y0, std::min(size, y0 + kBand),
+                   maps.data() + v * size_t(size) * size);
+    });
+}
+
+void DirectIrradiance(const Plan& plan, const float* maps,
+                      const std::vector<GpuReceiver>& receivers, float* out) {
+    tbb::parallel_for(size_t(0), receivers.size(), [&](size_t i) {
+        const GpuReceiver& r = receivers[i];
+        const glm::vec3 p(r.position), n(r.normal), c(r.centroid);
+        glm::vec3 t, b;
+        TangentBasis(n, t, b);
+        glm::vec3 e(0.0f);
+        for (const GpuLight& light : plan.lights) {
+            glm::vec3 toLight;
+            float scale;
+            if (light.position.w == 2.0f) {
+                toLight = -glm::vec3(light.direction);
+                scale = 1.0f;
+            } else {
+                glm::vec3 v = glm::vec3(light.position) - p;
+                float d2 = glm::dot(v, v);
+                if (!(d2 > 1e-12f)) continue;
+                float d = std::sqrt(d2);
+                toLight = v / d;
+                // LightAttenuation (scene.cpp), as the shaders have it.
+                scale = 1.0f / d2;
+                if (light.direction.w > 0.0f) {
+                    float x = d / light.direction.w;
+                    float w = std::clamp(1.0f - x * x * x * x, 0.0f, 1.0f);
+                    scale *= w * w;
+                }
+                if (light.position.w == 1.0f) {
+                    float s =
+                        std::clamp((glm::dot(glm::vec3(light.direction), -toLight) - light.cone.x) *
+                                       light.cone.y,
+                                   0.0f, 1.0f);
+                    scale *= s * s;
+                }
+            }
+            float cosine = glm::dot(n, toLight);
+            if (cosine <= 0.0f || scale <= 0.0f) continue;
+            float visible = 0.0f;
+            for (int k = 0; k < kTaps; ++k) {
+                float rr = r.position.w * std::sqrt((k + 0.5f) / kTaps);
+                float phi = 2.3999632f * k;  // the golden angle: a Vogel disc
+                glm::vec3 q = c + rr * (std::cos(phi) * t + std::sin(phi) * b);
+                glm::vec3 qToLight = light.position.w == 2.0f
+                                         ? toLight
+                                         : glm::normalize(glm::vec3(light.position) - q);
+                visible += TapVisibility(plan, maps, light, q, n, qToLight);
+            }
+            e += glm::vec3(light.radiant) * (scale * cosine * visible / kTaps);
+        }
+        out[i * 4] = e.x;
+        out[i * 4 + 1] = e.y;
+        out[i * 4 + 2] = e.z;
+        out[i * 4 + 3] = 0.0f;
+    });
+}
+
+CpuDirect::CpuDirect(const Scene& scene, std::vector<GpuReceiver> receivers, int mapSize)
+    : triangles_(SceneTriangles(scene)), receivers_(std::move(receivers)), mapSize_(mapSize) {
+    out_.assign(receivers_.size() * 4, 0.0f);
+    Update(scene);
+}
+
+void CpuDirect::Update(const Scene& scene) {
+    Plan plan = PlanShadows(scene, mapSize_);
+    auto t0 = std::chrono::steady_clock::now();
+    RasterShadowMaps(plan, triangles_, maps_);
+    msShadow = MsSince(t0);
+    auto t1 = std::chrono::steady_clock::now();
+    DirectIrradiance(plan, maps_.data(), receivers_, out_.data());
+    msDirect = MsSince(t1);
+}
+
+}  // namespace penumbra::direct

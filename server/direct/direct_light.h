@@ -1,0 +1,95 @@
+// Direct light of punctual lights (Sec. 3.3, "Direct light initialization"): shadow maps
+// of the scene from every light, then the shadowed direct irradiance E_d at every surfel.
+// E_d initialises the incident light of the local pass and makes no antiradiance: the
+// shadow map has already done the occlusion. Shared by every solver (DESIGN.md).
+//
+// Shadow maps are float NDC depth per texel (Vulkan conventions: z in [0, 1], texel
+// (x, y) = ((ndc + 1) / 2) · size). Point lights (and spots wider than 60°) get six cube
+// faces, spots a perspective view, directional lights an orthographic view of the scene's
+// bounding sphere. The CPU twin rasterises the same maps in software; the Vulkan back end
+// (vulkan_direct.h) renders them with the raster pipeline.
+//
+// Filtering: the visibility of a surfel is the average over 16 taps spread over its own
+// footprint (a disc of radius ½√area around its centroid, in its tangent plane), each a
+// bilinear 2×2 depth comparison. A shadow edge thus falls off over one element, as the
+// element's own irradiance would, instead of aliasing on the element grid.
+#pragma once
+
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <vector>
+
+#include "scene/scene.h"
+#include "scene/surfels.h"
+
+namespace penumbra::direct {
+
+inline constexpr int kDefaultMapSize = 1024;
+inline constexpr int kTaps = 16;
+// Spots with a wider outer cone than this get a cube map like a point light.
+inline constexpr float kMaxSpotViewCone = 1.0471976f;  // 60°
+
+// Layouts shared with shaders/direct.glsl.
+struct GpuLight {
+    glm::vec4 position;   // xyz; w = type (0 point, 1 spot, 2 directional)
+    glm::vec4 direction;  // xyz (where the light travels); w = range (0: none)
+    glm::vec4 radiant;    // colour × intensity (cd or lux); w unused
+    glm::vec4 cone;       // x = cos outer, y = 1 / (cos inner − cos outer), z = first view,
+                          // w = view count (1 or 6)
+};
+struct GpuShadowView {
+    glm::mat4 viewProj;
+    glm::vec4 eye;      // xyz: light position (perspective) or a point behind the scene
+    glm::vec4 forward;  // xyz: view axis; w = texel world size per metre of depth
+                        // (perspective) or per texel (orthographic, then eye.w = 1)
+};
+struct GpuReceiver {
+    glm::vec4 position;  // xyz; w = footprint radius
+    glm::vec4 normal;    // xyz unit
+    glm::vec4 centroid;  // xyz; centre of the footprint
+};
+static_assert(sizeof(GpuLight) == 64 && sizeof(GpuShadowView) == 96 && sizeof(GpuReceiver) == 48);
+
+// The views to render for the scene's lights, and the lights as the shaders read them.
+struct Plan {
+    int mapSize = kDefaultMapSize;
+    std::vector<GpuLight> lights;
+    std::vector<GpuShadowView> views;
+
+    size_t MapTexels() const { return views.size() * size_t(mapSize) * mapSize; }
+};
+Plan PlanShadows(const Scene& scene, int mapSize = kDefaultMapSize);
+
+// The scene's triangles in world space, three vertices each: the shadow casters.
+std::vector<glm::vec3> SceneTriangles(const Scene& scene);
+
+// Receivers for `order` (surfel indices, e.g. hierarchy leaves), footprints from surfel areas.
+std::vector<GpuReceiver> MakeReceivers(const Surfels& surfels, const std::vector<uint32_t>& order);
+
+// CPU twin of the shadow pass: `maps` gets plan.MapTexels() depths (1 where nothing is).
+void RasterShadowMaps(const Plan& plan, const std::vector<glm::vec3>& triangles,
+                      std::vector<float>& maps);
+
+// CPU twin of the direct pass: RGB irradiance (lux) per receiver, stride 4 (xyz + 0).
+void DirectIrradiance(const Plan& plan, const float* maps,
+                      const std::vector<GpuReceiver>& receivers, float* out);
+
+// Both stages on the CPU, with their wall times.
+class CpuDirect {
+  public:
+    CpuDirect(const Scene& scene, std::vector<GpuReceiver> receivers, int mapSize);
+    // Re-plans from the scene's lights (geometry as at construction) and recomputes.
+    void Update(const Scene& scene);
+    const std::vector<float>& Irradiance() const { return out_; }  // stride 4
+    const std::vector<float>& Maps() const { return maps_; }
+    double msShadow = 0.0, msDirect = 0.0;  // last update
+
+  private:
+    std::vector<glm::vec3> triangles_;
+    std::vector<GpuReceiver> receivers_;
+    int mapSize_;
+    std::vector<float> maps_;
+    std::vector<float> out_;
+};
+
+}  // namespace penumbra::direct

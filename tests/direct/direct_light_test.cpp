@@ -1,0 +1,301 @@
+// Direct light of punctual lights (issue 5): closed forms for point, spot and directional
+// lights, shadows from each type, light edits, and direct light feeding the bounces.
+#include "direct/direct_light.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
+#include <numbers>
+
+#include "base/check.h"
+#include "scene/gltf_loader.h"
+#include "solver/solver.h"
+#include "test_util.h"
+
+namespace penumbra {
+namespace {
+
+using testing::Mean;
+
+SolverSettings Settings(float elementSize = 0.1f) {
+    SolverSettings s;
+    s.device = DeviceChoice::kCpu;
+    s.bins = 64;
+    s.elementSize = elementSize;
+    return s;
+}
+
+PunctualLight Light(const std::string& name, LightType type, glm::vec3 position,
+                    glm::vec3 direction, float intensity) {
+    PunctualLight l;
+    l.name = name;
+    l.type = type;
+    l.position = position;
+    l.direction = direction;
+    l.intensity = intensity;
+    return l;
+}
+
+// A grey 4 m floor at y = 0 facing up, optionally with a 0.4 m square slab at y = 0.5.
+SceneBuilder Floor(bool blocker) {
+    SceneBuilder b;
+    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.5f));
+    b.AddTiledQuad("floor", grey, {-2, 0, -2}, {4, 0, 0}, {0, 0, 4}, 20, 20, {0, 1, 0});
+    if (blocker) b.AddBox("blocker", grey, {0, 0.5f, 0}, {0.4f, 0.05f, 0.4f});
+    return b;
+}
+
+// Direct irradiance on the floor's surfels next to the closed form `expected(p)`; returns
+// the largest relative error over surfels where expected > 5% of its peak.
+template <typename F>
+float MaxRelativeError(Solver& solver, F expected) {
+    const Surfels& s = solver.GetSurfels();
+    std::vector<glm::vec3> e = solver.SurfelIrradiance(Channel::kDirect);
+    float peak = 0.0f;
+    for (size_t i = 0; i < s.size(); ++i) peak = std::max(peak, expected(s.positions[i]));
+    float worst = 0.0f;
+    int checked = 0;
+    for (size_t i = 0; i < s.size(); ++i) {
+        float want = expected(s.positions[i]);
+        if (want < 0.05f * peak) {
+            EXPECT_LT(Mean(e[i]), 0.05f * peak + 1e-6f) << "at surfel " << i;
+            continue;
+        }
+        worst = std::max(worst, std::abs(Mean(e[i]) - want) / want);
+        ++checked;
+    }
+    EXPECT_GT(checked, 100);
+    return worst;
+}
+
+TEST(DirectLight, PointLightOverAPlaneIsICosOverDSquared) {
+    SceneBuilder b = Floor(false);
+    const glm::vec3 light(0.3f, 1.2f, -0.2f);
+    b.AddLight(Light("lamp", LightType::kPoint, light, {0, -1, 0}, 25.0f));
+    auto solver = CreateSolver(b.Build(), Settings());
+    float worst = MaxRelativeError(*solver, [&](glm::vec3 p) {
+        glm::vec3 v = light - p;
+        float d2 = glm::dot(v, v);
+        return 25.0f * (v.y / std::sqrt(d2)) / d2;
+    });
+    std::printf("point light: max relative error %.5f\n", worst);
+    EXPECT_LT(worst, 0.02f);
+    EXPECT_EQ(solver->Stats().shadowViews, 6);
+}
+
+TEST(DirectLight, SpotLightFollowsItsConeFalloff) {
+    SceneBuilder b = Floor(false);
+    PunctualLight spot = Light("spot", LightType::kSpot, {0, 1.5f, 0}, {0.2f, -1, 0}, 40.0f);
+    spot.innerCone = 0.3f;
+    spot.outerCone = 0.5f;
+    spot.color = glm::vec3(1.0f, 0.5f, 0.25f);
+    b.AddLight(spot);
+    Scene scene = b.Build();
+    const PunctualLight& placed = scene.lights[0];
+    auto solver = CreateSolver(scene, Settings());
+    const glm::vec3 colourMean(Mean(spot.color));
+    float worst = MaxRelativeError(*solver, [&](glm::vec3 p) {
+        glm::vec3 v = p - placed.position;
+        float d = glm::length(v);
+        float cosine = -v.y / d;
+        // KHR_lights_punctual's smooth cone, written out here on its own.
+        float cd = glm::dot(placed.direction, v / d);
+        float t = std::clamp((cd - std::cos(0.5f)) / (std::cos(0.3f) - std::cos(0.5f)), 0.f, 1.f);
+        return 40.0f * colourMean.x * t * t * cosine / (d * d);
+    });
+    std::printf("spot light: max relative error %.5f\n", worst);
+    EXPECT_LT(worst, 0.02f);
+    EXPECT_EQ(solver->Stats().shadowViews, 1);
+}
+
+TEST(DirectLight, DirectionalLightGivesEPerpTimesCosine) {
+    for (float degrees : {0.0f, 30.0f, 60.0f}) {
+        SceneBuilder b = Floor(false);
+        float t = glm::radians(degrees);
+        b.AddLight(Light("sun", LightType::kDirectional, {0, 3, 0},
+                         {std::sin(t), -std::cos(t), 0.0f}, 1000.0f));
+        auto solver = CreateSolver(b.Build(), Settings());
+        float worst = MaxRelativeError(*solver, [&](glm::vec3) { return 1000.0f * std::cos(t); });
+        std::printf("directional %.0f°: max relative error %.6f\n", degrees, worst);
+        EXPECT_LT(worst, 0.001f);
+    }
+}
+
+// The umbra of a slab under each light type is below 5% of the lit value, and away from the
+// shadow the blocker changes nothing.
+TEST(DirectLight, BlockerCastsAShadowFromEveryLightType) {
+    struct Case {
+        PunctualLight light;
+        float umbra;  // half-width of the floor square that must be in full shadow
+    };
+    PunctualLight spot = Light("spot", LightType::kSpot, {0, 1, 0}, {0, -1, 0}, 20.0f);
+    spot.outerCone = 0.9f;
+    spot.innerCone = 0.8f;
+    const Case cases[] = {
+        {Light("lamp", LightType::kPoint, {0, 1, 0}, {0, -1, 0}, 20.0f), 0.3f},
+        {spot, 0.3f},
+        {Light("sun", LightType::kDirectional, {0, 3, 0}, {0, -1, 0}, 1000.0f), 0.12f},
+    };
+    for (const Case& c : cases) {
+        SceneBuilder open = Floor(false), blocked = Floor(true);
+        open.AddLight(c.light);
+        blocked.AddLight(c.light);
+        auto lit = CreateSolver(open.Build(), Settings(0.05f));
+        auto shadowed = CreateSolver(blocked.Build(), Settings(0.05f));
+        std::vector<glm::vec3> a = lit->SurfelIrradiance(Channel::kDirect);
+        std::vector<glm::vec3> s = shadowed->SurfelIrradiance(Channel::kDirect);
+        const Surfels& sa = lit->GetSurfels();
+        const Surfels& ss = shadowed->GetSurfels();
+        int umbra = 0, far = 0;
+        for (size_t i = 0; i < ss.size(); ++i) {
+            glm::vec3 p = ss.positions[i];
+            if (p.y > 1e-4f || ss.normals[i].y < 0.99f) continue;  // floor only
+            size_t j = testing::NearestSurfel(sa, p, {0, 1, 0});
+            float open = Mean(a[j]);
+            if (std::abs(p.x) < c.umbra && std::abs(p.z) < c.umbra) {
+                EXPECT_LT(Mean(s[i]), 0.05f * open) << c.light.name << " at " << p.x << "," << p.z;
+                ++umbra;
+            } else if (std::abs(p.x) > 0.8f || std::abs(p.z) > 0.8f) {
+                EXPECT_NEAR(Mean(s[i]), open, 1e-3f * open) << c.light.name;
+                ++far;
+            }
+        }
+        std::printf("%s: %d umbra surfels, %d far surfels checked\n", c.light.name.c_str(), umbra,
+                    far);
+        EXPECT_GT(umbra, 20);
+        EXPECT_GT(far, 100);
+    }
+}
+
+// Moving, recolouring and dimming a light re-renders its shadow map and changes E_d.
+TEST(DirectLight, LightEditsTakeOneShadowPass) {
+    SceneBuilder b = Floor(true);
+    b.AddLight(Light("lamp", LightType::kPoint, {0, 1, 0}, {0, -1, 0}, 20.0f));
+    Scene scene = b.Build();
+    auto solver = CreateSolver(scene, Settings(0.05f));
+    size_t under = testing::NearestSurfel(solver->GetSurfels(), {0, 0, 0}, {0, 1, 0});
+    EXPECT_LT(Mean(solver->SurfelIrradiance(Channel::kDirect)[under]), 0.1f);
+
+    // Move the lamp sideways: the point under the blocker is lit from the side now.
+    int node = FindNode(scene, "lamp");
+    ASSERT_GE(node, 0);
+    SetNodeTransform(scene, node, glm::translate(glm::mat4(1.0f), glm::vec3(1.5f, 1.0f, 0.0f)));
+    EXPECT_EQ(scene.lights[0].position, glm::vec3(1.5f, 1.0f, 0.0f));
+    solver->UpdateLights(scene);
+    glm::vec3 v = glm::vec3(1.5f, 1.0f, 0.0f);
+    float want = 20.0f * (1.0f / glm::length(v)) / glm::dot(v, v);
+    EXPECT_NEAR(Mean(solver->SurfelIrradiance(Channel::kDirect)[under]), want, 0.02f * want);
+
+    // Dim and recolour.
+    scene.lights[0].intensity = 5.0f;
+    scene.lights[0].color = glm::vec3(1.0f, 0.0f, 0.0f);
+    solver->UpdateLights(scene);
+    glm::vec3 e = solver->SurfelIrradiance(Channel::kDirect)[under];
+    EXPECT_NEAR(e.x, want / 4.0f, 0.02f * want);
+    EXPECT_EQ(e.y, 0.0f);
+    EXPECT_GT(solver->Stats().msShadow, 0.0);
+}
+
+// Direct light bounces: a lamp that only lights the floor makes a wall that it cannot see
+// receive indirect light, and no antiradiance is made from the direct light (a wall behind
+// an opaque plate stays dark in `total`).
+TEST(DirectLight, DirectLightBouncesAndMakesNoAntiradiance) {
+    SceneBuilder b;
+    uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
+    b.AddTiledQuad("floor", white, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 10, 10, {0, 1, 0});
+    b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, 8);
+    PunctualLight spot = Light("spot", LightType::kSpot, {0.8f, 0.9f, 0}, {-0.3f, -1, 0}, 10.0f);
+    spot.outerCone = 0.6f;
+    spot.innerCone = 0.5f;
+    b.AddLight(spot);
+    auto solver = CreateSolver(b.Build(), Settings(0.1f));
+    size_t wall = testing::NearestSurfel(solver->GetSurfels(), {1, 0.3f, 0}, {-1, 0, 0});
+    EXPECT_EQ(Mean(solver->SurfelIrradiance(Channel::kDirect)[wall]), 0.0f);
+    solver->Iterate(4);
+    float indirect = Mean(solver->SurfelIrradiance(Channel::kIndirect)[wall]);
+    float total = Mean(solver->SurfelIrradiance(Channel::kTotal)[wall]);
+    std::printf("wall: indirect %.4f lux, total %.4f lux\n", indirect, total);
+    EXPECT_GT(indirect, 0.05f);
+    EXPECT_FLOAT_EQ(indirect, total);
+    // Energy: the wall cannot receive more than the floor reflects, ρ Σ a E_d.
+    const Surfels& s = solver->GetSurfels();
+    std::vector<glm::vec3> d = solver->SurfelIrradiance(Channel::kDirect);
+    std::vector<glm::vec3> in = solver->SurfelIrradiance(Channel::kIndirect);
+    double reflected = 0.0, received = 0.0;
+    for (size_t i = 0; i < s.size(); ++i) {
+        if (s.normals[i].y > 0.9f) reflected += 0.8 * s.areas[i] * Mean(d[i]);
+        if (s.normals[i].x < -0.9f) received += s.areas[i] * Mean(in[i]);
+    }
+    EXPECT_LT(received, reflected);
+}
+
+TEST(DirectLight, GltfLightsRoundTrip) {
+    auto dir = testing::TempDir("lights");
+    SceneBuilder b = Floor(false);
+    PunctualLight spot = Light("spot", LightType::kSpot, {0.5f, 2, 0}, {0, -1, 0.2f}, 40.0f);
+    spot.innerCone = 0.2f;
+    spot.outerCone = 0.4f;
+    spot.range = 8.0f;
+    spot.color = glm::vec3(1, 0.9f, 0.8f);
+    b.AddLight(spot);
+    b.AddLight(Light("sun", LightType::kDirectional, {0, 5, 0}, {0, -1, 0}, 100.0f));
+    b.WriteGltf((dir / "lights.gltf").string());
+    Scene loaded = LoadGltf((dir / "lights.gltf").string());
+    Scene built = b.Build();
+    ASSERT_EQ(loaded.lights.size(), 2u);
+    for (size_t i = 0; i < 2; ++i) {
+        const PunctualLight &x = loaded.lights[i], &y = built.lights[i];
+        EXPECT_EQ(x.name, y.name);
+        EXPECT_EQ(x.type, y.type);
+        EXPECT_NEAR(glm::length(x.position - y.position), 0.0f, 1e-5f);
+        EXPECT_NEAR(glm::length(x.direction - y.direction), 0.0f, 1e-5f);
+        EXPECT_EQ(x.color, y.color);
+        EXPECT_EQ(x.intensity, y.intensity);
+        EXPECT_EQ(x.range, y.range);
+        EXPECT_FLOAT_EQ(x.outerCone, y.outerCone);
+        EXPECT_EQ(FindLight(loaded, x.name), static_cast<int>(i));
+    }
+}
+
+TEST(DirectLight, BrokenLightsFailWithTheReason) {
+    auto dir = testing::TempDir("broken-lights");
+    SceneBuilder b = Floor(false);
+    b.AddLight(Light("lamp", LightType::kPoint, {0, 1, 0}, {0, -1, 0}, 20.0f));
+    std::string path = (dir / "lamp.gltf").string();
+    b.WriteGltf(path);
+    std::string text;
+    {
+        std::FILE* f = std::fopen(path.c_str(), "rb");
+        ASSERT_TRUE(f);
+        char buf[4096];
+        size_t n;
+        while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, n);
+        std::fclose(f);
+    }
+    auto broken = [&](const std::string& from, const std::string& to) {
+        std::string t = text;
+        size_t at = t.find(from);
+        EXPECT_NE(at, std::string::npos) << from;
+        t.replace(at, from.size(), to);
+        std::string p = (dir / "broken.gltf").string();
+        std::FILE* f = std::fopen(p.c_str(), "wb");
+        std::fwrite(t.data(), 1, t.size(), f);
+        std::fclose(f);
+        try {
+            LoadGltf(p);
+        } catch (const Error& e) {
+            return std::string(e.what());
+        }
+        return std::string("(loaded)");
+    };
+    EXPECT_NE(broken("\"point\"", "\"area\"").find("is not point, spot or directional"),
+              std::string::npos);
+    EXPECT_NE(broken("\"intensity\": 20", "\"intensity\": -20").find("intensity"),
+              std::string::npos);
+    EXPECT_NE(broken("\"light\": 0", "\"light\": 7").find("light 7 does not exist"),
+              std::string::npos);
+}
+
+}  // namespace
+}  // namespace penumbra
