@@ -38,7 +38,7 @@ GpuShadowView PerspectiveView(const glm::vec3& eye, const glm::vec3& forward, fl
 // Branchless orthonormal basis around a unit normal (Duff et al. 2017); direct.glsl has
 // the same lines.
 void TangentBasis(const glm::vec3& n, glm::vec3& t, glm::vec3& b) {
-    float sign = std::copysign(1.0f, n.z);
+    float sign = n.z >= 0.0f ? 1.0f : -1.0f;
     float a = -1.0f / (sign + n.z);
     float c = n.x * n.y * a;
     t = glm::vec3(1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x);

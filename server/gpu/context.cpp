@@ -102,18 +102,24 @@ Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<
         timestampPeriod_ = props.limits.timestampPeriod;
 
         auto families = physical_->getQueueFamilyProperties();
+        // A queue that computes and, for the shadow pass, rasterises; else compute only.
         family_ = UINT32_MAX;
-        for (uint32_t i = 0; i < families.size(); ++i)
-            if (families[i].queueFlags & vk::QueueFlagBits::eCompute) {
-                family_ = i;
-                break;
-            }
+        const auto both = vk::QueueFlagBits::eCompute | vk::QueueFlagBits::eGraphics;
+        for (uint32_t i = 0; i < families.size() && family_ == UINT32_MAX; ++i)
+            if ((families[i].queueFlags & both) == both) family_ = i;
+        for (uint32_t i = 0; i < families.size() && family_ == UINT32_MAX; ++i)
+            if (families[i].queueFlags & vk::QueueFlagBits::eCompute) family_ = i;
+        graphics_ = static_cast<bool>(families[family_ == UINT32_MAX ? 0 : family_].queueFlags &
+                                      vk::QueueFlagBits::eGraphics);
         if (family_ == UINT32_MAX) throw Error("Vulkan device " + name_ + " has no compute queue");
         if (families[family_].timestampValidBits == 0) timestampPeriod_ = 0.0f;
 
         float priority = 1.0f;
         vk::DeviceQueueCreateInfo qi({}, family_, 1, &priority);
-        vk::DeviceCreateInfo di({}, qi);
+        vk::PhysicalDeviceFeatures features;
+        fragmentStores_ = graphics_ && physical_->getFeatures().fragmentStoresAndAtomics;
+        features.fragmentStoresAndAtomics = fragmentStores_ ? VK_TRUE : VK_FALSE;
+        vk::DeviceCreateInfo di({}, qi, {}, {}, &features);
         device_ = std::make_unique<vk::raii::Device>(*physical_, di);
         queue_ = std::make_unique<vk::raii::Queue>(*device_, family_, 0);
         pool_ = std::make_unique<vk::raii::CommandPool>(

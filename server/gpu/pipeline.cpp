@@ -1,45 +1,25 @@
-// Shader module, layouts, descriptor pool and specialised compute pipeline.
+// Shader modules, layouts, descriptor pools, and compute and raster pipelines.
 #include "gpu/pipeline.h"
 
 namespace penumbra::gpu {
 
-Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t bufferCount,
-                   std::span<const uint32_t> specialization, uint32_t pushConstantBytes)
-    : ctx_(ctx), bufferCount_(bufferCount) {
+BufferSetLayout::BufferSetLayout(Context& ctx, uint32_t count, vk::ShaderStageFlags stages)
+    : ctx_(ctx) {
     const auto& dev = ctx.Device();
     std::vector<vk::DescriptorSetLayoutBinding> bindings;
-    for (uint32_t i = 0; i < bufferCount; ++i)
-        bindings.emplace_back(i, vk::DescriptorType::eStorageBuffer, 1,
-                              vk::ShaderStageFlagBits::eCompute);
+    for (uint32_t i = 0; i < count; ++i)
+        bindings.emplace_back(i, vk::DescriptorType::eStorageBuffer, 1, stages);
     setLayout_ =
         vk::raii::DescriptorSetLayout(dev, vk::DescriptorSetLayoutCreateInfo({}, bindings));
-    vk::PushConstantRange range(vk::ShaderStageFlagBits::eCompute, 0, pushConstantBytes);
-    vk::DescriptorSetLayout raw = *setLayout_;
-    vk::PipelineLayoutCreateInfo li({}, raw);
-    if (pushConstantBytes) li.setPushConstantRanges(range);
-    layout_ = vk::raii::PipelineLayout(dev, li);
-
     // Enough sets for the ping-pong variants a pass needs.
     constexpr uint32_t kMaxSets = 8;
-    vk::DescriptorPoolSize size(vk::DescriptorType::eStorageBuffer, bufferCount * kMaxSets);
+    vk::DescriptorPoolSize size(vk::DescriptorType::eStorageBuffer, count * kMaxSets);
     pool_ = vk::raii::DescriptorPool(
         dev, vk::DescriptorPoolCreateInfo(vk::DescriptorPoolCreateFlagBits::eFreeDescriptorSet,
                                           kMaxSets, size));
-
-    module_ = vk::raii::ShaderModule(
-        dev, vk::ShaderModuleCreateInfo({}, spirv.size() * sizeof(uint32_t), spirv.data()));
-    std::vector<vk::SpecializationMapEntry> entries;
-    for (uint32_t i = 0; i < specialization.size(); ++i)
-        entries.emplace_back(i, i * sizeof(uint32_t), sizeof(uint32_t));
-    vk::SpecializationInfo spec(static_cast<uint32_t>(entries.size()), entries.data(),
-                                specialization.size_bytes(), specialization.data());
-    vk::PipelineShaderStageCreateInfo stage({}, vk::ShaderStageFlagBits::eCompute, *module_, "main",
-                                            &spec);
-    pipeline_ =
-        vk::raii::Pipeline(dev, nullptr, vk::ComputePipelineCreateInfo({}, stage, *layout_));
 }
 
-vk::raii::DescriptorSet Pipeline::MakeSet(std::span<const Buffer* const> buffers) const {
+vk::raii::DescriptorSet BufferSetLayout::MakeSet(std::span<const Buffer* const> buffers) const {
     vk::DescriptorSetLayout raw = *setLayout_;
     vk::raii::DescriptorSets sets(ctx_.Device(), vk::DescriptorSetAllocateInfo(*pool_, raw));
     vk::raii::DescriptorSet set = std::move(sets.front());
@@ -53,11 +33,93 @@ vk::raii::DescriptorSet Pipeline::MakeSet(std::span<const Buffer* const> buffers
     return set;
 }
 
+namespace {
+
+vk::raii::PipelineLayout MakeLayout(Context& ctx, const BufferSetLayout& sets,
+                                    vk::ShaderStageFlags stages, uint32_t pushConstantBytes) {
+    vk::PushConstantRange range(stages, 0, pushConstantBytes);
+    vk::DescriptorSetLayout raw = sets.Handle();
+    vk::PipelineLayoutCreateInfo li({}, raw);
+    if (pushConstantBytes) li.setPushConstantRanges(range);
+    return vk::raii::PipelineLayout(ctx.Device(), li);
+}
+
+vk::raii::ShaderModule MakeModule(Context& ctx, std::span<const uint32_t> spirv) {
+    return vk::raii::ShaderModule(
+        ctx.Device(),
+        vk::ShaderModuleCreateInfo({}, spirv.size() * sizeof(uint32_t), spirv.data()));
+}
+
+}  // namespace
+
+Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t bufferCount,
+                   std::span<const uint32_t> specialization, uint32_t pushConstantBytes)
+    : sets_(ctx, bufferCount, vk::ShaderStageFlagBits::eCompute) {
+    layout_ = MakeLayout(ctx, sets_, vk::ShaderStageFlagBits::eCompute, pushConstantBytes);
+    module_ = MakeModule(ctx, spirv);
+    std::vector<vk::SpecializationMapEntry> entries;
+    for (uint32_t i = 0; i < specialization.size(); ++i)
+        entries.emplace_back(i, i * sizeof(uint32_t), sizeof(uint32_t));
+    vk::SpecializationInfo spec(static_cast<uint32_t>(entries.size()), entries.data(),
+                                specialization.size_bytes(), specialization.data());
+    vk::PipelineShaderStageCreateInfo stage({}, vk::ShaderStageFlagBits::eCompute, *module_, "main",
+                                            &spec);
+    pipeline_ = vk::raii::Pipeline(ctx.Device(), nullptr,
+                                   vk::ComputePipelineCreateInfo({}, stage, *layout_));
+}
+
+RasterPipeline::RasterPipeline(Context& ctx, std::span<const uint32_t> vertexSpirv,
+                               std::span<const uint32_t> fragmentSpirv, uint32_t bufferCount,
+                               uint32_t pushConstantBytes, uint32_t width, uint32_t height)
+    : sets_(ctx, bufferCount, kStages), width_(width), height_(height) {
+    const auto& dev = ctx.Device();
+    layout_ = MakeLayout(ctx, sets_, kStages, pushConstantBytes);
+    // One subpass without attachments; the framebuffer only gives the area its size.
+    vk::SubpassDescription subpass({}, vk::PipelineBindPoint::eGraphics);
+    renderPass_ = vk::raii::RenderPass(dev, vk::RenderPassCreateInfo({}, {}, subpass));
+    framebuffer_ = vk::raii::Framebuffer(
+        dev, vk::FramebufferCreateInfo({}, *renderPass_, {}, width, height, 1));
+    vertex_ = MakeModule(ctx, vertexSpirv);
+    fragment_ = MakeModule(ctx, fragmentSpirv);
+    vk::PipelineShaderStageCreateInfo stages[] = {
+        {{}, vk::ShaderStageFlagBits::eVertex, *vertex_, "main"},
+        {{}, vk::ShaderStageFlagBits::eFragment, *fragment_, "main"}};
+    vk::PipelineVertexInputStateCreateInfo vertexInput;
+    vk::PipelineInputAssemblyStateCreateInfo assembly({}, vk::PrimitiveTopology::eTriangleList);
+    vk::Viewport viewport(0.0f, 0.0f, static_cast<float>(width), static_cast<float>(height), 0.0f,
+                          1.0f);
+    vk::Rect2D scissor({0, 0}, {width, height});
+    vk::PipelineViewportStateCreateInfo viewportState({}, viewport, scissor);
+    vk::PipelineRasterizationStateCreateInfo raster(
+        {}, VK_FALSE, VK_FALSE, vk::PolygonMode::eFill, vk::CullModeFlagBits::eNone,
+        vk::FrontFace::eCounterClockwise, VK_FALSE, 0.0f, 0.0f, 0.0f, 1.0f);
+    vk::PipelineMultisampleStateCreateInfo multisample({}, vk::SampleCountFlagBits::e1);
+    vk::PipelineColorBlendStateCreateInfo blend;
+    vk::GraphicsPipelineCreateInfo info({}, stages, &vertexInput, &assembly, nullptr,
+                                        &viewportState, &raster, &multisample, nullptr, &blend,
+                                        nullptr, *layout_, *renderPass_, 0);
+    pipeline_ = vk::raii::Pipeline(dev, nullptr, info);
+}
+
+void RasterPipeline::Begin(const vk::raii::CommandBuffer& cb,
+                           const vk::raii::DescriptorSet& set) const {
+    vk::RenderPassBeginInfo begin(*renderPass_, *framebuffer_,
+                                  vk::Rect2D({0, 0}, {width_, height_}), {});
+    cb.beginRenderPass(begin, vk::SubpassContents::eInline);
+    cb.bindPipeline(vk::PipelineBindPoint::eGraphics, *pipeline_);
+    cb.bindDescriptorSets(vk::PipelineBindPoint::eGraphics, *layout_, 0, {*set}, {});
+}
+
 void ComputeBarrier(const vk::raii::CommandBuffer& cb) {
-    vk::MemoryBarrier barrier(vk::AccessFlagBits::eShaderWrite,
+    Barrier(cb, vk::PipelineStageFlagBits::eComputeShader, vk::AccessFlagBits::eShaderWrite,
+            vk::PipelineStageFlagBits::eComputeShader);
+}
+
+void Barrier(const vk::raii::CommandBuffer& cb, vk::PipelineStageFlags from,
+             vk::AccessFlags fromAccess, vk::PipelineStageFlags to) {
+    vk::MemoryBarrier barrier(fromAccess,
                               vk::AccessFlagBits::eShaderRead | vk::AccessFlagBits::eShaderWrite);
-    cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
-                       vk::PipelineStageFlagBits::eComputeShader, {}, barrier, {}, {});
+    cb.pipelineBarrier(from, to, {}, barrier, {}, {});
 }
 
 }  // namespace penumbra::gpu

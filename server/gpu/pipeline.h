@@ -1,5 +1,6 @@
-// A compute pipeline from embedded SPIR-V: storage buffers at bindings 0..N−1 of set 0,
-// uint specialization constants by id, and a push-constant block.
+// Pipelines from embedded SPIR-V whose resources are storage buffers at bindings 0..N−1 of
+// set 0, plus a push-constant block: compute pipelines (with uint specialization
+// constants by id) and attachment-less raster pipelines whose fragments write buffers.
 #pragma once
 
 #include <cstdint>
@@ -11,28 +12,72 @@
 
 namespace penumbra::gpu {
 
+// Set 0 with `count` storage buffers visible to `stages`, and a pool for a few sets of it.
+class BufferSetLayout {
+  public:
+    BufferSetLayout(Context& ctx, uint32_t count, vk::ShaderStageFlags stages);
+    // A descriptor set binding `buffers` in order to bindings 0..N−1.
+    vk::raii::DescriptorSet MakeSet(std::span<const Buffer* const> buffers) const;
+    vk::DescriptorSetLayout Handle() const { return *setLayout_; }
+
+  private:
+    Context& ctx_;
+    vk::raii::DescriptorSetLayout setLayout_{nullptr};
+    vk::raii::DescriptorPool pool_{nullptr};
+};
+
 class Pipeline {
   public:
     Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t bufferCount,
              std::span<const uint32_t> specialization, uint32_t pushConstantBytes);
 
-    // A descriptor set binding `buffers` in order to bindings 0..N−1.
-    vk::raii::DescriptorSet MakeSet(std::span<const Buffer* const> buffers) const;
-
+    vk::raii::DescriptorSet MakeSet(std::span<const Buffer* const> buffers) const {
+        return sets_.MakeSet(buffers);
+    }
     vk::Pipeline Handle() const { return *pipeline_; }
     vk::PipelineLayout Layout() const { return *layout_; }
 
   private:
-    Context& ctx_;
-    uint32_t bufferCount_;
-    vk::raii::DescriptorSetLayout setLayout_{nullptr};
+    BufferSetLayout sets_;
     vk::raii::PipelineLayout layout_{nullptr};
-    vk::raii::DescriptorPool pool_{nullptr};
     vk::raii::ShaderModule module_{nullptr};
+    vk::raii::Pipeline pipeline_{nullptr};
+};
+
+// Triangles from a vertex and a fragment shader over a width × height render area with no
+// attachments: the fragment shader writes storage buffers (the shadow pass keeps depth
+// with atomics). No vertex input: the vertex shader reads its buffer by gl_VertexIndex.
+// Both windings are drawn. Needs Context::FragmentStores().
+class RasterPipeline {
+  public:
+    RasterPipeline(Context& ctx, std::span<const uint32_t> vertexSpirv,
+                   std::span<const uint32_t> fragmentSpirv, uint32_t bufferCount,
+                   uint32_t pushConstantBytes, uint32_t width, uint32_t height);
+
+    vk::raii::DescriptorSet MakeSet(std::span<const Buffer* const> buffers) const {
+        return sets_.MakeSet(buffers);
+    }
+    // Begins the render pass over the whole area and binds the pipeline and `set`.
+    void Begin(const vk::raii::CommandBuffer& cb, const vk::raii::DescriptorSet& set) const;
+    vk::PipelineLayout Layout() const { return *layout_; }
+    static constexpr vk::ShaderStageFlags kStages =
+        vk::ShaderStageFlagBits::eVertex | vk::ShaderStageFlagBits::eFragment;
+
+  private:
+    BufferSetLayout sets_;
+    uint32_t width_, height_;
+    vk::raii::PipelineLayout layout_{nullptr};
+    vk::raii::RenderPass renderPass_{nullptr};
+    vk::raii::Framebuffer framebuffer_{nullptr};
+    vk::raii::ShaderModule vertex_{nullptr}, fragment_{nullptr};
     vk::raii::Pipeline pipeline_{nullptr};
 };
 
 // Orders compute writes before later compute reads/writes (a full compute→compute barrier).
 void ComputeBarrier(const vk::raii::CommandBuffer& cb);
+
+// Orders writes of stage `from` before shader reads and writes of stage `to`.
+void Barrier(const vk::raii::CommandBuffer& cb, vk::PipelineStageFlags from,
+             vk::AccessFlags fromAccess, vk::PipelineStageFlags to);
 
 }  // namespace penumbra::gpu

@@ -34,8 +34,14 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
         if (progress) progress("shadow maps", 0.0);
         std::vector<uint32_t> order;
         for (const LeafAttributes& leaf : model_.leaves) order.push_back(leaf.surfel);
-        direct_ = std::make_unique<direct::CpuDirect>(
-            scene, direct::MakeReceivers(model_.surfels, order), settings.shadowMapSize);
+        auto receivers = direct::MakeReceivers(model_.surfels, order);
+        if (gpu_)
+            gpuDirect_ = std::make_unique<direct::VulkanDirect>(
+                gpu_->Context(), scene, std::move(receivers), gpu_->DirectBuffer(),
+                settings.shadowMapSize);
+        else
+            direct_ = std::make_unique<direct::CpuDirect>(scene, std::move(receivers),
+                                                          settings.shadowMapSize);
         lights_ = static_cast<int>(scene.lights.size());
         shadowViews_ =
             static_cast<int>(direct::PlanShadows(scene, settings.shadowMapSize).views.size());
@@ -78,20 +84,24 @@ std::vector<glm::vec3> AntiradianceSolver::SurfelIrradiance(Channel channel) {
 }
 
 void AntiradianceSolver::CopyDirect() {
-    const std::vector<float>& e = direct_->Irradiance();
+    // The device's E_d is already where its local pass reads it; keep a host copy for the
+    // `direct` channel. The CPU back end reads model_.leafDirect itself.
+    std::vector<float> e = gpuDirect_ ? gpuDirect_->ReadIrradiance() : direct_->Irradiance();
     for (size_t i = 0; i < model_.leafDirect.size(); ++i)
         model_.leafDirect[i] = glm::vec4(e[i * 4], e[i * 4 + 1], e[i * 4 + 2], 0.0f);
-    if (gpu_) gpu_->UploadDirect();  // the CPU back end reads model_.leafDirect directly
 }
 
 void AntiradianceSolver::UpdateLights(const Scene& scene) {
-    if (!direct_) {
+    if (!direct_ && !gpuDirect_) {
         if (scene.lights.empty()) return;
         throw Error("the scene was loaded without punctual lights; lights cannot be added");
     }
     if (scene.lights.size() != static_cast<size_t>(lights_))
         throw Error("the number of punctual lights cannot change in a loaded scene");
-    direct_->Update(scene);
+    if (gpuDirect_)
+        gpuDirect_->Update(scene);
+    else
+        direct_->Update(scene);
     CopyDirect();
 }
 
@@ -128,10 +138,10 @@ SolverStats AntiradianceSolver::Stats() const {
     s.linkBytes =
         model_.links.links.size() * sizeof(Link) + model_.links.offsets.size() * sizeof(uint32_t);
     s.lights = lights_;
-    if (direct_) {
+    if (direct_ || gpuDirect_) {
         s.shadowViews = shadowViews_;
-        s.msShadow = direct_->msShadow;
-        s.msDirect = direct_->msDirect;
+        s.msShadow = gpuDirect_ ? gpuDirect_->msShadow : direct_->msShadow;
+        s.msDirect = gpuDirect_ ? gpuDirect_->msDirect : direct_->msDirect;
     }
     if (cpu_) {
         s.passes = {{"global", cpu_->msGlobal},

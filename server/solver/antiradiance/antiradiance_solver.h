@@ -5,6 +5,7 @@
 #include <memory>
 
 #include "direct/direct_light.h"
+#include "direct/vulkan_direct.h"
 #include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/model.h"
 #include "solver/solver.h"
@@ -34,7 +35,9 @@ class AntiradianceSolver : public Solver {
     AntiradianceModel model_;
     std::unique_ptr<cpu::CpuBackend> cpu_;
     std::unique_ptr<VulkanAntiradiance> gpu_;
-    std::unique_ptr<direct::CpuDirect> direct_;  // only when the scene has punctual lights
+    // Only when the scene has punctual lights: the CPU twin or the device's passes.
+    std::unique_ptr<direct::CpuDirect> direct_;
+    std::unique_ptr<direct::VulkanDirect> gpuDirect_;
     int shadowViews_ = 0;
     int lights_ = 0;
     void CopyDirect();

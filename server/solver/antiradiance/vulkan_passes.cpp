@@ -255,6 +255,10 @@ void VulkanAntiradiance::UploadLeaves() { impl_->leaves.Upload(impl_->m.leaves);
 
 void VulkanAntiradiance::UploadDirect() { impl_->direct.Upload(impl_->m.leafDirect); }
 
+gpu::Context& VulkanAntiradiance::Context() { return impl_->ctx; }
+
+gpu::Buffer& VulkanAntiradiance::DirectBuffer() { return impl_->direct; }
+
 std::string VulkanAntiradiance::DeviceName() const { return "vulkan:" + impl_->ctx.DeviceName(); }
 
 std::vector<PassTiming> VulkanAntiradiance::PassTimings() const {

@@ -12,8 +12,9 @@
 namespace penumbra {
 
 namespace gpu {
+class Buffer;
 class Context;
-}
+}  // namespace gpu
 
 class VulkanAntiradiance {
   public:
@@ -27,6 +28,10 @@ class VulkanAntiradiance {
     void UploadLeaves();
     // Copies the model's per-leaf direct irradiance (E_d) to the device again.
     void UploadDirect();
+    // The device and the per-leaf E_d buffer (vec4 per leaf) the local pass reads, for the
+    // direct pass to render into.
+    gpu::Context& Context();
+    gpu::Buffer& DirectBuffer();
     std::string DeviceName() const;
     std::vector<PassTiming> PassTimings() const;
     size_t TableBytes() const;

@@ -1,0 +1,180 @@
+// Vulkan shadow pass (attachment-less raster, depth kept with atomicMin in a buffer) and
+// direct pass (compute), timed with timestamps.
+#include "direct/vulkan_direct.h"
+
+#include <chrono>
+#include <cstring>
+
+#include "base/check.h"
+#include "gpu/buffer.h"
+#include "gpu/context.h"
+#include "gpu/pipeline.h"
+#include "shaders/direct_spv.h"
+#include "shaders/shadow_frag_spv.h"
+#include "shaders/shadow_vert_spv.h"
+
+namespace penumbra::direct {
+namespace {
+
+template <typename T>
+std::span<const uint32_t> Words(const T& array) {
+    return {array, sizeof(array) / sizeof(uint32_t)};
+}
+
+struct ShadowPush {
+    glm::mat4 viewProj;
+    uint32_t mapOffset;
+    uint32_t size;
+};
+struct DirectPush {
+    uint32_t receiverCount;
+    uint32_t lightCount;
+    uint32_t size;
+};
+
+constexpr uint32_t kOneDepth = 0x3F800000u;  // the bits of 1.0f: nothing drawn
+
+}  // namespace
+
+struct VulkanDirect::Impl {
+    gpu::Context& ctx;
+    int size;
+    std::vector<GpuReceiver> receiverList;
+    uint32_t triangleVertices;
+    gpu::Buffer& out;
+    gpu::Buffer vertices, receivers;
+    std::unique_ptr<gpu::Buffer> lights, views, maps;
+    size_t viewCapacity = 0, lightCapacity = 0;
+    gpu::RasterPipeline shadow;
+    gpu::Pipeline directPass;
+    vk::raii::DescriptorSet shadowSet{nullptr}, directSet{nullptr};
+    vk::raii::QueryPool queries{nullptr};
+
+    static std::vector<glm::vec4> Vertices(const Scene& scene) {
+        std::vector<glm::vec4> v;
+        for (const glm::vec3& p : SceneTriangles(scene)) v.emplace_back(p, 1.0f);
+        return v;
+    }
+
+    Impl(gpu::Context& c, const Scene& scene, std::vector<GpuReceiver> r, gpu::Buffer& o, int s)
+        : ctx(c),
+          size(s),
+          receiverList(std::move(r)),
+          triangleVertices(static_cast<uint32_t>(scene.TriangleCount() * 3)),
+          out(o),
+          vertices(c, std::max<size_t>(1, triangleVertices) * sizeof(glm::vec4)),
+          receivers(c, std::max<size_t>(1, receiverList.size()) * sizeof(GpuReceiver)),
+          shadow(c, Words(kSpirv_shadow_vert), Words(kSpirv_shadow_frag), 2, sizeof(ShadowPush),
+                 static_cast<uint32_t>(s), static_cast<uint32_t>(s)),
+          directPass(c, Words(kSpirv_direct), 5, {}, sizeof(DirectPush)) {
+        vertices.Upload(Vertices(scene));
+        receivers.Upload(receiverList);
+        if (ctx.TimestampPeriodNs() > 0.0f)
+            queries = vk::raii::QueryPool(
+                ctx.Device(), vk::QueryPoolCreateInfo({}, vk::QueryType::eTimestamp, 3));
+    }
+
+    // Buffers sized for the plan; sets made again when they grow.
+    void Reserve(const Plan& plan) {
+        if (plan.views.size() <= viewCapacity && plan.lights.size() <= lightCapacity && maps)
+            return;
+        viewCapacity = std::max(viewCapacity, plan.views.size());
+        lightCapacity = std::max(lightCapacity, plan.lights.size());
+        views = std::make_unique<gpu::Buffer>(ctx, viewCapacity * sizeof(GpuShadowView));
+        lights = std::make_unique<gpu::Buffer>(ctx, lightCapacity * sizeof(GpuLight));
+        maps = std::make_unique<gpu::Buffer>(ctx, viewCapacity * size_t(size) * size * 4);
+        const gpu::Buffer* s[] = {&vertices, maps.get()};
+        shadowSet = shadow.MakeSet(s);
+        const gpu::Buffer* d[] = {&receivers, lights.get(), views.get(), maps.get(), &out};
+        directSet = directPass.MakeSet(d);
+    }
+
+    void Update(const Scene& scene, double& msShadow, double& msDirect) {
+        Plan plan = PlanShadows(scene, size);
+        if (plan.lights.empty()) return;
+        Reserve(plan);
+        views->Upload(plan.views);
+        lights->Upload(plan.lights);
+        auto start = std::chrono::steady_clock::now();
+        ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+            if (*queries) {
+                cb.resetQueryPool(*queries, 0, 3);
+                cb.writeTimestamp(vk::PipelineStageFlagBits::eTopOfPipe, *queries, 0);
+            }
+            cb.fillBuffer(maps->Handle(), 0, plan.MapTexels() * 4, kOneDepth);
+            gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
+                         vk::AccessFlagBits::eTransferWrite,
+                         vk::PipelineStageFlagBits::eFragmentShader);
+            for (size_t v = 0; v < plan.views.size(); ++v) {
+                shadow.Begin(cb, shadowSet);
+                ShadowPush push{plan.views[v].viewProj,
+                                static_cast<uint32_t>(v * size_t(size) * size),
+                                static_cast<uint32_t>(size)};
+                cb.pushConstants<ShadowPush>(shadow.Layout(), gpu::RasterPipeline::kStages, 0,
+                                             push);
+                if (triangleVertices) cb.draw(triangleVertices, 1, 0, 0);
+                cb.endRenderPass();
+            }
+            gpu::Barrier(cb, vk::PipelineStageFlagBits::eFragmentShader,
+                         vk::AccessFlagBits::eShaderWrite,
+                         vk::PipelineStageFlagBits::eComputeShader);
+            if (*queries)
+                cb.writeTimestamp(vk::PipelineStageFlagBits::eFragmentShader, *queries, 1);
+            cb.bindPipeline(vk::PipelineBindPoint::eCompute, directPass.Handle());
+            cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, directPass.Layout(), 0,
+                                  {*directSet}, {});
+            DirectPush dp{static_cast<uint32_t>(receiverList.size()),
+                          static_cast<uint32_t>(plan.lights.size()), static_cast<uint32_t>(size)};
+            cb.pushConstants<DirectPush>(directPass.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
+                                         dp);
+            cb.dispatch(static_cast<uint32_t>((receiverList.size() + 63) / 64), 1, 1);
+            gpu::ComputeBarrier(cb);
+            if (*queries) cb.writeTimestamp(vk::PipelineStageFlagBits::eComputeShader, *queries, 2);
+        });
+        if (*queries) {
+            auto [result, stamps] = queries.getResults<uint64_t>(
+                0, 3, 3 * sizeof(uint64_t), sizeof(uint64_t),
+                vk::QueryResultFlagBits::e64 | vk::QueryResultFlagBits::eWait);
+            if (result != vk::Result::eSuccess) gpu::ThrowVulkan("vkGetQueryPoolResults", result);
+            double ns = ctx.TimestampPeriodNs();
+            msShadow = (stamps[1] - stamps[0]) * ns * 1e-6;
+            msDirect = (stamps[2] - stamps[1]) * ns * 1e-6;
+        } else {
+            msShadow =
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                    .count();
+            msDirect = 0.0;
+        }
+    }
+};
+
+VulkanDirect::VulkanDirect(gpu::Context& ctx, const Scene& scene,
+                           std::vector<GpuReceiver> receivers, gpu::Buffer& out, int mapSize) {
+    if (!ctx.FragmentStores())
+        throw Error("Vulkan device " + ctx.DeviceName() +
+                    " cannot write storage buffers from fragment shaders (needed by the shadow "
+                    "pass); use --device cpu");
+    if (mapSize < 16 || mapSize > 8192) throw Error("shadow map size must be 16…8192 texels");
+    impl_ = std::make_unique<Impl>(ctx, scene, std::move(receivers), out, mapSize);
+    Update(scene);
+}
+
+VulkanDirect::~VulkanDirect() = default;
+
+void VulkanDirect::Update(const Scene& scene) { impl_->Update(scene, msShadow, msDirect); }
+
+std::vector<float> VulkanDirect::ReadIrradiance() const {
+    std::vector<float> v(impl_->receiverList.size() * 4);
+    impl_->out.Download(v.data(), v.size() * sizeof(float));
+    return v;
+}
+
+std::vector<float> VulkanDirect::ReadMaps() const {
+    std::vector<float> v;
+    if (!impl_->maps) return v;
+    v.resize(impl_->maps->Bytes() / 4);
+    impl_->maps->Download(v.data(), v.size() * sizeof(float));
+    return v;
+}
+
+}  // namespace penumbra::direct
