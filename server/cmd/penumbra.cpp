@@ -36,7 +36,9 @@ void CheckOutputPath(const std::string& outPath) {
 }
 
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
-         int iterations, const std::string& device, const std::string& scheme, bool quiet) {
+         int iterations, const std::string& device, const std::string& scheme,
+         const std::string& channelName, bool quiet) {
+    Channel channel = ParseChannel(channelName);
     CheckOutputPath(outPath);
     settings.device = ParseDevice(device);
     settings.scheme = ParseScheme(scheme);
@@ -51,7 +53,7 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     solver->Iterate(iterations);
     progress.Done();
 
-    IrradianceResult result = CollectIrradiance(scene, *solver);
+    IrradianceResult result = CollectIrradiance(scene, *solver, channel);
     WriteResult(scenePath, outPath, scene, result);
 
     if (!quiet) {
@@ -65,6 +67,10 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
         for (const auto& p : s.passes)
             std::fprintf(stderr, " | %s %.2f", p.name.c_str(),
                          s.iterations ? p.msTotal / s.iterations : 0.0);
+        if (s.lights)
+            std::fprintf(stderr,
+                         "\n  %d punctual lights: %d shadow maps in %.2f ms, direct light %.2f ms",
+                         s.lights, s.shadowViews, s.msShadow, s.msDirect);
         std::fprintf(stderr, "\n  wrote %s (channel %s; %s)\n", outPath.c_str(),
                      result.channel.c_str(), kIrradianceUnits);
     }
@@ -98,6 +104,7 @@ int Reference(const std::string& scenePath, const std::string& outPath, Referenc
     const ReferenceStats& st = ref.stats;
     IrradianceResult result;
     result.solver = "reference";
+    result.channel = ChannelName(settings.channel);
     result.primitives = std::move(ref.irradiance);
     result.standardError = std::move(ref.standardError);
     // Relative standard error of the whole estimate: √Σσ² / √Σ|E|², like compare's RMSE.
@@ -173,7 +180,7 @@ int main(int argc, char** argv) {
                                     "Light a glTF scene in-process and write per-vertex "
                                     "irradiance (.json, or .glb/.gltf with COLOR_0)");
     std::string scenePath, outPath, device = "auto", scheme = "symmetric",
-                                    linkOracle = "conservative";
+                                    linkOracle = "conservative", channel = "indirect";
     SolverSettings settings;
     int iterations = 8;
     bool quiet = false;
@@ -201,6 +208,13 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     bake->add_option("--threads", settings.threads, "CPU threads (0: all cores)")
         ->capture_default_str();
+    bake->add_option("--channel", channel,
+                     "indirect (all but punctual lights' direct light), direct (punctual lights, "
+                     "shadowed) or total")
+        ->capture_default_str();
+    bake->add_option("--shadow-map-size", settings.shadowMapSize,
+                     "texels per side of each shadow map (cube face), 16..8192")
+        ->capture_default_str();
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
 
@@ -208,7 +222,7 @@ int main(int argc, char** argv) {
         "reference",
         "Path-trace per-vertex irradiance with Embree (ground truth for the solvers), with a "
         "standard error per vertex");
-    std::string refScene, refOut;
+    std::string refScene, refOut, refChannel = "indirect";
     ReferenceSettings refSettings;
     bool refQuiet = false;
     reference->add_option("scene", refScene, "glTF 2.0 scene (.gltf or .glb)")->required();
@@ -221,6 +235,10 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     reference->add_option("--seed", refSettings.seed, "random seed")->capture_default_str();
     reference->add_option("--threads", refSettings.threads, "threads (0: all cores)")
+        ->capture_default_str();
+    reference
+        ->add_option("--channel", refChannel,
+                     "indirect (all but punctual lights' direct light), direct or total")
         ->capture_default_str();
     reference->add_flag("-q,--quiet", refQuiet, "no progress or summary on stderr");
 
@@ -247,9 +265,12 @@ int main(int argc, char** argv) {
     try {
         if (bake->parsed()) {
             settings.paperOracle = ParsePaperOracle(linkOracle);
-            return Bake(scenePath, outPath, settings, iterations, device, scheme, quiet);
+            return Bake(scenePath, outPath, settings, iterations, device, scheme, channel, quiet);
         }
-        if (reference->parsed()) return Reference(refScene, refOut, refSettings, refQuiet);
+        if (reference->parsed()) {
+            refSettings.channel = ParseChannel(refChannel);
+            return Reference(refScene, refOut, refSettings, refQuiet);
+        }
         if (compare->parsed()) return CompareFiles(cmpA, cmpB, cmpJson, maxRmse, floor);
     } catch (const penumbra::Error& e) {
         std::fprintf(stderr, "\npenumbra: error: %s\n", e.what());

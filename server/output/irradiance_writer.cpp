@@ -13,9 +13,10 @@
 
 namespace penumbra {
 
-IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver) {
+IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver, Channel channel) {
     IrradianceResult r;
-    std::vector<glm::vec3> surfel = solver.SurfelIrradiance();
+    r.channel = ChannelName(channel);
+    std::vector<glm::vec3> surfel = solver.SurfelIrradiance(channel);
     for (size_t p = 0; p < scene.primitives.size(); ++p)
         r.primitives.push_back(PrimitiveIrradiance(solver.GetSurfels(), surfel, scene, p));
     r.solver = solver.Stats().solver;
@@ -36,6 +37,12 @@ nlohmann::json StatsToJson(const SolverStats& s) {
     j["link_build_seconds"] = s.linkBuildSeconds;
     j["setup_seconds"] = s.setupSeconds;
     j["ms_per_iteration"] = s.MsPerIteration();
+    if (s.lights > 0) {
+        j["punctual_lights"] = s.lights;
+        j["shadow_views"] = s.shadowViews;
+        j["shadow_ms"] = s.msShadow;
+        j["direct_ms"] = s.msDirect;
+    }
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

@@ -27,7 +27,8 @@ struct IrradianceResult {
 };
 
 // Gathers per-primitive irradiance from a solver that has run.
-IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver);
+IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver,
+                                   Channel channel = Channel::kIndirect);
 
 // `{"units", "solver", "channel", "primitives": [...], "stats": {...}}`; each primitive
 // `{"node", "mesh", "primitive", "irradiance": [[r,g,b], ...]}` and, with standard

@@ -97,6 +97,36 @@ class Tracer {
         return e + kPi * Incoming(x, n, CosineSample(n, rng), rng, rays);
     }
 
+    // Irradiance at `x` (normal `n`) straight from the punctual lights: Σ Φ·att·cosθ/d²
+    // (point, spot) or E⊥·cosθ (directional), each behind one shadow ray. Delta lights: no
+    // sampling, no MIS.
+    glm::vec3 PunctualDirect(const glm::vec3& x, const glm::vec3& n, uint64_t& rays) const {
+        glm::vec3 e(0.0f);
+        for (const PunctualLight& light : scene_.lights) {
+            glm::vec3 toLight, span;
+            float scale;
+            if (light.type == LightType::kDirectional) {
+                toLight = -light.direction;
+                span = toLight * (4.0f * std::max(scene_.Diameter(), 1e-3f));
+                scale = 1.0f;
+            } else {
+                span = light.position - x;
+                float d2 = glm::dot(span, span);
+                if (!(d2 > 0.0f)) continue;
+                float d = std::sqrt(d2);
+                toLight = span / d;
+                scale = LightAttenuation(light, -toLight, d) / d2;
+            }
+            float cosine = glm::dot(n, toLight);
+            if (cosine <= 0.0f || scale <= 0.0f) continue;
+            ++rays;
+            glm::vec3 from = x + eps_ * n;
+            if (Occluded(from, x + span - from)) continue;
+            e += light.color * (light.intensity * scale * cosine);
+        }
+        return e;
+    }
+
   private:
     static void OnError(void* self, RTCError code, const char* what) {
         auto* t = static_cast<Tracer*>(self);
@@ -227,7 +257,8 @@ class Tracer {
             x = t.p0 + rh.hit.u * t.e1 + rh.hit.v * t.e2;
             n = t.normal;
             // Reflected: L_r = ρ/π · (E_next-event + π · L_in(cosine-sampled direction)).
-            radiance += throughput * rho * (1.0f / kPi) * NextEvent(x, n, rng, rays);
+            radiance += throughput * rho * (1.0f / kPi) *
+                        (NextEvent(x, n, rng, rays) + PunctualDirect(x, n, rays));
             throughput *= rho;
             if (depth >= 2) {
                 float q = std::min(0.95f, std::max({throughput.x, throughput.y, throughput.z}));
@@ -331,7 +362,10 @@ ReferenceResult RenderReference(const Scene& scene, const ReferenceSettings& set
                 const Primitive& prim = scene.primitives[p];
                 Rng rng(settings.seed, v);
                 glm::dvec3 sum(0.0), sum2(0.0);
-                for (int s = 0; s < settings.samples; ++s) {
+                glm::vec3 direct(0.0f);
+                if (settings.channel != Channel::kIndirect)
+                    direct = tracer.PunctualDirect(points[p][i], prim.normals[i], r);
+                for (int s = 0; s < settings.samples && settings.channel != Channel::kDirect; ++s) {
                     glm::dvec3 e(tracer.Sample(points[p][i], prim.normals[i], rng, r));
                     sum += e;
                     sum2 += e * e;
@@ -339,7 +373,7 @@ ReferenceResult RenderReference(const Scene& scene, const ReferenceSettings& set
                 double n = settings.samples;
                 glm::dvec3 mean = sum / n;
                 glm::dvec3 var = glm::max((sum2 - n * mean * mean) / (n - 1.0), glm::dvec3(0.0));
-                result.irradiance[p][i] = glm::vec3(mean);
+                result.irradiance[p][i] = glm::vec3(mean) + direct;
                 result.standardError[p][i] = glm::vec3(glm::sqrt(var / n));
             }
             size_t d = done.fetch_add(range.size()) + range.size();

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "scene/scene.h"
+#include "solver/solver.h"
 
 namespace penumbra {
 
@@ -16,6 +17,7 @@ struct ReferenceSettings {
     int maxDepth = 64;   // bounces after the vertex; Russian roulette ends most paths sooner
     uint64_t seed = 1;
     int threads = 0;  // 0: all cores
+    Channel channel = Channel::kIndirect;
     // Called with the fraction done (0..1) and the estimated seconds left, from any thread,
     // never by two threads at once.
     std::function<void(double fraction, double secondsLeft)> progress;
@@ -39,8 +41,11 @@ struct ReferenceResult {
     ReferenceStats stats;
 };
 
-// Irradiance at every input vertex over the hemisphere of its normal, from every emitting
-// surface (channel `indirect`: there are no punctual lights yet). Lambertian surfaces,
+// Irradiance at every input vertex over the hemisphere of its normal, in the settings'
+// channel: `indirect` is the light of emitting surfaces plus every bounce of any light
+// (punctual lights included), `direct` the light arriving straight from punctual lights
+// (shadow rays, exact: no sampling, so its standard error is 0), `total` their sum.
+// Punctual lights follow KHR_lights_punctual (LightAttenuation in scene.h). Lambertian surfaces,
 // reflecting and emitting on their front side (the side their vertex normals point to);
 // a ray that reaches a back side ends there (opaque, black). Each vertex is estimated
 // 10⁻³ × the scene's diameter inside its own surface (towards its triangles), so that a

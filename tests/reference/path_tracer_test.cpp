@@ -70,6 +70,106 @@ TEST(Reference, SmallPatchMatchesPointToPointFormula) {
         }
 }
 
+// Punctual lights: the `direct` channel is the closed form I·att·cosθ/d² (E⊥·cosθ for a
+// directional light) at every vertex, exactly (no sampling), away from the shadow of a slab;
+// in the slab's umbra it is zero.
+TEST(Reference, PunctualLightsMatchClosedForms) {
+    PunctualLight point;
+    point.name = "lamp";
+    point.position = glm::vec3(0.3f, 1.2f, -0.2f);
+    point.intensity = 25.0f;
+    PunctualLight spot = point;
+    spot.name = "spot";
+    spot.type = LightType::kSpot;
+    spot.direction = glm::normalize(glm::vec3(0.2f, -1.0f, 0.0f));
+    spot.innerCone = 0.3f;
+    spot.outerCone = 0.5f;
+    spot.range = 3.0f;
+    PunctualLight sun;
+    sun.name = "sun";
+    sun.type = LightType::kDirectional;
+    sun.position = glm::vec3(0, 3, 0);
+    sun.direction = glm::normalize(glm::vec3(0.5f, -1.0f, 0.0f));
+    sun.intensity = 800.0f;
+    for (const PunctualLight& light : {point, spot, sun}) {
+        SceneBuilder b;
+        uint32_t grey = b.AddMaterial("grey", glm::vec3(0.5f));
+        b.AddQuad("floor", grey, {-2, 0, -2}, {2, 0, -2}, {2, 0, 2}, {-2, 0, 2}, {0, 1, 0}, 16);
+        b.AddBox("slab", grey, {-1.2f, 0.5f, 1.2f}, {0.6f, 0.05f, 0.6f});
+        b.AddLight(light);
+        Scene scene = b.Build();
+        const PunctualLight& placed = scene.lights[0];
+        ReferenceSettings s = Settings(2);
+        s.channel = Channel::kDirect;
+        ReferenceResult r = RenderReference(scene, s);
+        const Primitive& floor = scene.primitives[0];
+        int checked = 0, shadowed = 0;
+        for (size_t i = 0; i < floor.positions.size(); ++i) {
+            glm::vec3 p = floor.positions[i];
+            glm::vec3 toLight = placed.type == LightType::kDirectional
+                                    ? -placed.direction
+                                    : glm::normalize(placed.position - p);
+            // Where the ray to the light crosses the slab's height: inside its square?
+            glm::vec3 at = p + toLight * ((0.5f - p.y) / toLight.y);
+            bool umbra = std::abs(at.x + 1.2f) < 0.25f && std::abs(at.z - 1.2f) < 0.25f;
+            bool edge = std::abs(at.x + 1.2f) < 0.35f && std::abs(at.z - 1.2f) < 0.35f;
+            float e = Mean(r.irradiance[0][i]);
+            EXPECT_EQ(Mean(r.standardError[0][i]), 0.0f);
+            if (umbra) {
+                EXPECT_EQ(e, 0.0f) << light.name << " at " << p.x << "," << p.z;
+                ++shadowed;
+            } else if (!edge && std::abs(p.x) < 1.99f && std::abs(p.z) < 1.99f) {
+                // (Boundary vertices are estimated 10⁻³ × diameter inside the floor.)
+                float want;
+                if (placed.type == LightType::kDirectional) {
+                    want = placed.intensity * toLight.y;
+                } else {
+                    float d = glm::length(placed.position - p);
+                    want = placed.intensity * LightAttenuation(placed, -toLight, d) * toLight.y /
+                           (d * d);
+                }
+                EXPECT_NEAR(e, want, 1e-4f * want + 1e-6f) << light.name << " at " << p.x;
+                ++checked;
+            }
+        }
+        EXPECT_GT(checked, 200) << light.name;
+        EXPECT_GT(shadowed, 0) << light.name;
+    }
+}
+
+// `total` is `direct` plus `indirect` with the same random streams; the bounce of a point
+// light's light reaches a wall the light cannot see.
+TEST(Reference, TotalIsDirectPlusIndirect) {
+    SceneBuilder b;
+    uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
+    b.AddQuad("floor", white, {-1, 0, -1}, {1, 0, -1}, {1, 0, 1}, {-1, 0, 1}, {0, 1, 0}, 4);
+    b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, 4);
+    PunctualLight spot;
+    spot.name = "spot";
+    spot.type = LightType::kSpot;
+    spot.position = glm::vec3(0.8f, 0.9f, 0.0f);
+    spot.direction = glm::normalize(glm::vec3(-0.3f, -1.0f, 0.0f));
+    spot.innerCone = 0.5f;
+    spot.outerCone = 0.6f;
+    spot.intensity = 10.0f;
+    b.AddLight(spot);
+    Scene scene = b.Build();
+    ReferenceResult r[3];
+    for (Channel c : {Channel::kIndirect, Channel::kDirect, Channel::kTotal}) {
+        ReferenceSettings s = Settings(64);
+        s.channel = c;
+        r[static_cast<int>(c)] = RenderReference(scene, s);
+    }
+    const auto &indirect = r[0].irradiance, &direct = r[1].irradiance, &total = r[2].irradiance;
+    for (size_t p = 0; p < total.size(); ++p)
+        for (size_t i = 0; i < total[p].size(); ++i)
+            EXPECT_NEAR(Mean(total[p][i]), Mean(direct[p][i] + indirect[p][i]),
+                        1e-5f * Mean(total[p][i]) + 1e-7f);
+    size_t v = NearestVertex(scene.primitives[1], {1, 0.5f, 0});
+    EXPECT_EQ(Mean(direct[1][v]), 0.0f);
+    EXPECT_GT(Mean(indirect[1][v]), 0.05f);
+}
+
 // A closed room with blockers, every surface emitting Le with albedo ρ: E = π Le / (1 − ρ)
 // at every vertex. Each vertex within 2% and within five standard errors.
 TEST(Reference, WhiteFurnace) {
