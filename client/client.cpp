@@ -80,6 +80,24 @@ SceneInfo ToSceneInfo(const protocol::Message& m) {
                         {p->mesh(), p->primitive(), p->vertices(), Str(p->material())});
             out.nodes.push_back(std::move(node));
         }
+    auto vec = [](const fb::Vec3* v) {
+        return v ? std::array<float, 3>{v->x(), v->y(), v->z()} : std::array<float, 3>{};
+    };
+    if (s->lights())
+        for (const auto* l : *s->lights()) {
+            LightInfo light;
+            light.name = Str(l->name());
+            light.node = Str(l->node());
+            light.type = Str(l->type());
+            light.color = vec(l->color());
+            light.position = vec(l->position());
+            light.direction = vec(l->direction());
+            light.intensity = l->intensity();
+            light.range = l->range();
+            light.innerCone = l->inner_cone();
+            light.outerCone = l->outer_cone();
+            out.lights.push_back(light);
+        }
     if (s->materials())
         for (const auto* m2 : *s->materials()) {
             MaterialInfo mat;
@@ -285,10 +303,24 @@ uint64_t Client::SetTransform(const std::string& node, const std::array<float, 1
 
 uint64_t Client::SetLight(const std::string& light, std::optional<std::array<float, 3>> color,
                           std::optional<float> intensity, const std::string& scene) {
+    LightChange change;
+    change.color = color;
+    change.intensity = intensity;
+    return SetLight(light, change, scene);
+}
+
+uint64_t Client::SetLight(const std::string& light, const LightChange& change,
+                          const std::string& scene) {
     flatbuffers::FlatBufferBuilder b;
-    fb::Vec3 c = color ? fb::Vec3((*color)[0], (*color)[1], (*color)[2]) : fb::Vec3();
-    b.Finish(fb::CreateSetLightDirect(b, scene.c_str(), light.c_str(), color ? &c : nullptr,
-                                      intensity ? *intensity : -1.0f));
+    auto vec = [](const std::optional<std::array<float, 3>>& v) {
+        return v ? fb::Vec3((*v)[0], (*v)[1], (*v)[2]) : fb::Vec3();
+    };
+    fb::Vec3 c = vec(change.color), p = vec(change.position), d = vec(change.direction);
+    b.Finish(
+        fb::CreateSetLightDirect(b, scene.c_str(), light.c_str(), change.color ? &c : nullptr,
+                                 change.intensity.value_or(-1.0f), change.position ? &p : nullptr,
+                                 change.direction ? &d : nullptr, change.innerCone.value_or(-1.0f),
+                                 change.outerCone.value_or(-1.0f), change.range.value_or(-1.0f)));
     return impl_->Call(MessageType::kSetLight, b, MessageType::kEditAck)
         .As<fb::EditAck>()
         ->edit_id();

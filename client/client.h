@@ -42,10 +42,19 @@ struct MaterialInfo {
     std::string name;
     std::array<float, 3> albedo{}, emission{};
 };
+// A punctual light (KHR_lights_punctual), world space.
+struct LightInfo {
+    std::string name, node, type;  // type: point | spot | directional
+    std::array<float, 3> color{}, position{}, direction{};
+    float intensity = 0.0f;                    // cd (point, spot) or lux (directional)
+    float range = 0.0f;                        // metres; 0 = infinite
+    float innerCone = 0.0f, outerCone = 0.0f;  // radians (spot)
+};
 struct SceneInfo {
     std::string scene, solver, device;
     std::vector<NodeInfo> nodes;
     std::vector<MaterialInfo> materials;
+    std::vector<LightInfo> lights;
     uint32_t elements = 0;
     uint64_t links = 0;
     double buildSeconds = 0.0;
@@ -100,6 +109,16 @@ class Client {
     // Edits return their edit id; frames with lastEdit ≥ id include them.
     uint64_t SetTransform(const std::string& node, const std::array<float, 16>& matrix,
                           const std::string& scene = "");
+    // A light edit: absent parts stay as they are. Position, direction, cone and range
+    // apply to punctual lights only.
+    struct LightChange {
+        std::optional<std::array<float, 3>> color;
+        std::optional<float> intensity;
+        std::optional<std::array<float, 3>> position, direction;
+        std::optional<float> innerCone, outerCone, range;
+    };
+    uint64_t SetLight(const std::string& light, const LightChange& change,
+                      const std::string& scene = "");
     uint64_t SetLight(const std::string& light, std::optional<std::array<float, 3>> color,
                       std::optional<float> intensity, const std::string& scene = "");
     uint64_t SetMaterial(const std::string& material, std::optional<std::array<float, 3>> albedo,

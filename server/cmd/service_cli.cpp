@@ -152,9 +152,10 @@ struct ServiceCommands::State {
     std::string channel = "indirect", format = "f32";
 
     std::string node;
-    std::vector<float> translate, matrix, color, albedo, emission;
+    std::vector<float> translate, matrix, color, albedo, emission, position, direction, cone;
     float rotateY = 0.0f;
     float intensity = -1.0f;
+    float range = -1.0f;
 
     std::string output, gltf;
     int stepIterations = 1;
@@ -224,11 +225,23 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.move->add_option("--matrix", s.matrix, "16 numbers, column-major: the new local transform")
         ->delimiter(',');
 
-    s.light = app.add_subcommand("light", "Change an emissive node's light: colour × intensity");
-    s.light->add_option("name", s.node, "light (emissive node) name")->required();
-    s.light->add_option("--intensity", s.intensity, "peak emitted radiance (nits)");
-    s.light->add_option("--color", s.color, "r,g,b (scaled so its peak is 1 by intensity)")
+    s.light = app.add_subcommand(
+        "light",
+        "Change a light: a punctual light's colour, intensity, placement, cone and range, or an "
+        "emissive node's colour × intensity");
+    s.light->add_option("name", s.node, "punctual light (or its node) or emissive node")
+        ->required();
+    s.light->add_option("--intensity", s.intensity,
+                        "cd (point, spot), lux (directional), or peak radiance in nits (emissive)");
+    s.light->add_option("--color", s.color, "r,g,b (emissive: scaled so its peak is 1)")
         ->delimiter(',');
+    s.light->add_option("--position", s.position, "x,y,z world position, metres (punctual)")
+        ->delimiter(',');
+    s.light->add_option("--direction", s.direction, "x,y,z where the light shines (punctual)")
+        ->delimiter(',');
+    s.light->add_option("--cone", s.cone, "inner,outer spot cone angles in degrees (≤ 90)")
+        ->delimiter(',');
+    s.light->add_option("--range", s.range, "metres, 0 = infinite (point, spot)");
 
     s.material = app.add_subcommand("material", "Change a material's albedo or emission");
     s.material->add_option("name", s.node, "material name")->required();
@@ -347,9 +360,11 @@ int ServiceCommands::State::Execute(client::Client& c) {
         }
         auto info = c.Load(o);
         std::string dynamic, lights;
+        for (const auto& l : info.lights)
+            lights += (lights.empty() ? "" : ", ") + l.name + " (" + l.type + ")";
         for (const auto& n : info.nodes) {
             if (n.dynamic) dynamic += (dynamic.empty() ? "" : ", ") + n.name;
-            if (n.emissive) lights += (lights.empty() ? "" : ", ") + n.name;
+            if (n.emissive) lights += (lights.empty() ? "" : ", ") + n.name + " (emissive)";
         }
         std::printf("%s %s: %u elements, %llu links, solver %s on %s, built in %.2f s\n",
                     info.reused ? "joined" : "loaded", info.scene.c_str(), info.elements,
@@ -372,6 +387,17 @@ int ServiceCommands::State::Execute(client::Client& c) {
                         n.primitives.size(), vertices, n.dynamic ? ", dynamic" : "",
                         n.emissive ? ", light" : "");
         }
+        for (const auto& l : i.lights)
+            std::printf(
+                "  light %-19s %s on node %s, colour %.3g %.3g %.3g × %.4g %s, at %.3g %.3g %.3g, "
+                "towards %.3g %.3g %.3g%s\n",
+                l.name.c_str(), l.type.c_str(), l.node.c_str(), l.color[0], l.color[1], l.color[2],
+                l.intensity, l.type == "directional" ? "lux" : "cd", l.position[0], l.position[1],
+                l.position[2], l.direction[0], l.direction[1], l.direction[2],
+                l.type == "spot" ? (", cone " + std::to_string(glm::degrees(l.innerCone)) + "°–" +
+                                    std::to_string(glm::degrees(l.outerCone)) + "°")
+                                       .c_str()
+                                 : "");
         for (const auto& m : i.materials)
             std::printf("  material %-16s albedo %.3g %.3g %.3g  emission %.3g %.3g %.3g\n",
                         m.name.c_str(), m.albedo[0], m.albedo[1], m.albedo[2], m.emission[0],
@@ -448,10 +474,23 @@ int ServiceCommands::State::Execute(client::Client& c) {
     if (light && light->parsed()) {
         std::optional<std::array<float, 3>> col;
         if (!color.empty()) col = Triple(color, "--color");
-        std::optional<float> in;
-        if (intensity >= 0.0f) in = intensity;
-        if (!col && !in) throw Error("light: give --intensity and/or --color");
-        lastEdit = c.SetLight(node, col, in, session);
+        client::Client::LightChange change;
+        change.color = col;
+        if (intensity >= 0.0f) change.intensity = intensity;
+        if (!position.empty()) change.position = Triple(position, "--position");
+        if (!direction.empty()) change.direction = Triple(direction, "--direction");
+        if (!cone.empty()) {
+            if (cone.size() != 2) throw Error("--cone needs inner,outer (degrees)");
+            change.innerCone = glm::radians(cone[0]);
+            change.outerCone = glm::radians(cone[1]);
+        }
+        if (range >= 0.0f) change.range = range;
+        if (!change.color && !change.intensity && !change.position && !change.direction &&
+            !change.innerCone && !change.range)
+            throw Error(
+                "light: give at least one of --intensity, --color, --position, --direction, "
+                "--cone, --range");
+        lastEdit = c.SetLight(node, change, session);
         if (!quiet)
             std::printf("edit %llu: light %s\n", (unsigned long long)lastEdit, node.c_str());
         return kExitOk;

@@ -65,7 +65,9 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
     SolverStats stats = session.SolverStatistics();
     std::vector<flatbuffers::Offset<fb::NodeInfo>> nodes;
     for (const auto& n : scene.nodes) {
-        if (n.primitives.empty() && n.children.empty()) continue;
+        bool placesLight = false;
+        for (const auto& l : scene.lights) placesLight = placesLight || &scene.nodes[l.node] == &n;
+        if (n.primitives.empty() && n.children.empty() && !placesLight) continue;
         std::vector<flatbuffers::Offset<fb::PrimitiveInfo>> prims;
         bool emissive = false;
         for (uint32_t pi : n.primitives) {
@@ -86,31 +88,56 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
         fb::Vec3 emission(m.emission.x, m.emission.y, m.emission.z);
         materials.push_back(fb::CreateMaterialInfoDirect(b, m.name.c_str(), &albedo, &emission));
     }
-    b.Finish(fb::CreateSceneInfoDirect(
-        b, session.Name().c_str(), stats.solver.c_str(), stats.device.c_str(), &nodes, &materials,
-        static_cast<uint32_t>(stats.elements), stats.links, session.BuildSeconds(), reused));
+    std::vector<flatbuffers::Offset<fb::LightInfo>> lights;
+    for (const auto& l : scene.lights) {
+        fb::Vec3 color(l.color.x, l.color.y, l.color.z);
+        fb::Vec3 position(l.position.x, l.position.y, l.position.z);
+        fb::Vec3 direction(l.direction.x, l.direction.y, l.direction.z);
+        const char* type = l.type == LightType::kPoint  ? "point"
+                           : l.type == LightType::kSpot ? "spot"
+                                                        : "directional";
+        lights.push_back(fb::CreateLightInfoDirect(
+            b, l.name.c_str(), scene.nodes[l.node].name.c_str(), type, &color, l.intensity, l.range,
+            l.innerCone, l.outerCone, &position, &direction));
+    }
+    b.Finish(fb::CreateSceneInfoDirect(b, session.Name().c_str(), stats.solver.c_str(),
+                                       stats.device.c_str(), &nodes, &materials,
+                                       static_cast<uint32_t>(stats.elements), stats.links,
+                                       session.BuildSeconds(), reused, &lights));
 }
 
 }  // namespace
 
 void BuildFramePayload(flatbuffers::FlatBufferBuilder& b, const service::FrameData& frame,
                        service::Channel channel, fb::Format format) {
-    // Channels: punctual lights are not implemented yet, so `direct` is zero and `total`
-    // equals `indirect` (exact only without them; the connection refuses the others).
-    const bool zero = channel == service::Channel::kDirect;
+    // Channels: `indirect` and `direct` as the session made them (`direct` is zero in a
+    // scene without punctual lights), `total` their sum.
+    const bool hasDirect = !frame.direct.empty();
     std::vector<flatbuffers::Offset<fb::PrimitiveIrradiance>> prims;
     prims.reserve(frame.irradiance.size());
+    std::vector<float> sum;
     for (size_t p = 0; p < frame.irradiance.size(); ++p) {
-        const auto& rgb = frame.irradiance[p];
-        const float* values = reinterpret_cast<const float*>(rgb.data());
-        const size_t n = rgb.size() * 3;
+        const size_t n = frame.irradiance[p].size() * 3;
+        const float* values = nullptr;  // null: all zero
+        if (channel == service::Channel::kIndirect || (!hasDirect && channel == Channel::kTotal)) {
+            values = reinterpret_cast<const float*>(frame.irradiance[p].data());
+        } else if (hasDirect && channel == service::Channel::kDirect) {
+            values = reinterpret_cast<const float*>(frame.direct[p].data());
+        } else if (hasDirect) {
+            const float* a = reinterpret_cast<const float*>(frame.irradiance[p].data());
+            const float* d = reinterpret_cast<const float*>(frame.direct[p].data());
+            sum.resize(n);
+            for (size_t i = 0; i < n; ++i) sum[i] = a[i] + d[i];
+            values = sum.data();
+        }
         flatbuffers::Offset<flatbuffers::Vector<float>> f32 = 0;
         flatbuffers::Offset<flatbuffers::Vector<uint16_t>> f16 = 0;
         if (format == fb::Format::Float16) {
             uint16_t* out = nullptr;
             f16 = b.CreateUninitializedVector(n, &out);
-            for (size_t i = 0; i < n; ++i) out[i] = protocol::FloatToHalf(zero ? 0.0f : values[i]);
-        } else if (zero) {
+            for (size_t i = 0; i < n; ++i)
+                out[i] = protocol::FloatToHalf(values ? values[i] : 0.0f);
+        } else if (!values) {
             float* out = nullptr;
             f32 = b.CreateUninitializedVector(n, &out);
             std::fill(out, out + n, 0.0f);
@@ -419,8 +446,14 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 service::LightEdit e;
                 e.light = Str(l->light());
                 e.color = Vec(l->color());
-                if (l->intensity() >= 0.0f || std::isnan(l->intensity()))
-                    e.intensity = l->intensity();
+                // Negative means "unchanged"; NaN is passed on to be refused.
+                auto given = [](float v) { return v >= 0.0f || std::isnan(v); };
+                if (given(l->intensity())) e.intensity = l->intensity();
+                e.position = Vec(l->position());
+                e.direction = Vec(l->direction());
+                if (given(l->inner_cone())) e.innerCone = l->inner_cone();
+                if (given(l->outer_cone())) e.outerCone = l->outer_cone();
+                if (given(l->range())) e.range = l->range();
                 SendAck(id, session->Submit(e));
                 return;
             }
@@ -438,7 +471,6 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 const auto* s = m.As<fb::Subscribe>();
                 auto session = service.Find(Str(s->scene()));
                 auto channel = ChannelOf(s->channel());
-                CheckChannel(*session, channel);
                 Unsubscribe(session->Name());
                 std::weak_ptr<Connection> weak = shared_from_this();
                 Server* server = &server_;
@@ -464,7 +496,6 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 const auto* g = m.As<fb::GetIrradiance>();
                 auto session = service.Find(Str(g->scene()));
                 auto channel = ChannelOf(g->channel());
-                CheckChannel(*session, channel);
                 fb::Format format = g->format();
                 Blocking(
                     id, [session] { return session->Latest(); },
@@ -503,13 +534,6 @@ class Connection : public std::enable_shared_from_this<Connection> {
                           std::string(protocol::MessageName(m.header.type)) +
                               " is a reply type; a client may not send it");
         }
-    }
-
-    void CheckChannel(const service::Session& session, service::Channel channel) {
-        if (channel != service::Channel::kIndirect && session.PunctualLights() > 0)
-            throw ServiceError(ErrorKind::kUnsupported,
-                               "the scene has punctual lights, which this server does not light "
-                               "yet; only the indirect channel is exact");
     }
 
     void SendAck(uint32_t id, uint64_t edit) {

@@ -3,6 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
+#define GLM_ENABLE_EXPERIMENTAL
+#include <glm/gtx/quaternion.hpp>
 
 #include "base/check.h"
 #include "output/irradiance_writer.h"
@@ -16,6 +19,8 @@ using Clock = std::chrono::steady_clock;
 double MsSince(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
+
+bool Finite(glm::vec3 v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
 bool FiniteNonNegative(glm::vec3 v) {
     for (int i = 0; i < 3; ++i)
@@ -56,6 +61,20 @@ std::vector<uint32_t> OwnMaterials(Scene& scene, int node) {
             used.push_back(p.material);
     }
     return used;
+}
+
+bool SubtreeHasPrimitives(const Scene& scene, int node) {
+    if (!scene.nodes[node].primitives.empty()) return true;
+    for (int c : scene.nodes[node].children)
+        if (SubtreeHasPrimitives(scene, c)) return true;
+    return false;
+}
+
+bool SubtreeHasLights(const Scene& scene, int node) {
+    for (const auto& l : scene.lights)
+        for (int n = l.node; n >= 0; n = scene.nodes[n].parent)
+            if (n == node) return true;
+    return false;
 }
 
 bool Outside(const Scene& scene, const SceneNode& node) {
@@ -111,10 +130,11 @@ Session::~Session() {
 
 // --- Edits ----------------------------------------------------------------------------------
 
-uint64_t Session::Queue(std::function<void(Scene&)> apply, bool moves, std::string what) {
+uint64_t Session::Queue(std::function<void(Scene&)> apply, bool moves, std::string what,
+                        bool lights) {
     // Caller holds mutex_ and has applied `apply` to validated_ already.
     uint64_t id = nextEdit_++;
-    pending_.push_back(Pending{id, Clock::now(), std::move(apply), moves, std::move(what)});
+    pending_.push_back(Pending{id, Clock::now(), std::move(apply), moves, lights, std::move(what)});
     if (!rebuild_) editWaiting_ = true;
     wake_.notify_all();
     return id;
@@ -127,7 +147,10 @@ uint64_t Session::Submit(const TransformEdit& edit) {
         throw ServiceError(ErrorKind::kNotFound,
                            "no node '" + edit.node + "' in scene '" + name_ +
                                "'; movable nodes: " + NodeList(validated_, true));
-    if (!validated_.nodes[node].dynamic)
+    // Lights are always movable; geometry only when marked dynamic.
+    const bool geometry = SubtreeHasPrimitives(validated_, node);
+    const bool lights = SubtreeHasLights(validated_, node);
+    if (geometry && !validated_.nodes[node].dynamic)
         throw ServiceError(ErrorKind::kStaticNode,
                            "node '" + edit.node +
                                "' is static; mark it extras.penumbra.dynamic in the glTF to move "
@@ -141,20 +164,27 @@ uint64_t Session::Submit(const TransformEdit& edit) {
     glm::mat4 local = edit.local;
     std::string what = "moved " + edit.node;
     if (Outside(validated_, validated_.nodes[node])) what += " (outside its motion bounds)";
-    return Queue([node, local](Scene& s) { SetNodeTransform(s, node, local); }, true, what);
+    return Queue([node, local](Scene& s) { SetNodeTransform(s, node, local); }, geometry, what,
+                 lights);
 }
 
 uint64_t Session::Submit(const LightEdit& edit) {
     std::lock_guard lock(mutex_);
+    if (int li = FindLight(validated_, edit.light); li >= 0) return SubmitPunctual(li, edit);
     if (std::find(lightNodes_.begin(), lightNodes_.end(), edit.light) == lightNodes_.end()) {
         std::string lights;
+        for (const auto& l : validated_.lights) lights += (lights.empty() ? "" : ", ") + l.name;
         for (const auto& l : lightNodes_) lights += (lights.empty() ? "" : ", ") + l;
-        throw ServiceError(
-            ErrorKind::kNotFound,
-            "no light '" + edit.light + "' in scene '" + name_ +
-                "'; lights (emissive nodes): " + (lights.empty() ? "(none)" : lights) +
-                (!validated_.lights.empty() ? "; punctual lights are not supported yet" : ""));
+        throw ServiceError(ErrorKind::kNotFound, "no light '" + edit.light + "' in scene '" +
+                                                     name_ +
+                                                     "'; lights (punctual, then emissive nodes): " +
+                                                     (lights.empty() ? "(none)" : lights));
     }
+    if (edit.position || edit.direction || edit.innerCone || edit.outerCone || edit.range)
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "'" + edit.light +
+                               "' is an emissive surface: only its colour and intensity can "
+                               "change (move its node with SetTransform)");
     if (edit.intensity && (!std::isfinite(*edit.intensity) || *edit.intensity < 0.0f))
         throw ServiceError(ErrorKind::kInvalidArgument,
                            "light intensity must be a finite number ≥ 0");
@@ -177,6 +207,57 @@ uint64_t Session::Submit(const LightEdit& edit) {
     };
     apply(validated_);
     return Queue(apply, false, "light " + edit.light);
+}
+
+uint64_t Session::SubmitPunctual(int li, const LightEdit& edit) {
+    // Caller holds mutex_. Check the light as it will be, then queue the change.
+    auto invalid = [](const std::string& why) {
+        return ServiceError(ErrorKind::kInvalidArgument, why);
+    };
+    if (edit.intensity && (!std::isfinite(*edit.intensity) || *edit.intensity < 0.0f))
+        throw invalid("light intensity must be a finite number ≥ 0 (cd, or lux if directional)");
+    if (edit.color && !FiniteNonNegative(*edit.color))
+        throw invalid("light colour must be three finite numbers ≥ 0");
+    if (edit.range && (!std::isfinite(*edit.range) || *edit.range < 0.0f))
+        throw invalid("light range must be a finite number of metres ≥ 0 (0: infinite)");
+    if (edit.position && !Finite(*edit.position))
+        throw invalid("light position must be three finite numbers");
+    if (edit.direction && (!Finite(*edit.direction) || !(glm::length(*edit.direction) > 1e-12f)))
+        throw invalid("light direction must be a finite, non-zero vector");
+    PunctualLight next = validated_.lights[li];
+    if (edit.innerCone) next.innerCone = *edit.innerCone;
+    if (edit.outerCone) next.outerCone = *edit.outerCone;
+    if ((edit.innerCone || edit.outerCone) && next.type != LightType::kSpot)
+        throw invalid("'" + edit.light + "' is not a spot light: it has no cone");
+    if (!(next.innerCone >= 0.0f && next.innerCone < next.outerCone &&
+          next.outerCone <= 1.5707964f))
+        throw invalid("spot cone angles need 0 ≤ inner < outer ≤ π/2 radians");
+    LightEdit e = edit;
+    int node = validated_.lights[li].node;
+    auto apply = [li, node, e](Scene& s) {
+        PunctualLight& light = s.lights[li];
+        if (e.color) light.color = *e.color;
+        if (e.intensity) light.intensity = *e.intensity;
+        if (e.range) light.range = *e.range;
+        if (e.innerCone) light.innerCone = *e.innerCone;
+        if (e.outerCone) light.outerCone = *e.outerCone;
+        if (e.position || e.direction) {
+            // The node's new world matrix: at the position, −Z turned onto the direction.
+            glm::vec3 p = e.position ? *e.position : light.position;
+            glm::vec3 d = glm::normalize(e.direction ? *e.direction : light.direction);
+            glm::mat4 world = glm::translate(glm::mat4(1.0f), p) *
+                              glm::mat4_cast(glm::rotation(glm::vec3(0, 0, -1), d));
+            const SceneNode& n = s.nodes[node];
+            glm::mat4 parent = n.parent >= 0 ? s.nodes[n.parent].world : glm::mat4(1.0f);
+            SetNodeTransform(s, node, glm::inverse(parent) * world);
+        }
+    };
+    try {
+        apply(validated_);
+    } catch (const Error& err) {
+        throw invalid(err.what());
+    }
+    return Queue(apply, false, "light " + edit.light, true);
 }
 
 uint64_t Session::Submit(const MaterialEdit& edit) {
@@ -324,6 +405,12 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
     frame->irradiance.resize(applied_.primitives.size());
     for (size_t p = 0; p < applied_.primitives.size(); ++p)
         frame->irradiance[p] = PrimitiveIrradiance(solver_->GetSurfels(), surfels, applied_, p);
+    if (!applied_.lights.empty()) {
+        std::vector<glm::vec3> direct = solver_->SurfelIrradiance(Channel::kDirect);
+        frame->direct.resize(applied_.primitives.size());
+        for (size_t p = 0; p < applied_.primitives.size(); ++p)
+            frame->direct[p] = PrimitiveIrradiance(solver_->GetSurfels(), direct, applied_, p);
+    }
     SolverStats stats = solver_->Stats();
     passTotals_.resize(stats.passes.size(), 0.0);
     for (size_t i = 0; i < stats.passes.size(); ++i) {
@@ -399,11 +486,12 @@ void Session::Run() {
         // being rebuilt later edits wait, so frames name their edits in order.
         if (!rebuild_ && !pending_.empty()) {
             Scene next = applied_;
-            bool moves = false;
+            bool moves = false, lights = false;
             std::string what;
             for (auto& p : pending_) {
                 p.apply(next);
                 moves = moves || p.moves;
+                lights = lights || p.lights;
                 if (p.moves) what += (what.empty() ? "" : ", ") + p.what;
             }
             uint64_t last = pending_.back().id;
@@ -434,8 +522,16 @@ void Session::Run() {
             } else {
                 applied_ = std::move(next);
                 lock.unlock();
-                solver_->UpdateMaterials(applied_);
+                std::exception_ptr failure;
+                try {
+                    solver_->UpdateMaterials(applied_);
+                    if (lights) solver_->UpdateLights(applied_);  // one shadow pass
+                } catch (const std::exception& e) {
+                    failure = std::current_exception();
+                    note = std::string("light update failed: ") + e.what();
+                }
                 lock.lock();
+                if (failure) lastError_ = note;
                 appliedEdit_ = last;
                 appliedReceived_ = received;
                 latencyReported_ = false;

@@ -48,7 +48,7 @@ class ServiceError : public std::runtime_error {
     ErrorKind kind_;
 };
 
-enum class Channel { kIndirect, kDirect, kTotal };
+using penumbra::Channel;
 
 struct SessionSettings {
     SolverSettings solver;
@@ -79,6 +79,8 @@ struct FrameData {
     std::string note;
     // `indirect` irradiance per scene primitive, in the primitive's input vertex order.
     std::vector<std::vector<glm::vec3>> irradiance;
+    // `direct` (punctual lights, shadowed) the same way; empty when the scene has none.
+    std::vector<std::vector<glm::vec3>> direct;
     std::shared_ptr<const std::vector<PrimitiveKey>> layout;  // one key per primitive
 };
 using FramePtr = std::shared_ptr<const FrameData>;
@@ -89,9 +91,12 @@ struct TransformEdit {
     glm::mat4 local{1.0f};
 };
 struct LightEdit {
-    std::string light;  // an emissive node
+    std::string light;  // a punctual light (its or its node's name) or an emissive node
     std::optional<glm::vec3> color;
     std::optional<float> intensity;
+    // Punctual lights only: world-space placement, spot cone (radians), range (metres).
+    std::optional<glm::vec3> position, direction;
+    std::optional<float> innerCone, outerCone, range;
 };
 struct MaterialEdit {
     std::string material;
@@ -134,7 +139,7 @@ class Session {
     SolverStats SolverStatistics() const;
     nlohmann::json StatsJson() const;
     double BuildSeconds() const { return buildSeconds_; }
-    // KHR_lights_punctual lights in the file (not lit yet: only `indirect` is exact).
+    // KHR_lights_punctual lights in the scene.
     int PunctualLights() const { return punctualLights_; }
 
   private:
@@ -143,6 +148,7 @@ class Session {
         std::chrono::steady_clock::time_point received;
         std::function<void(Scene&)> apply;  // changes the working scene
         bool moves = false;                 // geometry changed: links must be rebuilt
+        bool lights = false;                // punctual lights changed: a shadow pass
         std::string what;                   // for the frame note
     };
     // Links rebuilt on a thread of their own while the old solver keeps producing frames.
@@ -157,7 +163,9 @@ class Session {
         std::string error;
     };
 
-    uint64_t Queue(std::function<void(Scene&)> apply, bool moves, std::string what);
+    uint64_t Queue(std::function<void(Scene&)> apply, bool moves, std::string what,
+                   bool lights = false);
+    uint64_t SubmitPunctual(int light, const LightEdit& edit);
     void Run();
     // `interruptible`: end the frame early, after the current iteration, when an edit that
     // can apply at once arrives (it then waits at most one iteration, not a whole frame).

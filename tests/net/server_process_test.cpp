@@ -245,6 +245,82 @@ TEST(ServerProcess, TwoClientsOneEditsOneWatchesOverTcpAndUnix) {
     EXPECT_NEAR(MeanOf(got, "floor"), MeanOf(*dimmed, "floor"), 2e-3f * MeanOf(*dimmed, "floor"));
 }
 
+// A scene with a spot light, uploaded as .glb: SceneInfo lists the light, the three
+// channels stream (total = direct + indirect), and SetLight moves and re-aims the spot.
+TEST(ServerProcess, PunctualLightsOverTheWire) {
+    ServerProcess server("punctual");
+    SceneBuilder b;
+    uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
+    b.AddTiledQuad("floor", white, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 8, 8, {0, 1, 0});
+    b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, 4);
+    PunctualLight spot;
+    spot.name = "spot";
+    spot.type = LightType::kSpot;
+    spot.position = glm::vec3(0, 1, 0);
+    spot.direction = glm::vec3(0, -1, 0);
+    spot.innerCone = 0.4f;
+    spot.outerCone = 0.6f;
+    spot.intensity = 8.0f;
+    b.AddLight(spot);
+    auto dir = testing::TempDir("punctual-scene");
+    std::string path = (dir / "spot.glb").string();
+    b.WriteGltf(path);
+    std::ifstream in(path, std::ios::binary);
+    client::LoadOptions o;
+    o.glb.assign(std::istreambuf_iterator<char>(in), {});
+    o.name = "spot.glb";
+    o.device = "cpu";
+    o.bins = 64;
+    o.elementSize = 0.1f;
+
+    client::Client c(server.Unix(), "lights");
+    client::SceneInfo info = c.Load(o);
+    ASSERT_EQ(info.lights.size(), 1u);
+    EXPECT_EQ(info.lights[0].name, "spot");
+    EXPECT_EQ(info.lights[0].type, "spot");
+    EXPECT_NEAR(info.lights[0].outerCone, 0.6f, 1e-6f);
+    ASSERT_TRUE(info.Node("spot"));
+
+    Watcher watch;
+    c.Subscribe(std::ref(watch), client::Channel::kDirect);
+    auto first = watch.Until(0);
+    ASSERT_TRUE(first);
+    // Under the spot: E = I / d² = 8 lux, in the floor's vertex nearest the origin.
+    Scene scene = b.Build();
+    const auto& floor = scene.primitives[0].positions;
+    size_t under = 0;
+    for (size_t i = 0; i < floor.size(); ++i)
+        if (glm::length(floor[i]) < glm::length(floor[under])) under = i;
+    ASSERT_EQ(first->primitives[0].node, "floor");
+    EXPECT_NEAR(first->primitives[0].rgb[under * 3], 8.0f, 1e-3f);
+    client::Frame direct = c.Get(client::Channel::kDirect);
+    client::Frame indirect = c.Get(client::Channel::kIndirect);
+    client::Frame total = c.Get(client::Channel::kTotal);
+    ASSERT_EQ(total.primitives.size(), 2u);
+    for (size_t p = 0; p < 2; ++p)
+        for (size_t i = 0; i < total.primitives[p].rgb.size(); ++i)
+            EXPECT_NEAR(total.primitives[p].rgb[i],
+                        direct.primitives[p].rgb[i] + indirect.primitives[p].rgb[i], 1e-5f);
+    EXPECT_GT(MeanOf(indirect, "wall"), 0.0f);
+    EXPECT_EQ(MeanOf(direct, "wall"), 0.0f);  // the spot does not reach the wall
+
+    // Raise the spot to 2 m and widen it: under it, E = 8 / 4.
+    client::Client::LightChange change;
+    change.position = std::array<float, 3>{0, 2, 0};
+    change.innerCone = 0.5f;
+    change.outerCone = 0.7f;
+    uint64_t edit = c.SetLight("spot", change);
+    auto moved = watch.Until(edit);
+    ASSERT_TRUE(moved);
+    EXPECT_NEAR(moved->primitives[0].rgb[under * 3], 2.0f, 1e-3f);
+    EXPECT_NEAR(c.Info().lights[0].position[1], 2.0f, 1e-6f);
+    // A cone wider than 90° is refused; the connection stays.
+    change = {};
+    change.outerCone = 2.0f;
+    EXPECT_THROW(c.SetLight("spot", change), client::ClientError);
+    EXPECT_EQ(c.Info().lights.size(), 1u);
+}
+
 TEST(ServerProcess, GarbageOnOneConnectionDoesNotDisturbAnother) {
     ServerProcess server("garbage");
     client::Client viewer(server.Unix(), "viewer");

@@ -24,6 +24,13 @@ SessionSettings Settings() {
     return s;
 }
 
+LightEdit Dim(const std::string& light, float intensity) {
+    LightEdit e;
+    e.light = light;
+    e.intensity = intensity;
+    return e;
+}
+
 // Waits for a converged frame that includes edit `edit`; `notes` collects the notes of the
 // frames on the way.
 FramePtr WaitFor(Session& session, uint64_t edit, std::string* notes = nullptr) {
@@ -101,8 +108,8 @@ TEST(Session, EditsAreValidatedOnSubmission) {
     nan[3][1] = std::nanf("");
     EXPECT_EQ(kind(TransformEdit{"blocker", nan}), ErrorKind::kInvalidArgument);
     EXPECT_EQ(kind(TransformEdit{"blocker", glm::mat4(0.0f)}), ErrorKind::kInvalidArgument);
-    EXPECT_EQ(kind(LightEdit{"floor", std::nullopt, 2.0f}), ErrorKind::kNotFound);
-    EXPECT_EQ(kind(LightEdit{"emitter", std::nullopt, -1.0f}), ErrorKind::kInvalidArgument);
+    EXPECT_EQ(kind(Dim("floor", 2.0f)), ErrorKind::kNotFound);
+    EXPECT_EQ(kind(Dim("emitter", -1.0f)), ErrorKind::kInvalidArgument);
     EXPECT_EQ(kind(MaterialEdit{"grey", glm::vec3(1.5f), std::nullopt}),
               ErrorKind::kInvalidArgument);
     EXPECT_EQ(kind(MaterialEdit{"unobtainium", glm::vec3(0.5f), std::nullopt}),
@@ -112,7 +119,7 @@ TEST(Session, EditsAreValidatedOnSubmission) {
 TEST(Session, DimmingTheLightScalesIrradiance) {
     Session session("blocker", LoadGltf(kBlocker), Settings());
     FramePtr before = WaitFor(session, 0);
-    uint64_t edit = session.Submit(LightEdit{"emitter", std::nullopt, 5.0f});  // from 10
+    uint64_t edit = session.Submit(Dim("emitter", 5.0f));  // from 10
     FramePtr after = WaitFor(session, edit);
     ASSERT_TRUE(before && after);
     // Light is linear in the emission: every floor vertex halves (to the convergence bound).
@@ -121,6 +128,81 @@ TEST(Session, DimmingTheLightScalesIrradiance) {
               a = testing::Mean(after->irradiance[0][i]);
         EXPECT_NEAR(a, 0.5f * b, 2e-3f * b + 1e-6f) << "floor vertex " << i;
     }
+}
+
+// Punctual lights: frames carry the direct light; dimming scales it (and the bounces); a
+// light moves with SetLight or SetTransform of its (static) node without a link rebuild;
+// bad light edits are refused.
+TEST(Session, PunctualLightEdits) {
+    SceneBuilder b;
+    uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
+    b.AddTiledQuad("floor", white, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 8, 8, {0, 1, 0});
+    b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, 4);
+    PunctualLight lamp;
+    lamp.name = "lamp";
+    lamp.position = glm::vec3(0, 0.8f, 0);
+    lamp.intensity = 4.0f;
+    b.AddLight(lamp);
+    Session session("lit", b.Build(), Settings());
+    FramePtr before = WaitFor(session, 0);
+    ASSERT_TRUE(before);
+    ASSERT_EQ(before->direct.size(), 2u);
+    // Floor vertex under the lamp: E = I / d².
+    const Scene scene = session.SceneSnapshot();
+    size_t under = 0;
+    const auto& floor = scene.primitives[0].positions;
+    for (size_t i = 0; i < floor.size(); ++i)
+        if (glm::length(floor[i]) < glm::length(floor[under])) under = i;
+    EXPECT_NEAR(testing::Mean(before->direct[0][under]), 4.0f / (0.8f * 0.8f), 1e-3f);
+
+    uint64_t edit = session.Submit(Dim("lamp", 2.0f));
+    FramePtr after = WaitFor(session, edit);
+    ASSERT_TRUE(after);
+    for (size_t i = 0; i < floor.size(); i += 5) {
+        EXPECT_NEAR(testing::Mean(after->direct[0][i]), 0.5f * testing::Mean(before->direct[0][i]),
+                    1e-4f);
+        float b2 = testing::Mean(before->irradiance[0][i]);
+        EXPECT_NEAR(testing::Mean(after->irradiance[0][i]), 0.5f * b2, 3e-3f * b2 + 1e-6f);
+    }
+
+    // Move with SetLight: 0.5 m higher, E under it = I / 1.3².
+    LightEdit move;
+    move.light = "lamp";
+    move.position = glm::vec3(0, 1.3f, 0);
+    std::string notes;
+    FramePtr moved = WaitFor(session, session.Submit(move), &notes);
+    ASSERT_TRUE(moved);
+    EXPECT_NEAR(testing::Mean(moved->direct[0][under]), 2.0f / (1.3f * 1.3f), 1e-3f);
+    // And with SetTransform of the light's node, which is not marked dynamic.
+    uint64_t t = session.Submit(
+        TransformEdit{"lamp", glm::translate(glm::mat4(1.0f), glm::vec3(0, 0.5f, 0))});
+    moved = WaitFor(session, t, &notes);
+    ASSERT_TRUE(moved);
+    EXPECT_NEAR(testing::Mean(moved->direct[0][under]), 2.0f / (0.5f * 0.5f), 1e-2f);
+    EXPECT_EQ(notes.find("links rebuilt"), std::string::npos) << notes;
+    EXPECT_EQ(session.StatsJson()["link_rebuilds"], 0);
+
+    auto kind = [&](const LightEdit& e) {
+        try {
+            session.Submit(e);
+        } catch (const ServiceError& err) {
+            return err.kind();
+        }
+        return ErrorKind::kShuttingDown;  // stands for "accepted"
+    };
+    LightEdit cone;
+    cone.light = "lamp";
+    cone.outerCone = 0.5f;
+    EXPECT_EQ(kind(cone), ErrorKind::kInvalidArgument);  // a point light has no cone
+    LightEdit zero;
+    zero.light = "lamp";
+    zero.direction = glm::vec3(0.0f);
+    EXPECT_EQ(kind(zero), ErrorKind::kInvalidArgument);
+    LightEdit nan;
+    nan.light = "lamp";
+    nan.position = glm::vec3(std::nanf(""));
+    EXPECT_EQ(kind(nan), ErrorKind::kInvalidArgument);
+    EXPECT_EQ(kind(Dim("lamp", -2.0f)), ErrorKind::kInvalidArgument);
 }
 
 TEST(Session, StepRunsIterationsEvenWhenConverged) {
