@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check bench bench-service accuracy format clean
+.PHONY: all deps build demo check bench bench-service bench-direct accuracy format clean
 
 all: build
 
@@ -28,6 +28,9 @@ bench: build
 
 bench-service: build
 	$(BUILD)/bench/penumbra-bench-service --out bench/results
+
+bench-direct: build
+	$(BUILD)/bench/penumbra-bench-direct --out bench/results
 
 accuracy: build
 	$(BUILD)/bench/penumbra-bench-accuracy --out bench/results

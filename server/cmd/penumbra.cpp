@@ -69,8 +69,9 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
                          s.iterations ? p.msTotal / s.iterations : 0.0);
         if (s.lights)
             std::fprintf(stderr,
-                         "\n  %d punctual lights: %d shadow maps in %.2f ms, direct light %.2f ms",
-                         s.lights, s.shadowViews, s.msShadow, s.msDirect);
+                         "\n  %d punctual lights: %d shadow maps of %d² in %.2f ms, direct light "
+                         "%.2f ms",
+                         s.lights, s.shadowViews, s.shadowMapSize, s.msShadow, s.msDirect);
         std::fprintf(stderr, "\n  wrote %s (channel %s; %s)\n", outPath.c_str(),
                      result.channel.c_str(), kIrradianceUnits);
     }
@@ -213,7 +214,8 @@ int main(int argc, char** argv) {
                      "shadowed) or total")
         ->capture_default_str();
     bake->add_option("--shadow-map-size", settings.shadowMapSize,
-                     "texels per side of each shadow map (cube face), 16..8192")
+                     "texels per side of each shadow map (cube face), 16..8192; 0: from the "
+                     "element size (256..2048)")
         ->capture_default_str();
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");

@@ -155,6 +155,13 @@ void RasterRows(const std::vector<ScreenTriangle>& tris, int size, int y0, int y
 
 }  // namespace
 
+int AutoMapSize(float diameter, float elementSize) {
+    float want = elementSize > 0.0f ? 4.0f * diameter / elementSize : 2048.0f;
+    int size = 256;
+    while (size < 2048 && size < want) size *= 2;
+    return size;
+}
+
 Plan PlanShadows(const Scene& scene, int mapSize) {
     if (mapSize < 16 || mapSize > 8192) throw Error("shadow map size must be 16…8192 texels");
     Plan plan;

@@ -25,6 +25,12 @@
 namespace penumbra::direct {
 
 inline constexpr int kDefaultMapSize = 1024;
+
+// A map size for elements of `elementSize` in a scene of `diameter`: texels of a quarter
+// element across an orthographic map of the whole scene (and finer on cube faces nearer
+// than half the diameter), as a power of two in 256…2048. The 16-tap footprint filter
+// averages over the element anyway; finer maps only cost time.
+int AutoMapSize(float diameter, float elementSize);
 inline constexpr int kTaps = 16;
 // Spots with a wider outer cone than this get a cube map like a point light.
 inline constexpr float kMaxSpotViewCone = 1.0471976f;  // 60°

@@ -40,6 +40,7 @@ nlohmann::json StatsToJson(const SolverStats& s) {
     if (s.lights > 0) {
         j["punctual_lights"] = s.lights;
         j["shadow_views"] = s.shadowViews;
+        j["shadow_map_size"] = s.shadowMapSize;
         j["shadow_ms"] = s.msShadow;
         j["direct_ms"] = s.msDirect;
     }

@@ -32,7 +32,7 @@ struct SolverSettings {
     bool paperOracle = false;     // Sec. 3.2's oracle (fewer links, less accurate)
     int threads = 0;              // CPU threads; 0 = all cores
     bool validation = false;      // Vulkan validation layers (tests turn them on)
-    int shadowMapSize = 1024;     // texels per side of each shadow map (cube face)
+    int shadowMapSize = 0;        // texels per side of each shadow map; 0: from the element size
 };
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
@@ -59,6 +59,7 @@ struct SolverStats {
     size_t linkBytes = 0;
     int lights = 0;         // punctual lights
     int shadowViews = 0;    // shadow maps rendered per light update (cube faces count 6)
+    int shadowMapSize = 0;  // texels per side
     double msShadow = 0.0;  // last shadow pass
     double msDirect = 0.0;  // last direct-light initialisation
 

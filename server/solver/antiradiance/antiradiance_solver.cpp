@@ -35,16 +35,16 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
         std::vector<uint32_t> order;
         for (const LeafAttributes& leaf : model_.leaves) order.push_back(leaf.surfel);
         auto receivers = direct::MakeReceivers(model_.surfels, order);
+        mapSize_ = settings.shadowMapSize > 0
+                       ? settings.shadowMapSize
+                       : direct::AutoMapSize(scene.Diameter(), model_.elementSize);
         if (gpu_)
             gpuDirect_ = std::make_unique<direct::VulkanDirect>(
-                gpu_->Context(), scene, std::move(receivers), gpu_->DirectBuffer(),
-                settings.shadowMapSize);
+                gpu_->Context(), scene, std::move(receivers), gpu_->DirectBuffer(), mapSize_);
         else
-            direct_ = std::make_unique<direct::CpuDirect>(scene, std::move(receivers),
-                                                          settings.shadowMapSize);
+            direct_ = std::make_unique<direct::CpuDirect>(scene, std::move(receivers), mapSize_);
         lights_ = static_cast<int>(scene.lights.size());
-        shadowViews_ =
-            static_cast<int>(direct::PlanShadows(scene, settings.shadowMapSize).views.size());
+        shadowViews_ = static_cast<int>(direct::PlanShadows(scene, mapSize_).views.size());
         CopyDirect();
     }
     setupSeconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -140,6 +140,7 @@ SolverStats AntiradianceSolver::Stats() const {
     s.lights = lights_;
     if (direct_ || gpuDirect_) {
         s.shadowViews = shadowViews_;
+        s.shadowMapSize = mapSize_;
         s.msShadow = gpuDirect_ ? gpuDirect_->msShadow : direct_->msShadow;
         s.msDirect = gpuDirect_ ? gpuDirect_->msDirect : direct_->msDirect;
     }

@@ -40,6 +40,7 @@ class AntiradianceSolver : public Solver {
     std::unique_ptr<direct::VulkanDirect> gpuDirect_;
     int shadowViews_ = 0;
     int lights_ = 0;
+    int mapSize_ = 0;
     void CopyDirect();
     std::string deviceName_;
     int iterations_ = 0;
