@@ -14,27 +14,50 @@
 namespace penumbra {
 namespace {
 
-double SolverRmse(const std::string& file, float elementSize, int samples) {
-    Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/" + file);
+double SceneRmse(const Scene& scene, const std::string& label, float elementSize, int samples,
+                 Channel channel = Channel::kIndirect) {
     SolverSettings s;
     s.bins = 128;
     s.elementSize = elementSize;
     s.device = DeviceChoice::kCpu;
     auto solver = CreateSolver(scene, s);
     solver->Iterate(8);
-    IrradianceResult solved = CollectIrradiance(scene, *solver);
+    IrradianceResult solved = CollectIrradiance(scene, *solver, channel);
 
     ReferenceSettings rs;
     rs.samples = samples;
+    rs.channel = channel;
     ReferenceResult ref = RenderReference(scene, rs);
     IrradianceResult truth;
     truth.solver = "reference";
     truth.primitives = ref.irradiance;
 
     Comparison c = Compare(ToIrradianceFile(scene, solved), ToIrradianceFile(scene, truth));
-    std::printf("%s: relative RMSE %.4f, mean relative %.4f over %zu vertices\n", file.c_str(),
-                c.overall.relRmse, c.overall.meanRel, c.overall.vertices);
+    std::printf("%s (%s): relative RMSE %.4f, mean relative %.4f over %zu vertices\n",
+                label.c_str(), ChannelName(channel), c.overall.relRmse, c.overall.meanRel,
+                c.overall.vertices);
     return c.overall.relRmse;
+}
+
+double SolverRmse(const std::string& file, float elementSize, int samples) {
+    Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/" + file);
+    return SceneRmse(scene, file, elementSize, samples);
+}
+
+// The Cornell box lit by a point light under the ceiling instead of its emissive panel.
+Scene CornellWithPointLight() {
+    Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
+    for (Material& m : scene.materials) m.emission = glm::vec3(0.0f);
+    SceneNode node;
+    node.name = "bulb";
+    scene.nodes.push_back(node);
+    PunctualLight bulb;
+    bulb.name = "bulb";
+    bulb.node = static_cast<int>(scene.nodes.size() - 1);
+    bulb.position = glm::vec3(0.278f, 0.45f, 0.28f);
+    bulb.intensity = 1.0f;
+    scene.lights.push_back(bulb);
+    return scene;
 }
 
 // Measured 9.7% (128 bins, 0.1 m elements, 8 iterations; reference 1024 samples, itself
@@ -50,6 +73,23 @@ TEST(Accuracy, BlockerCoarse) { EXPECT_LT(SolverRmse("blocker.gltf", 0.1f, 1024)
 // Measured 13.7%: elements (0.1 m) as thick as the partitions let light leak into the far
 // corridors, where the reference is nearly black; the lit corridor is within a few per cent.
 TEST(Accuracy, MazeCoarse) { EXPECT_LT(SolverRmse("maze.gltf", 0.1f, 1024), 0.18); }
+
+// Direct light of a point light: the closed form behind shadow rays (reference) against
+// shadow maps filtered over each element (solver). Measured 2.4% RMSE (mean relative error
+// 27%): fully lit vertices agree to float precision; the difference is at the blocks'
+// shadow edges, which the solver spreads over one element (0.1 m) by design, so vertices in
+// the reference's umbra next to an edge get some light (large relative, small absolute).
+TEST(Accuracy, CornellPointLightDirect) {
+    EXPECT_LT(
+        SceneRmse(CornellWithPointLight(), "cornell + point light", 0.1f, 2, Channel::kDirect),
+        0.04);
+}
+
+// Its bounces (`indirect`): measured 9.3% (reference 1024 samples); like the emissive box,
+// the first bounce is quantised to bin directions.
+TEST(Accuracy, CornellPointLightIndirect) {
+    EXPECT_LT(SceneRmse(CornellWithPointLight(), "cornell + point light", 0.1f, 1024), 0.12);
+}
 
 }  // namespace
 }  // namespace penumbra
