@@ -20,13 +20,7 @@
 namespace {
 
 using namespace penumbra;
-
-double Median(std::vector<double> v) {
-    if (v.empty()) return 0.0;
-    std::sort(v.begin(), v.end());
-    size_t n = v.size();
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+using bench::Median;
 
 // The office with a point light under the middle of its ceiling and a sun from the side.
 Scene LitOffice(const std::string& path) {
@@ -139,13 +133,8 @@ int main(int argc, char** argv) {
                                              {"ms_per_iteration", iterMs},
                                              {"share_of_iteration", share}});
             }
-        std::filesystem::create_directories(out);
-        std::string path = out + "/direct.json";
-        std::ofstream file(path);
-        if (!file) throw Error(path + ": cannot write");
-        file << report.dump(2) << "\n";
-        std::printf("wrote %s\n", path.c_str());
-    } catch (const Error& e) {
+        bench::WriteReport(report, out, "direct.json");
+    } catch (const std::exception& e) {
         std::fprintf(stderr, "bench: %s\n", e.what());
         return 1;
     }

@@ -19,13 +19,7 @@
 namespace {
 
 using namespace penumbra;
-
-double Median(std::vector<double> v) {
-    if (v.empty()) return 0.0;
-    std::sort(v.begin(), v.end());
-    size_t n = v.size();
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+using bench::Median;
 
 nlohmann::json RunDevice(const Scene& scene, SolverSettings settings, int frames,
                          int iterationsPerFrame) {
@@ -125,13 +119,8 @@ int main(int argc, char** argv) {
                         r["table_mib"].get<double>());
             report["results"].push_back(r);
         }
-        std::filesystem::create_directories(out);
-        std::string path = out + "/office.json";
-        std::ofstream file(path);
-        if (!file) throw Error(path + ": cannot write");
-        file << report.dump(2) << "\n";
-        std::printf("wrote %s\n", path.c_str());
-    } catch (const Error& e) {
+        bench::WriteReport(report, out, "office.json");
+    } catch (const std::exception& e) {
         std::fprintf(stderr, "bench: %s\n", e.what());
         return 1;
     }

@@ -31,6 +31,23 @@ inline size_t NearestSurfel(const Surfels& s, glm::vec3 p, glm::vec3 normal) {
 
 inline float Mean(glm::vec3 v) { return (v.x + v.y + v.z) / 3.0f; }
 
+// A punctual light for SceneBuilder::AddLight; a spot's inner cone is half its outer one
+// (other types keep the glTF default cone, which they do not use).
+inline PunctualLight MakeLight(const std::string& name, LightType type, glm::vec3 position,
+                               glm::vec3 direction, float intensity, float outerCone = 0.8f) {
+    PunctualLight l;
+    l.name = name;
+    l.type = type;
+    l.position = position;
+    l.direction = direction;
+    l.intensity = intensity;
+    if (type == LightType::kSpot) {
+        l.innerCone = 0.5f * outerCone;
+        l.outerCone = outerCone;
+    }
+    return l;
+}
+
 // A fresh temporary folder for one test. Named by the process too: ctest runs the tests of
 // one executable as parallel processes, which must not share (and delete) a folder.
 inline std::filesystem::path TempDir(const std::string& name) {

@@ -26,17 +26,6 @@ SolverSettings Settings(float elementSize = 0.1f) {
     return s;
 }
 
-PunctualLight Light(const std::string& name, LightType type, glm::vec3 position,
-                    glm::vec3 direction, float intensity) {
-    PunctualLight l;
-    l.name = name;
-    l.type = type;
-    l.position = position;
-    l.direction = direction;
-    l.intensity = intensity;
-    return l;
-}
-
 // A grey 4 m floor at y = 0 facing up, optionally with a 0.4 m square slab at y = 0.5.
 SceneBuilder Floor(bool blocker) {
     SceneBuilder b;
@@ -72,7 +61,7 @@ float MaxRelativeError(Solver& solver, F expected) {
 TEST(DirectLight, PointLightOverAPlaneIsICosOverDSquared) {
     SceneBuilder b = Floor(false);
     const glm::vec3 light(0.3f, 1.2f, -0.2f);
-    b.AddLight(Light("lamp", LightType::kPoint, light, {0, -1, 0}, 25.0f));
+    b.AddLight(testing::MakeLight("lamp", LightType::kPoint, light, {0, -1, 0}, 25.0f));
     auto solver = CreateSolver(b.Build(), Settings());
     float worst = MaxRelativeError(*solver, [&](glm::vec3 p) {
         glm::vec3 v = light - p;
@@ -86,7 +75,8 @@ TEST(DirectLight, PointLightOverAPlaneIsICosOverDSquared) {
 
 TEST(DirectLight, SpotLightFollowsItsConeFalloff) {
     SceneBuilder b = Floor(false);
-    PunctualLight spot = Light("spot", LightType::kSpot, {0, 1.5f, 0}, {0.2f, -1, 0}, 40.0f);
+    PunctualLight spot =
+        testing::MakeLight("spot", LightType::kSpot, {0, 1.5f, 0}, {0.2f, -1, 0}, 40.0f);
     spot.innerCone = 0.3f;
     spot.outerCone = 0.5f;
     spot.color = glm::vec3(1.0f, 0.5f, 0.25f);
@@ -113,8 +103,8 @@ TEST(DirectLight, DirectionalLightGivesEPerpTimesCosine) {
     for (float degrees : {0.0f, 30.0f, 60.0f}) {
         SceneBuilder b = Floor(false);
         float t = glm::radians(degrees);
-        b.AddLight(Light("sun", LightType::kDirectional, {0, 3, 0},
-                         {std::sin(t), -std::cos(t), 0.0f}, 1000.0f));
+        b.AddLight(testing::MakeLight("sun", LightType::kDirectional, {0, 3, 0},
+                                      {std::sin(t), -std::cos(t), 0.0f}, 1000.0f));
         auto solver = CreateSolver(b.Build(), Settings());
         float worst = MaxRelativeError(*solver, [&](glm::vec3) { return 1000.0f * std::cos(t); });
         std::printf("directional %.0f°: max relative error %.6f\n", degrees, worst);
@@ -129,13 +119,13 @@ TEST(DirectLight, BlockerCastsAShadowFromEveryLightType) {
         PunctualLight light;
         float umbra;  // half-width of the floor square that must be in full shadow
     };
-    PunctualLight spot = Light("spot", LightType::kSpot, {0, 1, 0}, {0, -1, 0}, 20.0f);
+    PunctualLight spot = testing::MakeLight("spot", LightType::kSpot, {0, 1, 0}, {0, -1, 0}, 20.0f);
     spot.outerCone = 0.9f;
     spot.innerCone = 0.8f;
     const Case cases[] = {
-        {Light("lamp", LightType::kPoint, {0, 1, 0}, {0, -1, 0}, 20.0f), 0.3f},
+        {testing::MakeLight("lamp", LightType::kPoint, {0, 1, 0}, {0, -1, 0}, 20.0f), 0.3f},
         {spot, 0.3f},
-        {Light("sun", LightType::kDirectional, {0, 3, 0}, {0, -1, 0}, 1000.0f), 0.12f},
+        {testing::MakeLight("sun", LightType::kDirectional, {0, 3, 0}, {0, -1, 0}, 1000.0f), 0.12f},
     };
     for (const Case& c : cases) {
         SceneBuilder open = Floor(false), blocked = Floor(true);
@@ -176,7 +166,7 @@ TEST(DirectLight, ShadowEdgesDoNotAliasOnTheElementGrid) {
     uint32_t grey = b.AddMaterial("slab", glm::vec3(0.5f));
     // A large slab turned 27° about y: its straight edge crosses the floor's grid diagonally.
     b.AddBox("slab", grey, {-1.0f, 0.5f, 0.0f}, {2.0f, 0.05f, 6.0f}, 27.0f);
-    b.AddLight(Light("sun", LightType::kDirectional, {0, 3, 0}, {0, -1, 0}, 1000.0f));
+    b.AddLight(testing::MakeLight("sun", LightType::kDirectional, {0, 3, 0}, {0, -1, 0}, 1000.0f));
     const float h = 0.05f;
     auto solver = CreateSolver(b.Build(), Settings(h));
     const Surfels& s = solver->GetSurfels();
@@ -226,7 +216,7 @@ TEST(DirectLight, ShadowEdgesDoNotAliasOnTheElementGrid) {
 // Moving, recolouring and dimming a light re-renders its shadow map and changes E_d.
 TEST(DirectLight, LightEditsTakeOneShadowPass) {
     SceneBuilder b = Floor(true);
-    b.AddLight(Light("lamp", LightType::kPoint, {0, 1, 0}, {0, -1, 0}, 20.0f));
+    b.AddLight(testing::MakeLight("lamp", LightType::kPoint, {0, 1, 0}, {0, -1, 0}, 20.0f));
     Scene scene = b.Build();
     auto solver = CreateSolver(scene, Settings(0.05f));
     size_t under = testing::NearestSurfel(solver->GetSurfels(), {0, 0, 0}, {0, 1, 0});
@@ -260,7 +250,8 @@ TEST(DirectLight, DirectLightBouncesAndMakesNoAntiradiance) {
     uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
     b.AddTiledQuad("floor", white, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 10, 10, {0, 1, 0});
     b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, 8);
-    PunctualLight spot = Light("spot", LightType::kSpot, {0.8f, 0.9f, 0}, {-0.3f, -1, 0}, 10.0f);
+    PunctualLight spot =
+        testing::MakeLight("spot", LightType::kSpot, {0.8f, 0.9f, 0}, {-0.3f, -1, 0}, 10.0f);
     spot.outerCone = 0.6f;
     spot.innerCone = 0.5f;
     b.AddLight(spot);
@@ -288,13 +279,14 @@ TEST(DirectLight, DirectLightBouncesAndMakesNoAntiradiance) {
 TEST(DirectLight, GltfLightsRoundTrip) {
     auto dir = testing::TempDir("lights");
     SceneBuilder b = Floor(false);
-    PunctualLight spot = Light("spot", LightType::kSpot, {0.5f, 2, 0}, {0, -1, 0.2f}, 40.0f);
+    PunctualLight spot =
+        testing::MakeLight("spot", LightType::kSpot, {0.5f, 2, 0}, {0, -1, 0.2f}, 40.0f);
     spot.innerCone = 0.2f;
     spot.outerCone = 0.4f;
     spot.range = 8.0f;
     spot.color = glm::vec3(1, 0.9f, 0.8f);
     b.AddLight(spot);
-    b.AddLight(Light("sun", LightType::kDirectional, {0, 5, 0}, {0, -1, 0}, 100.0f));
+    b.AddLight(testing::MakeLight("sun", LightType::kDirectional, {0, 5, 0}, {0, -1, 0}, 100.0f));
     b.WriteGltf((dir / "lights.gltf").string());
     Scene loaded = LoadGltf((dir / "lights.gltf").string());
     Scene built = b.Build();
@@ -316,7 +308,7 @@ TEST(DirectLight, GltfLightsRoundTrip) {
 TEST(DirectLight, BrokenLightsFailWithTheReason) {
     auto dir = testing::TempDir("broken-lights");
     SceneBuilder b = Floor(false);
-    b.AddLight(Light("lamp", LightType::kPoint, {0, 1, 0}, {0, -1, 0}, 20.0f));
+    b.AddLight(testing::MakeLight("lamp", LightType::kPoint, {0, 1, 0}, {0, -1, 0}, 20.0f));
     std::string path = (dir / "lamp.gltf").string();
     b.WriteGltf(path);
     std::string text;

@@ -18,19 +18,6 @@
 namespace penumbra {
 namespace {
 
-PunctualLight Light(const std::string& name, LightType type, glm::vec3 position,
-                    glm::vec3 direction, float intensity, float outer = 0.8f) {
-    PunctualLight l;
-    l.name = name;
-    l.type = type;
-    l.position = position;
-    l.direction = direction;
-    l.intensity = intensity;
-    l.innerCone = 0.5f * outer;
-    l.outerCone = outer;
-    return l;
-}
-
 // A floor, a wall, a slab and a box; a point light, a narrow and a wide spot, a sun.
 Scene LitScene() {
     SceneBuilder b;
@@ -39,10 +26,14 @@ Scene LitScene() {
     b.AddQuad("wall", grey, {2, 0, -2}, {2, 0, 2}, {2, 2, 2}, {2, 2, -2}, {0, 1, 0}, 4);
     b.AddBox("slab", grey, {0, 0.6f, 0}, {0.5f, 0.05f, 0.5f});
     b.AddBox("box", grey, {-1, 0.25f, 0.8f}, {0.5f, 0.5f, 0.5f}, 30.0f, false);
-    b.AddLight(Light("lamp", LightType::kPoint, {0.2f, 1.4f, 0.1f}, {0, -1, 0}, 20.0f));
-    b.AddLight(Light("narrow", LightType::kSpot, {1.5f, 1.8f, -1}, {-0.5f, -1, 0.3f}, 30.0f, 0.5f));
-    b.AddLight(Light("wide", LightType::kSpot, {-1, 1.5f, -1}, {0.2f, -1, 0.1f}, 30.0f, 1.3f));
-    b.AddLight(Light("sun", LightType::kDirectional, {0, 4, 0}, {0.3f, -1, 0.2f}, 500.0f));
+    b.AddLight(
+        testing::MakeLight("lamp", LightType::kPoint, {0.2f, 1.4f, 0.1f}, {0, -1, 0}, 20.0f));
+    b.AddLight(testing::MakeLight("narrow", LightType::kSpot, {1.5f, 1.8f, -1}, {-0.5f, -1, 0.3f},
+                                  30.0f, 0.5f));
+    b.AddLight(testing::MakeLight("wide", LightType::kSpot, {-1, 1.5f, -1}, {0.2f, -1, 0.1f}, 30.0f,
+                                  1.3f));
+    b.AddLight(
+        testing::MakeLight("sun", LightType::kDirectional, {0, 4, 0}, {0.3f, -1, 0.2f}, 500.0f));
     return b.Build();
 }
 
