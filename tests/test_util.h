@@ -31,6 +31,16 @@ inline size_t NearestSurfel(const Surfels& s, glm::vec3 p, glm::vec3 normal) {
 
 inline float Mean(glm::vec3 v) { return (v.x + v.y + v.z) / 3.0f; }
 
+// A white (ρ 0.8) floor 2 m square at y = 0 (floorTiles² tiles) and a 1 m high wall on its
+// +x edge facing it (wallTiles² tiles): a corner that a light can reach only one side of.
+inline uint32_t AddWhiteCorner(SceneBuilder& b, int floorTiles, int wallTiles) {
+    uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
+    b.AddTiledQuad("floor", white, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, floorTiles, floorTiles,
+                   {0, 1, 0});
+    b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, wallTiles);
+    return white;
+}
+
 // A punctual light for SceneBuilder::AddLight; a spot's inner cone is half its outer one
 // (other types keep the glTF default cone, which they do not use).
 inline PunctualLight MakeLight(const std::string& name, LightType type, glm::vec3 position,

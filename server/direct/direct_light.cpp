@@ -327,6 +327,7 @@ CpuDirect::CpuDirect(const Scene& scene, std::vector<GpuReceiver> receivers, int
 
 void CpuDirect::Update(const Scene& scene) {
     Plan plan = PlanShadows(scene, mapSize_);
+    views = static_cast<int>(plan.views.size());
     auto t0 = std::chrono::steady_clock::now();
     RasterShadowMaps(plan, triangles_, maps_);
     msShadow = MsSince(t0);

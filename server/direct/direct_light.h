@@ -89,6 +89,7 @@ class CpuDirect {
     const std::vector<float>& Irradiance() const { return out_; }  // stride 4
     const std::vector<float>& Maps() const { return maps_; }
     double msShadow = 0.0, msDirect = 0.0;  // last update
+    int views = 0;                          // shadow maps the last update rendered
 
   private:
     std::vector<glm::vec3> triangles_;

@@ -89,8 +89,9 @@ struct VulkanDirect::Impl {
         directSet = directPass.MakeSet(d);
     }
 
-    void Update(const Scene& scene, double& msShadow, double& msDirect) {
+    void Update(const Scene& scene, double& msShadow, double& msDirect, int& viewCount) {
         Plan plan = PlanShadows(scene, size);
+        viewCount = static_cast<int>(plan.views.size());
         if (plan.lights.empty()) return;
         Reserve(plan);
         views->Upload(plan.views);
@@ -161,7 +162,7 @@ VulkanDirect::VulkanDirect(gpu::Context& ctx, const Scene& scene,
 
 VulkanDirect::~VulkanDirect() = default;
 
-void VulkanDirect::Update(const Scene& scene) { impl_->Update(scene, msShadow, msDirect); }
+void VulkanDirect::Update(const Scene& scene) { impl_->Update(scene, msShadow, msDirect, views); }
 
 std::vector<float> VulkanDirect::ReadIrradiance() const {
     std::vector<float> v(impl_->receiverList.size() * 4);

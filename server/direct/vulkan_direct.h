@@ -30,6 +30,7 @@ class VulkanDirect {
     std::vector<float> ReadIrradiance() const;  // stride 4, as the CPU twin's
     std::vector<float> ReadMaps() const;        // depths, as RasterShadowMaps writes them
     double msShadow = 0.0, msDirect = 0.0;      // last update, device time
+    int views = 0;                              // shadow maps the last update rendered
 
   private:
     struct Impl;

@@ -247,9 +247,7 @@ TEST(DirectLight, LightEditsTakeOneShadowPass) {
 // an opaque plate stays dark in `total`).
 TEST(DirectLight, DirectLightBouncesAndMakesNoAntiradiance) {
     SceneBuilder b;
-    uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
-    b.AddTiledQuad("floor", white, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 10, 10, {0, 1, 0});
-    b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, 8);
+    testing::AddWhiteCorner(b, 10, 8);
     PunctualLight spot =
         testing::MakeLight("spot", LightType::kSpot, {0.8f, 0.9f, 0}, {-0.3f, -1, 0}, 10.0f);
     spot.outerCone = 0.6f;

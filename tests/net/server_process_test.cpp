@@ -250,9 +250,7 @@ TEST(ServerProcess, TwoClientsOneEditsOneWatchesOverTcpAndUnix) {
 TEST(ServerProcess, PunctualLightsOverTheWire) {
     ServerProcess server("punctual");
     SceneBuilder b;
-    uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
-    b.AddTiledQuad("floor", white, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 8, 8, {0, 1, 0});
-    b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, 4);
+    testing::AddWhiteCorner(b, 8, 4);
     PunctualLight spot;
     spot.name = "spot";
     spot.type = LightType::kSpot;

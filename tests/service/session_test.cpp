@@ -135,9 +135,7 @@ TEST(Session, DimmingTheLightScalesIrradiance) {
 // bad light edits are refused.
 TEST(Session, PunctualLightEdits) {
     SceneBuilder b;
-    uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
-    b.AddTiledQuad("floor", white, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 8, 8, {0, 1, 0});
-    b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, 4);
+    testing::AddWhiteCorner(b, 8, 4);
     PunctualLight lamp;
     lamp.name = "lamp";
     lamp.position = glm::vec3(0, 0.8f, 0);

@@ -44,7 +44,6 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
         else
             direct_ = std::make_unique<direct::CpuDirect>(scene, std::move(receivers), mapSize_);
         lights_ = static_cast<int>(scene.lights.size());
-        shadowViews_ = static_cast<int>(direct::PlanShadows(scene, mapSize_).views.size());
         CopyDirect();
     }
     setupSeconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -139,7 +138,7 @@ SolverStats AntiradianceSolver::Stats() const {
         model_.links.links.size() * sizeof(Link) + model_.links.offsets.size() * sizeof(uint32_t);
     s.lights = lights_;
     if (direct_ || gpuDirect_) {
-        s.shadowViews = shadowViews_;
+        s.shadowViews = gpuDirect_ ? gpuDirect_->views : direct_->views;
         s.shadowMapSize = mapSize_;
         s.msShadow = gpuDirect_ ? gpuDirect_->msShadow : direct_->msShadow;
         s.msDirect = gpuDirect_ ? gpuDirect_->msDirect : direct_->msDirect;

@@ -38,7 +38,6 @@ class AntiradianceSolver : public Solver {
     // Only when the scene has punctual lights: the CPU twin or the device's passes.
     std::unique_ptr<direct::CpuDirect> direct_;
     std::unique_ptr<direct::VulkanDirect> gpuDirect_;
-    int shadowViews_ = 0;
     int lights_ = 0;
     int mapSize_ = 0;
     void CopyDirect();
