@@ -8,7 +8,7 @@ packages=(
     libvulkan-dev vulkan-validationlayers mesa-vulkan-drivers glslang-tools vulkan-tools
     libtinygltf-dev nlohmann-json3-dev libstb-dev libglm-dev
     libcli11-dev libtbb-dev libgtest-dev libembree-dev
-    libflatbuffers-dev flatbuffers-compiler libasio-dev
+    libflatbuffers-dev flatbuffers-compiler libasio-dev libopenexr-dev
     clang-format
 )
 

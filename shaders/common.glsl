@@ -29,8 +29,9 @@ struct Leaf {
     uint node;
     uint parent;
     uint surfel;
-    uint pad;
+    uint flags;  // kLeafTwoSided
 };
+const uint kLeafTwoSided = 1u;
 
 const uint kReflect = 1u;
 const uint kAntiradiance = 2u;

@@ -15,6 +15,8 @@ layout(std430, binding = 3) readonly buffer Neighbours { BinWeight neighbours[];
 layout(std430, binding = 4) readonly buffer Iex { float iex[]; };
 layout(std430, binding = 5) writeonly buffer Lin { vec4 lin[]; };  // rows of BINS·3/4 vec4
 layout(std430, binding = 6) readonly buffer Receivers { uint receivers[]; };
+// Environment radiance per bin (RGB): the root's L_in starts from it (Sec. 3.3).
+layout(std430, binding = 7) readonly buffer Environment { float environment[]; };
 
 layout(push_constant) uniform Push { uint count; } pc;
 
@@ -24,7 +26,7 @@ void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i >= pc.count) return;
     uint r = receivers[i];
-    for (uint k = 0u; k < BINS * 3u; ++k) acc[k] = 0.0;
+    for (uint k = 0u; k < BINS * 3u; ++k) acc[k] = r == 0u ? environment[k] : 0.0;
     uint end = linkOffsets[r + 1];
     // Links come sorted by (level, bin): sum a run of equal (level, bin) and spread once.
     uint key = 0xffffffffu;

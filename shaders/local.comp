@@ -43,7 +43,12 @@ void main() {
         uint k = row + b * 3u;
         vec3 v;
         if (c > 0.0) {
-            v = (pc.mode & kReflect) != 0u ? c * front : vec3(iexOld[k], iexOld[k + 1u], iexOld[k + 2u]);
+            // A two-sided leaf sends light arriving at its back on through its front.
+            vec3 through = (leaf.flags & kLeafTwoSided) != 0u
+                               ? leaf.area * c * vec3(lin[k], lin[k + 1u], lin[k + 2u])
+                               : vec3(0.0);
+            v = (pc.mode & kReflect) != 0u ? c * front - through
+                                           : vec3(iexOld[k], iexOld[k + 1u], iexOld[k + 2u]);
         } else {
             v = (pc.mode & kAntiradiance) != 0u
                     ? leaf.area * c * vec3(lin[k], lin[k + 1u], lin[k + 2u])

@@ -30,6 +30,40 @@ void WriteResult(const std::string& scenePath, const std::string& outPath, const
         WriteIrradianceGltf(scenePath, outPath, scene, result);
 }
 
+// `--environment FILE.exr | --environment-color R,G,B`, `--environment-intensity`,
+// `--environment-rotation` (degrees about +Y), shared by bake and reference.
+struct EnvironmentOptions {
+    std::string file;
+    std::vector<float> color;
+    float intensity = 1.0f;
+    float rotationDegrees = 0.0f;
+
+    void Add(CLI::App* app) {
+        auto* f = app->add_option("--environment", file,
+                                  "equirectangular OpenEXR sky (radiance in nits; the image's "
+                                  "centre looks down -Z, its top is +Y)");
+        auto* c = app->add_option("--environment-color", color,
+                                  "a constant sky instead: r,g,b radiance in nits")
+                      ->delimiter(',')
+                      ->expected(3);
+        f->excludes(c);
+        app->add_option("--environment-intensity", intensity, "scales the sky")
+            ->capture_default_str();
+        app->add_option("--environment-rotation", rotationDegrees,
+                        "turns the sky about +Y, degrees (counter-clockwise from above)")
+            ->capture_default_str();
+    }
+
+    void Apply(Scene& scene) const {
+        if (file.empty() && color.empty()) return;
+        scene.environment = file.empty() ? ConstantEnvironment({color[0], color[1], color[2]})
+                                         : LoadEnvironment(file);
+        scene.environment.intensity = intensity;
+        scene.environment.rotation = glm::radians(rotationDegrees);
+        ValidateEnvironment(scene.environment);
+    }
+};
+
 void CheckOutputPath(const std::string& outPath) {
     if (!EndsWith(outPath, ".json") && !EndsWith(outPath, ".glb") && !EndsWith(outPath, ".gltf"))
         throw Error("output '" + outPath + "' must end in .json, .glb or .gltf");
@@ -37,7 +71,7 @@ void CheckOutputPath(const std::string& outPath) {
 
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
          int iterations, const std::string& device, const std::string& scheme,
-         const std::string& channelName, bool quiet) {
+         const std::string& channelName, const EnvironmentOptions& environment, bool quiet) {
     Channel channel = ParseChannel(channelName);
     CheckOutputPath(outPath);
     settings.device = ParseDevice(device);
@@ -48,6 +82,7 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     Progress progress(!quiet && StderrIsTerminal());
     progress.Update("loading " + scenePath, 0.0);
     Scene scene = LoadGltf(scenePath);
+    environment.Apply(scene);
     auto solver = CreateSolver(
         scene, settings, [&](const std::string& stage, double f) { progress.Update(stage, f); });
     solver->Iterate(iterations);
@@ -91,11 +126,12 @@ std::string Duration(double seconds) {
 }
 
 int Reference(const std::string& scenePath, const std::string& outPath, ReferenceSettings settings,
-              bool quiet) {
+              const EnvironmentOptions& environment, bool quiet) {
     CheckOutputPath(outPath);
     Progress progress(!quiet && StderrIsTerminal());
     progress.Update("loading " + scenePath, 0.0);
     Scene scene = LoadGltf(scenePath);
+    environment.Apply(scene);
     settings.progress = [&](double f, double left) {
         progress.Update("path tracing, " + Duration(left) + " left", f);
     };
@@ -217,6 +253,8 @@ int main(int argc, char** argv) {
                      "texels per side of each shadow map (cube face), 16..8192; 0: from the "
                      "element size (256..2048)")
         ->capture_default_str();
+    EnvironmentOptions bakeEnv;
+    bakeEnv.Add(bake);
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
 
@@ -242,6 +280,8 @@ int main(int argc, char** argv) {
         ->add_option("--channel", refChannel,
                      "indirect (all but punctual lights' direct light), direct or total")
         ->capture_default_str();
+    EnvironmentOptions refEnv;
+    refEnv.Add(reference);
     reference->add_flag("-q,--quiet", refQuiet, "no progress or summary on stderr");
 
     auto* compare = app.add_subcommand(
@@ -267,11 +307,12 @@ int main(int argc, char** argv) {
     try {
         if (bake->parsed()) {
             settings.paperOracle = ParsePaperOracle(linkOracle);
-            return Bake(scenePath, outPath, settings, iterations, device, scheme, channel, quiet);
+            return Bake(scenePath, outPath, settings, iterations, device, scheme, channel, bakeEnv,
+                        quiet);
         }
         if (reference->parsed()) {
             refSettings.channel = ParseChannel(refChannel);
-            return Reference(refScene, refOut, refSettings, refQuiet);
+            return Reference(refScene, refOut, refSettings, refEnv, refQuiet);
         }
         if (compare->parsed()) return CompareFiles(cmpA, cmpB, cmpJson, maxRmse, floor);
     } catch (const penumbra::Error& e) {

@@ -49,6 +49,7 @@ struct Builder {
             node.surfel = ids[begin];
             node.normal = s.normals[ids[begin]];
             node.coneCos = 1.0f;
+            node.twoSided = !s.twoSided.empty() && s.twoSided[ids[begin]];
             node.end = index + 1;
             h.nodes[index] = node;
             return index;
@@ -84,6 +85,8 @@ struct Builder {
         Build(begin, mid, index, depth + 1);
         Build(mid, end, index, depth + 1);
         h.nodes[index].end = static_cast<uint32_t>(h.nodes.size());
+        h.nodes[index].twoSided =
+            h.nodes[index + 1].twoSided || h.nodes[h.nodes[index + 1].end].twoSided;
         return index;
     }
 };

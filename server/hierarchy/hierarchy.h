@@ -24,6 +24,9 @@ struct HierarchyNode {
     uint32_t end;      // one past the last node of this subtree
     uint32_t surfel;   // kNoSurfel for interior nodes
     uint32_t depth;
+    // Some member occludes from both sides (Surfels::twoSided): light arriving at its back
+    // must be gathered (no Fig. 7 culling) so that it can be sent on as antiradiance.
+    bool twoSided;
 
     bool IsLeaf() const { return surfel != kNoSurfel; }
 };

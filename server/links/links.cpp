@@ -40,10 +40,11 @@ struct Refiner {
     }
 
     // Fig. 7: a receiver only takes light that arrives on its front side. True when no
-    // point of the sender can lie in front of any member of the receiver.
+    // point of the sender can lie in front of any member of the receiver. A receiver with
+    // two-sided members takes light from behind too: they send it on as antiradiance.
     bool Culled(const HierarchyNode& r, const HierarchyNode& s, const glm::vec3& d,
                 float dist) const {
-        if (r.coneCos <= -1.0f) return false;
+        if (r.coneCos <= -1.0f || r.twoSided) return false;
         if (r.IsLeaf() && s.IsLeaf()) return glm::dot(r.normal, d) <= 1e-6f * dist;
         if (dist <= r.radius + s.radius) return false;
         if (r.IsLeaf()) return glm::dot(r.normal, d) <= -s.radius;

@@ -239,7 +239,12 @@ class Tracer {
             rtcInitIntersectContext(&ctx);
             rtcIntersect1(rtcScene_, &ctx, &rh);
             ++rays;
-            if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;
+            if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
+                // Escaped: the environment's radiance from that direction (no next-event
+                // estimate for the sky, so no MIS weight either).
+                if (sky_) radiance += throughput * scene_.environment.Radiance(dir);
+                break;
+            }
             const uint32_t ti = rh.hit.primID;
             const Triangle& t = tris_[ti];
             float cy = -glm::dot(t.normal, dir);
@@ -296,6 +301,7 @@ class Tracer {
     RTCScene rtcScene_ = nullptr;
     std::string error_;
     float eps_;
+    bool sky_ = scene_.environment.Active();
     std::vector<Triangle> tris_;
     std::vector<uint32_t> emitters_;
     std::vector<double> cdf_;

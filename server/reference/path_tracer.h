@@ -45,6 +45,8 @@ struct ReferenceResult {
 // channel: `indirect` is the light of emitting surfaces plus every bounce of any light
 // (punctual lights included), `direct` the light arriving straight from punctual lights
 // (shadow rays, exact: no sampling, so its standard error is 0), `total` their sum.
+// A path that leaves the scene picks up the environment's radiance (scene.environment) and
+// counts as `indirect`.
 // Punctual lights follow KHR_lights_punctual (LightAttenuation in scene.h). Lambertian surfaces,
 // reflecting and emitting on their front side (the side their vertex normals point to);
 // a ray that reaches a back side ends there (opaque, black). Each vertex is estimated

@@ -2,8 +2,10 @@
 #include "scene/scene.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
+#include <unordered_map>
 
 #include "base/check.h"
 
@@ -138,6 +140,60 @@ void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
             }
         }
     }
+}
+
+std::vector<bool> ClosedNodes(const Scene& scene) {
+    // Weld positions on a grid far finer than any element.
+    const float cell = std::max(scene.Diameter(), 1e-6f) * 1e-6f;
+    struct KeyHash {
+        size_t operator()(const std::array<int64_t, 3>& k) const {
+            return size_t(k[0] * 73856093) ^ size_t(k[1] * 19349663) ^ size_t(k[2] * 83492791);
+        }
+    };
+    std::vector<bool> closed(scene.nodes.size(), false);
+    for (size_t n = 0; n < scene.nodes.size(); ++n) {
+        std::unordered_map<std::array<int64_t, 3>, uint32_t, KeyHash> ids;
+        // Directed edge (a, b) → how many times it occurs.
+        std::unordered_map<uint64_t, int> edges;
+        bool any = false;
+        double volume = 0.0;
+        for (uint32_t p : scene.nodes[n].primitives) {
+            const Primitive& prim = scene.primitives[p];
+            std::vector<uint32_t> id(prim.positions.size());
+            for (size_t i = 0; i < prim.positions.size(); ++i) {
+                glm::vec3 q = glm::round(prim.positions[i] / cell);
+                std::array<int64_t, 3> k{int64_t(q.x), int64_t(q.y), int64_t(q.z)};
+                id[i] = ids.emplace(k, uint32_t(ids.size())).first->second;
+            }
+            for (size_t t = 0; t + 2 < prim.indices.size(); t += 3) {
+                uint32_t i0 = prim.indices[t], i1 = prim.indices[t + 1], i2 = prim.indices[t + 2];
+                // Wind each triangle so its front is the side its vertex normals point to.
+                const glm::vec3 &a = prim.positions[i0], &b = prim.positions[i1];
+                const glm::vec3& c = prim.positions[i2];
+                glm::vec3 n = prim.normals[i0] + prim.normals[i1] + prim.normals[i2];
+                bool flip = glm::dot(glm::cross(b - a, c - a), n) < 0.0f;
+                if (flip) std::swap(i1, i2);
+                uint32_t v[3] = {id[i0], id[i1], id[i2]};
+                if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) continue;  // degenerate
+                // Signed volume (divergence theorem): positive when the fronts face out.
+                volume += glm::dot(prim.positions[i0],
+                                   glm::cross(prim.positions[i1], prim.positions[i2])) /
+                          6.0;
+                any = true;
+                for (int e = 0; e < 3; ++e) ++edges[uint64_t(v[e]) << 32 | v[(e + 1) % 3]];
+            }
+        }
+        bool ok = any;
+        for (const auto& [key, count] : edges) {
+            if (!ok) break;
+            uint64_t opposite = (key << 32) | (key >> 32);
+            auto it = edges.find(opposite);
+            ok = count == 1 && it != edges.end() && it->second == 1;
+        }
+        // A closed surface facing inwards (a room) is open to the outside: not a solid.
+        closed[n] = ok && volume > 0.0;
+    }
+    return closed;
 }
 
 void ComputeVertexNormals(Primitive& primitive) {

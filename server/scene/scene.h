@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "scene/environment.h"
+
 namespace penumbra {
 
 struct Material {
@@ -73,6 +75,8 @@ struct Scene {
     std::vector<Primitive> primitives;
     std::vector<SceneNode> nodes;       // indexed like the file's nodes (Primitive::nodeIndex)
     std::vector<PunctualLight> lights;  // KHR_lights_punctual, one per node that places one
+    // Light from infinity (not part of glTF: set by `--environment` or the protocol).
+    Environment environment;
 
     glm::vec3 BoundsMin() const;
     glm::vec3 BoundsMax() const;
@@ -94,6 +98,13 @@ int FindLight(const Scene& scene, const std::string& name);
 // Replaces node `node`'s local transform and re-places the geometry and lights of its subtree.
 // Throws penumbra::Error for a non-finite or singular matrix (the scene is unchanged then).
 void SetNodeTransform(Scene& scene, int node, const glm::mat4& local);
+
+// Per scene node: whether the triangles of all its primitives together bound solids, so that
+// no light can reach their back sides: after welding equal positions and winding each
+// triangle so its front is where its vertex normals point, every directed edge is met by
+// exactly one opposite edge, and the enclosed volume is positive (fronts facing out; a closed
+// room facing in is not a solid). False for nodes without triangles.
+std::vector<bool> ClosedNodes(const Scene& scene);
 
 // Fills `normals` with area-weighted vertex normals of the triangles.
 void ComputeVertexNormals(Primitive& primitive);

@@ -22,6 +22,10 @@ struct Surfels {
     // Primitive p's input vertex i is surfel firstSurfel[p] + i (input vertices come first).
     std::vector<uint32_t> firstSurfel;
     std::vector<uint32_t> refinedTriangles;  // triangle list over surfel indices
+    // Per surfel (empty: none): the surface occludes light arriving at either side, not only
+    // at its front. Set for surfaces that do not close a solid (a wall of one-sided quads),
+    // whose back can be reached by light, e.g. the sky (solver/antiradiance/model.h).
+    std::vector<uint8_t> twoSided;
 
     size_t size() const { return positions.size(); }
 };

@@ -40,6 +40,13 @@ Channel ParseChannel(const std::string& name) {
     throw Error("unknown channel '" + name + "' (use indirect, direct or total)");
 }
 
+BackOcclusion ParseBackOcclusion(const std::string& name) {
+    if (name == "auto") return BackOcclusion::kAuto;
+    if (name == "on") return BackOcclusion::kOn;
+    if (name == "off") return BackOcclusion::kOff;
+    throw Error("unknown back occlusion '" + name + "' (use auto, on or off)");
+}
+
 const char* ChannelName(Channel channel) {
     return channel == Channel::kDirect  ? "direct"
            : channel == Channel::kTotal ? "total"

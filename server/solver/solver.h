@@ -19,6 +19,11 @@ enum class Scheme { kSymmetric, kAsymmetric };
 // `total` their sum.
 enum class Channel { kIndirect, kDirect, kTotal };
 enum class DeviceChoice { kAuto, kGpu, kLavapipe, kCpu };
+// Whether surfaces that do not close a solid occlude light arriving at their backs
+// (Surfels::twoSided). `auto`: on when the scene has an environment, whose light reaches
+// every back side; without one, light reaches a back only from inside the scene, which the
+// paper's front-side rule (Fig. 7) ignores at the cost of leaks through thin walls.
+enum class BackOcclusion { kAuto, kOn, kOff };
 
 struct SolverSettings {
     std::string solver = "antiradiance";
@@ -33,6 +38,7 @@ struct SolverSettings {
     int threads = 0;              // CPU threads; 0 = all cores
     bool validation = false;      // Vulkan validation layers (tests turn them on)
     int shadowMapSize = 0;        // texels per side of each shadow map; 0: from the element size
+    BackOcclusion backOcclusion = BackOcclusion::kAuto;
 };
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
@@ -80,8 +86,9 @@ class Solver {
     // solution moves towards the new one from the next iteration on (Sec. 3.3: the
     // iteration continues from the current radiance).
     virtual void UpdateMaterials(const Scene& scene) = 0;
-    // Re-reads the punctual lights of `scene` (same geometry; lights moved, recoloured,
-    // dimmed): one shadow pass and a new direct light; the iteration continues.
+    // Re-reads the punctual lights and the environment of `scene` (same geometry; lights
+    // moved, recoloured, dimmed; the sky changed, turned or scaled): one shadow pass and a
+    // new direct light, the environment re-binned; the iteration continues.
     virtual void UpdateLights(const Scene& scene) = 0;
     virtual SolverStats Stats() const = 0;
 };
@@ -96,7 +103,8 @@ std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& s
 DeviceChoice ParseDevice(const std::string& name);
 bool ParsePaperOracle(const std::string& name);  // "conservative" | "paper"
 Scheme ParseScheme(const std::string& name);
-Channel ParseChannel(const std::string& name);  // "indirect" | "direct" | "total"
+Channel ParseChannel(const std::string& name);              // "indirect" | "direct" | "total"
+BackOcclusion ParseBackOcclusion(const std::string& name);  // "auto" | "on" | "off"
 const char* ChannelName(Channel channel);
 
 // Per-vertex irradiance for primitive `p` in its input vertex order, clamped at zero.

@@ -4,6 +4,7 @@
 #include <chrono>
 
 #include "base/check.h"
+#include "direct/environment_light.h"
 #include "gpu/context.h"
 #include "solver/antiradiance/vulkan_passes.h"
 
@@ -21,7 +22,9 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
         // (PERFORMANCE-NOTES.md), so `auto` takes a real GPU only.
         device = gpu::FindRealGpu(&gpuName) ? DeviceChoice::kGpu : DeviceChoice::kCpu;
     }
+    ValidateEnvironment(scene.environment);
     model_ = BuildAntiradianceModel(scene, settings, progress);
+    environment_ = scene.environment;
     if (device == DeviceChoice::kCpu) {
         cpu_ = std::make_unique<cpu::CpuBackend>(model_);
         deviceName_ = "cpu";
@@ -91,6 +94,15 @@ void AntiradianceSolver::CopyDirect() {
 }
 
 void AntiradianceSolver::UpdateLights(const Scene& scene) {
+    // The environment: re-binned only when it changed (a map costs a pass over its pixels).
+    const Environment& env = scene.environment;
+    ValidateEnvironment(env);
+    if (env.image != environment_.image || env.constant != environment_.constant ||
+        env.intensity != environment_.intensity || env.rotation != environment_.rotation) {
+        model_.environment = direct::EnvironmentBins(env, model_.dirs);
+        if (gpu_) gpu_->UploadEnvironment();  // the CPU back end reads model_.environment
+        environment_ = env;
+    }
     if (!direct_ && !gpuDirect_) {
         if (scene.lights.empty()) return;
         throw Error("the scene was loaded without punctual lights; lights cannot be added");
@@ -119,6 +131,10 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
         leaf.emission = mat.emission;
     }
     if (gpu_) gpu_->UploadLeaves();  // the CPU back end reads model_.leaves directly
+}
+
+std::vector<std::string> AntiradianceSolver::ValidationMessages() const {
+    return gpu_ ? gpu_->ValidationMessages() : std::vector<std::string>{};
 }
 
 SolverStats AntiradianceSolver::Stats() const {

@@ -28,6 +28,8 @@ class AntiradianceSolver : public Solver {
     SolverStats Stats() const override;
 
     const AntiradianceModel& Model() const { return model_; }
+    // Vulkan validation messages so far (settings.validation; none on the CPU back end).
+    std::vector<std::string> ValidationMessages() const;
 
   private:
     SolverSettings settings_;
@@ -40,6 +42,7 @@ class AntiradianceSolver : public Solver {
     std::unique_ptr<direct::VulkanDirect> gpuDirect_;
     int lights_ = 0;
     int mapSize_ = 0;
+    Environment environment_;  // as last binned into model_.environment
     void CopyDirect();
     std::string deviceName_;
     int iterations_ = 0;

@@ -91,10 +91,14 @@ inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf,
                                 Rgba{leaf.albedo.x, leaf.albedo.y, leaf.albedo.z, 0.0f} *
                                     (e + Rgba{direct.x, direct.y, direct.z, 0.0f}) *
                                     (1.0f / std::numbers::pi_v<float>));
-    // Front bins get c·front, back bins a⟨n|ω⟩·L_in (c < 0); the other term is zero.
+    // Front bins get c·front, back bins a⟨n|ω⟩·L_in (c < 0); the other term is zero. A
+    // two-sided leaf also sends light arriving at its back on through its front:
+    // −a⟨n|ω⟩·L_in for c > 0.
+    const bool twoSided = (leaf.flags & kLeafTwoSided) != 0;
     auto exitant = [&](int b) {
         float c = cosine[b];
-        return std::max(c, 0.0f) * front + leaf.area * std::min(c, 0.0f) * lin[b];
+        float through = twoSided ? -std::abs(c) : std::min(c, 0.0f);
+        return std::max(c, 0.0f) * front + leaf.area * through * lin[b];
     };
     auto keep = [&](int b) {
         return cosine[b] > 0.0f ? (mode & kReflect) != 0 : (mode & kAntiradiance) != 0;
@@ -181,17 +185,20 @@ void InitEmission(const AntiradianceModel& m, float* iex) {
 
 void GlobalPass(const AntiradianceModel& m, const float* iex, float* lin) {
     const size_t row = size_t(m.Bins()) * 3;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, m.Nodes(), 64),
-                      [&](const tbb::blocked_range<size_t>& range) {
-                          Rgba acc[Directions::kMaxBins];
-                          for (size_t r = range.begin(); r != range.end(); ++r) {
-                              std::fill(acc, acc + row / 3, Rgba{});
-                              GatherRgba(m, iex, static_cast<uint32_t>(r), acc);
-                              float* out = lin + r * row;
-                              for (size_t b = 0; b < row / 3; ++b)
-                                  for (int c = 0; c < 3; ++c) out[b * 3 + c] = acc[b][c];
-                          }
-                      });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, m.Nodes(), 64), [&](const tbb::blocked_range<
+                                                                        size_t>& range) {
+        Rgba acc[Directions::kMaxBins];
+        for (size_t r = range.begin(); r != range.end(); ++r) {
+            std::fill(acc, acc + row / 3, Rgba{});
+            if (r == 0)  // the root starts from the environment (model.h)
+                for (size_t b = 0; b < row / 3; ++b)
+                    acc[b] = Rgba{m.environment[b].x, m.environment[b].y, m.environment[b].z, 0.0f};
+            GatherRgba(m, iex, static_cast<uint32_t>(r), acc);
+            float* out = lin + r * row;
+            for (size_t b = 0; b < row / 3; ++b)
+                for (int c = 0; c < 3; ++c) out[b * 3 + c] = acc[b][c];
+        }
+    });
 }
 
 void PushPass(const AntiradianceModel& m, float* lin) { PushRows(m, lin); }
@@ -236,10 +243,14 @@ struct CpuBackend::Walk {
         Rgba lin[Directions::kMaxBins];
         const size_t bins = row / 3;
         uint64_t t0 = Ticks();
-        if (parentLin)
+        if (parentLin) {
             std::memcpy(lin, parentLin, bins * sizeof(Rgba));
-        else
-            std::fill(lin, lin + bins, Rgba{});
+        } else {  // the root starts from the environment (model.h)
+            for (size_t b = 0; b < bins; ++b) {
+                const glm::vec3& e = m.environment[b];
+                lin[b] = Rgba{e.x, e.y, e.z, 0.0f};
+            }
+        }
         uint64_t t1 = Ticks();
         GatherRgba(m, iex, node, lin);
         uint64_t t2 = Ticks();

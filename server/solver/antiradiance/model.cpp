@@ -5,6 +5,7 @@
 #include <numbers>
 
 #include "base/check.h"
+#include "direct/environment_light.h"
 
 namespace penumbra {
 
@@ -19,6 +20,21 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
     model.elementSize = h;
     if (progress) progress("refining", 0.0);
     model.surfels = RefineScene(scene, h);
+    // Surfaces that do not close a solid occlude from both sides when asked (solver.h).
+    bool back = settings.backOcclusion == BackOcclusion::kOn ||
+                (settings.backOcclusion == BackOcclusion::kAuto &&
+                 (scene.environment.image || scene.environment.constant != glm::vec3(0.0f)));
+    if (back) {
+        std::vector<bool> closed = ClosedNodes(scene);
+        Surfels& s = model.surfels;
+        s.twoSided.assign(s.size(), 0);
+        for (size_t p = 0; p < scene.primitives.size(); ++p) {
+            size_t end = p + 1 < scene.primitives.size() ? s.firstSurfel[p + 1] : s.size();
+            int node = scene.primitives[p].nodeIndex;
+            bool open = node < 0 || !closed[node];
+            for (size_t i = s.firstSurfel[p]; i < end; ++i) s.twoSided[i] = open;
+        }
+    }
     if (progress) progress("clustering", 0.0);
     model.hierarchy = BuildHierarchy(model.surfels);
 
@@ -57,9 +73,12 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
         leaf.node = node;
         leaf.parent = n.parent;
         leaf.surfel = s;
+        leaf.flags =
+            !model.surfels.twoSided.empty() && model.surfels.twoSided[s] ? kLeafTwoSided : 0;
         model.leaves.push_back(leaf);
     }
     model.leafDirect.assign(model.leaves.size(), glm::vec4(0.0f));
+    model.environment = direct::EnvironmentBins(scene.environment, model.dirs);
     return model;
 }
 

@@ -26,8 +26,11 @@ struct LeafAttributes {
     uint32_t node;     // hierarchy node of this leaf
     uint32_t parent;   // its parent node (kNoParent for a single-surfel scene)
     uint32_t surfel;
-    uint32_t pad;
+    uint32_t flags;  // kLeafTwoSided
 };
+// The leaf occludes from both sides: light arriving at its back leaves its front as
+// antiradiance (Surfels::twoSided).
+inline constexpr uint32_t kLeafTwoSided = 1;
 static_assert(sizeof(LeafAttributes) == 64);
 
 // What one local pass updates (Sec. 2.2): K reflects into the front hemisphere (Eq. 18),
@@ -45,6 +48,11 @@ struct AntiradianceModel {
     // reflected by the local pass like the gathered irradiance, but never sent through
     // as antiradiance. Zero without punctual lights.
     std::vector<glm::vec4> leafDirect;
+    // Environment radiance travelling along each bin (direct::EnvironmentBins), RGB per bin:
+    // the root's L_in starts from it and push hands it to every node, so every element's
+    // incident radiance is initialised with the sky and antiradiance removes what is
+    // occluded (Sec. 3.3). Zero without an environment.
+    std::vector<glm::vec3> environment;
     std::vector<uint32_t> leftChild;  // per node; kNoParent for leaves
     std::vector<uint32_t> rightChild;
 

@@ -47,7 +47,7 @@ struct VulkanAntiradiance::Impl {
     gpu::Context ctx;
     // Model data (read only).
     gpu::Buffer linkOffsets, links, spreadLevels, neighbours, receivers, leaves, dirs, parents,
-        children, nodesByDepth;
+        children, nodesByDepth, environment;
     // Tables.
     gpu::Buffer iex0, iex1, lin, irradiance, direct;
     gpu::Pipeline global, push, local, pull;
@@ -72,20 +72,21 @@ struct VulkanAntiradiance::Impl {
           parents(ctx, m.Nodes() * 4),
           children(ctx, m.Nodes() * 8),
           nodesByDepth(ctx, m.Nodes() * 4 * 2),
+          environment(ctx, m.Bins() * sizeof(glm::vec3)),
           iex0(ctx, m.TableFloats() * 4),
           iex1(ctx, m.TableFloats() * 4),
           lin(ctx, m.TableFloats() * 4),
           irradiance(ctx, m.leaves.size() * 12),
           direct(ctx, m.leaves.size() * sizeof(glm::vec4)),
-          global(ctx, Words(kSpirv_global), 7, Spec(), sizeof(uint32_t)),
+          global(ctx, Words(kSpirv_global), 8, Spec(), sizeof(uint32_t)),
           push(ctx, Words(kSpirv_push), 3, Spec(), sizeof(RangePush)),
           local(ctx, Words(kSpirv_local), 7, Spec(), sizeof(LocalPush)),
           pull(ctx, Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
         Upload();
         const gpu::Buffer* g0[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
-                                   &iex0,        &lin,   &receivers};
+                                   &iex0,        &lin,   &receivers,    &environment};
         const gpu::Buffer* g1[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
-                                   &iex1,        &lin,   &receivers};
+                                   &iex1,        &lin,   &receivers,    &environment};
         globalSet[0] = global.MakeSet(g0);
         globalSet[1] = global.MakeSet(g1);
         const gpu::Buffer* l0[] = {&leaves, &dirs, &lin, &iex0, &iex1, &irradiance, &direct};
@@ -123,6 +124,7 @@ struct VulkanAntiradiance::Impl {
         receivers.Upload(order);
         leaves.Upload(m.leaves);
         direct.Upload(m.leafDirect);
+        environment.Upload(m.environment);
         std::vector<glm::vec4> d;
         for (const auto& v : m.dirs.All()) d.emplace_back(v, 0.0f);
         dirs.Upload(d);
@@ -254,6 +256,8 @@ std::vector<float> VulkanAntiradiance::ReadLeafIrradiance() {
 void VulkanAntiradiance::UploadLeaves() { impl_->leaves.Upload(impl_->m.leaves); }
 
 void VulkanAntiradiance::UploadDirect() { impl_->direct.Upload(impl_->m.leafDirect); }
+
+void VulkanAntiradiance::UploadEnvironment() { impl_->environment.Upload(impl_->m.environment); }
 
 gpu::Context& VulkanAntiradiance::Context() { return impl_->ctx; }
 

@@ -28,6 +28,8 @@ class VulkanAntiradiance {
     void UploadLeaves();
     // Copies the model's per-leaf direct irradiance (E_d) to the device again.
     void UploadDirect();
+    // Copies the model's environment row (radiance per bin) to the device again.
+    void UploadEnvironment();
     // The device and the per-leaf E_d buffer (vec4 per leaf) the local pass reads, for the
     // direct pass to render into.
     gpu::Context& Context();
