@@ -107,6 +107,12 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
                          "\n  %d punctual lights: %d shadow maps of %d² in %.2f ms, direct light "
                          "%.2f ms",
                          s.lights, s.shadowViews, s.shadowMapSize, s.msShadow, s.msDirect);
+        if (!s.environment.empty())
+            std::fprintf(stderr,
+                         "\n  environment %s × %.3g, turned %.1f°; %zu of %zu elements occlude "
+                         "from both sides",
+                         s.environment.c_str(), s.environmentIntensity,
+                         glm::degrees(s.environmentRotation), s.twoSidedElements, s.elements);
         std::fprintf(stderr, "\n  wrote %s (channel %s; %s)\n", outPath.c_str(),
                      result.channel.c_str(), kIrradianceUnits);
     }
@@ -255,6 +261,11 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     EnvironmentOptions bakeEnv;
     bakeEnv.Add(bake);
+    std::string backOcclusion = "auto";
+    bake->add_option("--back-occlusion", backOcclusion,
+                     "auto|on|off: surfaces that do not bound a solid also block light arriving "
+                     "at their backs (auto: on with an environment)")
+        ->capture_default_str();
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
 
@@ -307,6 +318,7 @@ int main(int argc, char** argv) {
     try {
         if (bake->parsed()) {
             settings.paperOracle = ParsePaperOracle(linkOracle);
+            settings.backOcclusion = ParseBackOcclusion(backOcclusion);
             return Bake(scenePath, outPath, settings, iterations, device, scheme, channel, bakeEnv,
                         quiet);
         }

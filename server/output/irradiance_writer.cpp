@@ -44,6 +44,11 @@ nlohmann::json StatsToJson(const SolverStats& s) {
         j["shadow_ms"] = s.msShadow;
         j["direct_ms"] = s.msDirect;
     }
+    if (!s.environment.empty())
+        j["environment"] = {{"source", s.environment},
+                            {"intensity", s.environmentIntensity},
+                            {"rotation_degrees", s.environmentRotation * 57.29577951308232}};
+    j["two_sided_elements"] = s.twoSidedElements;
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

@@ -142,56 +142,139 @@ void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
     }
 }
 
+namespace {
+
+// Distance from `p` to triangle abc (closest point by Voronoi regions, Ericson 5.1.5).
+float PointTriangleDistance(const glm::vec3& p, const glm::vec3& a, const glm::vec3& b,
+                            const glm::vec3& c) {
+    glm::vec3 ab = b - a, ac = c - a, ap = p - a;
+    float d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
+    if (d1 <= 0 && d2 <= 0) return glm::length(ap);
+    glm::vec3 bp = p - b;
+    float d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
+    if (d3 >= 0 && d4 <= d3) return glm::length(bp);
+    float vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return glm::length(p - (a + ab * (d1 / (d1 - d3))));
+    glm::vec3 cp = p - c;
+    float d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
+    if (d6 >= 0 && d5 <= d6) return glm::length(cp);
+    float vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return glm::length(p - (a + ac * (d2 / (d2 - d6))));
+    float va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+        return glm::length(p - (b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))));
+    float denom = 1.0f / (va + vb + vc);
+    return glm::length(p - (a + ab * (vb * denom) + ac * (vc * denom)));
+}
+
+struct OrientedMesh {
+    std::vector<glm::vec3> points;      // welded positions
+    std::vector<glm::uvec3> triangles;  // wound so the front is where vertex normals point
+};
+
+}  // namespace
+
 std::vector<bool> ClosedNodes(const Scene& scene) {
-    // Weld positions on a grid far finer than any element.
-    const float cell = std::max(scene.Diameter(), 1e-6f) * 1e-6f;
+    const float diameter = std::max(scene.Diameter(), 1e-6f);
+    const float cell = diameter * 1e-6f;   // welds positions far closer than any element
+    const float touch = diameter * 1e-4f;  // an open edge this close to a surface is sealed
     struct KeyHash {
         size_t operator()(const std::array<int64_t, 3>& k) const {
             return size_t(k[0] * 73856093) ^ size_t(k[1] * 19349663) ^ size_t(k[2] * 83492791);
         }
     };
-    std::vector<bool> closed(scene.nodes.size(), false);
+    // Each node's triangles, welded and wound front-out.
+    std::vector<OrientedMesh> meshes(scene.nodes.size());
+    std::vector<glm::vec3> lo(scene.nodes.size(), glm::vec3(1e30f)),
+        hi(lo.size(), glm::vec3(-1e30f));
     for (size_t n = 0; n < scene.nodes.size(); ++n) {
+        OrientedMesh& m = meshes[n];
         std::unordered_map<std::array<int64_t, 3>, uint32_t, KeyHash> ids;
-        // Directed edge (a, b) → how many times it occurs.
-        std::unordered_map<uint64_t, int> edges;
-        bool any = false;
-        double volume = 0.0;
         for (uint32_t p : scene.nodes[n].primitives) {
             const Primitive& prim = scene.primitives[p];
             std::vector<uint32_t> id(prim.positions.size());
             for (size_t i = 0; i < prim.positions.size(); ++i) {
                 glm::vec3 q = glm::round(prim.positions[i] / cell);
                 std::array<int64_t, 3> k{int64_t(q.x), int64_t(q.y), int64_t(q.z)};
-                id[i] = ids.emplace(k, uint32_t(ids.size())).first->second;
+                auto [it, added] = ids.emplace(k, uint32_t(m.points.size()));
+                if (added) m.points.push_back(prim.positions[i]);
+                id[i] = it->second;
+                lo[n] = glm::min(lo[n], prim.positions[i]);
+                hi[n] = glm::max(hi[n], prim.positions[i]);
             }
             for (size_t t = 0; t + 2 < prim.indices.size(); t += 3) {
                 uint32_t i0 = prim.indices[t], i1 = prim.indices[t + 1], i2 = prim.indices[t + 2];
-                // Wind each triangle so its front is the side its vertex normals point to.
                 const glm::vec3 &a = prim.positions[i0], &b = prim.positions[i1];
                 const glm::vec3& c = prim.positions[i2];
-                glm::vec3 n = prim.normals[i0] + prim.normals[i1] + prim.normals[i2];
-                bool flip = glm::dot(glm::cross(b - a, c - a), n) < 0.0f;
-                if (flip) std::swap(i1, i2);
-                uint32_t v[3] = {id[i0], id[i1], id[i2]};
-                if (v[0] == v[1] || v[1] == v[2] || v[2] == v[0]) continue;  // degenerate
-                // Signed volume (divergence theorem): positive when the fronts face out.
-                volume += glm::dot(prim.positions[i0],
-                                   glm::cross(prim.positions[i1], prim.positions[i2])) /
-                          6.0;
-                any = true;
-                for (int e = 0; e < 3; ++e) ++edges[uint64_t(v[e]) << 32 | v[(e + 1) % 3]];
+                glm::vec3 normal = prim.normals[i0] + prim.normals[i1] + prim.normals[i2];
+                if (glm::dot(glm::cross(b - a, c - a), normal) < 0.0f) std::swap(i1, i2);
+                glm::uvec3 v(id[i0], id[i1], id[i2]);
+                if (v.x == v.y || v.y == v.z || v.z == v.x) continue;  // degenerate
+                m.triangles.push_back(v);
             }
         }
-        bool ok = any;
+    }
+    // Is `p` on a triangle of a node other than `self`?
+    auto onOtherSurface = [&](size_t self, const glm::vec3& p) {
+        for (size_t o = 0; o < meshes.size(); ++o) {
+            if (o == self || glm::any(glm::lessThan(p, lo[o] - touch)) ||
+                glm::any(glm::greaterThan(p, hi[o] + touch)))
+                continue;
+            const OrientedMesh& m = meshes[o];
+            for (const glm::uvec3& t : m.triangles)
+                if (PointTriangleDistance(p, m.points[t.x], m.points[t.y], m.points[t.z]) <= touch)
+                    return true;
+        }
+        return false;
+    };
+
+    std::vector<bool> closed(scene.nodes.size(), false);
+    for (size_t n = 0; n < meshes.size(); ++n) {
+        const OrientedMesh& m = meshes[n];
+        if (m.triangles.empty()) continue;
+        // Directed edge (a, b) → how many times it occurs.
+        std::unordered_map<uint64_t, int> edges;
+        double area = 0.0;
+        for (const glm::uvec3& t : m.triangles) {
+            for (int e = 0; e < 3; ++e) ++edges[uint64_t(t[e]) << 32 | t[(e + 1) % 3]];
+            area += 0.5 * glm::length(glm::cross(m.points[t.y] - m.points[t.x],
+                                                 m.points[t.z] - m.points[t.x]));
+        }
+        // Boundary edges: met by no opposite edge. An edge used twice the same way is not
+        // manifold: no solid.
+        std::vector<std::pair<uint32_t, uint32_t>> boundary;
+        bool manifold = true;
         for (const auto& [key, count] : edges) {
-            if (!ok) break;
             uint64_t opposite = (key << 32) | (key >> 32);
             auto it = edges.find(opposite);
-            ok = count == 1 && it != edges.end() && it->second == 1;
+            if (count != 1 || (it != edges.end() && it->second != 1)) manifold = false;
+            if (it == edges.end()) boundary.emplace_back(uint32_t(key >> 32), uint32_t(key));
         }
-        // A closed surface facing inwards (a room) is open to the outside: not a solid.
-        closed[n] = ok && volume > 0.0;
+        if (!manifold) continue;
+        // Signed volume (divergence theorem) about a point on the open boundary's cap, so a
+        // planar cap adds nothing: positive when the fronts face out.
+        glm::dvec3 origin(0.0);
+        for (const auto& [a, b] : boundary) origin += glm::dvec3(m.points[a]);
+        if (!boundary.empty()) origin /= double(boundary.size());
+        double volume = 0.0;
+        for (const glm::uvec3& t : m.triangles)
+            volume += glm::dot(glm::dvec3(m.points[t.x]) - origin,
+                               glm::cross(glm::dvec3(m.points[t.y]) - origin,
+                                          glm::dvec3(m.points[t.z]) - origin)) /
+                      6.0;
+        // Far from flat: a planar open sheet has no volume whatever its boundary touches.
+        if (!(volume > 1e-3 * area * std::sqrt(area))) continue;
+        // An open boundary must be sealed by other surfaces (a box standing on a floor).
+        bool sealed = true;
+        for (const auto& [a, b] : boundary) {
+            const glm::vec3 &pa = m.points[a], &pb = m.points[b];
+            if (!onOtherSurface(n, pa) || !onOtherSurface(n, pb) ||
+                !onOtherSurface(n, 0.5f * (pa + pb))) {
+                sealed = false;
+                break;
+            }
+        }
+        closed[n] = sealed;
     }
     return closed;
 }

@@ -99,11 +99,12 @@ int FindLight(const Scene& scene, const std::string& name);
 // Throws penumbra::Error for a non-finite or singular matrix (the scene is unchanged then).
 void SetNodeTransform(Scene& scene, int node, const glm::mat4& local);
 
-// Per scene node: whether the triangles of all its primitives together bound solids, so that
-// no light can reach their back sides: after welding equal positions and winding each
-// triangle so its front is where its vertex normals point, every directed edge is met by
-// exactly one opposite edge, and the enclosed volume is positive (fronts facing out; a closed
-// room facing in is not a solid). False for nodes without triangles.
+// Per scene node: whether its triangles (all its primitives together) bound solids, so that
+// no light can reach their back sides. Positions are welded and each triangle wound so its
+// front is where its vertex normals point; then every edge must be met by one opposite edge,
+// or else lie on another node's surface (a box without a bottom standing on a floor), and the
+// enclosed volume must be positive (fronts facing out: a closed room facing in is no solid).
+// False for nodes without triangles.
 std::vector<bool> ClosedNodes(const Scene& scene);
 
 // Fills `normals` with area-weighted vertex normals of the triangles.

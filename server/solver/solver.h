@@ -63,11 +63,15 @@ struct SolverStats {
     std::vector<PassTiming> passes;
     size_t tableBytes = 0;
     size_t linkBytes = 0;
-    int lights = 0;         // punctual lights
-    int shadowViews = 0;    // shadow maps rendered per light update (cube faces count 6)
-    int shadowMapSize = 0;  // texels per side
-    double msShadow = 0.0;  // last shadow pass
-    double msDirect = 0.0;  // last direct-light initialisation
+    int lights = 0;           // punctual lights
+    int shadowViews = 0;      // shadow maps rendered per light update (cube faces count 6)
+    int shadowMapSize = 0;    // texels per side
+    double msShadow = 0.0;    // last shadow pass
+    double msDirect = 0.0;    // last direct-light initialisation
+    std::string environment;  // its source (file or "constant"); empty: none
+    float environmentIntensity = 0.0f;
+    float environmentRotation = 0.0f;  // radians
+    size_t twoSidedElements = 0;       // elements that occlude from both sides
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "base/image.h"
 #include "gpu/context.h"
 #include "test_util.h"
 
@@ -115,6 +116,55 @@ TEST(BakeCli, BadInputGivesExitCodeOneAndAMessage) {
     ProcessResult device = Execute("bake " + kCornell + " -o /tmp/x.json --device tpu");
     EXPECT_EQ(device.exitCode, 1) << device.output;
     EXPECT_NE(device.output.find("unknown device 'tpu'"), std::string::npos) << device.output;
+}
+
+}  // namespace
+}  // namespace penumbra
+
+namespace penumbra {
+namespace {
+
+// `--environment` and `--environment-color`: the Cornell box is open at the front, so a sky
+// adds light; stats name the sky; a bad sky file fails with exit code 1 and its name.
+TEST(BakeCli, EnvironmentLightsTheSceneThroughItsOpening) {
+    const std::string base = "--bins 64 --iterations 4 --element-size 0.1 --device cpu";
+    auto dark = BakeJson("bake-nosky", base);
+    ASSERT_EQ(dark.run.exitCode, 0) << dark.run.output;
+    EXPECT_FALSE(dark.json["stats"].contains("environment"));
+
+    auto dir = testing::TempDir("sky-file");
+    Image sky(32, 16);
+    for (auto& p : sky.pixels) p = glm::vec3(0.5f);
+    WriteExr((dir / "sky.exr").string(), sky);
+    auto lit = BakeJson("bake-sky", base + " --environment " + (dir / "sky.exr").string() +
+                                        " --environment-intensity 2 --environment-rotation 45");
+    ASSERT_EQ(lit.run.exitCode, 0) << lit.run.output;
+    const auto& env = lit.json["stats"]["environment"];
+    EXPECT_NE(env["source"].get<std::string>().find("sky.exr"), std::string::npos);
+    EXPECT_EQ(env["intensity"], 2.0);
+    EXPECT_NEAR(env["rotation_degrees"].get<double>(), 45.0, 1e-3);
+    EXPECT_GT(lit.json["stats"]["two_sided_elements"].get<int>(), 0);
+    // A constant sky of the same radiance gives the same light.
+    auto constant = BakeJson("bake-constant", base + " --environment-color 1,1,1");
+    ASSERT_EQ(constant.run.exitCode, 0) << constant.run.output;
+    double sumDark = 0, sumLit = 0, sumConstant = 0;
+    const auto& floorDark = dark.json["primitives"][0]["irradiance"];
+    for (size_t i = 0; i < floorDark.size(); ++i) {
+        sumDark += floorDark[i][0].get<double>();
+        sumLit += lit.json["primitives"][0]["irradiance"][i][0].get<double>();
+        sumConstant += constant.json["primitives"][0]["irradiance"][i][0].get<double>();
+    }
+    EXPECT_GT(sumLit, sumDark * 1.05);
+    EXPECT_NEAR(sumConstant, sumLit, 1e-3 * sumLit);
+
+    auto missing = BakeJson("bake-sky-missing", base + " --environment /nonexistent/sky.exr");
+    EXPECT_EQ(missing.run.exitCode, 1);
+    EXPECT_NE(missing.run.output.find("/nonexistent/sky.exr"), std::string::npos)
+        << missing.run.output;
+    auto both = BakeJson("bake-sky-both", base + " --environment a.exr --environment-color 1,1,1");
+    EXPECT_NE(both.run.exitCode, 0);
+    auto negative = BakeJson("bake-sky-neg", base + " --environment-color 1,-1,1");
+    EXPECT_EQ(negative.run.exitCode, 1) << negative.run.output;
 }
 
 }  // namespace

@@ -132,14 +132,16 @@ TEST(Environment, OnlySolidsKeepTheFrontSideRule) {
     b.AddBox("bottomless", grey, {0, 0.5f, 3}, {1, 1, 1}, 0.0f, false);
     b.AddQuad("quad", grey, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, {0, 1, 0});
     testing::AddUnitRoom(b, grey, grey);  // six nodes, each one open quad
+    b.AddBox("resting", grey, {0.5f, 0.2f, 0.5f}, {0.2f, 0.4f, 0.2f}, 20.0f, false);
     Scene scene = b.Build();
     std::vector<bool> closed = ClosedNodes(scene);
     auto is = [&](const std::string& name) { return bool(closed[FindNode(scene, name)]); };
     EXPECT_TRUE(is("box"));
     EXPECT_TRUE(is("two_boxes"));
-    EXPECT_FALSE(is("bottomless"));
+    EXPECT_FALSE(is("bottomless"));  // floating: nothing seals its open bottom
     EXPECT_FALSE(is("quad"));
     EXPECT_FALSE(is("floor"));
+    EXPECT_TRUE(is("resting"));  // its open bottom lies on the room's floor
 
     // A closed room in one node faces in: its backs face the sky, so it is no solid.
     SceneBuilder r;

@@ -153,6 +153,13 @@ SolverStats AntiradianceSolver::Stats() const {
     s.linkBytes =
         model_.links.links.size() * sizeof(Link) + model_.links.offsets.size() * sizeof(uint32_t);
     s.lights = lights_;
+    if (environment_.Active()) {
+        s.environment = environment_.source;
+        s.environmentIntensity = environment_.intensity;
+        s.environmentRotation = environment_.rotation;
+    }
+    for (const LeafAttributes& leaf : model_.leaves)
+        s.twoSidedElements += leaf.flags & kLeafTwoSided;
     if (direct_ || gpuDirect_) {
         s.shadowViews = gpuDirect_ ? gpuDirect_->views : direct_->views;
         s.shadowMapSize = mapSize_;
