@@ -10,6 +10,7 @@
 #include "output/compare.h"
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
+#include "render/renderer.h"
 #include "scene/gltf_loader.h"
 #include "solver/solver.h"
 
@@ -179,6 +180,119 @@ int Reference(const std::string& scenePath, const std::string& outPath, Referenc
     return 0;
 }
 
+struct RenderOptions {
+    std::string scene;
+    std::vector<std::string> outputs;
+    std::string size = "800x600";
+    std::string camera, cameraName, lighting, compare, mesh = "auto", renderDevice = "auto";
+    float errorScale = 0.5f, exposure = 0.0f;
+    bool quiet = false;
+};
+
+int Render(const RenderOptions& o, SolverSettings settings, int iterations,
+           const std::string& device, const std::string& channelName,
+           const EnvironmentOptions& environment) {
+    // Everything the command line says is checked before any work.
+    int w = 0, h = 0;
+    char x = 0, rest = 0;
+    if (std::sscanf(o.size.c_str(), "%d%c%d%c", &w, &x, &h, &rest) != 3 || x != 'x')
+        throw Error("--size must be WIDTHxHEIGHT, e.g. 800x600");
+    for (const std::string& out : o.outputs)
+        if (!EndsWith(out, ".exr") && !EndsWith(out, ".png"))
+            throw Error("output '" + out + "' must end in .exr or .png");
+    if (o.mesh != "auto" && o.mesh != "refined" && o.mesh != "input")
+        throw Error("--mesh must be auto, refined or input");
+    if (o.renderDevice != "auto" && o.renderDevice != "lavapipe")
+        throw Error("--render-device must be auto or lavapipe");
+    const bool fromFile = !o.lighting.empty();
+    if (fromFile && o.mesh == "refined")
+        throw Error("--mesh refined needs the solver's own result (drop --lighting)");
+    Channel channel = ParseChannel(channelName);
+    settings.device = ParseDevice(device);
+    if (iterations < 0 || iterations > 100000)
+        throw Error("--iterations must be between 0 and 100000");
+
+    Progress progress(!o.quiet && StderrIsTerminal());
+    progress.Update("loading " + o.scene, 0.0);
+    Scene scene = LoadGltf(o.scene);
+    environment.Apply(scene);
+    render::RenderSettings rs;
+    rs.width = w;
+    rs.height = h;
+    rs.lavapipe = o.renderDevice == "lavapipe";
+    rs.validation = settings.validation;
+
+    // The camera: --camera, a named glTF camera, the file's first, or one framing the scene.
+    Camera camera;
+    if (!o.camera.empty()) {
+        camera = render::ParseCamera(o.camera);
+    } else if (!o.cameraName.empty()) {
+        auto it = std::find_if(scene.cameras.begin(), scene.cameras.end(),
+                               [&](const Camera& c) { return c.name == o.cameraName; });
+        if (it == scene.cameras.end())
+            throw Error(o.scene + " has no perspective camera called '" + o.cameraName + "'");
+        camera = *it;
+    } else {
+        camera = scene.cameras.empty() ? render::FrameScene(scene) : scene.cameras.front();
+    }
+
+    // The lighting: a file, or the solver run here.
+    std::vector<std::vector<glm::vec3>> perVertex;
+    std::unique_ptr<Solver> solver;
+    std::string source;
+    if (fromFile) {
+        perVertex = render::IrradianceForScene(scene, ReadIrradianceJson(o.lighting));
+        source = o.lighting;
+    } else {
+        solver = CreateSolver(scene, settings, [&](const std::string& stage, double f) {
+            progress.Update(stage, f);
+        });
+        solver->Iterate(iterations);
+        IrradianceResult r = CollectIrradiance(scene, *solver, channel);
+        perVertex = r.primitives;
+        source = "antiradiance on " + solver->Stats().device + ", " + std::to_string(iterations) +
+                 " iterations, channel " + ChannelName(channel);
+    }
+    render::Mesh mesh;
+    bool heat = !o.compare.empty();
+    if (heat) {
+        auto other = render::IrradianceForScene(scene, ReadIrradianceJson(o.compare));
+        mesh = render::ErrorMesh(scene, perVertex, other, o.errorScale, kDefaultFloor);
+    } else if (solver && o.mesh != "input") {
+        mesh = render::ShadedRefinedMesh(scene, solver->GetSurfels(),
+                                         solver->SurfelIrradiance(channel));
+    } else {
+        mesh = render::ShadedInputMesh(scene, perVertex);
+    }
+    progress.Update("rendering", 0.0);
+    render::RenderOutput out = render::Rasterize(mesh, camera, rs);
+    progress.Done();
+    for (const auto& m : out.validationMessages)
+        std::fprintf(stderr, "penumbra render: validation: %s\n", m.c_str());
+    for (const std::string& path : o.outputs) {
+        if (EndsWith(path, ".exr"))
+            WriteExr(path, out.image);
+        else  // a heat map keeps its colours; radiance is exposed
+            WritePng(path, w, h, render::ToneMap(out.image, heat ? 0.0f : o.exposure, !heat));
+    }
+    if (!o.quiet) {
+        std::fprintf(stderr,
+                     "%s: %d×%d from camera '%s', %zu triangles, rendered on %s in %.1f ms\n",
+                     o.scene.c_str(), w, h, camera.name.c_str(), mesh.indices.size() / 3,
+                     out.device.c_str(), out.ms);
+        if (heat)
+            std::fprintf(stderr,
+                         "  heat map: relative error of %s against %s, blue 0 → red ≥ %.0f%%\n",
+                         source.c_str(), o.compare.c_str(), 100.0 * o.errorScale);
+        else
+            std::fprintf(stderr, "  lighting: %s; pixels are radiance ρE/π + Lₑ (nits)\n",
+                         source.c_str());
+        for (const std::string& path : o.outputs)
+            std::fprintf(stderr, "  wrote %s\n", path.c_str());
+    }
+    return out.validationMessages.empty() ? 0 : 3;
+}
+
 // Exit status when `compare --max-rmse` is exceeded.
 constexpr int kGateFailed = 4;
 
@@ -295,6 +409,56 @@ int main(int argc, char** argv) {
     refEnv.Add(reference);
     reference->add_flag("-q,--quiet", refQuiet, "no progress or summary on stderr");
 
+    auto* render = app.add_subcommand(
+        "render",
+        "Render the lit scene to an image (headless Vulkan raster): OpenEXR (linear, half) "
+        "and/or PNG (tone-mapped)");
+    RenderOptions ro;
+    SolverSettings renderSettings;
+    int renderIterations = 8;
+    std::string renderSolverDevice = "auto", renderChannel = "total";
+    render->add_option("scene", ro.scene, "glTF 2.0 scene (.gltf or .glb)")->required();
+    render->add_option("-o,--output", ro.outputs, "image file(s): .exr and/or .png")->required();
+    render->add_option("--size", ro.size, "WIDTHxHEIGHT")->capture_default_str();
+    render->add_option("--camera", ro.camera,
+                       "ex,ey,ez,tx,ty,tz,fov: eye, target (metres), vertical fov (degrees); "
+                       "default: the file's first perspective camera, else one framing the "
+                       "scene from -Z");
+    render->add_option("--camera-name", ro.cameraName, "a perspective camera of the file");
+    render->add_option("--lighting", ro.lighting,
+                       "per-vertex irradiance JSON (bake, reference, get) instead of solving");
+    render->add_option("--compare", ro.compare,
+                       "reference irradiance JSON: render the relative error as a heat map");
+    render->add_option("--error-scale", ro.errorScale, "relative error shown as red")
+        ->capture_default_str();
+    render->add_option("--exposure", ro.exposure, "EV added to the automatic exposure (PNG)")
+        ->capture_default_str();
+    render
+        ->add_option("--mesh", ro.mesh,
+                     "auto|refined|input: shade the solver's refined mesh or the input "
+                     "vertices (auto: refined when solving here)")
+        ->capture_default_str();
+    render
+        ->add_option("--render-device", ro.renderDevice,
+                     "auto (a real GPU if any, else lavapipe) or lavapipe")
+        ->capture_default_str();
+    render->add_option("--channel", renderChannel, "indirect, direct or total")
+        ->capture_default_str();
+    render->add_option("--bins", renderSettings.bins, "direction bins (solver)")
+        ->capture_default_str();
+    render->add_option("--iterations", renderIterations, "solver iterations")
+        ->capture_default_str();
+    render->add_option("--element-size", renderSettings.elementSize,
+                       "metres; 0 = scene diameter / 40");
+    render->add_option("--device", renderSolverDevice, "solver device: auto, gpu, lavapipe, cpu")
+        ->capture_default_str();
+    render->add_option("--shadow-map-size", renderSettings.shadowMapSize,
+                       "texels per shadow map side; 0 = from the element size");
+    EnvironmentOptions renderEnv;
+    renderEnv.Add(render);
+    render->add_flag("--validation", renderSettings.validation, "enable Vulkan validation layers");
+    render->add_flag("-q,--quiet", ro.quiet, "no progress or summary on stderr");
+
     auto* compare = app.add_subcommand(
         "compare",
         "Per-vertex error of irradiance file A against reference B: relative RMSE, mean and "
@@ -326,6 +490,9 @@ int main(int argc, char** argv) {
             refSettings.channel = ParseChannel(refChannel);
             return Reference(refScene, refOut, refSettings, refEnv, refQuiet);
         }
+        if (render->parsed())
+            return Render(ro, renderSettings, renderIterations, renderSolverDevice, renderChannel,
+                          renderEnv);
         if (compare->parsed()) return CompareFiles(cmpA, cmpB, cmpJson, maxRmse, floor);
     } catch (const penumbra::Error& e) {
         std::fprintf(stderr, "\npenumbra: error: %s\n", e.what());

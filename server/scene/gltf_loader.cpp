@@ -391,6 +391,27 @@ Scene LoadGltf(const std::string& path) {
             }
             scene.lights.push_back(light);
         }
+        if (node.camera >= 0) {
+            // Only perspective cameras matter (`penumbra render`); others are skipped.
+            if (node.camera >= static_cast<int>(model.cameras.size()))
+                ctx.Fail(NodeLabel(model, ni),
+                         "camera " + std::to_string(node.camera) + " does not exist");
+            const tinygltf::Camera& cam = model.cameras[node.camera];
+            if (cam.type == "perspective") {
+                Camera c;
+                c.name = cam.name.empty() ? sn.name : cam.name;
+                c.yfov = static_cast<float>(cam.perspective.yfov);
+                if (!(c.yfov > 0.0f && c.yfov < 3.14f))
+                    ctx.Fail(NodeLabel(model, ni), "camera yfov must be in (0, π)");
+                c.eye = glm::vec3(world[3]);
+                glm::vec3 f = -glm::vec3(world[2]), u = glm::vec3(world[1]);
+                if (glm::length(f) < 1e-12f || glm::length(u) < 1e-12f)
+                    ctx.Fail(NodeLabel(model, ni), "camera transform is singular");
+                c.forward = glm::normalize(f);
+                c.up = glm::normalize(u - glm::dot(u, c.forward) * c.forward);
+                scene.cameras.push_back(c);
+            }
+        }
         if (parentIndex >= 0) {
             scene.nodes[parentIndex].children.push_back(ni);
             sn.dynamic = sn.dynamic || scene.nodes[parentIndex].dynamic;

@@ -69,12 +69,22 @@ struct PunctualLight {
 // extension's recommended falloff). 1 for directional lights.
 float LightAttenuation(const PunctualLight& light, const glm::vec3& toPoint, float d);
 
+// A glTF perspective camera placed by a node: it looks down the node's −Z axis, +Y up.
+struct Camera {
+    std::string name;  // the camera's name, else its node's
+    glm::vec3 eye{0.0f};
+    glm::vec3 forward{0.0f, 0.0f, -1.0f};  // unit
+    glm::vec3 up{0.0f, 1.0f, 0.0f};        // unit, orthogonal to forward
+    float yfov = 0.8f;                     // radians, vertical field of view
+};
+
 struct Scene {
     std::string source;  // file it came from, for messages
     std::vector<Material> materials;
     std::vector<Primitive> primitives;
     std::vector<SceneNode> nodes;       // indexed like the file's nodes (Primitive::nodeIndex)
     std::vector<PunctualLight> lights;  // KHR_lights_punctual, one per node that places one
+    std::vector<Camera> cameras;        // perspective cameras of the file, in node order
     // Light from infinity (not part of glTF: set by `--environment` or the protocol).
     Environment environment;
 

@@ -122,7 +122,24 @@ void SceneBuilder::AddLight(const PunctualLight& light) {
     lights_.back().direction = glm::normalize(light.direction);
 }
 
+void SceneBuilder::AddCamera(const std::string& name, glm::vec3 eye, glm::vec3 target, float yfov) {
+    if (name.empty() || nodes_.count(name)) throw Error("a camera needs a name no other node has");
+    Camera c;
+    c.name = name;
+    c.eye = eye;
+    c.forward = glm::normalize(target - eye);
+    glm::vec3 up(0.0f, 1.0f, 0.0f);
+    c.up = glm::normalize(up - glm::dot(up, c.forward) * c.forward);
+    c.yfov = yfov;
+    cameras_.push_back(c);
+}
+
 namespace {
+// The rotation of a camera node: −Z to `forward`, +Y to `up`.
+glm::quat CameraRotation(const Camera& c) {
+    return glm::quat_cast(glm::mat3(glm::cross(c.forward, c.up), c.up, -c.forward));
+}
+
 // The rotation that turns −Z into `direction` (unit).
 glm::quat LightRotation(const glm::vec3& direction) {
     return glm::rotation(glm::vec3(0.0f, 0.0f, -1.0f), direction);
@@ -175,6 +192,14 @@ Scene SceneBuilder::Build() const {
         PlaceLight(placed, node.world);
         scene.nodes.push_back(std::move(node));
         scene.lights.push_back(placed);
+    }
+    for (const Camera& c : cameras_) {
+        SceneNode node;
+        node.name = c.name;
+        node.local = node.world =
+            glm::translate(glm::mat4(1.0f), c.eye) * glm::mat4_cast(CameraRotation(c));
+        scene.nodes.push_back(std::move(node));
+        scene.cameras.push_back(c);
     }
     return scene;
 }
@@ -305,6 +330,23 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
         tinygltf::Value::Object ext;
         ext["light"] = tinygltf::Value(static_cast<int>(model.lights.size() - 1));
         node.extensions["KHR_lights_punctual"] = tinygltf::Value(ext);
+        model.nodes.push_back(node);
+        scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
+    }
+    for (const Camera& c : cameras_) {
+        tinygltf::Camera out;
+        out.name = c.name;
+        out.type = "perspective";
+        out.perspective.yfov = c.yfov;
+        out.perspective.znear = 0.01;
+        out.perspective.aspectRatio = 1.0;
+        model.cameras.push_back(out);
+        tinygltf::Node node;
+        node.name = c.name;
+        node.camera = static_cast<int>(model.cameras.size() - 1);
+        glm::quat q = CameraRotation(c);
+        node.translation = {c.eye.x, c.eye.y, c.eye.z};
+        node.rotation = {q.x, q.y, q.z, q.w};
         model.nodes.push_back(node);
         scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
     }

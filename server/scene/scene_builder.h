@@ -39,6 +39,10 @@ class SceneBuilder {
     // `light.position` and turned so that its −Z axis is `light.direction`.
     void AddLight(const PunctualLight& light);
 
+    // A perspective camera on its own node: at `eye`, looking at `target`, +Y up, vertical
+    // field of view `yfov` (radians).
+    void AddCamera(const std::string& name, glm::vec3 eye, glm::vec3 target, float yfov);
+
     Scene Build() const;
     // Writes .gltf (buffers embedded as base64) or .glb. Throws penumbra::Error.
     void WriteGltf(const std::string& path) const;
@@ -55,6 +59,7 @@ class SceneBuilder {
     };
     std::map<std::string, Motion> dynamic_;
     std::vector<PunctualLight> lights_;
+    std::vector<Camera> cameras_;
     std::vector<Material> materials_;
     std::vector<std::string> nodeOrder_;
     std::map<std::string, std::map<uint32_t, Part>> nodes_;

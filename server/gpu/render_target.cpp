@@ -1,0 +1,146 @@
+// Colour and depth attachments, the render pass that clears them and leaves the colour
+// image ready to copy, and the graphics pipeline (depth test, no culling).
+#include "gpu/render_target.h"
+
+#include "base/check.h"
+
+namespace penumbra::gpu {
+namespace {
+
+constexpr vk::Format kColor = vk::Format::eR32G32B32A32Sfloat;
+constexpr vk::Format kDepth = vk::Format::eD32Sfloat;
+
+}  // namespace
+
+RenderTarget::Attachment RenderTarget::MakeAttachment(Context& ctx, vk::Format format,
+                                                      vk::ImageUsageFlags usage,
+                                                      vk::ImageAspectFlags aspect) const {
+    Attachment a;
+    vk::ImageCreateInfo info({}, vk::ImageType::e2D, format, vk::Extent3D(width_, height_, 1), 1, 1,
+                             vk::SampleCountFlagBits::e1, vk::ImageTiling::eOptimal, usage);
+    a.image = vk::raii::Image(ctx.Device(), info);
+    auto req = a.image.getMemoryRequirements();
+    auto props = ctx.Physical().getMemoryProperties();
+    uint32_t type = UINT32_MAX;
+    for (uint32_t i = 0; i < props.memoryTypeCount && type == UINT32_MAX; ++i)
+        if ((req.memoryTypeBits & (1u << i)) &&
+            (props.memoryTypes[i].propertyFlags & vk::MemoryPropertyFlagBits::eDeviceLocal))
+            type = i;
+    if (type == UINT32_MAX) throw Error("Vulkan device has no memory for a render target");
+    a.memory = vk::raii::DeviceMemory(ctx.Device(), vk::MemoryAllocateInfo(req.size, type));
+    a.image.bindMemory(*a.memory, 0);
+    a.view = vk::raii::ImageView(
+        ctx.Device(), vk::ImageViewCreateInfo({}, *a.image, vk::ImageViewType::e2D, format, {},
+                                              vk::ImageSubresourceRange(aspect, 0, 1, 0, 1)));
+    return a;
+}
+
+RenderTarget::RenderTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
+                           std::span<const uint32_t> fragmentSpirv, uint32_t bufferCount,
+                           uint32_t pushConstantBytes, uint32_t width, uint32_t height)
+    : sets_(ctx, bufferCount, kStages), width_(width), height_(height) {
+    const auto& dev = ctx.Device();
+    color_ = MakeAttachment(
+        ctx, kColor,
+        vk::ImageUsageFlagBits::eColorAttachment | vk::ImageUsageFlagBits::eTransferSrc,
+        vk::ImageAspectFlagBits::eColor);
+    depth_ = MakeAttachment(ctx, kDepth, vk::ImageUsageFlagBits::eDepthStencilAttachment,
+                            vk::ImageAspectFlagBits::eDepth);
+
+    vk::PushConstantRange range(kStages, 0, pushConstantBytes);
+    vk::DescriptorSetLayout raw = sets_.Handle();
+    vk::PipelineLayoutCreateInfo li({}, raw);
+    if (pushConstantBytes) li.setPushConstantRanges(range);
+    layout_ = vk::raii::PipelineLayout(dev, li);
+
+    // Colour: cleared, stored, left in TRANSFER_SRC for the copy. Depth: cleared, dropped.
+    vk::AttachmentDescription attachments[] = {{{},
+                                                kColor,
+                                                vk::SampleCountFlagBits::e1,
+                                                vk::AttachmentLoadOp::eClear,
+                                                vk::AttachmentStoreOp::eStore,
+                                                vk::AttachmentLoadOp::eDontCare,
+                                                vk::AttachmentStoreOp::eDontCare,
+                                                vk::ImageLayout::eUndefined,
+                                                vk::ImageLayout::eTransferSrcOptimal},
+                                               {{},
+                                                kDepth,
+                                                vk::SampleCountFlagBits::e1,
+                                                vk::AttachmentLoadOp::eClear,
+                                                vk::AttachmentStoreOp::eDontCare,
+                                                vk::AttachmentLoadOp::eDontCare,
+                                                vk::AttachmentStoreOp::eDontCare,
+                                                vk::ImageLayout::eUndefined,
+                                                vk::ImageLayout::eDepthStencilAttachmentOptimal}};
+    vk::AttachmentReference colorRef(0, vk::ImageLayout::eColorAttachmentOptimal);
+    vk::AttachmentReference depthRef(1, vk::ImageLayout::eDepthStencilAttachmentOptimal);
+    vk::SubpassDescription subpass({}, vk::PipelineBindPoint::eGraphics, {}, colorRef, {},
+                                   &depthRef);
+    // The colour writes finish before the copy that follows the pass reads them.
+    vk::SubpassDependency done(
+        0, VK_SUBPASS_EXTERNAL, vk::PipelineStageFlagBits::eColorAttachmentOutput,
+        vk::PipelineStageFlagBits::eTransfer, vk::AccessFlagBits::eColorAttachmentWrite,
+        vk::AccessFlagBits::eTransferRead);
+    renderPass_ =
+        vk::raii::RenderPass(dev, vk::RenderPassCreateInfo({}, attachments, subpass, done));
+    vk::ImageView views[] = {*color_.view, *depth_.view};
+    framebuffer_ = vk::raii::Framebuffer(
+        dev, vk::FramebufferCreateInfo({}, *renderPass_, views, width, height, 1));
+
+    auto module = [&](std::span<const uint32_t> spirv) {
+        return vk::raii::ShaderModule(
+            dev, vk::ShaderModuleCreateInfo({}, spirv.size() * sizeof(uint32_t), spirv.data()));
+    };
+    vertex_ = module(vertexSpirv);
+    fragment_ = module(fragmentSpirv);
+    vk::PipelineShaderStageCreateInfo stages[] = {
+        {{}, vk::ShaderStageFlagBits::eVertex, *vertex_, "main"},
+        {{}, vk::ShaderStageFlagBits::eFragment, *fragment_, "main"}};
+    vk::PipelineVertexInputStateCreateInfo vertexInput;
+    vk::PipelineInputAssemblyStateCreateInfo assembly({}, vk::PrimitiveTopology::eTriangleList);
+    vk::Viewport viewport(0.0f, 0.0f, float(width), float(height), 0.0f, 1.0f);
+    vk::Rect2D scissor({0, 0}, {width, height});
+    vk::PipelineViewportStateCreateInfo viewportState({}, viewport, scissor);
+    // One-sided surfaces are seen from both sides (their backs are black in the shader).
+    vk::PipelineRasterizationStateCreateInfo raster(
+        {}, VK_FALSE, VK_FALSE, vk::PolygonMode::eFill, vk::CullModeFlagBits::eNone,
+        vk::FrontFace::eCounterClockwise, VK_FALSE, 0.0f, 0.0f, 0.0f, 1.0f);
+    vk::PipelineMultisampleStateCreateInfo multisample({}, vk::SampleCountFlagBits::e1);
+    vk::PipelineDepthStencilStateCreateInfo depth({}, VK_TRUE, VK_TRUE, vk::CompareOp::eLess);
+    vk::PipelineColorBlendAttachmentState blendAttachment;
+    blendAttachment.colorWriteMask =
+        vk::ColorComponentFlagBits::eR | vk::ColorComponentFlagBits::eG |
+        vk::ColorComponentFlagBits::eB | vk::ColorComponentFlagBits::eA;
+    vk::PipelineColorBlendStateCreateInfo blend({}, VK_FALSE, vk::LogicOp::eCopy, blendAttachment);
+    vk::GraphicsPipelineCreateInfo info({}, stages, &vertexInput, &assembly, nullptr,
+                                        &viewportState, &raster, &multisample, &depth, &blend,
+                                        nullptr, *layout_, *renderPass_, 0);
+    pipeline_ = vk::raii::Pipeline(dev, nullptr, info);
+}
+
+void RenderTarget::Begin(const vk::raii::CommandBuffer& cb, const vk::raii::DescriptorSet& set,
+                         const float clear[4]) const {
+    vk::ClearValue values[] = {
+        vk::ClearColorValue(std::array<float, 4>{clear[0], clear[1], clear[2], clear[3]}),
+        vk::ClearDepthStencilValue(1.0f, 0)};
+    vk::RenderPassBeginInfo begin(*renderPass_, *framebuffer_,
+                                  vk::Rect2D({0, 0}, {width_, height_}), values);
+    cb.beginRenderPass(begin, vk::SubpassContents::eInline);
+    cb.bindPipeline(vk::PipelineBindPoint::eGraphics, *pipeline_);
+    cb.bindDescriptorSets(vk::PipelineBindPoint::eGraphics, *layout_, 0, {*set}, {});
+}
+
+void RenderTarget::EndAndCopy(const vk::raii::CommandBuffer& cb, const Buffer& out) const {
+    PENUMBRA_CHECK_LE(size_t(width_) * height_ * 16, out.Bytes());
+    cb.endRenderPass();
+    vk::BufferImageCopy region(0, 0, 0,
+                               vk::ImageSubresourceLayers(vk::ImageAspectFlagBits::eColor, 0, 0, 1),
+                               {0, 0, 0}, {width_, height_, 1});
+    cb.copyImageToBuffer(*color_.image, vk::ImageLayout::eTransferSrcOptimal, out.Handle(), region);
+    // The copy lands before the host reads the buffer (SubmitAndWait waits on the fence).
+    vk::MemoryBarrier toHost(vk::AccessFlagBits::eTransferWrite, vk::AccessFlagBits::eHostRead);
+    cb.pipelineBarrier(vk::PipelineStageFlagBits::eTransfer, vk::PipelineStageFlagBits::eHost, {},
+                       toHost, {}, {});
+}
+
+}  // namespace penumbra::gpu
