@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check bench bench-service bench-direct accuracy format clean
+.PHONY: all deps build demo check bench bench-service bench-direct accuracy images format clean
 
 all: build
 
@@ -34,6 +34,16 @@ bench-direct: build
 
 accuracy: build
 	$(BUILD)/bench/penumbra-bench-accuracy --out bench/results
+
+# The README's pictures: the Cornell box lit by the solver, and its error against the
+# path-traced reference as a heat map.
+images: build
+	@mkdir -p docs/images
+	$(BUILD)/penumbra render scenes/cornell-box.gltf -o docs/images/cornell-box.png --size 512x512 --bins 256 --element-size 0.02 --iterations 12
+	$(BUILD)/penumbra bake scenes/cornell-box.gltf -o $(BUILD)/cornell-solver.json --bins 256 --element-size 0.02 --iterations 12 -q
+	$(BUILD)/penumbra reference scenes/cornell-box.gltf -o $(BUILD)/cornell-reference.json --samples 4096 -q
+	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-reference.json -o docs/images/cornell-box-reference.png --size 512x512
+	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-solver.json --compare $(BUILD)/cornell-reference.json -o docs/images/cornell-box-error.png --size 512x512 --error-scale 0.5
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.h' '*.hpp')
