@@ -31,6 +31,17 @@ inline size_t NearestSurfel(const Surfels& s, glm::vec3 p, glm::vec3 normal) {
 
 inline float Mean(glm::vec3 v) { return (v.x + v.y + v.z) / 3.0f; }
 
+// √(Σ|a−b|²) / √(Σ|b|²) over two equally long arrays (NaN when b is all zero).
+inline double RelativeRms(const std::vector<glm::vec3>& a, const std::vector<glm::vec3>& b) {
+    double num = 0, den = 0;
+    for (size_t i = 0; i < a.size() && i < b.size(); ++i) {
+        glm::dvec3 d = glm::dvec3(a[i]) - glm::dvec3(b[i]);
+        num += glm::dot(d, d);
+        den += glm::dot(glm::dvec3(b[i]), glm::dvec3(b[i]));
+    }
+    return std::sqrt(num / den);
+}
+
 // A white (ρ 0.8) floor 2 m square at y = 0 (floorTiles² tiles) and a 1 m high wall on its
 // +x edge facing it (wallTiles² tiles): a corner that a light can reach only one side of.
 inline uint32_t AddWhiteCorner(SceneBuilder& b, int floorTiles, int wallTiles) {

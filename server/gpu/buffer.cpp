@@ -4,14 +4,14 @@
 #include "base/check.h"
 
 namespace penumbra::gpu {
-namespace {
-
 uint32_t FindMemory(const Context& ctx, uint32_t typeBits, vk::MemoryPropertyFlags want) {
     auto mem = ctx.Physical().getMemoryProperties();
     for (uint32_t i = 0; i < mem.memoryTypeCount; ++i)
         if ((typeBits & (1u << i)) && (mem.memoryTypes[i].propertyFlags & want) == want) return i;
     return UINT32_MAX;
 }
+
+namespace {
 
 // A transient host-visible buffer for staging copies.
 struct Staging {

@@ -9,6 +9,9 @@
 
 namespace penumbra::gpu {
 
+// Index of a memory type allowed by `typeBits` with all of `want`, or UINT32_MAX.
+uint32_t FindMemory(const Context& ctx, uint32_t typeBits, vk::MemoryPropertyFlags want);
+
 class Buffer {
   public:
     // A storage buffer of `bytes` (rounded up to 4), zero-filled.

@@ -33,10 +33,9 @@ vk::raii::DescriptorSet BufferSetLayout::MakeSet(std::span<const Buffer* const> 
     return set;
 }
 
-namespace {
-
-vk::raii::PipelineLayout MakeLayout(Context& ctx, const BufferSetLayout& sets,
-                                    vk::ShaderStageFlags stages, uint32_t pushConstantBytes) {
+vk::raii::PipelineLayout MakePipelineLayout(Context& ctx, const BufferSetLayout& sets,
+                                            vk::ShaderStageFlags stages,
+                                            uint32_t pushConstantBytes) {
     vk::PushConstantRange range(stages, 0, pushConstantBytes);
     vk::DescriptorSetLayout raw = sets.Handle();
     vk::PipelineLayoutCreateInfo li({}, raw);
@@ -44,19 +43,17 @@ vk::raii::PipelineLayout MakeLayout(Context& ctx, const BufferSetLayout& sets,
     return vk::raii::PipelineLayout(ctx.Device(), li);
 }
 
-vk::raii::ShaderModule MakeModule(Context& ctx, std::span<const uint32_t> spirv) {
+vk::raii::ShaderModule MakeShaderModule(Context& ctx, std::span<const uint32_t> spirv) {
     return vk::raii::ShaderModule(
         ctx.Device(),
         vk::ShaderModuleCreateInfo({}, spirv.size() * sizeof(uint32_t), spirv.data()));
 }
 
-}  // namespace
-
 Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t bufferCount,
                    std::span<const uint32_t> specialization, uint32_t pushConstantBytes)
     : sets_(ctx, bufferCount, vk::ShaderStageFlagBits::eCompute) {
-    layout_ = MakeLayout(ctx, sets_, vk::ShaderStageFlagBits::eCompute, pushConstantBytes);
-    module_ = MakeModule(ctx, spirv);
+    layout_ = MakePipelineLayout(ctx, sets_, vk::ShaderStageFlagBits::eCompute, pushConstantBytes);
+    module_ = MakeShaderModule(ctx, spirv);
     std::vector<vk::SpecializationMapEntry> entries;
     for (uint32_t i = 0; i < specialization.size(); ++i)
         entries.emplace_back(i, i * sizeof(uint32_t), sizeof(uint32_t));
@@ -73,14 +70,14 @@ RasterPipeline::RasterPipeline(Context& ctx, std::span<const uint32_t> vertexSpi
                                uint32_t pushConstantBytes, uint32_t width, uint32_t height)
     : sets_(ctx, bufferCount, kStages), width_(width), height_(height) {
     const auto& dev = ctx.Device();
-    layout_ = MakeLayout(ctx, sets_, kStages, pushConstantBytes);
+    layout_ = MakePipelineLayout(ctx, sets_, kStages, pushConstantBytes);
     // One subpass without attachments; the framebuffer only gives the area its size.
     vk::SubpassDescription subpass({}, vk::PipelineBindPoint::eGraphics);
     renderPass_ = vk::raii::RenderPass(dev, vk::RenderPassCreateInfo({}, {}, subpass));
     framebuffer_ = vk::raii::Framebuffer(
         dev, vk::FramebufferCreateInfo({}, *renderPass_, {}, width, height, 1));
-    vertex_ = MakeModule(ctx, vertexSpirv);
-    fragment_ = MakeModule(ctx, fragmentSpirv);
+    vertex_ = MakeShaderModule(ctx, vertexSpirv);
+    fragment_ = MakeShaderModule(ctx, fragmentSpirv);
     vk::PipelineShaderStageCreateInfo stages[] = {
         {{}, vk::ShaderStageFlagBits::eVertex, *vertex_, "main"},
         {{}, vk::ShaderStageFlagBits::eFragment, *fragment_, "main"}};

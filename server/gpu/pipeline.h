@@ -73,6 +73,13 @@ class RasterPipeline {
     vk::raii::Pipeline pipeline_{nullptr};
 };
 
+// A shader module from SPIR-V words, and a pipeline layout of `sets` plus a push-constant
+// block of `pushConstantBytes` (none when 0) visible to `stages`.
+vk::raii::ShaderModule MakeShaderModule(Context& ctx, std::span<const uint32_t> spirv);
+vk::raii::PipelineLayout MakePipelineLayout(Context& ctx, const BufferSetLayout& sets,
+                                            vk::ShaderStageFlags stages,
+                                            uint32_t pushConstantBytes);
+
 // Orders compute writes before later compute reads/writes (a full compute→compute barrier).
 void ComputeBarrier(const vk::raii::CommandBuffer& cb);
 

@@ -20,12 +20,7 @@ RenderTarget::Attachment RenderTarget::MakeAttachment(Context& ctx, vk::Format f
                              vk::SampleCountFlagBits::e1, vk::ImageTiling::eOptimal, usage);
     a.image = vk::raii::Image(ctx.Device(), info);
     auto req = a.image.getMemoryRequirements();
-    auto props = ctx.Physical().getMemoryProperties();
-    uint32_t type = UINT32_MAX;
-    for (uint32_t i = 0; i < props.memoryTypeCount && type == UINT32_MAX; ++i)
-        if ((req.memoryTypeBits & (1u << i)) &&
-            (props.memoryTypes[i].propertyFlags & vk::MemoryPropertyFlagBits::eDeviceLocal))
-            type = i;
+    uint32_t type = FindMemory(ctx, req.memoryTypeBits, vk::MemoryPropertyFlagBits::eDeviceLocal);
     if (type == UINT32_MAX) throw Error("Vulkan device has no memory for a render target");
     a.memory = vk::raii::DeviceMemory(ctx.Device(), vk::MemoryAllocateInfo(req.size, type));
     a.image.bindMemory(*a.memory, 0);
@@ -47,11 +42,7 @@ RenderTarget::RenderTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
     depth_ = MakeAttachment(ctx, kDepth, vk::ImageUsageFlagBits::eDepthStencilAttachment,
                             vk::ImageAspectFlagBits::eDepth);
 
-    vk::PushConstantRange range(kStages, 0, pushConstantBytes);
-    vk::DescriptorSetLayout raw = sets_.Handle();
-    vk::PipelineLayoutCreateInfo li({}, raw);
-    if (pushConstantBytes) li.setPushConstantRanges(range);
-    layout_ = vk::raii::PipelineLayout(dev, li);
+    layout_ = MakePipelineLayout(ctx, sets_, kStages, pushConstantBytes);
 
     // Colour: cleared, stored, left in TRANSFER_SRC for the copy. Depth: cleared, dropped.
     vk::AttachmentDescription attachments[] = {{{},
@@ -87,12 +78,8 @@ RenderTarget::RenderTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
     framebuffer_ = vk::raii::Framebuffer(
         dev, vk::FramebufferCreateInfo({}, *renderPass_, views, width, height, 1));
 
-    auto module = [&](std::span<const uint32_t> spirv) {
-        return vk::raii::ShaderModule(
-            dev, vk::ShaderModuleCreateInfo({}, spirv.size() * sizeof(uint32_t), spirv.data()));
-    };
-    vertex_ = module(vertexSpirv);
-    fragment_ = module(fragmentSpirv);
+    vertex_ = MakeShaderModule(ctx, vertexSpirv);
+    fragment_ = MakeShaderModule(ctx, fragmentSpirv);
     vk::PipelineShaderStageCreateInfo stages[] = {
         {{}, vk::ShaderStageFlagBits::eVertex, *vertex_, "main"},
         {{}, vk::ShaderStageFlagBits::eFragment, *fragment_, "main"}};
