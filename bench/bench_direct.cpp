@@ -1,8 +1,8 @@
 // Direct light on the office-scale scene (issue 5): the shadow pass and the direct-light
 // initialisation for one point light and one directional light, against one solver
 // iteration on the same device (goal: under 15% of an iteration on lavapipe). Light updates
-// are timed as the service runs them (Solver::UpdateLights). Prints a table and writes JSON
-// to --out.
+// are timed as the service runs them (Solver::UpdateLights); then the binning of a sky map
+// (environment light). Prints tables and writes JSON to --out.
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
@@ -14,6 +14,7 @@
 
 #include "base/check.h"
 #include "bench_util.h"
+#include "direct/environment_light.h"
 #include "scene/gltf_loader.h"
 #include "solver/solver.h"
 
@@ -133,6 +134,36 @@ int main(int argc, char** argv) {
                                              {"ms_per_iteration", iterMs},
                                              {"share_of_iteration", share}});
             }
+        // The environment: binning a sky map (done at load and when the sky changes).
+        std::printf("\nenvironment binning, %d bins, median of 5 (all threads)\n", settings.bins);
+        std::printf("%-24s %10s\n", "sky", "ms");
+        Directions dirs(settings.bins);
+        for (int width : {0, 512, 2048, 4096}) {
+            Environment env = ConstantEnvironment(glm::vec3(1.0f));
+            if (width) {
+                auto image = std::make_shared<Image>(width, width / 2);
+                for (int y = 0; y < image->height; ++y)
+                    for (int x = 0; x < width; ++x)
+                        image->At(x, y) = glm::vec3(1.0f + 0.5f * std::sin(0.01f * x * y));
+                env.image = image;
+                env.source = "synthetic";
+            }
+            std::vector<double> ms;
+            for (int r = 0; r < 5; ++r) {
+                auto t0 = std::chrono::steady_clock::now();
+                std::vector<glm::vec3> bins = direct::EnvironmentBins(env, dirs);
+                ms.push_back(
+                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                        .count());
+                if (bins.empty()) return 1;
+            }
+            std::string name =
+                width ? std::to_string(width) + "×" + std::to_string(width / 2) + " map"
+                      : "constant";
+            std::printf("%-24s %10.2f\n", name.c_str(), Median(ms));
+            report["environment_binning"].push_back(
+                {{"sky", name}, {"bins", settings.bins}, {"ms_median", Median(ms)}});
+        }
         bench::WriteReport(report, out, "direct.json");
     } catch (const std::exception& e) {
         std::fprintf(stderr, "bench: %s\n", e.what());
