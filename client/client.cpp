@@ -66,6 +66,8 @@ SceneInfo ToSceneInfo(const protocol::Message& m) {
     out.links = s->links();
     out.buildSeconds = s->build_seconds();
     out.reused = s->reused();
+    if (s->environment()) out.environment = s->environment()->str();
+    out.environmentIntensity = s->environment_intensity();
     if (s->nodes())
         for (const auto* n : *s->nodes()) {
             NodeInfo node;
@@ -277,11 +279,17 @@ uint16_t Client::ProtocolVersion() const { return impl_->version; }
 
 SceneInfo Client::Load(const LoadOptions& o) {
     flatbuffers::FlatBufferBuilder b(1024 + o.glb.size());
+    std::optional<fb::Vec3> sky;
+    if (o.environmentColor)
+        sky =
+            fb::Vec3((*o.environmentColor)[0], (*o.environmentColor)[1], (*o.environmentColor)[2]);
     b.Finish(fb::CreateLoadSceneDirect(
         b, o.path.empty() ? nullptr : o.path.c_str(), o.glb.empty() ? nullptr : &o.glb,
         o.name.empty() ? nullptr : o.name.c_str(), o.solver.c_str(), o.bins, o.iterationsPerFrame,
         o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload,
-        o.linkOracle.empty() ? nullptr : o.linkOracle.c_str(), o.oracle, o.convergedChange));
+        o.linkOracle.empty() ? nullptr : o.linkOracle.c_str(), o.oracle, o.convergedChange,
+        o.environment.empty() ? nullptr : o.environment.c_str(), sky ? &*sky : nullptr,
+        o.environmentIntensity, o.environmentRotation));
     return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo));
 }
 

@@ -59,6 +59,8 @@ struct SceneInfo {
     uint64_t links = 0;
     double buildSeconds = 0.0;
     bool reused = false;
+    std::string environment;  // the sky's source; empty: none
+    float environmentIntensity = 0.0f;
     const NodeInfo* Node(const std::string& name) const;
 };
 
@@ -92,6 +94,11 @@ struct LoadOptions {
     std::string linkOracle;  // "" (server default: conservative) | "paper"
     float oracle = 1.0f;
     float convergedChange = 1e-3f;  // 0: frames stream continuously, never idle
+    // The sky: an equirectangular EXR under the server's scene root, or a constant colour.
+    std::string environment;
+    std::optional<std::array<float, 3>> environmentColor;
+    float environmentIntensity = 1.0f;
+    float environmentRotation = 0.0f;  // radians about +Y
 };
 
 class Client {

@@ -144,6 +144,8 @@ struct ServiceCommands::State {
     client::LoadOptions loadOptions;
     std::string loadPath;
     bool upload = false;
+    std::vector<float> skyColor;
+    float skyRotationDegrees = 0.0f;
 
     int watchFrames = 0;
     uint64_t minEdit = 0;
@@ -201,6 +203,19 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.load
         ->add_option("--converged-change", s.loadOptions.convergedChange,
                      "idle once a frame changes irradiance by less (0: stream forever)")
+        ->capture_default_str();
+    s.load->add_option("--environment", s.loadOptions.environment,
+                       "equirectangular OpenEXR sky under the server's scene root");
+    s.load->add_option("--environment-color", s.skyColor, "a constant sky: r,g,b nits")
+        ->delimiter(',')
+        ->expected(3);
+    s.load
+        ->add_option("--environment-intensity", s.loadOptions.environmentIntensity,
+                     "scales the sky")
+        ->capture_default_str();
+    s.load
+        ->add_option("--environment-rotation", s.skyRotationDegrees,
+                     "turns the sky about +Y, degrees")
         ->capture_default_str();
 
     s.info = app.add_subcommand("info", "Print the scene's nodes, lights and materials");
@@ -349,6 +364,8 @@ int ServiceCommands::State::Wait(client::Client& c, uint64_t edit, double timeou
 int ServiceCommands::State::Execute(client::Client& c) {
     if (load && load->parsed()) {
         client::LoadOptions o = loadOptions;
+        if (skyColor.size() == 3) o.environmentColor = {skyColor[0], skyColor[1], skyColor[2]};
+        o.environmentRotation = skyRotationDegrees * 0.017453292519943295f;
         if (upload) {
             std::ifstream in(loadPath, std::ios::binary);
             if (!in) throw Error(loadPath + ": cannot read");
@@ -370,6 +387,8 @@ int ServiceCommands::State::Execute(client::Client& c) {
                     info.reused ? "joined" : "loaded", info.scene.c_str(), info.elements,
                     (unsigned long long)info.links, info.solver.c_str(), info.device.c_str(),
                     info.buildSeconds);
+        if (!info.environment.empty())
+            lights += (lights.empty() ? "" : ", ") + ("environment " + info.environment);
         if (!quiet)
             std::printf("  movable: %s\n  lights: %s\n",
                         dynamic.empty() ? "(none)" : dynamic.c_str(),

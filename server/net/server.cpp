@@ -100,10 +100,11 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
             b, l.name.c_str(), scene.nodes[l.node].name.c_str(), type, &color, l.intensity, l.range,
             l.innerCone, l.outerCone, &position, &direction));
     }
-    b.Finish(fb::CreateSceneInfoDirect(b, session.Name().c_str(), stats.solver.c_str(),
-                                       stats.device.c_str(), &nodes, &materials,
-                                       static_cast<uint32_t>(stats.elements), stats.links,
-                                       session.BuildSeconds(), reused, &lights));
+    b.Finish(fb::CreateSceneInfoDirect(
+        b, session.Name().c_str(), stats.solver.c_str(), stats.device.c_str(), &nodes, &materials,
+        static_cast<uint32_t>(stats.elements), stats.links, session.BuildSeconds(), reused, &lights,
+        scene.environment.Active() ? scene.environment.source.c_str() : nullptr,
+        scene.environment.intensity));
 }
 
 }  // namespace
@@ -373,6 +374,13 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 if (l->glb()) req.glb.assign(l->glb()->begin(), l->glb()->end());
                 req.name = Str(l->name());
                 req.reload = l->reload();
+                req.environmentPath = Str(l->environment());
+                if (const fb::Vec3* c = l->environment_color()) {
+                    req.hasEnvironmentColor = true;
+                    req.environmentColor = glm::vec3(c->x(), c->y(), c->z());
+                }
+                req.environmentIntensity = l->environment_intensity();
+                req.environmentRotation = l->environment_rotation();
                 req.settings.solver = service.Defaults();
                 std::string solver = Str(l->solver());
                 if (!solver.empty() && solver != "antiradiance")

@@ -103,6 +103,26 @@ LoadResult Service::Load(const LoadRequest& request) {
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kLoadFailed, e.what());
     }
+    // The sky: a file under the root (never outside it) or a constant colour.
+    if (!request.environmentPath.empty() && request.hasEnvironmentColor)
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "give an environment file or an environment colour, not both");
+    try {
+        if (!request.environmentPath.empty()) {
+            fs::path sky = Resolve(request.environmentPath);
+            scene.environment = LoadEnvironment(sky.string());
+            scene.environment.source = fs::relative(sky, root_).generic_string();
+        } else if (request.hasEnvironmentColor) {
+            scene.environment = ConstantEnvironment(request.environmentColor);
+        }
+        scene.environment.intensity = request.environmentIntensity;
+        scene.environment.rotation = request.environmentRotation;
+        ValidateEnvironment(scene.environment);
+    } catch (const Error& e) {
+        throw ServiceError(
+            request.environmentPath.empty() ? ErrorKind::kInvalidArgument : ErrorKind::kLoadFailed,
+            e.what());
+    }
     if (scene.TriangleCount() > limits_.maxSceneTriangles)
         throw ServiceError(
             ErrorKind::kLimitReached,

@@ -25,6 +25,12 @@ struct LoadRequest {
     std::string name;          // session name for an upload
     SessionSettings settings;
     bool reload = false;
+    // The environment: a sky file under the scene root, or a constant colour, or neither.
+    std::string environmentPath;
+    bool hasEnvironmentColor = false;
+    glm::vec3 environmentColor{0.0f};
+    float environmentIntensity = 1.0f;
+    float environmentRotation = 0.0f;  // radians
 };
 
 struct LoadResult {

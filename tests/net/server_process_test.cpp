@@ -19,6 +19,7 @@
 #include "output/irradiance_writer.h"
 #include "protocol/frame.h"
 #include "scene/gltf_loader.h"
+#include "solver/solver.h"
 #include "test_util.h"
 
 namespace penumbra {
@@ -317,6 +318,56 @@ TEST(ServerProcess, PunctualLightsOverTheWire) {
     change.outerCone = 2.0f;
     EXPECT_THROW(c.SetLight("spot", change), client::ClientError);
     EXPECT_EQ(c.Info().lights.size(), 1u);
+}
+
+// The environment at load time: a constant sky through the Cornell box's open front adds
+// light (the same as a bake with that sky); a sky file must lie under the scene root.
+TEST(ServerProcess, EnvironmentAtLoad) {
+    ServerProcess server("environment");
+    client::Client c(server.Unix(), "sky");
+    client::LoadOptions o = Cornell();
+    o.environmentColor = std::array<float, 3>{1.0f, 1.0f, 1.0f};
+    o.environmentIntensity = 0.5f;
+    client::SceneInfo info = c.Load(o);
+    EXPECT_EQ(info.environment, "constant");
+    EXPECT_FLOAT_EQ(info.environmentIntensity, 0.5f);
+    c.Step(8);
+    client::Frame lit = c.Get();
+
+    Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
+    scene.environment = ConstantEnvironment(glm::vec3(1.0f));
+    scene.environment.intensity = 0.5f;
+    SolverSettings s;
+    s.bins = 64;
+    s.elementSize = 0.06f;
+    s.device = DeviceChoice::kCpu;
+    auto solver = CreateSolver(scene, s);
+    solver->Iterate(lit.iterations);
+    std::vector<glm::vec3> want =
+        PrimitiveIrradiance(solver->GetSurfels(), solver->SurfelIrradiance(), scene, 0);
+    ASSERT_EQ(lit.primitives[0].node, "floor");
+    ASSERT_EQ(lit.primitives[0].rgb.size(), want.size() * 3);
+    for (size_t i = 0; i < want.size(); ++i)
+        EXPECT_NEAR(lit.primitives[0].rgb[i * 3], want[i].x, 1e-4f * (1.0f + want[i].x));
+
+    auto code = [&](auto call) -> int {
+        try {
+            call();
+        } catch (const client::ClientError& e) {
+            return e.code();
+        }
+        return -1;
+    };
+    client::LoadOptions bad = Cornell();
+    bad.reload = true;
+    bad.environment = "../sky.exr";
+    EXPECT_EQ(code([&] { c.Load(bad); }), int(fb::ErrorCode::OutsideRoot));
+    bad.environment = "cornell-box.gltf";  // not an EXR
+    EXPECT_EQ(code([&] { c.Load(bad); }), int(fb::ErrorCode::LoadFailed));
+    bad.environment = "";
+    bad.environmentColor = std::array<float, 3>{1.0f, -1.0f, 1.0f};
+    EXPECT_EQ(code([&] { c.Load(bad); }), int(fb::ErrorCode::InvalidArgument));
+    EXPECT_TRUE(c.Connected());
 }
 
 TEST(ServerProcess, GarbageOnOneConnectionDoesNotDisturbAnother) {
