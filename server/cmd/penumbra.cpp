@@ -238,6 +238,7 @@ int Render(const RenderOptions& o, SolverSettings settings, int iterations,
 
     // The lighting: a file, or the solver run here.
     std::vector<std::vector<glm::vec3>> perVertex;
+    std::vector<glm::vec3> perSurfel;  // when solved here
     std::unique_ptr<Solver> solver;
     std::string source;
     if (fromFile) {
@@ -248,8 +249,9 @@ int Render(const RenderOptions& o, SolverSettings settings, int iterations,
             progress.Update(stage, f);
         });
         solver->Iterate(iterations);
-        IrradianceResult r = CollectIrradiance(scene, *solver, channel);
-        perVertex = r.primitives;
+        perSurfel = solver->SurfelIrradiance(channel);
+        for (size_t p = 0; p < scene.primitives.size(); ++p)
+            perVertex.push_back(PrimitiveIrradiance(solver->GetSurfels(), perSurfel, scene, p));
         source = "antiradiance on " + solver->Stats().device + ", " + std::to_string(iterations) +
                  " iterations, channel " + ChannelName(channel);
     }
@@ -259,8 +261,7 @@ int Render(const RenderOptions& o, SolverSettings settings, int iterations,
         auto other = render::IrradianceForScene(scene, ReadIrradianceJson(o.compare));
         mesh = render::ErrorMesh(scene, perVertex, other, o.errorScale, kDefaultFloor);
     } else if (solver && o.mesh != "input") {
-        mesh = render::ShadedRefinedMesh(scene, solver->GetSurfels(),
-                                         solver->SurfelIrradiance(channel));
+        mesh = render::ShadedRefinedMesh(scene, solver->GetSurfels(), perSurfel);
     } else {
         mesh = render::ShadedInputMesh(scene, perVertex);
     }

@@ -78,24 +78,37 @@ RasterPipeline::RasterPipeline(Context& ctx, std::span<const uint32_t> vertexSpi
         dev, vk::FramebufferCreateInfo({}, *renderPass_, {}, width, height, 1));
     vertex_ = MakeShaderModule(ctx, vertexSpirv);
     fragment_ = MakeShaderModule(ctx, fragmentSpirv);
+    pipeline_ = MakeTrianglePipeline(ctx, *vertex_, *fragment_, *layout_, *renderPass_, width,
+                                     height, false);
+}
+
+vk::raii::Pipeline MakeTrianglePipeline(Context& ctx, vk::ShaderModule vertex,
+                                        vk::ShaderModule fragment, vk::PipelineLayout layout,
+                                        vk::RenderPass renderPass, uint32_t width, uint32_t height,
+                                        bool colorDepth) {
     vk::PipelineShaderStageCreateInfo stages[] = {
-        {{}, vk::ShaderStageFlagBits::eVertex, *vertex_, "main"},
-        {{}, vk::ShaderStageFlagBits::eFragment, *fragment_, "main"}};
+        {{}, vk::ShaderStageFlagBits::eVertex, vertex, "main"},
+        {{}, vk::ShaderStageFlagBits::eFragment, fragment, "main"}};
     vk::PipelineVertexInputStateCreateInfo vertexInput;
     vk::PipelineInputAssemblyStateCreateInfo assembly({}, vk::PrimitiveTopology::eTriangleList);
-    vk::Viewport viewport(0.0f, 0.0f, static_cast<float>(width), static_cast<float>(height), 0.0f,
-                          1.0f);
+    vk::Viewport viewport(0.0f, 0.0f, float(width), float(height), 0.0f, 1.0f);
     vk::Rect2D scissor({0, 0}, {width, height});
     vk::PipelineViewportStateCreateInfo viewportState({}, viewport, scissor);
     vk::PipelineRasterizationStateCreateInfo raster(
         {}, VK_FALSE, VK_FALSE, vk::PolygonMode::eFill, vk::CullModeFlagBits::eNone,
         vk::FrontFace::eCounterClockwise, VK_FALSE, 0.0f, 0.0f, 0.0f, 1.0f);
     vk::PipelineMultisampleStateCreateInfo multisample({}, vk::SampleCountFlagBits::e1);
+    vk::PipelineDepthStencilStateCreateInfo depth({}, VK_TRUE, VK_TRUE, vk::CompareOp::eLess);
+    vk::PipelineColorBlendAttachmentState blendAttachment;
+    blendAttachment.colorWriteMask =
+        vk::ColorComponentFlagBits::eR | vk::ColorComponentFlagBits::eG |
+        vk::ColorComponentFlagBits::eB | vk::ColorComponentFlagBits::eA;
     vk::PipelineColorBlendStateCreateInfo blend;
-    vk::GraphicsPipelineCreateInfo info({}, stages, &vertexInput, &assembly, nullptr,
-                                        &viewportState, &raster, &multisample, nullptr, &blend,
-                                        nullptr, *layout_, *renderPass_, 0);
-    pipeline_ = vk::raii::Pipeline(dev, nullptr, info);
+    if (colorDepth) blend.setAttachments(blendAttachment);
+    vk::GraphicsPipelineCreateInfo info(
+        {}, stages, &vertexInput, &assembly, nullptr, &viewportState, &raster, &multisample,
+        colorDepth ? &depth : nullptr, &blend, nullptr, layout, renderPass, 0);
+    return vk::raii::Pipeline(ctx.Device(), nullptr, info);
 }
 
 void RasterPipeline::Begin(const vk::raii::CommandBuffer& cb,

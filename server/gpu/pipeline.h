@@ -80,6 +80,15 @@ vk::raii::PipelineLayout MakePipelineLayout(Context& ctx, const BufferSetLayout&
                                             vk::ShaderStageFlags stages,
                                             uint32_t pushConstantBytes);
 
+// A graphics pipeline drawing triangle lists over a width × height area with no vertex input
+// (vertex shaders read buffers by gl_VertexIndex) and no culling. With `colorDepth`, subpass 0
+// of `renderPass` has one colour attachment (all channels written, no blending) and a depth
+// attachment tested with LESS; without, it has no attachments.
+vk::raii::Pipeline MakeTrianglePipeline(Context& ctx, vk::ShaderModule vertex,
+                                        vk::ShaderModule fragment, vk::PipelineLayout layout,
+                                        vk::RenderPass renderPass, uint32_t width, uint32_t height,
+                                        bool colorDepth);
+
 // Orders compute writes before later compute reads/writes (a full compute→compute barrier).
 void ComputeBarrier(const vk::raii::CommandBuffer& cb);
 

@@ -80,29 +80,9 @@ RenderTarget::RenderTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
 
     vertex_ = MakeShaderModule(ctx, vertexSpirv);
     fragment_ = MakeShaderModule(ctx, fragmentSpirv);
-    vk::PipelineShaderStageCreateInfo stages[] = {
-        {{}, vk::ShaderStageFlagBits::eVertex, *vertex_, "main"},
-        {{}, vk::ShaderStageFlagBits::eFragment, *fragment_, "main"}};
-    vk::PipelineVertexInputStateCreateInfo vertexInput;
-    vk::PipelineInputAssemblyStateCreateInfo assembly({}, vk::PrimitiveTopology::eTriangleList);
-    vk::Viewport viewport(0.0f, 0.0f, float(width), float(height), 0.0f, 1.0f);
-    vk::Rect2D scissor({0, 0}, {width, height});
-    vk::PipelineViewportStateCreateInfo viewportState({}, viewport, scissor);
-    // One-sided surfaces are seen from both sides (their backs are black in the shader).
-    vk::PipelineRasterizationStateCreateInfo raster(
-        {}, VK_FALSE, VK_FALSE, vk::PolygonMode::eFill, vk::CullModeFlagBits::eNone,
-        vk::FrontFace::eCounterClockwise, VK_FALSE, 0.0f, 0.0f, 0.0f, 1.0f);
-    vk::PipelineMultisampleStateCreateInfo multisample({}, vk::SampleCountFlagBits::e1);
-    vk::PipelineDepthStencilStateCreateInfo depth({}, VK_TRUE, VK_TRUE, vk::CompareOp::eLess);
-    vk::PipelineColorBlendAttachmentState blendAttachment;
-    blendAttachment.colorWriteMask =
-        vk::ColorComponentFlagBits::eR | vk::ColorComponentFlagBits::eG |
-        vk::ColorComponentFlagBits::eB | vk::ColorComponentFlagBits::eA;
-    vk::PipelineColorBlendStateCreateInfo blend({}, VK_FALSE, vk::LogicOp::eCopy, blendAttachment);
-    vk::GraphicsPipelineCreateInfo info({}, stages, &vertexInput, &assembly, nullptr,
-                                        &viewportState, &raster, &multisample, &depth, &blend,
-                                        nullptr, *layout_, *renderPass_, 0);
-    pipeline_ = vk::raii::Pipeline(dev, nullptr, info);
+    // No culling: one-sided surfaces are seen from both sides (backs are black in the shader).
+    pipeline_ = MakeTrianglePipeline(ctx, *vertex_, *fragment_, *layout_, *renderPass_, width,
+                                     height, true);
 }
 
 void RenderTarget::Begin(const vk::raii::CommandBuffer& cb, const vk::raii::DescriptorSet& set,

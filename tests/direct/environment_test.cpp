@@ -31,6 +31,18 @@ SolverSettings Settings(int bins, float elementSize) {
     return s;
 }
 
+// The floor and four walls of a unit room, facing in; all in node `name`, or each in its own
+// node (floor, w0…w3) when `name` is empty.
+void AddRoomSides(SceneBuilder& b, uint32_t material, const std::string& name = "") {
+    const glm::vec3 inside(0.5f, 0.5f, 0.5f);
+    auto node = [&](const char* own) { return name.empty() ? std::string(own) : name; };
+    b.AddQuad(node("floor"), material, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside);
+    b.AddQuad(node("w0"), material, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, inside);
+    b.AddQuad(node("w1"), material, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside);
+    b.AddQuad(node("w2"), material, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside);
+    b.AddQuad(node("w3"), material, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside);
+}
+
 // An equirectangular map of `w` × w/2 pixels holding f(direction at the pixel centre).
 template <typename F>
 Image MapOf(int w, F f) {
@@ -146,13 +158,8 @@ TEST(Environment, OnlySolidsKeepTheFrontSideRule) {
     // A closed room in one node faces in: its backs face the sky, so it is no solid.
     SceneBuilder r;
     uint32_t white = r.AddMaterial("white", glm::vec3(0.5f));
-    const glm::vec3 inside(0.5f, 0.5f, 0.5f);
-    r.AddQuad("room", white, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside);
-    r.AddQuad("room", white, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}, inside);
-    r.AddQuad("room", white, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, inside);
-    r.AddQuad("room", white, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside);
-    r.AddQuad("room", white, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside);
-    r.AddQuad("room", white, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside);
+    AddRoomSides(r, white, "room");
+    r.AddQuad("room", white, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}, {0.5f, 0.5f, 0.5f});
     r.AddBox("solid", white, {0.5f, 0.5f, 0.5f}, {0.2f, 0.2f, 0.2f});
     Scene room = r.Build();
     std::vector<bool> roomClosed = ClosedNodes(room);
@@ -231,14 +238,10 @@ TEST(Environment, BoxOnAPlaneOccludesTheSky) {
 TEST(Environment, RoomLitThroughAnOpeningKeepsTheFurnaceBalance) {
     SceneBuilder b;
     uint32_t white = b.AddMaterial("white", glm::vec3(1.0f));
-    const glm::vec3 inside(0.5f, 0.5f, 0.5f);
-    b.AddQuad("floor", white, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside);
-    b.AddQuad("w0", white, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, inside);
-    b.AddQuad("w1", white, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside);
-    b.AddQuad("w2", white, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside);
-    b.AddQuad("w3", white, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside);
+    AddRoomSides(b, white);
     // Half a ceiling: the opening is x ∈ [0.5, 1].
-    b.AddQuad("ceiling", white, {0, 1, 0}, {0.5f, 1, 0}, {0.5f, 1, 1}, {0, 1, 1}, inside);
+    b.AddQuad("ceiling", white, {0, 1, 0}, {0.5f, 1, 0}, {0.5f, 1, 1}, {0, 1, 1},
+              {0.5f, 0.5f, 0.5f});
     Scene scene = b.Build();
     scene.environment = ConstantEnvironment(glm::vec3(1.0f));
     SolverSettings settings = Settings(256, 0.05f);

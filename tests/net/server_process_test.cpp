@@ -87,6 +87,17 @@ class ServerProcess {
     pid_t pid_ = -1;
 };
 
+// The protocol error code a client call fails with, or -1 when it succeeds.
+template <typename F>
+int ErrorCodeOf(F call) {
+    try {
+        call();
+    } catch (const client::ClientError& e) {
+        return e.code();
+    }
+    return -1;
+}
+
 client::LoadOptions Cornell() {
     client::LoadOptions o;
     o.path = "cornell-box.gltf";
@@ -350,23 +361,15 @@ TEST(ServerProcess, EnvironmentAtLoad) {
     for (size_t i = 0; i < want.size(); ++i)
         EXPECT_NEAR(lit.primitives[0].rgb[i * 3], want[i].x, 1e-4f * (1.0f + want[i].x));
 
-    auto code = [&](auto call) -> int {
-        try {
-            call();
-        } catch (const client::ClientError& e) {
-            return e.code();
-        }
-        return -1;
-    };
     client::LoadOptions bad = Cornell();
     bad.reload = true;
     bad.environment = "../sky.exr";
-    EXPECT_EQ(code([&] { c.Load(bad); }), int(fb::ErrorCode::OutsideRoot));
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(bad); }), int(fb::ErrorCode::OutsideRoot));
     bad.environment = "cornell-box.gltf";  // not an EXR
-    EXPECT_EQ(code([&] { c.Load(bad); }), int(fb::ErrorCode::LoadFailed));
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(bad); }), int(fb::ErrorCode::LoadFailed));
     bad.environment = "";
     bad.environmentColor = std::array<float, 3>{1.0f, -1.0f, 1.0f};
-    EXPECT_EQ(code([&] { c.Load(bad); }), int(fb::ErrorCode::InvalidArgument));
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(bad); }), int(fb::ErrorCode::InvalidArgument));
     EXPECT_TRUE(c.Connected());
 }
 
@@ -425,34 +428,28 @@ TEST(ServerProcess, RequestsBeforeHelloAreRefused) {
 TEST(ServerProcess, BadRequestsGetClearErrorsAndTheConnectionStays) {
     ServerProcess server("bad-requests");
     client::Client c(server.Tcp());
-    auto code = [&](auto call) -> int {
-        try {
-            call();
-        } catch (const client::ClientError& e) {
-            return e.code();
-        }
-        return -1;
-    };
-    EXPECT_EQ(code([&] { c.Info(); }), int(fb::ErrorCode::NoScene));
+    EXPECT_EQ(ErrorCodeOf([&] { c.Info(); }), int(fb::ErrorCode::NoScene));
     client::LoadOptions outside = Cornell();
     outside.path = "../CMakeLists.txt";
-    EXPECT_EQ(code([&] { c.Load(outside); }), int(fb::ErrorCode::OutsideRoot));
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(outside); }), int(fb::ErrorCode::OutsideRoot));
     outside.path = "/etc/passwd";
-    EXPECT_EQ(code([&] { c.Load(outside); }), int(fb::ErrorCode::OutsideRoot));
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(outside); }), int(fb::ErrorCode::OutsideRoot));
     outside.path = "no-such.gltf";
-    EXPECT_EQ(code([&] { c.Load(outside); }), int(fb::ErrorCode::NotFound));
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(outside); }), int(fb::ErrorCode::NotFound));
     c.Load(Cornell());
     std::array<float, 16> nan{};
     nan.fill(std::nanf(""));
-    EXPECT_EQ(code([&] { c.SetTransform("tall_block", nan); }),
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetTransform("tall_block", nan); }),
               int(fb::ErrorCode::InvalidArgument));
     std::array<float, 16> zero{};
-    EXPECT_EQ(code([&] { c.SetTransform("tall_block", zero); }),
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetTransform("tall_block", zero); }),
               int(fb::ErrorCode::InvalidArgument));
     std::array<float, 16> id{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
-    EXPECT_EQ(code([&] { c.SetTransform("no_such_node", id); }), int(fb::ErrorCode::NotFound));
-    EXPECT_EQ(code([&] { c.SetTransform("floor", id); }), int(fb::ErrorCode::StaticNode));
-    EXPECT_EQ(code([&] { c.SetLight("floor", std::nullopt, 1.0f); }), int(fb::ErrorCode::NotFound));
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetTransform("no_such_node", id); }),
+              int(fb::ErrorCode::NotFound));
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetTransform("floor", id); }), int(fb::ErrorCode::StaticNode));
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetLight("floor", std::nullopt, 1.0f); }),
+              int(fb::ErrorCode::NotFound));
     // After all that, the same connection still works.
     EXPECT_NO_THROW(c.Stats());
     EXPECT_TRUE(c.Connected());

@@ -32,6 +32,14 @@ double MsSince(Clock::time_point t) {
 // three scalar ones.
 using Rgba = float __attribute__((vector_size(16)));
 
+// The root's L_in before its links: the environment per bin (model.h), as RGBA rows.
+inline void EnvironmentRows(const AntiradianceModel& m, Rgba* lin) {
+    for (size_t b = 0; b < m.environment.size(); ++b) {
+        const glm::vec3& e = m.environment[b];
+        lin[b] = Rgba{e.x, e.y, e.z, 0.0f};
+    }
+}
+
 // acc[bin] += Σ over receiver r's links of F · w · I_ex[sender][link bin] (the U operator,
 // Eq. 16/17 with the σ spreading of Sec. 3.1), RGB in the first three lanes. The sender
 // reads are random rows of a large table: gather a chunk of F·I_ex values first,
@@ -185,20 +193,18 @@ void InitEmission(const AntiradianceModel& m, float* iex) {
 
 void GlobalPass(const AntiradianceModel& m, const float* iex, float* lin) {
     const size_t row = size_t(m.Bins()) * 3;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, m.Nodes(), 64), [&](const tbb::blocked_range<
-                                                                        size_t>& range) {
-        Rgba acc[Directions::kMaxBins];
-        for (size_t r = range.begin(); r != range.end(); ++r) {
-            std::fill(acc, acc + row / 3, Rgba{});
-            if (r == 0)  // the root starts from the environment (model.h)
-                for (size_t b = 0; b < row / 3; ++b)
-                    acc[b] = Rgba{m.environment[b].x, m.environment[b].y, m.environment[b].z, 0.0f};
-            GatherRgba(m, iex, static_cast<uint32_t>(r), acc);
-            float* out = lin + r * row;
-            for (size_t b = 0; b < row / 3; ++b)
-                for (int c = 0; c < 3; ++c) out[b * 3 + c] = acc[b][c];
-        }
-    });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, m.Nodes(), 64),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                          Rgba acc[Directions::kMaxBins];
+                          for (size_t r = range.begin(); r != range.end(); ++r) {
+                              std::fill(acc, acc + row / 3, Rgba{});
+                              if (r == 0) EnvironmentRows(m, acc);
+                              GatherRgba(m, iex, static_cast<uint32_t>(r), acc);
+                              float* out = lin + r * row;
+                              for (size_t b = 0; b < row / 3; ++b)
+                                  for (int c = 0; c < 3; ++c) out[b * 3 + c] = acc[b][c];
+                          }
+                      });
 }
 
 void PushPass(const AntiradianceModel& m, float* lin) { PushRows(m, lin); }
@@ -245,11 +251,8 @@ struct CpuBackend::Walk {
         uint64_t t0 = Ticks();
         if (parentLin) {
             std::memcpy(lin, parentLin, bins * sizeof(Rgba));
-        } else {  // the root starts from the environment (model.h)
-            for (size_t b = 0; b < bins; ++b) {
-                const glm::vec3& e = m.environment[b];
-                lin[b] = Rgba{e.x, e.y, e.z, 0.0f};
-            }
+        } else {
+            EnvironmentRows(m, lin);
         }
         uint64_t t1 = Ticks();
         GatherRgba(m, iex, node, lin);
