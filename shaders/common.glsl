@@ -29,9 +29,24 @@ struct Leaf {
     uint node;
     uint parent;
     uint surfel;
-    uint flags;  // kLeafTwoSided
+    uint flags;  // kLeafTwoSided | kLeafGlossy | glossy index << kGlossyShift
 };
 const uint kLeafTwoSided = 1u;
+const uint kLeafGlossy = 2u;
+const uint kGlossyShift = 8u;
+
+// solver/antiradiance/model.h: struct GlossyLeaf (16 bytes).
+struct GlossyLeaf {
+    vec3 specular;  // F0
+    uint lobe;
+};
+// solver/antiradiance/model.h: struct GlossyLobe (16 bytes).
+struct Lobe {
+    uint start;
+    uint width;
+    float exponent;
+    float norm;
+};
 
 const uint kReflect = 1u;
 const uint kAntiradiance = 2u;

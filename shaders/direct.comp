@@ -31,6 +31,8 @@ layout(std430, binding = 1) readonly buffer Lights { Light lights[]; };
 layout(std430, binding = 2) readonly buffer Views { View views[]; };
 layout(std430, binding = 3) readonly buffer Maps { float maps[]; };
 layout(std430, binding = 4) writeonly buffer Out { vec4 direct[]; };
+// Each light's share, light-major: perLight[light · receiverCount + receiver].
+layout(std430, binding = 5) writeonly buffer PerLight { vec4 perLight[]; };
 
 layout(push_constant) uniform Push {
     uint receiverCount;
@@ -90,6 +92,7 @@ void main() {
     vec3 e = vec3(0.0);
     for (uint li = 0u; li < pc.lightCount; ++li) {
         Light light = lights[li];
+        perLight[li * pc.receiverCount + i] = vec4(0.0);
         vec3 toLight;
         float scale;
         if (light.position.w == 2.0) {
@@ -123,7 +126,9 @@ void main() {
             vec3 qToLight = light.position.w == 2.0 ? toLight : normalize(light.position.xyz - q);
             visible += TapVisibility(light, q, n, qToLight);
         }
-        e += light.radiant.xyz * (scale * cosine * visible / float(kTaps));
+        vec3 ek = light.radiant.xyz * (scale * cosine * visible / float(kTaps));
+        e += ek;
+        perLight[li * pc.receiverCount + i] = vec4(ek, 0.0);
     }
     direct[i] = vec4(e, 0.0);
 }

@@ -114,6 +114,9 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
                          "from both sides",
                          s.environment.c_str(), s.environmentIntensity,
                          glm::degrees(s.environmentRotation), s.twoSidedElements, s.elements);
+        if (s.glossyElements)
+            std::fprintf(stderr, "\n  %zu of %zu elements glossy (%zu lobes)", s.glossyElements,
+                         s.elements, s.glossyLobes);
         std::fprintf(stderr, "\n  wrote %s (channel %s; %s)\n", outPath.c_str(),
                      result.channel.c_str(), kIrradianceUnits);
     }

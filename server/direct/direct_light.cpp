@@ -264,14 +264,17 @@ void RasterShadowMaps(const Plan& plan, const std::vector<glm::vec3>& triangles,
 }
 
 void DirectIrradiance(const Plan& plan, const float* maps,
-                      const std::vector<GpuReceiver>& receivers, float* out) {
+                      const std::vector<GpuReceiver>& receivers, float* out, float* perLight) {
     tbb::parallel_for(size_t(0), receivers.size(), [&](size_t i) {
         const GpuReceiver& r = receivers[i];
         const glm::vec3 p(r.position), n(r.normal), c(r.centroid);
         glm::vec3 t, b;
         TangentBasis(n, t, b);
         glm::vec3 e(0.0f);
-        for (const GpuLight& light : plan.lights) {
+        for (size_t li = 0; li < plan.lights.size(); ++li) {
+            const GpuLight& light = plan.lights[li];
+            float* mine = perLight ? perLight + (li * receivers.size() + i) * 4 : nullptr;
+            if (mine) std::fill(mine, mine + 4, 0.0f);
             glm::vec3 toLight;
             float scale;
             if (light.position.w == 2.0f) {
@@ -310,7 +313,9 @@ void DirectIrradiance(const Plan& plan, const float* maps,
                                          : glm::normalize(glm::vec3(light.position) - q);
                 visible += TapVisibility(plan, maps, light, q, n, qToLight);
             }
-            e += glm::vec3(light.radiant) * (scale * cosine * visible / kTaps);
+            glm::vec3 ek = glm::vec3(light.radiant) * (scale * cosine * visible / kTaps);
+            e += ek;
+            if (mine) mine[0] = ek.x, mine[1] = ek.y, mine[2] = ek.z;
         }
         out[i * 4] = e.x;
         out[i * 4 + 1] = e.y;
@@ -332,7 +337,8 @@ void CpuDirect::Update(const Scene& scene) {
     RasterShadowMaps(plan, triangles_, maps_);
     msShadow = MsSince(t0);
     auto t1 = std::chrono::steady_clock::now();
-    DirectIrradiance(plan, maps_.data(), receivers_, out_.data());
+    perLight_.assign(plan.lights.size() * receivers_.size() * 4, 0.0f);
+    DirectIrradiance(plan, maps_.data(), receivers_, out_.data(), perLight_.data());
     msDirect = MsSince(t1);
 }
 

@@ -76,9 +76,11 @@ std::vector<GpuReceiver> MakeReceivers(const Surfels& surfels, const std::vector
 void RasterShadowMaps(const Plan& plan, const std::vector<glm::vec3>& triangles,
                       std::vector<float>& maps);
 
-// CPU twin of the direct pass: RGB irradiance (lux) per receiver, stride 4 (xyz + 0).
+// CPU twin of the direct pass: RGB irradiance (lux) per receiver, stride 4 (xyz + 0), and,
+// when `perLight` is given, each light's share: perLight[(light · receivers + i) · 4 + c].
 void DirectIrradiance(const Plan& plan, const float* maps,
-                      const std::vector<GpuReceiver>& receivers, float* out);
+                      const std::vector<GpuReceiver>& receivers, float* out,
+                      float* perLight = nullptr);
 
 // Both stages on the CPU, with their wall times.
 class CpuDirect {
@@ -86,7 +88,8 @@ class CpuDirect {
     CpuDirect(const Scene& scene, std::vector<GpuReceiver> receivers, int mapSize);
     // Re-plans from the scene's lights (geometry as at construction) and recomputes.
     void Update(const Scene& scene);
-    const std::vector<float>& Irradiance() const { return out_; }  // stride 4
+    const std::vector<float>& Irradiance() const { return out_; }     // stride 4
+    const std::vector<float>& PerLight() const { return perLight_; }  // lights × receivers × 4
     const std::vector<float>& Maps() const { return maps_; }
     double msShadow = 0.0, msDirect = 0.0;  // last update
     int views = 0;                          // shadow maps the last update rendered
@@ -97,6 +100,7 @@ class CpuDirect {
     int mapSize_;
     std::vector<float> maps_;
     std::vector<float> out_;
+    std::vector<float> perLight_;
 };
 
 }  // namespace penumbra::direct

@@ -43,7 +43,7 @@ struct VulkanDirect::Impl {
     uint32_t triangleVertices;
     gpu::Buffer& out;
     gpu::Buffer vertices, receivers;
-    std::unique_ptr<gpu::Buffer> lights, views, maps;
+    std::unique_ptr<gpu::Buffer> lights, views, maps, perLight;
     size_t viewCapacity = 0, lightCapacity = 0;
     gpu::RasterPipeline shadow;
     gpu::Pipeline directPass;
@@ -66,7 +66,7 @@ struct VulkanDirect::Impl {
           receivers(c, std::max<size_t>(1, receiverList.size()) * sizeof(GpuReceiver)),
           shadow(c, Words(kSpirv_shadow_vert), Words(kSpirv_shadow_frag), 2, sizeof(ShadowPush),
                  static_cast<uint32_t>(s), static_cast<uint32_t>(s)),
-          directPass(c, Words(kSpirv_direct), 5, {}, sizeof(DirectPush)) {
+          directPass(c, Words(kSpirv_direct), 6, {}, sizeof(DirectPush)) {
         vertices.Upload(Vertices(scene));
         receivers.Upload(receiverList);
         if (ctx.TimestampPeriodNs() > 0.0f)
@@ -83,9 +83,12 @@ struct VulkanDirect::Impl {
         views = std::make_unique<gpu::Buffer>(ctx, viewCapacity * sizeof(GpuShadowView));
         lights = std::make_unique<gpu::Buffer>(ctx, lightCapacity * sizeof(GpuLight));
         maps = std::make_unique<gpu::Buffer>(ctx, viewCapacity * size_t(size) * size * 4);
+        perLight = std::make_unique<gpu::Buffer>(
+            ctx, lightCapacity * std::max<size_t>(1, receiverList.size()) * sizeof(glm::vec4));
         const gpu::Buffer* s[] = {&vertices, maps.get()};
         shadowSet = shadow.MakeSet(s);
-        const gpu::Buffer* d[] = {&receivers, lights.get(), views.get(), maps.get(), &out};
+        const gpu::Buffer* d[] = {&receivers, lights.get(), views.get(),
+                                  maps.get(), &out,         perLight.get()};
         directSet = directPass.MakeSet(d);
     }
 
@@ -167,6 +170,12 @@ void VulkanDirect::Update(const Scene& scene) { impl_->Update(scene, msShadow, m
 std::vector<float> VulkanDirect::ReadIrradiance() const {
     std::vector<float> v(impl_->receiverList.size() * 4);
     impl_->out.Download(v.data(), v.size() * sizeof(float));
+    return v;
+}
+
+std::vector<float> VulkanDirect::ReadPerLight(size_t lights) const {
+    std::vector<float> v(lights * impl_->receiverList.size() * 4);
+    if (!v.empty()) impl_->perLight->Download(v.data(), v.size() * sizeof(float));
     return v;
 }
 

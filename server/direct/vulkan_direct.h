@@ -28,9 +28,11 @@ class VulkanDirect {
     // Plans from the scene's lights (geometry as at construction), renders, waits.
     void Update(const Scene& scene);
     std::vector<float> ReadIrradiance() const;  // stride 4, as the CPU twin's
-    std::vector<float> ReadMaps() const;        // depths, as RasterShadowMaps writes them
-    double msShadow = 0.0, msDirect = 0.0;      // last update, device time
-    int views = 0;                              // shadow maps the last update rendered
+    // Each of the first `lights` lights' share, as CpuDirect::PerLight.
+    std::vector<float> ReadPerLight(size_t lights) const;
+    std::vector<float> ReadMaps() const;    // depths, as RasterShadowMaps writes them
+    double msShadow = 0.0, msDirect = 0.0;  // last update, device time
+    int views = 0;                          // shadow maps the last update rendered
 
   private:
     struct Impl;

@@ -49,6 +49,8 @@ nlohmann::json StatsToJson(const SolverStats& s) {
                             {"intensity", s.environmentIntensity},
                             {"rotation_degrees", s.environmentRotation * 57.29577951308232}};
     j["two_sided_elements"] = s.twoSidedElements;
+    j["glossy_elements"] = s.glossyElements;
+    j["glossy_lobes"] = s.glossyLobes;
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

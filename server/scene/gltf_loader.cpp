@@ -225,8 +225,6 @@ void ReadPenumbraExtras(const Context& ctx, const std::string& where, const tiny
 Material ReadMaterial(const Context& ctx, int index) {
     const auto& m = ctx.model.materials[index];
     std::string where = "material " + std::to_string(index) + " '" + m.name + "'";
-    Material out;
-    out.name = m.name;
     const auto& pbr = m.pbrMetallicRoughness;
     glm::vec3 base(1.0f);
     if (pbr.baseColorFactor.size() >= 3)
@@ -234,7 +232,7 @@ Material ReadMaterial(const Context& ctx, int index) {
     if (pbr.baseColorTexture.index >= 0)
         base *= MeanTextureColor(ctx, where, pbr.baseColorTexture.index);
     float metallic = static_cast<float>(pbr.metallicFactor);
-    out.albedo = base * (1.0f - metallic);
+    float roughness = static_cast<float>(pbr.roughnessFactor);
     glm::vec3 emissive(0.0f);
     if (m.emissiveFactor.size() == 3)
         emissive = glm::vec3(m.emissiveFactor[0], m.emissiveFactor[1], m.emissiveFactor[2]);
@@ -242,16 +240,20 @@ Material ReadMaterial(const Context& ctx, int index) {
     auto ext = m.extensions.find("KHR_materials_emissive_strength");
     if (ext != m.extensions.end() && ext->second.Has("emissiveStrength"))
         strength = static_cast<float>(ext->second.Get("emissiveStrength").GetNumberAsDouble());
-    out.emission = emissive * strength;
+    glm::vec3 emission = emissive * strength;
     for (int c = 0; c < 3; ++c) {
-        if (!std::isfinite(out.albedo[c]) || out.albedo[c] < 0.0f)
+        if (!std::isfinite(base[c]) || base[c] < 0.0f)
             ctx.Fail(where, "base colour is not a finite non-negative number");
-        if (!std::isfinite(out.emission[c]) || out.emission[c] < 0.0f)
+        if (!std::isfinite(emission[c]) || emission[c] < 0.0f)
             ctx.Fail(where, "emission is not a finite non-negative number");
     }
-    if (glm::any(glm::greaterThan(out.albedo, glm::vec3(1.0f))))
-        ctx.Fail(where, "diffuse albedo exceeds 1 (the surface would create light)");
-    return out;
+    if (glm::any(glm::greaterThan(base, glm::vec3(1.0f))))
+        ctx.Fail(where, "base colour exceeds 1 (the surface would create light)");
+    if (!(metallic >= 0.0f && metallic <= 1.0f))
+        ctx.Fail(where, "metallicFactor is not a number in [0, 1]");
+    if (!(roughness >= 0.0f && roughness <= 1.0f))
+        ctx.Fail(where, "roughnessFactor is not a number in [0, 1]");
+    return PbrMaterial(m.name, base, metallic, roughness, emission);
 }
 
 // KHR_lights_punctual light `index`, checked; placed by the caller.
@@ -334,7 +336,9 @@ Scene LoadGltf(const std::string& path) {
         scene.materials.push_back(ReadMaterial(ctx, static_cast<int>(i)));
     // glTF's default material: baseColor 1, metallic 1, hence black diffuse.
     uint32_t defaultMaterial = static_cast<uint32_t>(scene.materials.size());
-    scene.materials.push_back(Material{"(default)", glm::vec3(0.0f), glm::vec3(0.0f)});
+    // Kept black (no light reflected) rather than glTF's rough white metal, so that
+    // geometry without a material does not light the scene up.
+    scene.materials.push_back(DiffuseMaterial("(default)", glm::vec3(0.0f)));
 
     std::vector<int> roots;
     if (!model.scenes.empty()) {

@@ -11,6 +11,43 @@
 
 namespace penumbra {
 
+void DeriveReflectance(Material& m) {
+    const float metallic = glm::clamp(m.metallic, 0.0f, 1.0f);
+    const float alpha = m.roughness * m.roughness;
+    const float alpha2 = alpha * alpha;
+    const float n = alpha2 > 0.0f ? 0.5f / alpha2 - 0.5f : kMaxPhongExponent;
+    const glm::vec3 f0 = glm::mix(glm::vec3(0.04f), m.baseColor, metallic);
+    if (n >= 1.0f) {
+        // Glossy: the dielectric's diffuse layer keeps 1 − 0.04 (glTF's 1 − F at normal
+        // incidence), so ρ_d + F0 ≤ 1 whenever the base colour is.
+        m.albedo = m.baseColor * (1.0f - metallic) * (1.0f - 0.04f);
+        m.specular = f0;
+        m.phongExponent = std::min(n, kMaxPhongExponent);
+    } else {
+        // Nearly uniform lobe: the metal's share reflects diffusely, the dielectric's 4% is
+        // left out.
+        m.albedo = m.baseColor * (1.0f - metallic) + m.baseColor * metallic;
+        m.specular = glm::vec3(0.0f);
+        m.phongExponent = 0.0f;
+    }
+}
+
+Material PbrMaterial(const std::string& name, glm::vec3 baseColor, float metallic, float roughness,
+                     glm::vec3 emission) {
+    Material m;
+    m.name = name;
+    m.baseColor = baseColor;
+    m.metallic = metallic;
+    m.roughness = roughness;
+    m.emission = emission;
+    DeriveReflectance(m);
+    return m;
+}
+
+Material DiffuseMaterial(const std::string& name, glm::vec3 albedo, glm::vec3 emission) {
+    return PbrMaterial(name, albedo, 0.0f, 1.0f, emission);
+}
+
 glm::vec3 Scene::BoundsMin() const {
     glm::vec3 lo(std::numeric_limits<float>::max());
     for (const auto& p : primitives)

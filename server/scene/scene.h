@@ -11,11 +11,41 @@
 
 namespace penumbra {
 
+// A glTF metallic-roughness material and the reflectance the solvers use, derived from it
+// by DeriveReflectance (docs/MATERIALS.md):
+//   diffuse BRDF ρ_d/π, plus for glossy materials a normalised Phong lobe about the mirror
+//   direction, f_s = F0 · (n + 2)/(2π) · cosⁿ θ_r, with F0 = mix(0.04, baseColor, metallic),
+//   α = roughness², n = 1/(2α²) − ½ (Blinn–Phong's 2/α² − 2 about the half vector is about
+//   four times n about the mirror direction, since θ_r ≈ 2θ_h).
+// Lobes with n < 1 (roughness > 0.76) are almost uniform: a metal's is folded into the
+// diffuse albedo, a dielectric's 4% is left out (glTF's BRDF takes about that much from
+// its diffuse layer by the (1 − F) weight), so rough materials stay on the diffuse path.
 struct Material {
     std::string name;
-    glm::vec3 albedo{0.8f};    // diffuse reflectance, baseColor × (1 − metallic)
-    glm::vec3 emission{0.0f};  // emitted radiance (nits), emissiveFactor × strength
+    glm::vec3 baseColor{0.8f};   // as given (glTF baseColorFactor × mean texture colour)
+    float metallic = 0.0f;       // as given
+    float roughness = 1.0f;      // as given
+    glm::vec3 albedo{0.8f};      // diffuse reflectance ρ_d (derived)
+    glm::vec3 specular{0.0f};    // F0 of the glossy lobe; zero: no lobe (derived)
+    float phongExponent = 0.0f;  // n of the lobe; 0 when there is none (derived)
+    glm::vec3 emission{0.0f};    // emitted radiance (nits), emissiveFactor × strength
+
+    bool Glossy() const { return phongExponent > 0.0f; }
 };
+
+// Roughness above this has a lobe exponent below 1 and is treated as diffuse.
+inline constexpr float kGlossyRoughness = 0.7598357f;  // (1/3)^(1/4): n = 1
+// The sharpest lobe kept (roughness ≈ 0.06): sharper ones are mirrors to every solver here.
+inline constexpr float kMaxPhongExponent = 10000.0f;
+
+// Fills albedo, specular and phongExponent from baseColor, metallic and roughness.
+void DeriveReflectance(Material& m);
+// A material from glTF's factors (name, base colour, metallic, roughness, emission).
+Material PbrMaterial(const std::string& name, glm::vec3 baseColor, float metallic, float roughness,
+                     glm::vec3 emission = glm::vec3(0.0f));
+// A purely diffuse material of albedo ρ (metallic 0, roughness 1).
+Material DiffuseMaterial(const std::string& name, glm::vec3 albedo,
+                         glm::vec3 emission = glm::vec3(0.0f));
 
 // One glTF mesh primitive placed by one node, in world space.
 struct Primitive {

@@ -16,7 +16,13 @@
 namespace penumbra {
 
 uint32_t SceneBuilder::AddMaterial(const std::string& name, glm::vec3 albedo, glm::vec3 emission) {
-    materials_.push_back({name, albedo, emission});
+    materials_.push_back(DiffuseMaterial(name, albedo, emission));
+    return static_cast<uint32_t>(materials_.size() - 1);
+}
+
+uint32_t SceneBuilder::AddPbrMaterial(const std::string& name, glm::vec3 baseColor, float metallic,
+                                      float roughness, glm::vec3 emission) {
+    materials_.push_back(PbrMaterial(name, baseColor, metallic, roughness, emission));
     return static_cast<uint32_t>(materials_.size() - 1);
 }
 
@@ -212,9 +218,10 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
     for (const auto& m : materials_) {
         tinygltf::Material mat;
         mat.name = m.name;
-        mat.pbrMetallicRoughness.baseColorFactor = {m.albedo.x, m.albedo.y, m.albedo.z, 1.0};
-        mat.pbrMetallicRoughness.metallicFactor = 0.0;
-        mat.pbrMetallicRoughness.roughnessFactor = 1.0;
+        mat.pbrMetallicRoughness.baseColorFactor = {m.baseColor.x, m.baseColor.y, m.baseColor.z,
+                                                    1.0};
+        mat.pbrMetallicRoughness.metallicFactor = m.metallic;
+        mat.pbrMetallicRoughness.roughnessFactor = m.roughness;
         float peak = std::max(m.emission.x, std::max(m.emission.y, m.emission.z));
         if (peak > 0.0f) {
             // emissiveFactor is clamped to [0,1] by the spec: the rest goes to the strength.

@@ -12,7 +12,11 @@ namespace penumbra {
 
 class SceneBuilder {
   public:
+    // A diffuse material (metallic 0, roughness 1): albedo = base colour.
     uint32_t AddMaterial(const std::string& name, glm::vec3 albedo, glm::vec3 emission = {});
+    // A glTF metallic-roughness material (DeriveReflectance gives its diffuse and lobe).
+    uint32_t AddPbrMaterial(const std::string& name, glm::vec3 baseColor, float metallic,
+                            float roughness, glm::vec3 emission = {});
 
     // A planar quad p0..p3 whose normal points to the side of `towards`, as a grid of
     // tiles × tiles (more input vertices where per-vertex output should resolve detail).

@@ -284,7 +284,9 @@ uint64_t Session::Submit(const MaterialEdit& edit) {
     MaterialEdit e = edit;
     auto apply = [matches, e](Scene& s) {
         for (uint32_t m : matches) {
-            if (e.albedo) s.materials[m].albedo = *e.albedo;
+            // `albedo` is the base colour; the diffuse albedo and any glossy lobe follow.
+            if (e.albedo) s.materials[m].baseColor = *e.albedo;
+            DeriveReflectance(s.materials[m]);
             if (e.emission) s.materials[m].emission = *e.emission;
         }
     };

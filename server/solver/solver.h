@@ -72,6 +72,8 @@ struct SolverStats {
     float environmentIntensity = 0.0f;
     float environmentRotation = 0.0f;  // radians
     size_t twoSidedElements = 0;       // elements that occlude from both sides
+    size_t glossyElements = 0;         // elements with a glossy lobe (Material::Glossy)
+    size_t glossyLobes = 0;            // distinct discretised lobes
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };

@@ -47,7 +47,7 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
         else
             direct_ = std::make_unique<direct::CpuDirect>(scene, std::move(receivers), mapSize_);
         lights_ = static_cast<int>(scene.lights.size());
-        CopyDirect();
+        CopyDirect(scene);
     }
     setupSeconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -85,12 +85,22 @@ std::vector<glm::vec3> AntiradianceSolver::SurfelIrradiance(Channel channel) {
     return out;
 }
 
-void AntiradianceSolver::CopyDirect() {
+void AntiradianceSolver::CopyDirect(const Scene& scene) {
     // The device's E_d is already where its local pass reads it; keep a host copy for the
     // `direct` channel. The CPU back end reads model_.leafDirect itself.
     std::vector<float> e = gpuDirect_ ? gpuDirect_->ReadIrradiance() : direct_->Irradiance();
     for (size_t i = 0; i < model_.leafDirect.size(); ++i)
         model_.leafDirect[i] = glm::vec4(e[i * 4], e[i * 4 + 1], e[i * 4 + 2], 0.0f);
+    // Glossy leaves reflect each light along its own mirror direction: per-light shares.
+    lightPlaces_ = scene.lights;
+    perLight_ = gpuDirect_ ? gpuDirect_->ReadPerLight(scene.lights.size()) : direct_->PerLight();
+    ReflectDirect();
+}
+
+void AntiradianceSolver::ReflectDirect() {
+    if (model_.glossy.empty() || lightPlaces_.empty()) return;
+    GlossyDirect(model_, lightPlaces_, perLight_);
+    if (gpu_) gpu_->UploadGlossy();
 }
 
 void AntiradianceSolver::UpdateLights(const Scene& scene) {
@@ -113,7 +123,7 @@ void AntiradianceSolver::UpdateLights(const Scene& scene) {
         gpuDirect_->Update(scene);
     else
         direct_->Update(scene);
-    CopyDirect();
+    CopyDirect(scene);
 }
 
 void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
@@ -130,6 +140,10 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
         leaf.albedo = mat.albedo;
         leaf.emission = mat.emission;
     }
+    // Which leaves are glossy, and their lobes, may have changed with the materials.
+    BuildGlossy(model_, scene);
+    if (gpu_) gpu_->UploadGlossy();
+    ReflectDirect();
     if (gpu_) gpu_->UploadLeaves();  // the CPU back end reads model_.leaves directly
 }
 
@@ -160,6 +174,8 @@ SolverStats AntiradianceSolver::Stats() const {
     }
     for (const LeafAttributes& leaf : model_.leaves)
         s.twoSidedElements += leaf.flags & kLeafTwoSided;
+    s.glossyElements = model_.glossy.size();
+    s.glossyLobes = model_.lobes.size();
     if (direct_ || gpuDirect_) {
         s.shadowViews = gpuDirect_ ? gpuDirect_->views : direct_->views;
         s.shadowMapSize = mapSize_;

@@ -43,7 +43,12 @@ class AntiradianceSolver : public Solver {
     int lights_ = 0;
     int mapSize_ = 0;
     Environment environment_;  // as last binned into model_.environment
-    void CopyDirect();
+    // Host copies of E_d (and each light's share), from the direct stage's last update.
+    void CopyDirect(const Scene& scene);
+    // The lights' direct light reflected by the glossy lobes (model_.glossyDirect).
+    void ReflectDirect();
+    std::vector<PunctualLight> lightPlaces_;
+    std::vector<float> perLight_;
     std::string deviceName_;
     int iterations_ = 0;
     double msTotal_ = 0.0;

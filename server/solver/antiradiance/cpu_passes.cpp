@@ -73,10 +73,42 @@ inline void GatherRgba(const AntiradianceModel& m, const float* iex, uint32_t r,
     }
 }
 
+// The glossy lobe's share of Eq. 18 at glossy leaf g, per outgoing bin ω_j in front, times
+// a (the leaf's area): a F0 [ω_bin Σ_l w(mirror(ω_l), ω_j) ⟨n|−ω_l⟩ L_in(ω_l) + direct(ω_j)],
+// w the discretised lobe (model.h, GlossyLobe). The incoming light is first gathered at
+// the mirror bin of each incoming bin, then each outgoing bin reads its lobe row there (the
+// kernel is symmetric): bins · (1 + row width) operations instead of bins².
+inline void GlossyReflection(const AntiradianceModel& m, const LeafAttributes& leaf,
+                             const float* cosine, const Rgba* lin, Rgba* spec) {
+    const int bins = m.Bins();
+    const uint32_t g = leaf.flags >> kGlossyShift;
+    Rgba arrived[Directions::kMaxBins];
+    std::fill(arrived, arrived + bins, Rgba{});
+    const uint32_t* mirror = m.mirror.data() + size_t(g) * bins;
+    for (int l = 0; l < bins; ++l)
+        if (cosine[l] < 0.0f) arrived[mirror[l]] += -cosine[l] * lin[l];
+    const GlossyLeaf& gl = m.glossy[g];
+    const GlossyLobe& lobe = m.lobes[gl.lobe];
+    const Rgba f0 = leaf.area * Rgba{gl.specular.x, gl.specular.y, gl.specular.z, 0.0f};
+    const float omega = m.dirs.BinSolidAngle();
+    const glm::vec4* direct = m.glossyDirect.data() + size_t(g) * bins;
+    for (int j = 0; j < bins; ++j) {
+        if (cosine[j] <= 0.0f) {
+            spec[j] = Rgba{};
+            continue;
+        }
+        const BinWeight* row = m.lobeWeights.data() + lobe.start + size_t(j) * lobe.width;
+        Rgba sum{};
+        for (uint32_t k = 0; k < lobe.width; ++k) sum += row[k].weight * arrived[row[k].bin];
+        spec[j] = f0 * (omega * sum + Rgba{direct[j].x, direct[j].y, direct[j].z, 0.0f});
+    }
+}
+
 // Local pass of one leaf for a diffuse BRDF f = ρ/π. Eq. 18 reduces to
 // I_L(ω_j) = a ⟨n|ω_j⟩ (L_e + ρ (E + E_d) / π), with E = ω_bin Σ_l ⟨n|−ω_l⟩ L_in(ω_l)
 // and E_d the shadow-mapped direct light (Sec. 3.3), which J never sees.
 // Eq. 19: I_A(ω_j) = a ⟨n|−ω_j⟩ L_in(ω_j); I_ex = I_L − I_A on separate hemispheres.
+// A glossy leaf adds its lobe's reflection (GlossyReflection) to I_L.
 // `lin` holds the leaf's L_in as RGBA rows; `old` and `out` are rows of the RGB I_ex table.
 inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf,
                       const glm::vec4& direct, const Rgba* lin, const float* old, float* out,
@@ -103,10 +135,20 @@ inline void LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf,
     // two-sided leaf also sends light arriving at its back on through its front:
     // −a⟨n|ω⟩·L_in for c > 0.
     const bool twoSided = (leaf.flags & kLeafTwoSided) != 0;
+    const bool glossy = (leaf.flags & kLeafGlossy) != 0;
+    Rgba spec[Directions::kMaxBins];
+    if (glossy) {
+        if (mode & kReflect)
+            GlossyReflection(m, leaf, cosine, lin, spec);
+        else
+            std::fill(spec, spec + bins, Rgba{});  // only back bins are written
+    }
     auto exitant = [&](int b) {
         float c = cosine[b];
         float through = twoSided ? -std::abs(c) : std::min(c, 0.0f);
-        return std::max(c, 0.0f) * front + leaf.area * through * lin[b];
+        Rgba v = std::max(c, 0.0f) * front + leaf.area * through * lin[b];
+        if (glossy) v += std::max(c, 0.0f) * spec[b];
+        return v;
     };
     auto keep = [&](int b) {
         return cosine[b] > 0.0f ? (mode & kReflect) != 0 : (mode & kAntiradiance) != 0;

@@ -26,12 +26,42 @@ struct LeafAttributes {
     uint32_t node;     // hierarchy node of this leaf
     uint32_t parent;   // its parent node (kNoParent for a single-surfel scene)
     uint32_t surfel;
-    uint32_t flags;  // kLeafTwoSided
+    uint32_t flags;  // kLeafTwoSided | kLeafGlossy | glossy index << kGlossyShift
 };
 // The leaf occludes from both sides: light arriving at its back leaves its front as
 // antiradiance (Surfels::twoSided).
 inline constexpr uint32_t kLeafTwoSided = 1;
+// The leaf's material has a glossy lobe (Material::Glossy): its local pass runs the full
+// Eq. 18 sum with the lobe; flags >> kGlossyShift indexes AntiradianceModel::glossy.
+inline constexpr uint32_t kLeafGlossy = 2;
+inline constexpr uint32_t kGlossyShift = 8;
 static_assert(sizeof(LeafAttributes) == 64);
+
+// A glossy leaf: its lobe's F0 and which discretised lobe it uses. Layout shared with
+// shaders/common.glsl (struct GlossyLeaf).
+struct GlossyLeaf {
+    glm::vec3 specular;  // F0
+    uint32_t lobe;       // index into AntiradianceModel::lobes
+};
+static_assert(sizeof(GlossyLeaf) == 16);
+
+// A normalised Phong lobe on the bins (Material): bin b's row holds cosⁿ∠(ω_b, ω_j) / N
+// for the bins j where that is at least kLobeCutoff of the peak, padded with zero weights
+// to `width` entries, at lobeWeights[start + b · width]. N = max_b Σ_j ω_bin cosⁿ∠ ·
+// max(0, cos∠): reflection about a mirror direction along a bin's centre returns at most
+// F0 (energy is never created). The kernel is symmetric, so a row serves as either the
+// incoming or the outgoing side. Layout shared with shaders/common.glsl (struct Lobe).
+struct GlossyLobe {
+    uint32_t start;
+    uint32_t width;
+    float exponent;  // n as used: min(n, m/π) (below)
+    float norm;      // 1/N
+};
+static_assert(sizeof(GlossyLobe) == 16);
+inline constexpr float kLobeCutoff = 1e-3f;
+// The sharpest lobe m bins resolve: σ = 1/√n at half the bin spacing √(4π/m) gives n = m/π.
+// Sharper lobes (roughness below ≈ 0.33 at 128 bins) are widened to it.
+inline float MaxLobeExponent(int bins) { return static_cast<float>(bins) / 3.14159265f; }
 
 // What one local pass updates (Sec. 2.2): K reflects into the front hemisphere (Eq. 18),
 // J sends incident light through as antiradiance (Eq. 19). Symmetric: both.
@@ -53,6 +83,19 @@ struct AntiradianceModel {
     // incident radiance is initialised with the sky and antiradiance removes what is
     // occluded (Sec. 3.3). Zero without an environment.
     std::vector<glm::vec3> environment;
+    // Glossy leaves (kLeafGlossy), in leaf order: F0 and lobe; which leaf each one is; the
+    // bin of the mirror direction of every incoming bin, mirror[g · m + l] (the lobe of
+    // light arriving along ω_l is centred there); the discretised lobes.
+    std::vector<GlossyLeaf> glossy;
+    std::vector<uint32_t> glossyLeaves;
+    std::vector<uint32_t> mirror;
+    std::vector<GlossyLobe> lobes;
+    std::vector<BinWeight> lobeWeights;
+    // The punctual lights' direct light reflected by the lobes, before F0:
+    // glossyDirect[g · m + j] = Σ_k E_d,k · cosⁿ∠(r_k, ω_j) / N_k (RGB, w = 0), r_k the mirror
+    // direction of light k at leaf g, N_k the lobe's normaliser for that exact direction.
+    // Exact light directions, so narrow lobes of direct light are not snapped to bins.
+    std::vector<glm::vec4> glossyDirect;
     std::vector<uint32_t> leftChild;  // per node; kNoParent for leaves
     std::vector<uint32_t> rightChild;
 
@@ -63,6 +106,14 @@ struct AntiradianceModel {
 
 AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSettings& settings,
                                          const ProgressFn& progress);
+
+// (Re)builds the glossy data from the materials of `scene` (same geometry): flags, glossy,
+// glossyLeaves, mirror, lobes; glossyDirect is zeroed (GlossyDirect fills it).
+void BuildGlossy(AntiradianceModel& model, const Scene& scene);
+// glossyDirect from each light's direct irradiance at each leaf (`perLight`: lights ×
+// leaves, stride 4, light-major) and the lights' places.
+void GlossyDirect(AntiradianceModel& model, const std::vector<PunctualLight>& lights,
+                  const std::vector<float>& perLight);
 
 // The local-pass mode of iteration `i` (0-based) under the settings' scheme.
 LocalMode ModeOfIteration(const SolverSettings& settings, int i);

@@ -50,6 +50,9 @@ struct VulkanAntiradiance::Impl {
         children, nodesByDepth, environment;
     // Tables.
     gpu::Buffer iex0, iex1, lin, irradiance, direct;
+    // Glossy data (model.h), remade when it grows: GlossyLeaf, mirror bins, GlossyLobe,
+    // lobe weights, reflected direct light.
+    std::unique_ptr<gpu::Buffer> glossy, mirror, lobes, lobeWeights, glossyDirect;
     gpu::Pipeline global, push, local, pull;
     vk::raii::DescriptorSet globalSet[2]{nullptr, nullptr}, localSet[2]{nullptr, nullptr},
         pullSet[2]{nullptr, nullptr}, pushSet{nullptr};
@@ -80,7 +83,7 @@ struct VulkanAntiradiance::Impl {
           direct(ctx, m.leaves.size() * sizeof(glm::vec4)),
           global(ctx, Words(kSpirv_global), 8, Spec(), sizeof(uint32_t)),
           push(ctx, Words(kSpirv_push), 3, Spec(), sizeof(RangePush)),
-          local(ctx, Words(kSpirv_local), 7, Spec(), sizeof(LocalPush)),
+          local(ctx, Words(kSpirv_local), 12, Spec(), sizeof(LocalPush)),
           pull(ctx, Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
         Upload();
         const gpu::Buffer* g0[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
@@ -89,10 +92,7 @@ struct VulkanAntiradiance::Impl {
                                    &iex1,        &lin,   &receivers,    &environment};
         globalSet[0] = global.MakeSet(g0);
         globalSet[1] = global.MakeSet(g1);
-        const gpu::Buffer* l0[] = {&leaves, &dirs, &lin, &iex0, &iex1, &irradiance, &direct};
-        const gpu::Buffer* l1[] = {&leaves, &dirs, &lin, &iex1, &iex0, &irradiance, &direct};
-        localSet[0] = local.MakeSet(l0);
-        localSet[1] = local.MakeSet(l1);
+        UploadGlossy();
         const gpu::Buffer* p0[] = {&iex0, &children, &nodesByDepth};
         const gpu::Buffer* p1[] = {&iex1, &children, &nodesByDepth};
         pullSet[0] = pull.MakeSet(p0);
@@ -102,6 +102,52 @@ struct VulkanAntiradiance::Impl {
         if (ctx.TimestampPeriodNs() > 0.0f)
             queries = vk::raii::QueryPool(
                 ctx.Device(), vk::QueryPoolCreateInfo({}, vk::QueryType::eTimestamp, kTimestamps));
+    }
+
+    // Glossy buffers sized for the model's data (at least one element each), uploaded, and
+    // the local pass's sets made again when a buffer was remade.
+    void UploadGlossy() {
+        bool remade = false;
+        auto fit = [&](std::unique_ptr<gpu::Buffer>& b, const auto& data) {
+            size_t bytes = std::max<size_t>(1, data.size()) * sizeof(data[0]);
+            if (!b || b->Bytes() < bytes) {
+                b = std::make_unique<gpu::Buffer>(ctx, bytes);
+                remade = true;
+            }
+            if (!data.empty()) b->Upload(data);
+        };
+        fit(glossy, m.glossy);
+        fit(mirror, m.mirror);
+        fit(lobes, m.lobes);
+        fit(lobeWeights, m.lobeWeights);
+        fit(glossyDirect, m.glossyDirect);
+        if (!remade && *localSet[0]) return;
+        const gpu::Buffer* l0[] = {&leaves,
+                                   &dirs,
+                                   &lin,
+                                   &iex0,
+                                   &iex1,
+                                   &irradiance,
+                                   &direct,
+                                   glossy.get(),
+                                   mirror.get(),
+                                   lobes.get(),
+                                   lobeWeights.get(),
+                                   glossyDirect.get()};
+        const gpu::Buffer* l1[] = {&leaves,
+                                   &dirs,
+                                   &lin,
+                                   &iex1,
+                                   &iex0,
+                                   &irradiance,
+                                   &direct,
+                                   glossy.get(),
+                                   mirror.get(),
+                                   lobes.get(),
+                                   lobeWeights.get(),
+                                   glossyDirect.get()};
+        localSet[0] = local.MakeSet(l0);
+        localSet[1] = local.MakeSet(l1);
     }
 
     std::vector<uint32_t> Spec() const { return {kWorkgroup, static_cast<uint32_t>(m.Bins())}; }
@@ -256,6 +302,8 @@ std::vector<float> VulkanAntiradiance::ReadLeafIrradiance() {
 void VulkanAntiradiance::UploadLeaves() { impl_->leaves.Upload(impl_->m.leaves); }
 
 void VulkanAntiradiance::UploadDirect() { impl_->direct.Upload(impl_->m.leafDirect); }
+
+void VulkanAntiradiance::UploadGlossy() { impl_->UploadGlossy(); }
 
 void VulkanAntiradiance::UploadEnvironment() { impl_->environment.Upload(impl_->m.environment); }
 

@@ -28,6 +28,9 @@ class VulkanAntiradiance {
     void UploadLeaves();
     // Copies the model's per-leaf direct irradiance (E_d) to the device again.
     void UploadDirect();
+    // Copies the model's glossy data (leaves, mirror bins, lobes, reflected direct light) to
+    // the device again; buffers are remade when the data outgrew them.
+    void UploadGlossy();
     // Copies the model's environment row (radiance per bin) to the device again.
     void UploadEnvironment();
     // The device and the per-leaf E_d buffer (vec4 per leaf) the local pass reads, for the
