@@ -8,7 +8,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <glm/glm.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -67,6 +69,16 @@ inline PunctualLight MakeLight(const std::string& name, LightType type, glm::vec
         l.outerCone = outerCone;
     }
     return l;
+}
+
+inline std::string ReadFile(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+}
+inline void WriteFile(const std::filesystem::path& path, const std::string& text) {
+    std::ofstream(path, std::ios::binary) << text;
 }
 
 // A fresh temporary folder for one test. Named by the process too: ctest runs the tests of

@@ -1,4 +1,5 @@
-// Path tracer on Embree 3: cosine-weighted bounces, next-event estimation on emitting
+// Path tracer on Embree 3: bounces sampled from each surface's BRDF (cosine-weighted for
+// the diffuse part, the Phong lobe for glossy materials), next-event estimation on emitting
 // triangles chosen by power, the two combined by MIS, Russian roulette after the second
 // bounce.
 #include "reference/path_tracer.h"
@@ -67,6 +68,56 @@ glm::vec3 CosineSample(const glm::vec3& n, Rng& rng) {
     return r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1.0f - u1)) * n;
 }
 
+float Luminance(const glm::vec3& c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
+
+// A material's BRDF at a surface point seen from `wo` (Material, scene.h): ρ_d/π plus the
+// normalised Phong lobe F0 (n + 2)/(2π) cosⁿθ_r, θ_r the angle between the incoming
+// direction and the mirror image of `wo`. The lobe exponent is the material's own: no
+// widening to bins, this is the ground truth. Sampled by choosing the diffuse part or the
+// lobe in proportion to their albedos.
+struct Bsdf {
+    glm::vec3 n, mirror, kd, ks;
+    float exponent = 0.0f;
+    float pLobe = 0.0f;  // probability of sampling the lobe
+
+    Bsdf(const Material& m, const glm::vec3& normal, const glm::vec3& wo)
+        : n(normal), kd(m.albedo), ks(m.specular), exponent(m.phongExponent) {
+        mirror = 2.0f * glm::dot(n, wo) * n - wo;
+        if (m.Glossy()) {
+            float d = Luminance(kd), s = Luminance(ks);
+            pLobe = d + s > 0.0f ? s / (d + s) : 0.0f;
+        }
+    }
+    bool Black() const { return glm::all(glm::lessThanEqual(kd + ks, glm::vec3(0.0f))); }
+    float Lobe(const glm::vec3& wi) const {
+        float c = glm::dot(mirror, wi);
+        return c > 0.0f ? std::pow(c, exponent) : 0.0f;
+    }
+    glm::vec3 Eval(const glm::vec3& wi) const {
+        if (glm::dot(n, wi) <= 0.0f) return glm::vec3(0.0f);
+        glm::vec3 f = kd * (1.0f / kPi);
+        if (pLobe > 0.0f) f += ks * ((exponent + 2.0f) / (2.0f * kPi) * Lobe(wi));
+        return f;
+    }
+    float Pdf(const glm::vec3& wi) const {
+        float c = glm::dot(n, wi);
+        if (c <= 0.0f) return 0.0f;
+        float p = (1.0f - pLobe) * c / kPi;
+        if (pLobe > 0.0f) p += pLobe * (exponent + 1.0f) / (2.0f * kPi) * Lobe(wi);
+        return p;
+    }
+    // A direction drawn from Pdf (it may point below the surface: then Eval is 0).
+    glm::vec3 Sample(Rng& rng) const {
+        if (pLobe <= 0.0f || rng.Uniform() >= pLobe) return CosineSample(n, rng);
+        float u1 = rng.Uniform(), u2 = rng.Uniform();
+        float c = std::pow(u1, 1.0f / (exponent + 1.0f));
+        float r = std::sqrt(std::max(0.0f, 1.0f - c * c)), phi = 2.0f * kPi * u2;
+        glm::vec3 t, b;
+        Frame(mirror, t, b);
+        return r * std::cos(phi) * t + r * std::sin(phi) * b + c * mirror;
+    }
+};
+
 struct Triangle {
     glm::vec3 p0, e1, e2;  // p0 + u·e1 + v·e2
     glm::vec3 normal;      // unit, on the side the vertex normals point to
@@ -93,14 +144,16 @@ class Tracer {
     // a cosine-sampled path, combined by multiple importance sampling (Veach 1997, power
     // heuristic) so that neither the 1/d² of nearby emitters nor small far ones blow up.
     glm::vec3 Sample(const glm::vec3& x, const glm::vec3& n, Rng& rng, uint64_t& rays) const {
-        glm::vec3 e = NextEvent(x, n, rng, rays);
+        glm::vec3 e = NextEvent(x, n, nullptr, rng, rays);
         return e + kPi * Incoming(x, n, CosineSample(n, rng), rng, rays);
     }
 
     // Irradiance at `x` (normal `n`) straight from the punctual lights: Σ Φ·att·cosθ/d²
-    // (point, spot) or E⊥·cosθ (directional), each behind one shadow ray. Delta lights: no
-    // sampling, no MIS.
-    glm::vec3 PunctualDirect(const glm::vec3& x, const glm::vec3& n, uint64_t& rays) const {
+    // (point, spot) or E⊥·cosθ (directional), each behind one shadow ray, or with `bsdf` the
+    // radiance reflected towards its `wo`: Σ f(toLight) · E. Delta lights: no sampling, no
+    // MIS.
+    glm::vec3 PunctualDirect(const glm::vec3& x, const glm::vec3& n, uint64_t& rays,
+                             const Bsdf* bsdf = nullptr) const {
         glm::vec3 e(0.0f);
         for (const PunctualLight& light : scene_.lights) {
             glm::vec3 toLight, span;
@@ -122,7 +175,8 @@ class Tracer {
             ++rays;
             glm::vec3 from = x + eps_ * n;
             if (Occluded(from, x + span - from)) continue;
-            e += light.color * (light.intensity * scale * cosine);
+            glm::vec3 f = bsdf ? bsdf->Eval(toLight) : glm::vec3(1.0f);
+            e += f * light.color * (light.intensity * scale * cosine);
         }
         return e;
     }
@@ -199,8 +253,10 @@ class Tracer {
     static float PowerHeuristic(float a, float b) { return a * a / (a * a + b * b); }
 
     // Direct irradiance at `x` (normal `n`) from one emitter point: L_e cosθ_x cosθ_y / d²
-    // over the area pdf, weighted against the cosine sampling of the same direction.
-    glm::vec3 NextEvent(const glm::vec3& x, const glm::vec3& n, Rng& rng, uint64_t& rays) const {
+    // over the area pdf, weighted against the cosine sampling of the same direction; with
+    // `bsdf`, the radiance it reflects (times f, weighted against sampling the BRDF).
+    glm::vec3 NextEvent(const glm::vec3& x, const glm::vec3& n, const Bsdf* bsdf, Rng& rng,
+                        uint64_t& rays) const {
         if (emitters_.empty()) return glm::vec3(0.0f);
         float u = rng.Uniform();
         size_t k =
@@ -221,8 +277,9 @@ class Tracer {
         ++rays;
         if (Occluded(from, to - from)) return glm::vec3(0.0f);
         float pdfArea = areaPdf_[ti];
-        float weight = PowerHeuristic(pdfArea * dist2 / cy, cx / kPi);
-        const glm::vec3& le = scene_.materials[t.material].emission;
+        float weight = PowerHeuristic(pdfArea * dist2 / cy, bsdf ? bsdf->Pdf(w) : cx / kPi);
+        glm::vec3 le = scene_.materials[t.material].emission;
+        if (bsdf) le *= bsdf->Eval(w);
         return le * (weight * cx * cy / (dist2 * pdfArea));
     }
 
@@ -231,6 +288,7 @@ class Tracer {
     // surface reflects, followed bounce by bounce.
     glm::vec3 Incoming(glm::vec3 x, glm::vec3 n, glm::vec3 dir, Rng& rng, uint64_t& rays) const {
         glm::vec3 radiance(0.0f), throughput(1.0f);
+        float pdfDir = glm::dot(n, dir) / kPi;  // the pdf `dir` was drawn with
         for (int depth = 0; depth <= s_.maxDepth; ++depth) {
             RTCRayHit rh;
             Ray(rh.ray, x + eps_ * n, dir, std::numeric_limits<float>::infinity());
@@ -253,24 +311,28 @@ class Tracer {
             if (areaPdf_[ti] > 0.0f) {
                 float dist = rh.ray.tfar;
                 float pdfLight = areaPdf_[ti] * dist * dist / cy;
-                float weight = PowerHeuristic(glm::dot(n, dir) / kPi, pdfLight);
+                float weight = PowerHeuristic(pdfDir, pdfLight);
                 radiance += throughput * weight * mat.emission;
             }
             if (depth == s_.maxDepth) break;
-            const glm::vec3& rho = mat.albedo;
-            if (rho.x <= 0.0f && rho.y <= 0.0f && rho.z <= 0.0f) break;
+            const Bsdf bsdf(mat, t.normal, -dir);
+            if (bsdf.Black()) break;
             x = t.p0 + rh.hit.u * t.e1 + rh.hit.v * t.e2;
             n = t.normal;
-            // Reflected: L_r = ρ/π · (E_next-event + π · L_in(cosine-sampled direction)).
-            radiance += throughput * rho * (1.0f / kPi) *
-                        (NextEvent(x, n, rng, rays) + PunctualDirect(x, n, rays));
-            throughput *= rho;
+            // Reflected: next-event estimates of emitters and punctual lights, then one
+            // direction drawn from the BRDF carries the rest (throughput f·cos/pdf).
+            radiance += throughput *
+                        (NextEvent(x, n, &bsdf, rng, rays) + PunctualDirect(x, n, rays, &bsdf));
+            dir = bsdf.Sample(rng);
+            pdfDir = bsdf.Pdf(dir);
+            float cosine = glm::dot(n, dir);
+            if (!(pdfDir > 0.0f) || cosine <= 0.0f) break;
+            throughput *= bsdf.Eval(dir) * (cosine / pdfDir);
             if (depth >= 2) {
                 float q = std::min(0.95f, std::max({throughput.x, throughput.y, throughput.z}));
                 if (rng.Uniform() >= q) break;
                 throughput /= q;
             }
-            dir = CosineSample(n, rng);
         }
         return radiance;
     }
