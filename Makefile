@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check bench bench-service bench-direct accuracy images format clean
+.PHONY: all deps build demo check bench bench-service bench-direct bench-glossy accuracy images format clean
 
 all: build
 
@@ -31,6 +31,9 @@ bench-service: build
 
 bench-direct: build
 	$(BUILD)/bench/penumbra-bench-direct --out bench/results
+
+bench-glossy: build
+	$(BUILD)/bench/penumbra-bench-glossy --out bench/results
 
 accuracy: build
 	$(BUILD)/bench/penumbra-bench-accuracy --out bench/results

@@ -16,45 +16,8 @@
 #include "scene/gltf_loader.h"
 #include "solver/solver.h"
 
-namespace {
-
 using namespace penumbra;
-using bench::Median;
-
-nlohmann::json RunDevice(const Scene& scene, SolverSettings settings, int frames,
-                         int iterationsPerFrame) {
-    auto solver = CreateSolver(scene, settings);
-    solver->Iterate(iterationsPerFrame);  // warm-up frame
-    std::vector<double> frameMs;
-    std::map<std::string, std::vector<double>> passMs;
-    SolverStats before = solver->Stats();
-    for (int f = 0; f < frames; ++f) {
-        auto t0 = std::chrono::steady_clock::now();
-        solver->Iterate(iterationsPerFrame);
-        frameMs.push_back(
-            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                .count());
-        SolverStats after = solver->Stats();
-        for (size_t p = 0; p < after.passes.size(); ++p)
-            passMs[after.passes[p].name].push_back(
-                (after.passes[p].msTotal - before.passes[p].msTotal) / iterationsPerFrame);
-        before = after;
-    }
-    SolverStats s = solver->Stats();
-    double frame = Median(frameMs);
-    nlohmann::json j = StatsToJson(s);  // totals over the whole run, as `bake` reports them
-    j["links_per_second"] = s.links / s.linkBuildSeconds;
-    j["iterations_per_frame"] = iterationsPerFrame;
-    j["frames_measured"] = frames;
-    j["frame_ms_median"] = frame;
-    j["ms_per_iteration_median"] = frame / iterationsPerFrame;
-    j["fps"] = 1000.0 / frame;
-    for (const auto& [name, v] : passMs) j["passes"][name + "_ms_per_iteration_median"] = Median(v);
-    j["table_mib"] = s.tableBytes / 1048576.0;
-    return j;
-}
-
-}  // namespace
+using bench::RunDevice;
 
 int main(int argc, char** argv) {
     CLI::App app{"penumbra office benchmark (antiradiance, issue 2)"};

@@ -185,11 +185,48 @@ SceneBuilder Maze() {
     return b;
 }
 
+SceneBuilder GlossyBox() {
+    SceneBuilder b;
+    uint32_t white = b.AddMaterial("white", {0.75f, 0.75f, 0.75f});
+    uint32_t floorMat = b.AddMaterial("floor", {0.55f, 0.5f, 0.45f});
+    uint32_t green = b.AddMaterial("green", {0.3f, 0.55f, 0.3f});
+    // Blue metal, roughness 0.35 (Phong exponent ≈ 33), and a rougher gold.
+    uint32_t blue = b.AddPbrMaterial("blue_metal", {0.25f, 0.4f, 0.9f}, 1.0f, 0.35f);
+    uint32_t gold = b.AddPbrMaterial("gold", {1.0f, 0.78f, 0.34f}, 1.0f, 0.5f);
+    const float W = 4.0f, D = 4.0f, H = 3.0f;
+    const glm::vec3 inside(W / 2, H / 2, D / 2);
+    b.AddQuad("floor", floorMat, {0, 0, 0}, {W, 0, 0}, {W, 0, D}, {0, 0, D}, inside, 12);
+    b.AddQuad("ceiling", white, {0, H, 0}, {W, H, 0}, {W, H, D}, {0, H, D}, inside, 12);
+    b.AddQuad("wall_south", white, {0, 0, 0}, {W, 0, 0}, {W, H, 0}, {0, H, 0}, inside, 12);
+    b.AddQuad("wall_north", white, {0, 0, D}, {W, 0, D}, {W, H, D}, {0, H, D}, inside, 12);
+    b.AddQuad("wall_west", green, {0, 0, 0}, {0, 0, D}, {0, H, D}, {0, H, 0}, inside, 12);
+    b.AddQuad("wall_east", white, {W, 0, 0}, {W, 0, D}, {W, H, D}, {W, H, 0}, inside, 12);
+    // The glossy cube, standing on the floor, movable anywhere in the room.
+    b.AddBox("glossy_cube", blue, {2.1f, 0.6f, 2.2f}, {1.2f, 1.2f, 1.2f}, 30.0f, false);
+    b.SetDynamic("glossy_cube", {2.1f, 0.6f, 2.2f}, {0.6f, 0.0f, 0.6f}, {3.4f, 1.2f, 3.4f});
+    b.AddBox("gold_column", gold, {0.8f, 0.8f, 3.1f}, {0.5f, 1.6f, 0.5f}, 0.0f, false);
+    // A spot from a top corner aimed at the cube: the room is lit by what the cube and the
+    // column reflect, directionally (the paper's Fig. 15 idea).
+    PunctualLight spot;
+    spot.name = "spot";
+    spot.type = LightType::kSpot;
+    spot.color = {1.0f, 0.95f, 0.85f};
+    spot.intensity = 60.0f;
+    spot.innerCone = 0.25f;
+    spot.outerCone = 0.45f;
+    spot.position = {3.6f, 2.8f, 0.4f};
+    spot.direction = glm::normalize(glm::vec3(2.1f, 0.9f, 2.2f) - spot.position);
+    b.AddLight(spot);
+    b.AddCamera("camera", {0.3f, 1.9f, 0.3f}, {2.3f, 0.7f, 2.6f}, 1.1f);
+    return b;
+}
+
 std::vector<Bundled> All() {
     return {{"cornell-box.gltf", &CornellBox},
             {"blocker.gltf", [] { return Blocker(true); }},
             {"maze.gltf", &Maze},
-            {"office.gltf", &Office}};
+            {"office.gltf", &Office},
+            {"glossy-box.gltf", &GlossyBox}};
 }
 
 }  // namespace penumbra::scenes

@@ -22,6 +22,10 @@ SceneBuilder Maze();
 // shelves, cabinets, emissive ceiling fixtures).
 SceneBuilder Office();
 
+// A 4 × 3 × 4 m room with a glossy blue metal cube and a rougher gold column, lit by a
+// spot aimed at the cube: most light in the room is reflected directionally (Fig. 15).
+SceneBuilder GlossyBox();
+
 struct Bundled {
     std::string file;  // name under scenes/
     SceneBuilder (*make)();

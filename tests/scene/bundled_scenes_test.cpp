@@ -3,27 +3,18 @@
 
 #include <gtest/gtest.h>
 
-#include <fstream>
-#include <sstream>
-
 #include "test_util.h"
 
 namespace penumbra {
 namespace {
-
-std::string Slurp(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-}
 
 TEST(BundledScenes, CommittedFilesMatchTheGenerator) {
     auto dir = testing::TempDir("scenes");
     for (const auto& s : scenes::All()) {
         std::string fresh = (dir / s.file).string();
         s.make().WriteGltf(fresh);
-        EXPECT_EQ(Slurp(fresh), Slurp(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/" + s.file))
+        EXPECT_EQ(testing::ReadFile(fresh),
+                  testing::ReadFile(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/" + s.file))
             << s.file << " differs from tools/bundled_scenes.cpp: run "
             << "build/tools/make_scenes scenes";
     }
