@@ -47,6 +47,9 @@ images: build
 	$(BUILD)/penumbra reference scenes/cornell-box.gltf -o $(BUILD)/cornell-reference.json --samples 4096 -q
 	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-reference.json -o docs/images/cornell-box-reference.png --size 512x512
 	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-solver.json --compare $(BUILD)/cornell-reference.json -o docs/images/cornell-box-error.png --size 512x512 --error-scale 0.5
+	$(BUILD)/penumbra render scenes/glossy-box.gltf -o docs/images/glossy-box.png --size 512x384 --channel total --bins 256 --element-size 0.08 --iterations 8
+	$(BUILD)/penumbra reference scenes/glossy-box.gltf -o $(BUILD)/glossy-reference.json --channel total --samples 4096 -q
+	$(BUILD)/penumbra render scenes/glossy-box.gltf --lighting $(BUILD)/glossy-reference.json -o docs/images/glossy-box-reference.png --size 512x384
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.h' '*.hpp')

@@ -76,7 +76,7 @@ Run Solve(const Scene& scene, const IrradianceFile& truth, int bins, int iterati
 int main(int argc, char** argv) {
     CLI::App app{"penumbra accuracy sweep against the Embree reference (issue 3)"};
     std::string sceneDir = "scenes", out = "bench/results";
-    std::vector<std::string> scenes{"cornell-box", "blocker", "maze"};
+    std::vector<std::string> scenes{"cornell-box", "blocker", "maze", "glossy-box"};
     int truthSamples = 16384;
     app.add_option("--scenes", scenes, "bundled scene names")->capture_default_str();
     app.add_option("--scene-dir", sceneDir, "folder of the scenes")->capture_default_str();

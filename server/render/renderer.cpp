@@ -27,8 +27,11 @@ std::span<const uint32_t> Words(const T& array) {
     return {array, sizeof(array) / sizeof(uint32_t)};
 }
 
+// Radiance towards the camera: (ρ_d + F0) E/π + L_e. A glossy lobe is shown as if it
+// reflected diffusely (its albedo at normal incidence), since per-vertex irradiance carries
+// no direction: metals are not black, but highlights are not drawn.
 glm::vec3 Shade(const Material& m, const glm::vec3& e) {
-    return m.albedo * glm::max(e, glm::vec3(0.0f)) * kInvPi + m.emission;
+    return (m.albedo + m.specular) * glm::max(e, glm::vec3(0.0f)) * kInvPi + m.emission;
 }
 
 // Layout of one vertex in shaders/render.vert.

@@ -109,5 +109,15 @@ TEST(Accuracy, MazeUnderASky) {
     EXPECT_LT(SceneRmse(scene, "maze + sky", 0.1f, 1024), 0.20);
 }
 
+// The glossy box (issue 5): a spot on a glossy metal cube, the room lit by what the cube and
+// a gold column reflect. `indirect` (every bounce, the spot's direct light excluded).
+// Measured 26.0% (18.2% at 512 bins). Each surface's mean is within 8% of the reference's;
+// the error is where the light lands: the cube's lobe is carried by 128 bins (about 18°
+// apart), so its reflection reaches the walls as bin-shaped patches instead of a smooth
+// highlight (docs/ACCURACY.md).
+TEST(Accuracy, GlossyBoxCoarse) {
+    EXPECT_LT(SolverRmse("glossy-box.gltf", 0.1f, 1024), 0.30);
+}
+
 }  // namespace
 }  // namespace penumbra
