@@ -106,6 +106,8 @@ SceneInfo ToSceneInfo(const protocol::Message& m) {
             mat.name = Str(m2->name());
             if (m2->albedo())
                 mat.albedo = {m2->albedo()->x(), m2->albedo()->y(), m2->albedo()->z()};
+            mat.roughness = m2->roughness();
+            mat.metallic = m2->metallic();
             if (m2->emission())
                 mat.emission = {m2->emission()->x(), m2->emission()->y(), m2->emission()->z()};
             out.materials.push_back(mat);
@@ -338,11 +340,19 @@ uint64_t Client::SetMaterial(const std::string& material,
                              std::optional<std::array<float, 3>> albedo,
                              std::optional<std::array<float, 3>> emission,
                              const std::string& scene) {
+    return SetMaterial(material, MaterialChange{albedo, emission, {}, {}}, scene);
+}
+
+uint64_t Client::SetMaterial(const std::string& material, const MaterialChange& change,
+                             const std::string& scene) {
     flatbuffers::FlatBufferBuilder b;
+    const auto& albedo = change.albedo;
+    const auto& emission = change.emission;
     fb::Vec3 a = albedo ? fb::Vec3((*albedo)[0], (*albedo)[1], (*albedo)[2]) : fb::Vec3();
     fb::Vec3 e = emission ? fb::Vec3((*emission)[0], (*emission)[1], (*emission)[2]) : fb::Vec3();
     b.Finish(fb::CreateSetMaterialDirect(b, scene.c_str(), material.c_str(), albedo ? &a : nullptr,
-                                         emission ? &e : nullptr));
+                                         emission ? &e : nullptr, change.roughness.value_or(-1.0f),
+                                         change.metallic.value_or(-1.0f)));
     return impl_->Call(MessageType::kSetMaterial, b, MessageType::kEditAck)
         .As<fb::EditAck>()
         ->edit_id();

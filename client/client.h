@@ -40,7 +40,8 @@ struct NodeInfo {
 };
 struct MaterialInfo {
     std::string name;
-    std::array<float, 3> albedo{}, emission{};
+    std::array<float, 3> albedo{}, emission{};  // albedo: glTF base colour
+    float roughness = 1.0f, metallic = 0.0f;    // glTF factors
 };
 // A punctual light (KHR_lights_punctual), world space.
 struct LightInfo {
@@ -128,6 +129,13 @@ class Client {
                       const std::string& scene = "");
     uint64_t SetLight(const std::string& light, std::optional<std::array<float, 3>> color,
                       std::optional<float> intensity, const std::string& scene = "");
+    // Absent fields are unchanged. albedo is the base colour (docs/MATERIALS.md).
+    struct MaterialChange {
+        std::optional<std::array<float, 3>> albedo, emission;
+        std::optional<float> roughness, metallic;
+    };
+    uint64_t SetMaterial(const std::string& material, const MaterialChange& change,
+                         const std::string& scene = "");
     uint64_t SetMaterial(const std::string& material, std::optional<std::array<float, 3>> albedo,
                          std::optional<std::array<float, 3>> emission,
                          const std::string& scene = "");

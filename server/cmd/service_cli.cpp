@@ -158,6 +158,7 @@ struct ServiceCommands::State {
     float rotateY = 0.0f;
     float intensity = -1.0f;
     float range = -1.0f;
+    std::optional<float> roughness, metallic;
 
     std::string output, gltf;
     int stepIterations = 1;
@@ -258,9 +259,12 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
         ->delimiter(',');
     s.light->add_option("--range", s.range, "metres, 0 = infinite (point, spot)");
 
-    s.material = app.add_subcommand("material", "Change a material's albedo or emission");
+    s.material = app.add_subcommand(
+        "material", "Change a material's albedo (base colour), emission, roughness or metallic");
     s.material->add_option("name", s.node, "material name")->required();
-    s.material->add_option("--albedo", s.albedo, "r,g,b in [0, 1]")->delimiter(',');
+    s.material->add_option("--albedo", s.albedo, "base colour r,g,b in [0, 1]")->delimiter(',');
+    s.material->add_option("--roughness", s.roughness, "glTF roughness in [0, 1]");
+    s.material->add_option("--metallic", s.metallic, "glTF metallic in [0, 1]");
     s.material->add_option("--emission", s.emission, "r,g,b nits")->delimiter(',');
 
     s.get = app.add_subcommand("get", "Write the current irradiance (.json, or .glb/.gltf)");
@@ -418,9 +422,11 @@ int ServiceCommands::State::Execute(client::Client& c) {
                                        .c_str()
                                  : "");
         for (const auto& m : i.materials)
-            std::printf("  material %-16s albedo %.3g %.3g %.3g  emission %.3g %.3g %.3g\n",
-                        m.name.c_str(), m.albedo[0], m.albedo[1], m.albedo[2], m.emission[0],
-                        m.emission[1], m.emission[2]);
+            std::printf(
+                "  material %-16s albedo %.3g %.3g %.3g  emission %.3g %.3g %.3g  "
+                "roughness %.3g  metallic %.3g\n",
+                m.name.c_str(), m.albedo[0], m.albedo[1], m.albedo[2], m.emission[0], m.emission[1],
+                m.emission[2], m.roughness, m.metallic);
         return kExitOk;
     }
     if (watch && watch->parsed()) {
@@ -515,11 +521,16 @@ int ServiceCommands::State::Execute(client::Client& c) {
         return kExitOk;
     }
     if (material && material->parsed()) {
-        std::optional<std::array<float, 3>> a, e;
-        if (!albedo.empty()) a = Triple(albedo, "--albedo");
-        if (!emission.empty()) e = Triple(emission, "--emission");
-        if (!a && !e) throw Error("material: give --albedo and/or --emission");
-        lastEdit = c.SetMaterial(node, a, e, session);
+        client::Client::MaterialChange change;
+        if (!albedo.empty()) change.albedo = Triple(albedo, "--albedo");
+        if (!emission.empty()) change.emission = Triple(emission, "--emission");
+        change.roughness = roughness;
+        change.metallic = metallic;
+        if (!change.albedo && !change.emission && !roughness && !metallic)
+            throw Error(
+                "material: give at least one of --albedo, --emission, --roughness, "
+                "--metallic");
+        lastEdit = c.SetMaterial(node, change, session);
         if (!quiet)
             std::printf("edit %llu: material %s\n", (unsigned long long)lastEdit, node.c_str());
         return kExitOk;

@@ -84,9 +84,10 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
     }
     std::vector<flatbuffers::Offset<fb::MaterialInfo>> materials;
     for (const auto& m : scene.materials) {
-        fb::Vec3 albedo(m.albedo.x, m.albedo.y, m.albedo.z);
+        fb::Vec3 albedo(m.baseColor.x, m.baseColor.y, m.baseColor.z);
         fb::Vec3 emission(m.emission.x, m.emission.y, m.emission.z);
-        materials.push_back(fb::CreateMaterialInfoDirect(b, m.name.c_str(), &albedo, &emission));
+        materials.push_back(fb::CreateMaterialInfoDirect(b, m.name.c_str(), &albedo, &emission,
+                                                         m.roughness, m.metallic));
     }
     std::vector<flatbuffers::Offset<fb::LightInfo>> lights;
     for (const auto& l : scene.lights) {
@@ -472,6 +473,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 e.material = Str(s->material());
                 e.albedo = Vec(s->albedo());
                 e.emission = Vec(s->emission());
+                // Negative: unchanged; NaN is passed on to be refused.
+                auto given = [](float v) { return v >= 0.0f || std::isnan(v); };
+                if (given(s->roughness())) e.roughness = s->roughness();
+                if (given(s->metallic())) e.metallic = s->metallic();
                 SendAck(id, session->Submit(e));
                 return;
             }

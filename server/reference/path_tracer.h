@@ -47,10 +47,11 @@ struct ReferenceResult {
 // (shadow rays, exact: no sampling, so its standard error is 0), `total` their sum.
 // A path that leaves the scene picks up the environment's radiance (scene.environment) and
 // counts as `indirect`.
-// Punctual lights follow KHR_lights_punctual (LightAttenuation in scene.h). Lambertian surfaces,
-// reflecting and emitting on their front side (the side their vertex normals point to);
-// a ray that reaches a back side ends there (opaque, black). Each vertex is estimated
-// 10⁻³ × the scene's diameter inside its own surface (towards its triangles), so that a
+// Punctual lights follow KHR_lights_punctual (LightAttenuation in scene.h). Surfaces reflect
+// with their material's diffuse part and glossy lobe (docs/MATERIALS.md, the lobe with the
+// material's own exponent), reflecting and emitting on their front side (the side their vertex
+// normals point to); a ray that reaches a back side ends there (opaque, black). Each vertex is
+// estimated 10⁻³ × the scene's diameter inside its own surface (towards its triangles), so that a
 // vertex on an edge another wall meets sees the room, not that wall's back. Deterministic for a
 // fixed seed whatever the thread count: each vertex has its own random stream. Throws
 // penumbra::Error on an Embree failure or invalid settings.

@@ -1,5 +1,5 @@
 // The scene as the solver sees it: world-space triangle primitives (one per glTF
-// node × mesh primitive, input vertex order kept) and their diffuse materials.
+// node × mesh primitive, input vertex order kept) and their materials.
 #pragma once
 
 #include <cstdint>

@@ -278,6 +278,10 @@ uint64_t Session::Submit(const MaterialEdit& edit) {
         throw ServiceError(
             ErrorKind::kInvalidArgument,
             "albedo must be three numbers in [0, 1] (above 1 a surface creates light)");
+    for (auto [value, name] : {std::pair{edit.roughness, "roughness"}, {edit.metallic, "metallic"}})
+        if (value && !(*value >= 0.0f && *value <= 1.0f))
+            throw ServiceError(ErrorKind::kInvalidArgument,
+                               std::string(name) + " must be a number in [0, 1]");
     if (edit.emission && !FiniteNonNegative(*edit.emission))
         throw ServiceError(ErrorKind::kInvalidArgument,
                            "emission must be three finite numbers ≥ 0");
@@ -286,6 +290,8 @@ uint64_t Session::Submit(const MaterialEdit& edit) {
         for (uint32_t m : matches) {
             // `albedo` is the base colour; the diffuse albedo and any glossy lobe follow.
             if (e.albedo) s.materials[m].baseColor = *e.albedo;
+            if (e.roughness) s.materials[m].roughness = *e.roughness;
+            if (e.metallic) s.materials[m].metallic = *e.metallic;
             DeriveReflectance(s.materials[m]);
             if (e.emission) s.materials[m].emission = *e.emission;
         }

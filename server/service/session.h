@@ -100,8 +100,9 @@ struct LightEdit {
 };
 struct MaterialEdit {
     std::string material;
-    std::optional<glm::vec3> albedo;
+    std::optional<glm::vec3> albedo;  // glTF base colour
     std::optional<glm::vec3> emission;
+    std::optional<float> roughness, metallic;  // glTF factors, [0, 1]
 };
 
 class Session {

@@ -115,9 +115,7 @@ TEST(Accuracy, MazeUnderASky) {
 // the error is where the light lands: the cube's lobe is carried by 128 bins (about 18°
 // apart), so its reflection reaches the walls as bin-shaped patches instead of a smooth
 // highlight (docs/ACCURACY.md).
-TEST(Accuracy, GlossyBoxCoarse) {
-    EXPECT_LT(SolverRmse("glossy-box.gltf", 0.1f, 1024), 0.30);
-}
+TEST(Accuracy, GlossyBoxCoarse) { EXPECT_LT(SolverRmse("glossy-box.gltf", 0.1f, 1024), 0.30); }
 
 }  // namespace
 }  // namespace penumbra

@@ -110,10 +110,39 @@ TEST(Session, EditsAreValidatedOnSubmission) {
     EXPECT_EQ(kind(TransformEdit{"blocker", glm::mat4(0.0f)}), ErrorKind::kInvalidArgument);
     EXPECT_EQ(kind(Dim("floor", 2.0f)), ErrorKind::kNotFound);
     EXPECT_EQ(kind(Dim("emitter", -1.0f)), ErrorKind::kInvalidArgument);
-    EXPECT_EQ(kind(MaterialEdit{"grey", glm::vec3(1.5f), std::nullopt}),
+    EXPECT_EQ(kind(MaterialEdit{"grey", glm::vec3(1.5f), std::nullopt, {}, {}}),
               ErrorKind::kInvalidArgument);
-    EXPECT_EQ(kind(MaterialEdit{"unobtainium", glm::vec3(0.5f), std::nullopt}),
+    EXPECT_EQ(kind(MaterialEdit{"unobtainium", glm::vec3(0.5f), std::nullopt, {}, {}}),
               ErrorKind::kNotFound);
+    EXPECT_EQ(kind(MaterialEdit{"grey", std::nullopt, std::nullopt, 1.5f, {}}),
+              ErrorKind::kInvalidArgument);
+    EXPECT_EQ(kind(MaterialEdit{"grey", std::nullopt, std::nullopt, {}, std::nanf("")}),
+              ErrorKind::kInvalidArgument);
+}
+
+// Making a material glossy in a running session (roughness and metallic): the glossy data
+// is rebuilt between frames and the session converges to a fresh bake of the edited scene.
+TEST(Session, MaterialTurnedGlossyConvergesToAFreshBake) {
+    Scene scene = LoadGltf(kBlocker);
+    Session session("blocker", scene, Settings());
+    WaitFor(session, 0);
+    uint64_t edit = session.Submit(MaterialEdit{"grey", glm::vec3(0.8f), std::nullopt, 0.3f, 1.0f});
+    FramePtr f = WaitFor(session, edit);
+    ASSERT_TRUE(f);
+    for (Material& m : scene.materials)
+        if (m.name == "grey") m = PbrMaterial("grey", glm::vec3(0.8f), 1.0f, 0.3f);
+    auto fresh = CreateSolver(scene, Settings().solver);
+    fresh->Iterate(40);
+    auto floor = PrimitiveIrradiance(fresh->GetSurfels(), fresh->SurfelIrradiance(), scene, 0);
+    ASSERT_EQ(floor.size(), f->irradiance[0].size());
+    double num = 0, den = 0;
+    for (size_t i = 0; i < floor.size(); ++i) {
+        glm::dvec3 d = glm::dvec3(floor[i]) - glm::dvec3(f->irradiance[0][i]);
+        num += glm::dot(d, d);
+        den += glm::dot(glm::dvec3(floor[i]), glm::dvec3(floor[i]));
+    }
+    EXPECT_LT(std::sqrt(num / den), 0.01);
+    EXPECT_GT(session.SolverStatistics().glossyElements, 0u);
 }
 
 TEST(Session, DimmingTheLightScalesIrradiance) {
