@@ -54,6 +54,30 @@ inline uint32_t AddWhiteCorner(SceneBuilder& b, int floorTiles, int wallTiles) {
     return white;
 }
 
+// The floor and four walls of a unit room, facing in, each a grid of tiles²; all in node
+// `name`, or each in its own node (floor, w0…w3) when `name` is empty.
+inline void AddRoomSides(SceneBuilder& b, uint32_t material, const std::string& name = "",
+                         int tiles = 1) {
+    const glm::vec3 inside(0.5f, 0.5f, 0.5f);
+    auto node = [&](const char* own) { return name.empty() ? std::string(own) : name; };
+    b.AddQuad(node("floor"), material, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside, tiles);
+    b.AddQuad(node("w0"), material, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, inside, tiles);
+    b.AddQuad(node("w1"), material, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside, tiles);
+    b.AddQuad(node("w2"), material, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, tiles);
+    b.AddQuad(node("w3"), material, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside, tiles);
+}
+
+// The unit room with half a ceiling (the opening is x ∈ [0.5, 1]) under a constant sky of
+// radiance 1: the sky furnace (radiance inside can nowhere exceed the sky's).
+inline Scene SkyFurnaceRoom(SceneBuilder& b, uint32_t material, int tiles = 1) {
+    AddRoomSides(b, material, "", tiles);
+    b.AddQuad("ceiling", material, {0, 1, 0}, {0.5f, 1, 0}, {0.5f, 1, 1}, {0, 1, 1},
+              {0.5f, 0.5f, 0.5f});
+    Scene scene = b.Build();
+    scene.environment = ConstantEnvironment(glm::vec3(1.0f));
+    return scene;
+}
+
 // A punctual light for SceneBuilder::AddLight; a spot's inner cone is half its outer one
 // (other types keep the glTF default cone, which they do not use).
 inline PunctualLight MakeLight(const std::string& name, LightType type, glm::vec3 position,

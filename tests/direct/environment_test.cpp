@@ -20,6 +20,7 @@ namespace penumbra {
 namespace {
 
 using direct::EnvironmentBins;
+using testing::AddRoomSides;
 using testing::Mean;
 constexpr float kPi = std::numbers::pi_v<float>;
 
@@ -29,18 +30,6 @@ SolverSettings Settings(int bins, float elementSize) {
     s.bins = bins;
     s.elementSize = elementSize;
     return s;
-}
-
-// The floor and four walls of a unit room, facing in; all in node `name`, or each in its own
-// node (floor, w0…w3) when `name` is empty.
-void AddRoomSides(SceneBuilder& b, uint32_t material, const std::string& name = "") {
-    const glm::vec3 inside(0.5f, 0.5f, 0.5f);
-    auto node = [&](const char* own) { return name.empty() ? std::string(own) : name; };
-    b.AddQuad(node("floor"), material, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside);
-    b.AddQuad(node("w0"), material, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, inside);
-    b.AddQuad(node("w1"), material, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside);
-    b.AddQuad(node("w2"), material, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside);
-    b.AddQuad(node("w3"), material, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside);
 }
 
 // An equirectangular map of `w` × w/2 pixels holding f(direction at the pixel centre).
@@ -237,13 +226,7 @@ TEST(Environment, BoxOnAPlaneOccludesTheSky) {
 // from outside must be cancelled exactly by antiradiance.
 TEST(Environment, RoomLitThroughAnOpeningKeepsTheFurnaceBalance) {
     SceneBuilder b;
-    uint32_t white = b.AddMaterial("white", glm::vec3(1.0f));
-    AddRoomSides(b, white);
-    // Half a ceiling: the opening is x ∈ [0.5, 1].
-    b.AddQuad("ceiling", white, {0, 1, 0}, {0.5f, 1, 0}, {0.5f, 1, 1}, {0, 1, 1},
-              {0.5f, 0.5f, 0.5f});
-    Scene scene = b.Build();
-    scene.environment = ConstantEnvironment(glm::vec3(1.0f));
+    Scene scene = testing::SkyFurnaceRoom(b, b.AddMaterial("white", glm::vec3(1.0f)));
     SolverSettings settings = Settings(256, 0.05f);
     settings.oracle = 0.25f;
     auto solver = CreateSolver(scene, settings);

@@ -241,16 +241,8 @@ TEST(Glossy, FloorReflectsMoreIntoTheMirrorDirection) {
 TEST(Glossy, SkyFurnaceNeverCreatesLight) {
     for (float metallic : {1.0f, 0.0f}) {
         SceneBuilder b;
-        uint32_t m = b.AddPbrMaterial("white", glm::vec3(1.0f), metallic, 0.5f);
-        b.AddQuad("floor", m, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, {0.5f, 0.5f, 0.5f});
-        b.AddQuad("w0", m, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0.5f, 0.5f, 0.5f});
-        b.AddQuad("w1", m, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, {0.5f, 0.5f, 0.5f});
-        b.AddQuad("w2", m, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, {0.5f, 0.5f, 0.5f});
-        b.AddQuad("w3", m, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, {0.5f, 0.5f, 0.5f});
-        b.AddQuad("ceiling", m, {0, 1, 0}, {0.5f, 1, 0}, {0.5f, 1, 1}, {0, 1, 1},
-                  {0.5f, 0.5f, 0.5f});
-        Scene scene = b.Build();
-        scene.environment = ConstantEnvironment(glm::vec3(1.0f));
+        Scene scene =
+            testing::SkyFurnaceRoom(b, b.AddPbrMaterial("white", glm::vec3(1.0f), metallic, 0.5f));
         SolverSettings settings = Settings(128, 0.1f);
         settings.oracle = 0.25f;
         auto solver = CreateSolver(scene, settings);
@@ -280,18 +272,10 @@ TEST(Glossy, SkyFurnaceNeverCreatesLight) {
 // solver agrees with it.
 TEST(Glossy, ReferenceKeepsTheFurnaceBoundAndAgreesWithTheSolver) {
     SceneBuilder b;
-    uint32_t m = b.AddPbrMaterial("white", glm::vec3(1.0f), 1.0f, 0.5f);
-    const glm::vec3 in(0.5f, 0.5f, 0.5f);
-    b.AddTiledQuad("floor", m, {0, 0, 0}, {1, 0, 0}, {0, 0, 1}, 4, 4, in);
-    b.AddQuad("w0", m, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, in, 4);
-    b.AddQuad("ceiling", m, {0, 1, 0}, {0.5f, 1, 0}, {0.5f, 1, 1}, {0, 1, 1}, in);
-    b.AddQuad("w1", m, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, in);
-    b.AddQuad("w2", m, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, in);
-    b.AddQuad("w3", m, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, in);
-    Scene scene = b.Build();
-    scene.environment = ConstantEnvironment(glm::vec3(1.0f));
+    Scene scene =
+        testing::SkyFurnaceRoom(b, b.AddPbrMaterial("white", glm::vec3(1.0f), 1.0f, 0.5f), 4);
     ReferenceSettings rs;
-    rs.samples = 512;
+    rs.samples = 4096;
     ReferenceResult ref = RenderReference(scene, rs);
     double over = 0;
     for (size_t p = 0; p < 2; ++p)
@@ -317,7 +301,10 @@ TEST(Glossy, ReferenceKeepsTheFurnaceBoundAndAgreesWithTheSolver) {
     for (size_t i = 0; i < a.size(); ++i) meanA += Mean(a[i]) / kPi, meanR += Mean(r[i]) / kPi;
     std::printf("glossy room: E/πL solver %.4f reference %.4f, relative RMS %.4f\n",
                 meanA / a.size(), meanR / r.size(), rel);
-    EXPECT_LT(rel, 0.10);
+    // Measured 8.6% (means 0.250 and 0.240): the lobe on 128 bins and the corners' usual
+    // discretisation error (the diffuse furnace's worst surfels are 4% off).
+    EXPECT_LT(rel, 0.12);
+    EXPECT_NEAR(meanA / a.size(), meanR / r.size(), 0.08 * meanR / r.size());
 }
 
 // The glossy local pass and the reflected direct light on lavapipe, validation on, equal the

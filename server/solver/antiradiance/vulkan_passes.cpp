@@ -122,32 +122,24 @@ struct VulkanAntiradiance::Impl {
         fit(lobeWeights, m.lobeWeights);
         fit(glossyDirect, m.glossyDirect);
         if (!remade && *localSet[0]) return;
-        const gpu::Buffer* l0[] = {&leaves,
-                                   &dirs,
-                                   &lin,
-                                   &iex0,
-                                   &iex1,
-                                   &irradiance,
-                                   &direct,
-                                   glossy.get(),
-                                   mirror.get(),
-                                   lobes.get(),
-                                   lobeWeights.get(),
-                                   glossyDirect.get()};
-        const gpu::Buffer* l1[] = {&leaves,
-                                   &dirs,
-                                   &lin,
-                                   &iex1,
-                                   &iex0,
-                                   &irradiance,
-                                   &direct,
-                                   glossy.get(),
-                                   mirror.get(),
-                                   lobes.get(),
-                                   lobeWeights.get(),
-                                   glossyDirect.get()};
-        localSet[0] = local.MakeSet(l0);
-        localSet[1] = local.MakeSet(l1);
+        // Parity p reads I_ex from table p and writes the other.
+        for (int p = 0; p < 2; ++p) {
+            gpu::Buffer* from = p == 0 ? &iex0 : &iex1;
+            gpu::Buffer* to = p == 0 ? &iex1 : &iex0;
+            const gpu::Buffer* set[] = {&leaves,
+                                        &dirs,
+                                        &lin,
+                                        from,
+                                        to,
+                                        &irradiance,
+                                        &direct,
+                                        glossy.get(),
+                                        mirror.get(),
+                                        lobes.get(),
+                                        lobeWeights.get(),
+                                        glossyDirect.get()};
+            localSet[p] = local.MakeSet(set);
+        }
     }
 
     std::vector<uint32_t> Spec() const { return {kWorkgroup, static_cast<uint32_t>(m.Bins())}; }
