@@ -393,7 +393,10 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
     auto start = Clock::now();
     for (int i = 0; i < iterations; ++i) {
         solver_->Iterate(1);
-        if (interruptible && editWaiting_.load(std::memory_order_relaxed)) break;
+        if (i + 1 < iterations && interruptible && editWaiting_.load(std::memory_order_relaxed)) {
+            std::unique_lock lock(mutex_);
+            if (!ApplyEditsInPlace(lock, note)) break;  // a move: at the frame boundary
+        }
     }
     std::vector<glm::vec3> surfels = solver_->SurfelIrradiance();
     double changed = 0.0, total = 0.0;
@@ -454,6 +457,42 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
     for (const auto& sink : sinks) sink(frame);
 }
 
+bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note) {
+    if (rebuild_ || pending_.empty()) return false;
+    for (const auto& p : pending_)
+        if (p.moves) return false;
+    Scene next = applied_;
+    bool lights = false;
+    for (auto& p : pending_) {
+        p.apply(next);
+        lights = lights || p.lights;
+    }
+    const uint64_t last = pending_.back().id;
+    const auto received = pending_.back().received;
+    pending_.clear();
+    editWaiting_ = false;
+    applied_ = std::move(next);
+    lock.unlock();
+    std::string failure;
+    try {
+        solver_->UpdateMaterials(applied_);
+        if (lights) solver_->UpdateLights(applied_);  // one shadow pass
+    } catch (const std::exception& e) {
+        failure = std::string("light update failed: ") + e.what();
+    }
+    lock.lock();
+    if (!failure.empty()) {
+        lastError_ = failure;
+        note += (note.empty() ? "" : "; ") + failure;
+    }
+    appliedEdit_ = last;
+    appliedReceived_ = received;
+    latencyReported_ = false;
+    converged_ = false;
+    framesSinceEdit_ = 0;
+    return true;
+}
+
 void Session::Run() {
     std::unique_lock lock(mutex_);
     while (true) {
@@ -490,62 +529,39 @@ void Session::Run() {
             rebuild_.reset();
         }
 
-        // Pending edits apply together, atomically, between two frames. While links are
-        // being rebuilt later edits wait, so frames name their edits in order.
-        if (!rebuild_ && !pending_.empty()) {
+        // Pending edits apply together, atomically, between two iterations (here, or inside
+        // ProduceFrame); with a move among them, at this frame boundary, by rebuilding the
+        // links on a thread. While links are being rebuilt later edits wait, so frames name
+        // their edits in order.
+        if (!rebuild_ && !pending_.empty() && !ApplyEditsInPlace(lock, note)) {
             Scene next = applied_;
-            bool moves = false, lights = false;
             std::string what;
             for (auto& p : pending_) {
                 p.apply(next);
-                moves = moves || p.moves;
-                lights = lights || p.lights;
                 if (p.moves) what += (what.empty() ? "" : ", ") + p.what;
             }
-            uint64_t last = pending_.back().id;
-            auto received = pending_.back().received;
+            rebuild_ = std::make_unique<Rebuild>();
+            rebuild_->scene = std::move(next);
+            rebuild_->lastEdit = pending_.back().id;
+            rebuild_->received = pending_.back().received;
+            rebuild_->what = what;
             pending_.clear();
             editWaiting_ = false;
-            if (moves) {
-                rebuild_ = std::make_unique<Rebuild>();
-                rebuild_->scene = std::move(next);
-                rebuild_->lastEdit = last;
-                rebuild_->received = received;
-                rebuild_->what = what;
-                Rebuild* r = rebuild_.get();
-                r->thread = std::thread([this, r] {
-                    std::unique_ptr<Solver> built;
-                    std::string error;
-                    try {
-                        built = BuildSolver(r->scene);
-                    } catch (const std::exception& e) {
-                        error = e.what();
-                    }
-                    std::lock_guard guard(mutex_);
-                    r->result = std::move(built);
-                    r->error = error;
-                    r->done = true;
-                    wake_.notify_all();
-                });
-            } else {
-                applied_ = std::move(next);
-                lock.unlock();
-                std::exception_ptr failure;
+            Rebuild* r = rebuild_.get();
+            r->thread = std::thread([this, r] {
+                std::unique_ptr<Solver> built;
+                std::string error;
                 try {
-                    solver_->UpdateMaterials(applied_);
-                    if (lights) solver_->UpdateLights(applied_);  // one shadow pass
+                    built = BuildSolver(r->scene);
                 } catch (const std::exception& e) {
-                    failure = std::current_exception();
-                    note = std::string("light update failed: ") + e.what();
+                    error = e.what();
                 }
-                lock.lock();
-                if (failure) lastError_ = note;
-                appliedEdit_ = last;
-                appliedReceived_ = received;
-                latencyReported_ = false;
-                converged_ = false;
-                framesSinceEdit_ = 0;
-            }
+                std::lock_guard guard(mutex_);
+                r->result = std::move(built);
+                r->error = error;
+                r->done = true;
+                wake_.notify_all();
+            });
         }
 
         // A device failure stops this session's frames, not the server: it is reported in

@@ -168,9 +168,15 @@ class Session {
                    bool lights = false);
     uint64_t SubmitPunctual(int light, const LightEdit& edit);
     void Run();
-    // `interruptible`: end the frame early, after the current iteration, when an edit that
-    // can apply at once arrives (it then waits at most one iteration, not a whole frame).
+    // `interruptible`: edits that arrive during the frame are taken after the current
+    // iteration: those that can apply at once (materials, lights, sky) join this frame, which
+    // goes on to its end; a move ends the frame there (its links rebuild from the boundary).
+    // An edit thus waits at most the rest of one frame, never a whole extra frame.
     void ProduceFrame(int iterations, std::string note, bool interruptible);
+    // Applies the pending edits to the solver when none of them moves geometry. Called with
+    // `lock` held (released around the solver update); returns false, applying nothing, when
+    // an edit needs a link rebuild or one is running. A failed update is put in `note`.
+    bool ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note);
     std::unique_ptr<Solver> BuildSolver(const Scene& scene) const;
 
     const std::string name_;

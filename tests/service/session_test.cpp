@@ -145,6 +145,45 @@ TEST(Session, MaterialTurnedGlossyConvergesToAFreshBake) {
     EXPECT_GT(session.SolverStatistics().glossyElements, 0u);
 }
 
+// Edits that need no link rebuild join the frame in progress after its current iteration:
+// frames keep their cadence (never cut short), and the frame being computed when an edit
+// arrives is the one that includes it.
+TEST(Session, LightEditsJoinTheFrameInProgress) {
+    SessionSettings settings = Settings();
+    settings.iterationsPerFrame = 64;  // long frames: an edit lands early in one
+    settings.convergedChange = 0.0;    // stream without pause
+    Session session("blocker", LoadGltf(kBlocker), settings);
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<FramePtr> frames;
+    int id = session.AddSubscriber([&](const FramePtr& f) {
+        std::lock_guard lock(m);
+        frames.push_back(f);
+        cv.notify_all();
+    });
+    auto waitFrames = [&](size_t n) {
+        std::unique_lock lock(m);
+        EXPECT_TRUE(
+            cv.wait_for(lock, std::chrono::seconds(60), [&] { return frames.size() >= n; }));
+        return frames.back();
+    };
+    for (int k = 0; k < 3; ++k) {
+        // Right after a frame is out, the next one has just begun.
+        FramePtr before = waitFrames(frames.size() + 1);
+        uint64_t edit = session.Submit(Dim("emitter", 8.0f + k));
+        FramePtr with;
+        while (!with) {
+            FramePtr f = waitFrames(frames.size() + 1);
+            if (f->lastEdit >= edit) with = f;
+        }
+        EXPECT_EQ(with->frame, before->frame + 1) << "edit " << edit;
+    }
+    session.RemoveSubscriber(id);
+    std::lock_guard lock(m);
+    for (const FramePtr& f : frames)
+        EXPECT_EQ(f->iterations % 64, 0u) << "frame " << f->frame << " was cut short";
+}
+
 TEST(Session, DimmingTheLightScalesIrradiance) {
     Session session("blocker", LoadGltf(kBlocker), Settings());
     FramePtr before = WaitFor(session, 0);
