@@ -343,6 +343,19 @@ uint64_t Client::SetMaterial(const std::string& material,
     return SetMaterial(material, MaterialChange{albedo, emission, {}, {}}, scene);
 }
 
+uint64_t Client::SetEnvironment(const EnvironmentChange& change, const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    fb::Vec3 c = change.color ? fb::Vec3((*change.color)[0], (*change.color)[1], (*change.color)[2])
+                              : fb::Vec3();
+    b.Finish(fb::CreateSetEnvironmentDirect(
+        b, scene.c_str(), change.path.empty() ? nullptr : change.path.c_str(),
+        change.color ? &c : nullptr, change.off, change.intensity.value_or(-1.0f),
+        change.rotation.value_or(0.0f), change.rotation.has_value()));
+    return impl_->Call(MessageType::kSetEnvironment, b, MessageType::kEditAck)
+        .As<fb::EditAck>()
+        ->edit_id();
+}
+
 uint64_t Client::SetMaterial(const std::string& material, const MaterialChange& change,
                              const std::string& scene) {
     flatbuffers::FlatBufferBuilder b;

@@ -139,6 +139,15 @@ class Client {
     uint64_t SetMaterial(const std::string& material, std::optional<std::array<float, 3>> albedo,
                          std::optional<std::array<float, 3>> emission,
                          const std::string& scene = "");
+    // The sky: a new one (`path`, an EXR under the server's scene root, or a constant
+    // `color`) or `off`, then `intensity` and `rotation` (radians about +Y) when given.
+    struct EnvironmentChange {
+        std::string path;
+        std::optional<std::array<float, 3>> color;
+        bool off = false;
+        std::optional<float> intensity, rotation;
+    };
+    uint64_t SetEnvironment(const EnvironmentChange& change, const std::string& scene = "");
     // Frames arrive on the client's reader thread; keep the callback short.
     using FrameCallback = std::function<void(const Frame&)>;
     void Subscribe(FrameCallback callback, Channel channel = Channel::kIndirect,

@@ -54,6 +54,8 @@ const char* MessageName(MessageType type) {
             return "SetMaterial";
         case MessageType::kEditAck:
             return "EditAck";
+        case MessageType::kSetEnvironment:
+            return "SetEnvironment";
         case MessageType::kSubscribe:
             return "Subscribe";
         case MessageType::kUnsubscribe:
@@ -104,6 +106,8 @@ bool VerifyPayload(MessageType type, const uint8_t* data, size_t size) {
             return Verify<fb::SetMaterial>(data, size);
         case MessageType::kEditAck:
             return Verify<fb::EditAck>(data, size);
+        case MessageType::kSetEnvironment:
+            return Verify<fb::SetEnvironment>(data, size);
         case MessageType::kSubscribe:
             return Verify<fb::Subscribe>(data, size);
         case MessageType::kUnsubscribe:

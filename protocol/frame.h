@@ -41,6 +41,7 @@ enum class MessageType : uint16_t {
     kSetLight = 21,
     kSetMaterial = 22,
     kEditAck = 23,
+    kSetEnvironment = 24,
     kSubscribe = 30,
     kUnsubscribe = 31,
     kGetIrradiance = 32,

@@ -138,7 +138,7 @@ struct ServiceCommands::State {
     bool quiet = false;
 
     CLI::App *load = nullptr, *info = nullptr, *watch = nullptr, *move = nullptr, *light = nullptr,
-             *material = nullptr, *get = nullptr, *step = nullptr, *stats = nullptr,
+             *material = nullptr, *sky = nullptr, *get = nullptr, *step = nullptr, *stats = nullptr,
              *script = nullptr, *wait = nullptr, *sleep = nullptr;
 
     client::LoadOptions loadOptions;
@@ -159,6 +159,9 @@ struct ServiceCommands::State {
     float intensity = -1.0f;
     float range = -1.0f;
     std::optional<float> roughness, metallic;
+    std::string skyPath;
+    bool skyOff = false;
+    std::optional<float> skyIntensity, skyTurnDegrees;
 
     std::string output, gltf;
     int stepIterations = 1;
@@ -267,6 +270,17 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.material->add_option("--metallic", s.metallic, "glTF metallic in [0, 1]");
     s.material->add_option("--emission", s.emission, "r,g,b nits")->delimiter(',');
 
+    s.sky = app.add_subcommand("sky", "Change the loaded scene's sky (environment light)");
+    s.sky->add_option("--environment", s.skyPath,
+                      "a new equirectangular OpenEXR sky under the server's scene root");
+    s.sky->add_option("--environment-color", s.skyColor, "a new constant sky: r,g,b nits")
+        ->delimiter(',')
+        ->expected(3);
+    s.sky->add_flag("--off", s.skyOff, "no sky");
+    s.sky->add_option("--environment-intensity", s.skyIntensity, "scales the sky (≥ 0)");
+    s.sky->add_option("--environment-rotation", s.skyTurnDegrees,
+                      "turns the sky about +Y, degrees");
+
     s.get = app.add_subcommand("get", "Write the current irradiance (.json, or .glb/.gltf)");
     s.get->add_option("-o,--output", s.output, "output: .json, .glb or .gltf")->required();
     s.get->add_option("--gltf", s.gltf,
@@ -297,16 +311,16 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
             ->capture_default_str();
         s.script->add_flag("-q,--quiet", s.quiet, "do not echo the script's lines");
     }
-    for (CLI::App* c :
-         {s.load, s.info, s.watch, s.move, s.light, s.material, s.get, s.step, s.stats, s.wait})
+    for (CLI::App* c : {s.load, s.info, s.watch, s.move, s.light, s.material, s.sky, s.get, s.step,
+                        s.stats, s.wait})
         c->add_flag("-q,--quiet", s.quiet, "print less");
 }
 
 ServiceCommands::~ServiceCommands() = default;
 
 bool ServiceCommands::Parsed() const {
-    for (CLI::App* c : {s_->load, s_->info, s_->watch, s_->move, s_->light, s_->material, s_->get,
-                        s_->step, s_->stats, s_->script, s_->wait, s_->sleep})
+    for (CLI::App* c : {s_->load, s_->info, s_->watch, s_->move, s_->light, s_->material, s_->sky,
+                        s_->get, s_->step, s_->stats, s_->script, s_->wait, s_->sleep})
         if (c && c->parsed()) return true;
     return false;
 }
@@ -533,6 +547,22 @@ int ServiceCommands::State::Execute(client::Client& c) {
         lastEdit = c.SetMaterial(node, change, session);
         if (!quiet)
             std::printf("edit %llu: material %s\n", (unsigned long long)lastEdit, node.c_str());
+        return kExitOk;
+    }
+    if (sky && sky->parsed()) {
+        client::Client::EnvironmentChange change;
+        change.path = skyPath;
+        if (skyColor.size() == 3) change.color = {skyColor[0], skyColor[1], skyColor[2]};
+        change.off = skyOff;
+        change.intensity = skyIntensity;
+        if (skyTurnDegrees) change.rotation = *skyTurnDegrees * 0.017453292519943295f;
+        if (change.path.empty() && !change.color && !change.off && !change.intensity &&
+            !change.rotation)
+            throw Error(
+                "sky: give --environment, --environment-color or --off, and/or "
+                "--environment-intensity, --environment-rotation");
+        lastEdit = c.SetEnvironment(change, session);
+        if (!quiet) std::printf("edit %llu: sky\n", (unsigned long long)lastEdit);
         return kExitOk;
     }
     if (get && get->parsed()) {

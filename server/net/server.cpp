@@ -480,6 +480,31 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 SendAck(id, session->Submit(e));
                 return;
             }
+            case MessageType::kSetEnvironment: {
+                const auto* s = m.As<fb::SetEnvironment>();
+                auto session = service.Find(Str(s->scene()));
+                service::EnvironmentEdit e;
+                std::string path = Str(s->environment());
+                std::optional<glm::vec3> color = Vec(s->environment_color());
+                if (s->off() && (!path.empty() || color))
+                    throw service::ServiceError(
+                        service::ErrorKind::kInvalidArgument,
+                        "SetEnvironment: `off` and a new sky cannot both be given");
+                if (s->off()) e.replace = Environment{};
+                if (s->intensity() >= 0.0f || std::isnan(s->intensity()))
+                    e.intensity = s->intensity();
+                if (s->set_rotation()) e.rotation = s->rotation();
+                // Reading a sky map takes a while: on the blocking pool.
+                Blocking(
+                    id,
+                    [&service = service, session, e, path, color]() mutable {
+                        if (!path.empty() || color)
+                            e.replace = service.MakeEnvironment(path, color);
+                        return session->Submit(e);
+                    },
+                    [this, id](uint64_t edit) { SendAck(id, edit); });
+                return;
+            }
             case MessageType::kSubscribe: {
                 const auto* s = m.As<fb::Subscribe>();
                 auto session = service.Find(Str(s->scene()));

@@ -22,6 +22,9 @@ struct Environment {
     float rotation = 0.0f;               // radians about +Y (counter-clockwise seen from above)
 
     bool Active() const;
+    // A sky is given (a map or a non-zero colour), whatever its intensity: what decides back
+    // occlusion `auto` when links are built.
+    bool Present() const { return image || constant != glm::vec3(0.0f); }
     // Radiance (× intensity) arriving from direction `towardSky` (unit), bilinear in the map.
     glm::vec3 Radiance(const glm::vec3& towardSky) const;
     // The map's own value at `towardSky` without rotation or intensity (for tests and tools).

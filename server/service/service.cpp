@@ -36,6 +36,28 @@ fs::path Service::Resolve(const std::string& relative) const {
     return full;
 }
 
+Environment Service::MakeEnvironment(const std::string& path,
+                                     const std::optional<glm::vec3>& color) const {
+    if (!path.empty() && color)
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "give an environment file or an environment colour, not both");
+    Environment env;
+    try {
+        if (!path.empty()) {
+            fs::path sky = Resolve(path);
+            env = LoadEnvironment(sky.string());
+            env.source = fs::relative(sky, root_).generic_string();
+        } else if (color) {
+            env = ConstantEnvironment(*color);
+        }
+        ValidateEnvironment(env);
+    } catch (const Error& e) {
+        throw ServiceError(path.empty() ? ErrorKind::kInvalidArgument : ErrorKind::kLoadFailed,
+                           e.what());
+    }
+    return env;
+}
+
 LoadResult Service::Load(const LoadRequest& request) {
     // Name the session and find the file before anything slow happens.
     std::string name;
@@ -104,24 +126,17 @@ LoadResult Service::Load(const LoadRequest& request) {
         throw ServiceError(ErrorKind::kLoadFailed, e.what());
     }
     // The sky: a file under the root (never outside it) or a constant colour.
-    if (!request.environmentPath.empty() && request.hasEnvironmentColor)
-        throw ServiceError(ErrorKind::kInvalidArgument,
-                           "give an environment file or an environment colour, not both");
+    if (!request.environmentPath.empty() || request.hasEnvironmentColor)
+        scene.environment = MakeEnvironment(request.environmentPath,
+                                            request.hasEnvironmentColor
+                                                ? std::optional<glm::vec3>(request.environmentColor)
+                                                : std::nullopt);
+    scene.environment.intensity = request.environmentIntensity;
+    scene.environment.rotation = request.environmentRotation;
     try {
-        if (!request.environmentPath.empty()) {
-            fs::path sky = Resolve(request.environmentPath);
-            scene.environment = LoadEnvironment(sky.string());
-            scene.environment.source = fs::relative(sky, root_).generic_string();
-        } else if (request.hasEnvironmentColor) {
-            scene.environment = ConstantEnvironment(request.environmentColor);
-        }
-        scene.environment.intensity = request.environmentIntensity;
-        scene.environment.rotation = request.environmentRotation;
         ValidateEnvironment(scene.environment);
     } catch (const Error& e) {
-        throw ServiceError(
-            request.environmentPath.empty() ? ErrorKind::kInvalidArgument : ErrorKind::kLoadFailed,
-            e.what());
+        throw ServiceError(ErrorKind::kInvalidArgument, e.what());
     }
     if (scene.TriangleCount() > limits_.maxSceneTriangles)
         throw ServiceError(

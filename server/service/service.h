@@ -6,6 +6,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -51,6 +52,11 @@ class Service {
     // A path under the scene root, refusing absolute paths, ".." escapes and symlinks that
     // lead outside it. Throws ServiceError(kOutsideRoot / kNotFound).
     std::filesystem::path Resolve(const std::string& relative) const;
+    // A sky: the equirectangular OpenEXR at `path` under the scene root, or the constant
+    // `color`, intensity 1, not turned. Throws ServiceError (kOutsideRoot, kNotFound,
+    // kLoadFailed for a bad file, kInvalidArgument for a bad colour or both given).
+    Environment MakeEnvironment(const std::string& path,
+                                const std::optional<glm::vec3>& color) const;
     nlohmann::json StatsJson() const;
     // Drops every session (their workers stop); later loads are refused.
     void Shutdown();

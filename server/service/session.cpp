@@ -300,6 +300,31 @@ uint64_t Session::Submit(const MaterialEdit& edit) {
     return Queue(apply, false, "material " + edit.material);
 }
 
+uint64_t Session::Submit(const EnvironmentEdit& edit) {
+    std::lock_guard lock(mutex_);
+    if (edit.intensity && !(*edit.intensity >= 0.0f && std::isfinite(*edit.intensity)))
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "environment intensity must be a finite number ≥ 0");
+    if (edit.rotation && !std::isfinite(*edit.rotation))
+        throw ServiceError(ErrorKind::kInvalidArgument, "environment rotation must be finite");
+    Environment next = edit.replace ? *edit.replace : validated_.environment;
+    if (edit.intensity) next.intensity = *edit.intensity;
+    if (edit.rotation) next.rotation = *edit.rotation;
+    try {
+        ValidateEnvironment(next);
+    } catch (const Error& e) {
+        throw ServiceError(ErrorKind::kInvalidArgument, e.what());
+    }
+    // Back occlusion `auto` is decided when the links are built: a sky appearing or going
+    // changes which surfaces occlude from both sides, so the links are rebuilt.
+    const bool rebuild = settings_.solver.backOcclusion == BackOcclusion::kAuto &&
+                         next.Present() != validated_.environment.Present();
+    auto apply = [next](Scene& s) { s.environment = next; };
+    apply(validated_);
+    std::string what = next.Active() ? "sky " + next.source : "sky off";
+    return Queue(apply, rebuild, what, true);
+}
+
 // --- Frames ---------------------------------------------------------------------------------
 
 int Session::AddSubscriber(FrameSink sink) {

@@ -105,6 +105,14 @@ struct MaterialEdit {
     std::optional<float> roughness, metallic;  // glTF factors, [0, 1]
 };
 
+// The sky: `replace` it (with an Environment made by Service::MakeEnvironment, or an
+// inactive one for none), then scale and turn it when given.
+struct EnvironmentEdit {
+    std::optional<Environment> replace;
+    std::optional<float> intensity;
+    std::optional<float> rotation;  // radians about +Y
+};
+
 class Session {
   public:
     // Builds the solver (seconds on large scenes) and starts the worker. Throws
@@ -122,6 +130,10 @@ class Session {
     uint64_t Submit(const TransformEdit& edit);
     uint64_t Submit(const LightEdit& edit);
     uint64_t Submit(const MaterialEdit& edit);
+    // A sky change re-bins the environment between iterations; one that gives a scene loaded
+    // without a sky its first (or takes its only one away) also rebuilds the links, since
+    // back occlusion (`auto`) follows whether there is a sky, as a move does.
+    uint64_t Submit(const EnvironmentEdit& edit);
 
     using FrameSink = std::function<void(const FramePtr&)>;
     // Every later frame goes to `sink` (on the worker thread: keep it short). The newest

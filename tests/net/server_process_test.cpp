@@ -373,6 +373,72 @@ TEST(ServerProcess, EnvironmentAtLoad) {
     EXPECT_TRUE(c.Connected());
 }
 
+// The sky of a loaded session: SetEnvironment scales it, and gives a scene loaded without one
+// its first sky (links rebuilt for back occlusion). Each converges to a solve of the scene with
+// that sky; bad requests are refused and the connection kept.
+TEST(ServerProcess, SkyChangedInALoadedSession) {
+    ServerProcess server("sky-edit");
+    client::Client c(server.Unix(), "sky");
+    auto converged = [](float intensity) {
+        Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
+        scene.environment = ConstantEnvironment(glm::vec3(0.5f, 0.6f, 1.0f));
+        scene.environment.intensity = intensity;
+        SolverSettings s;
+        s.bins = 64;
+        s.elementSize = 0.06f;
+        s.device = DeviceChoice::kCpu;
+        auto solver = CreateSolver(scene, s);
+        solver->Iterate(40);
+        return PrimitiveIrradiance(solver->GetSurfels(), solver->SurfelIrradiance(), scene, 0);
+    };
+    auto expectClose = [](const client::Frame& f, const std::vector<glm::vec3>& want) {
+        ASSERT_EQ(f.primitives[0].rgb.size(), want.size() * 3);
+        double num = 0, den = 0;
+        for (size_t i = 0; i < want.size(); ++i) {
+            double d = f.primitives[0].rgb[i * 3 + 2] - want[i].z;
+            num += d * d;
+            den += double(want[i].z) * want[i].z;
+        }
+        EXPECT_LT(std::sqrt(num / den), 0.01);
+    };
+    // Loaded without a sky; the sky arrives as an edit (a link rebuild).
+    c.Load(Cornell());
+    client::Client::EnvironmentChange sky;
+    sky.color = std::array<float, 3>{0.5f, 0.6f, 1.0f};
+    sky.intensity = 2.0f;
+    uint64_t edit = c.SetEnvironment(sky);
+    EXPECT_GT(edit, 0u);
+    client::Frame f = c.Get();
+    for (int k = 0; k < 200 && f.lastEdit < edit; ++k) {
+        c.Step(1);
+        f = c.Get();
+    }
+    EXPECT_GE(f.lastEdit, edit);
+    c.Step(40);
+    expectClose(c.Get(), converged(2.0f));
+    // Dimmed and turned (a constant sky looks the same turned): re-binned in place.
+    client::Client::EnvironmentChange dim;
+    dim.intensity = 0.5f;
+    dim.rotation = 1.0f;
+    c.SetEnvironment(dim);
+    c.Step(40);
+    expectClose(c.Get(), converged(0.5f));
+
+    client::Client::EnvironmentChange bad;
+    bad.path = "../sky.exr";
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(bad); }), int(fb::ErrorCode::OutsideRoot));
+    bad.path = "cornell-box.gltf";
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(bad); }), int(fb::ErrorCode::LoadFailed));
+    bad = {};
+    bad.off = true;
+    bad.color = std::array<float, 3>{1.0f, 1.0f, 1.0f};
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(bad); }), int(fb::ErrorCode::InvalidArgument));
+    bad = {};
+    bad.intensity = std::nanf("");
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(bad); }), int(fb::ErrorCode::InvalidArgument));
+    EXPECT_TRUE(c.Connected());
+}
+
 TEST(ServerProcess, GarbageOnOneConnectionDoesNotDisturbAnother) {
     ServerProcess server("garbage");
     client::Client viewer(server.Unix(), "viewer");

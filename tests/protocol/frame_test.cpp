@@ -57,6 +57,11 @@ std::vector<uint8_t> Payload(MessageType type) {
         case MessageType::kEditAck:
             b.Finish(fb::CreateEditAck(b, 42));
             break;
+        case MessageType::kSetEnvironment: {
+            fb::Vec3 c(0.5f, 0.6f, 1.0f);
+            b.Finish(fb::CreateSetEnvironmentDirect(b, "s", nullptr, &c, false, 2.0f, 0.5f, true));
+            break;
+        }
         case MessageType::kSubscribe:
             b.Finish(fb::CreateSubscribeDirect(b, "s", fb::Channel::Total, fb::Format::Float16));
             break;
@@ -88,13 +93,26 @@ std::vector<uint8_t> Payload(MessageType type) {
 }
 
 const MessageType kAllTypes[] = {
-    MessageType::kHello,        MessageType::kWelcome,     MessageType::kError,
-    MessageType::kBye,          MessageType::kOk,          MessageType::kLoadScene,
-    MessageType::kGetSceneInfo, MessageType::kSceneInfo,   MessageType::kSetTransform,
-    MessageType::kSetLight,     MessageType::kSetMaterial, MessageType::kEditAck,
-    MessageType::kSubscribe,    MessageType::kUnsubscribe, MessageType::kGetIrradiance,
-    MessageType::kFrame,        MessageType::kStep,        MessageType::kGetStats,
+    MessageType::kHello,
+    MessageType::kWelcome,
+    MessageType::kError,
+    MessageType::kBye,
+    MessageType::kOk,
+    MessageType::kLoadScene,
+    MessageType::kGetSceneInfo,
+    MessageType::kSceneInfo,
+    MessageType::kSetTransform,
+    MessageType::kSetLight,
+    MessageType::kSetMaterial,
+    MessageType::kEditAck,
+    MessageType::kSubscribe,
+    MessageType::kUnsubscribe,
+    MessageType::kGetIrradiance,
+    MessageType::kFrame,
+    MessageType::kStep,
+    MessageType::kGetStats,
     MessageType::kStats,
+    MessageType::kSetEnvironment,
 };
 
 TEST(Frame, EveryMessageRoundTripsByteByByte) {

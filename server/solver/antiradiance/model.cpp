@@ -25,8 +25,7 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
     model.surfels = RefineScene(scene, h);
     // Surfaces that do not close a solid occlude from both sides when asked (solver.h).
     bool back = settings.backOcclusion == BackOcclusion::kOn ||
-                (settings.backOcclusion == BackOcclusion::kAuto &&
-                 (scene.environment.image || scene.environment.constant != glm::vec3(0.0f)));
+                (settings.backOcclusion == BackOcclusion::kAuto && scene.environment.Present());
     if (back) {
         std::vector<bool> closed = ClosedNodes(scene);
         Surfels& s = model.surfels;
