@@ -16,6 +16,7 @@
 
 #include "scene/scene_builder.h"
 #include "scene/surfels.h"
+#include "solver/solver.h"
 
 namespace penumbra::testing {
 
@@ -29,6 +30,15 @@ inline size_t NearestSurfel(const Surfels& s, glm::vec3 p, glm::vec3 normal) {
         if (d < bestD) bestD = d, best = i;
     }
     return best;
+}
+
+// Solver settings for tests: the CPU back end, `bins` bins, elements of `elementSize` metres.
+inline SolverSettings CpuSettings(int bins, float elementSize) {
+    SolverSettings s;
+    s.device = DeviceChoice::kCpu;
+    s.bins = bins;
+    s.elementSize = elementSize;
+    return s;
 }
 
 inline float Mean(glm::vec3 v) { return (v.x + v.y + v.z) / 3.0f; }

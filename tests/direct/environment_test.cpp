@@ -24,13 +24,7 @@ using testing::AddRoomSides;
 using testing::Mean;
 constexpr float kPi = std::numbers::pi_v<float>;
 
-SolverSettings Settings(int bins, float elementSize) {
-    SolverSettings s;
-    s.device = DeviceChoice::kCpu;
-    s.bins = bins;
-    s.elementSize = elementSize;
-    return s;
-}
+using testing::CpuSettings;
 
 // An equirectangular map of `w` × w/2 pixels holding f(direction at the pixel centre).
 template <typename F>
@@ -164,7 +158,7 @@ TEST(Environment, ConstantSkyOverAnOpenPlaneGivesPiL) {
     b.AddTiledQuad("floor", grey, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 4, 4, {0, 1, 0});
     Scene scene = b.Build();
     scene.environment = ConstantEnvironment({1.0f, 0.5f, 0.25f});
-    auto solver = CreateSolver(scene, Settings(128, 0.2f));
+    auto solver = CreateSolver(scene, CpuSettings(128, 0.2f));
     solver->Iterate(2);
     auto e = solver->SurfelIrradiance();
     const auto& s = solver->GetSurfels();
@@ -192,7 +186,7 @@ TEST(Environment, BoxOnAPlaneOccludesTheSky) {
     b.AddBox("box", grey, {0, 0.5f, 0}, {1, 1, 1});
     Scene scene = b.Build();
     scene.environment = ConstantEnvironment(glm::vec3(1.0f));
-    auto solver = CreateSolver(scene, Settings(256, 0.1f));
+    auto solver = CreateSolver(scene, CpuSettings(256, 0.1f));
     solver->Iterate(6);
     auto e = solver->SurfelIrradiance();
     const auto& s = solver->GetSurfels();
@@ -227,7 +221,7 @@ TEST(Environment, BoxOnAPlaneOccludesTheSky) {
 TEST(Environment, RoomLitThroughAnOpeningKeepsTheFurnaceBalance) {
     SceneBuilder b;
     Scene scene = testing::SkyFurnaceRoom(b, b.AddMaterial("white", glm::vec3(1.0f)));
-    SolverSettings settings = Settings(256, 0.05f);
+    SolverSettings settings = CpuSettings(256, 0.05f);
     settings.oracle = 0.25f;
     auto solver = CreateSolver(scene, settings);
     // ~1/10 of the light leaves through the opening per bounce: 60 iterations leave < 0.5%.

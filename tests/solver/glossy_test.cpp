@@ -21,13 +21,7 @@ namespace {
 using testing::Mean;
 constexpr float kPi = std::numbers::pi_v<float>;
 
-SolverSettings Settings(int bins, float elementSize) {
-    SolverSettings s;
-    s.device = DeviceChoice::kCpu;
-    s.bins = bins;
-    s.elementSize = elementSize;
-    return s;
-}
+using testing::CpuSettings;
 
 TEST(GlossyMaterial, MetallicRoughnessMapsToDiffuseAndLobe) {
     // Rough dielectric: the diffuse path, albedo = base colour (DESIGN.md).
@@ -99,7 +93,7 @@ TEST(GlossyLobe, RowsAreNormalisedAndSymmetric) {
     for (int bins : {64, 128, 512}) {
         for (float roughness : {0.7f, 0.5f, 0.2f}) {
             Scene scene = GlossyFloor(roughness);
-            AntiradianceModel m = BuildAntiradianceModel(scene, Settings(bins, 0.5f), {});
+            AntiradianceModel m = BuildAntiradianceModel(scene, CpuSettings(bins, 0.5f), {});
             ASSERT_EQ(m.lobes.size(), 1u);
             ASSERT_EQ(m.glossy.size(), m.leaves.size());
             const GlossyLobe& lobe = m.lobes[0];
@@ -173,7 +167,7 @@ MirrorProbe Panels(const Scene& scene, const std::vector<std::vector<glm::vec3>>
 MirrorProbe ProbeFloor(const Material& floorMaterial, bool emitter, DeviceChoice device,
                        int bins = 256) {
     Scene scene = MirrorScene(floorMaterial, emitter);
-    SolverSettings settings = Settings(bins, 0.1f);
+    SolverSettings settings = CpuSettings(bins, 0.1f);
     settings.device = device;
     settings.oracle = 0.5f;
     settings.validation = true;
@@ -243,7 +237,7 @@ TEST(Glossy, SkyFurnaceNeverCreatesLight) {
         SceneBuilder b;
         Scene scene =
             testing::SkyFurnaceRoom(b, b.AddPbrMaterial("white", glm::vec3(1.0f), metallic, 0.5f));
-        SolverSettings settings = Settings(128, 0.1f);
+        SolverSettings settings = CpuSettings(128, 0.1f);
         settings.oracle = 0.25f;
         auto solver = CreateSolver(scene, settings);
         solver->Iterate(60);
@@ -285,7 +279,7 @@ TEST(Glossy, ReferenceKeepsTheFurnaceBoundAndAgreesWithTheSolver) {
                 double(Mean(ref.irradiance[p][i]) - 5.0f * Mean(ref.standardError[p][i])) / kPi);
     EXPECT_LT(over, 1.0) << "a path-traced E exceeds π·L by more than 5σ";
 
-    SolverSettings settings = Settings(128, 0.1f);
+    SolverSettings settings = CpuSettings(128, 0.1f);
     settings.oracle = 0.25f;
     auto solver = CreateSolver(scene, settings);
     solver->Iterate(60);
