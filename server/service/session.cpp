@@ -482,6 +482,50 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
     for (const auto& sink : sinks) sink(frame);
 }
 
+std::string Session::WarmStart(Solver& rebuilt, const Scene& next) {
+    // Surfels of primitives whose vertices stayed put keep the old solution's exitant
+    // intensity; the moved ones (and everything, if the surfels do not line up) start from
+    // their emission.
+    // Surfels are numbered primitive by primitive: a primitive that did not move has the
+    // same surfels, in the same order, in both solvers.
+    const Surfels& now = rebuilt.GetSurfels();
+    const Surfels& before = solver_->GetSurfels();
+    auto range = [](const Surfels& s, size_t p) {
+        size_t end = p + 1 < s.firstSurfel.size() ? s.firstSurfel[p + 1] : s.size();
+        return std::pair<size_t, size_t>(s.firstSurfel[p], end);
+    };
+    std::vector<uint8_t> keep(now.size(), 0);
+    std::vector<float> oldRows, rows;
+    size_t kept = 0;
+    if (applied_.primitives.size() == next.primitives.size() &&
+        before.firstSurfel.size() == now.firstSurfel.size()) {
+        for (size_t p = 0; p < next.primitives.size(); ++p) {
+            auto [b0, b1] = range(before, p);
+            auto [n0, n1] = range(now, p);
+            if (applied_.primitives[p].positions != next.primitives[p].positions ||
+                b1 - b0 != n1 - n0)
+                continue;
+            if (oldRows.empty()) {
+                oldRows = solver_->SurfelExitant();
+                if (oldRows.empty()) break;  // a solver without such state
+                rows.assign(oldRows.size() / before.size() * now.size(), 0.0f);
+            }
+            const size_t row = oldRows.size() / before.size();
+            std::copy(oldRows.begin() + b0 * row, oldRows.begin() + b1 * row,
+                      rows.begin() + n0 * row);
+            for (size_t s = n0; s < n1; ++s) keep[s] = 1, ++kept;
+        }
+    }
+    try {
+        if (kept) rebuilt.WarmStart(rows, keep);
+    } catch (const Error& e) {
+        return std::string("cold start (") + e.what() + ")";
+    }
+    return kept ? "warm start for " + std::to_string(kept) + " of " + std::to_string(now.size()) +
+                      " surfels"
+                : "cold start";
+}
+
 bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note) {
     if (rebuild_ || pending_.empty()) return false;
     for (const auto& p : pending_)
@@ -532,12 +576,15 @@ void Session::Run() {
         if (rebuild_ && rebuild_->done) {
             rebuild_->thread.join();
             if (rebuild_->result) {
+                lock.unlock();
+                std::string warm = WarmStart(*rebuild_->result, rebuild_->scene);
+                lock.lock();
                 solver_ = std::move(rebuild_->result);
                 applied_ = std::move(rebuild_->scene);
                 passTotals_.clear();
                 lastSurfels_.clear();  // a new solver: its first frame is never "converged"
                 ++rebuilds_;
-                note = "links rebuilt: " + rebuild_->what;
+                note = "links rebuilt: " + rebuild_->what + "; " + warm;
             } else {
                 // The edits were valid but the device could not take them (memory, say):
                 // report it and keep serving the scene as it was.

@@ -190,6 +190,9 @@ class Session {
     // an edit needs a link rebuild or one is running. A failed update is put in `note`.
     bool ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note);
     std::unique_ptr<Solver> BuildSolver(const Scene& scene) const;
+    // Starts `rebuilt` (built for `next`) from the current solver's solution on the surfels
+    // that did not move; returns what it did, for the frame note.
+    std::string WarmStart(Solver& rebuilt, const Scene& next);
 
     const std::string name_;
     const SessionSettings settings_;

@@ -97,6 +97,15 @@ class Solver {
     // new direct light, the environment re-binned; the iteration continues.
     virtual void UpdateLights(const Scene& scene) = 0;
     virtual SolverStats Stats() const = 0;
+    // Carrying a solution over a rebuild (a move rebuilds the links, Sec. 3.3): each surfel's
+    // exitant intensity, `Bins()` RGB rows after one another per surfel (empty when the
+    // solver has no such state), and a start from such rows for the surfels marked in `keep`
+    // (the others start from their emission). Rows from a solver with other bins or another
+    // surfel count are refused with penumbra::Error.
+    virtual std::vector<float> SurfelExitant() { return {}; }
+    virtual void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) {
+        (void)rows, (void)keep;
+    }
 };
 
 using ProgressFn = std::function<void(const std::string& stage, double fraction)>;

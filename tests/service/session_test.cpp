@@ -76,12 +76,14 @@ TEST(Session, MoveConvergesToAFreshBakeOfTheMovedScene) {
     FramePtr f = WaitFor(session, edit, &notes);
     ASSERT_TRUE(f);
     EXPECT_NE(notes.find("links rebuilt: moved blocker"), std::string::npos) << notes;
+    EXPECT_NE(notes.find("warm start for"), std::string::npos) << notes;
 
     SetNodeTransform(scene, node, moved);
     auto fresh = CreateSolver(scene, Settings().solver);
     fresh->Iterate(int(f->iterations));
-    // Same scene, same settings, same iteration count: the rebuilt session is a fresh bake
-    // (it restarts from the emission), so the floor matches to float round-off.
+    // Same scene, same settings, same iteration count: the rebuilt session (warm-started from
+    // the old solution on the surfels that did not move) has converged to what a fresh bake
+    // gives.
     auto floor = PrimitiveIrradiance(fresh->GetSurfels(), fresh->SurfelIrradiance(), scene, 0);
     ASSERT_EQ(floor.size(), f->irradiance[0].size());
     double worst = 0.0, peak = 0.0;
@@ -90,6 +92,58 @@ TEST(Session, MoveConvergesToAFreshBakeOfTheMovedScene) {
         peak = std::max(peak, double(glm::length(floor[i])));
     }
     EXPECT_LT(worst, 1e-3 * peak) << "max |session − fresh| " << worst << " of " << peak;
+}
+
+// The first frame after a move starts from the old solution where nothing moved (warm start):
+// it is closer to the converged answer than a cold start after as many iterations. Measured
+// on the floor after 2 iterations: 4.6% from converged warm, 18% cold. (After 1 iteration
+// both are ~47% off: the moved block starts from its emission, so its antiradiance, the
+// shadow it casts, appears only with the second iteration.)
+TEST(Session, WarmStartAfterAMoveBeatsAColdStart) {
+    // The Cornell box (light bounces many times) with two iterations per frame.
+    Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
+    SessionSettings settings = Settings();
+    settings.iterationsPerFrame = 2;
+    Session session("cornell", scene, settings);
+    WaitFor(session, 0);
+    int node = FindNode(scene, "tall_block");
+    glm::mat4 moved =
+        glm::translate(glm::mat4(1.0f), glm::vec3(0.05f, 0.0f, 0.03f)) * scene.nodes[node].local;
+    std::mutex m;
+    std::condition_variable cv;
+    FramePtr first;
+    uint64_t edit = 0;
+    int id = session.AddSubscriber([&](const FramePtr& f) {
+        std::lock_guard lock(m);
+        if (!first && edit && f->lastEdit >= edit) first = f;
+        cv.notify_all();
+    });
+    {
+        std::lock_guard lock(m);
+        edit = session.Submit(TransformEdit{"tall_block", moved});
+    }
+    {
+        std::unique_lock lock(m);
+        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(60), [&] { return first != nullptr; }));
+    }
+    session.RemoveSubscriber(id);
+    ASSERT_NE(first->note.find("warm start"), std::string::npos) << first->note;
+
+    SetNodeTransform(scene, node, moved);
+    auto error = [&](const std::vector<glm::vec3>& a, const std::vector<glm::vec3>& b) {
+        return testing::RelativeRms(a, b);
+    };
+    auto converged = CreateSolver(scene, Settings().solver);
+    converged->Iterate(40);
+    auto truth =
+        PrimitiveIrradiance(converged->GetSurfels(), converged->SurfelIrradiance(), scene, 0);
+    auto cold = CreateSolver(scene, Settings().solver);
+    cold->Iterate(int(first->iterations));
+    auto coldFloor = PrimitiveIrradiance(cold->GetSurfels(), cold->SurfelIrradiance(), scene, 0);
+    double warmError = error(first->irradiance[0], truth), coldError = error(coldFloor, truth);
+    std::printf("%s\nfirst frame after the move (%llu iterations): warm %.4f, cold %.4f\n",
+                first->note.c_str(), (unsigned long long)first->iterations, warmError, coldError);
+    EXPECT_LT(warmError, 0.5 * coldError);
 }
 
 TEST(Session, EditsAreValidatedOnSubmission) {

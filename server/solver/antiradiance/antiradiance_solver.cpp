@@ -147,6 +147,33 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
     if (gpu_) gpu_->UploadLeaves();  // the CPU back end reads model_.leaves directly
 }
 
+std::vector<float> AntiradianceSolver::SurfelExitant() {
+    const std::vector<float> table = cpu_ ? cpu_->Iex() : gpu_->ReadIex(false);
+    const size_t row = size_t(model_.Bins()) * 3;
+    std::vector<float> rows(model_.surfels.size() * row, 0.0f);
+    for (const LeafAttributes& leaf : model_.leaves)
+        std::copy_n(table.begin() + leaf.node * row, row, rows.begin() + leaf.surfel * row);
+    return rows;
+}
+
+void AntiradianceSolver::WarmStart(const std::vector<float>& rows,
+                                   const std::vector<uint8_t>& keep) {
+    const size_t row = size_t(model_.Bins()) * 3;
+    if (rows.size() != model_.surfels.size() * row || keep.size() != model_.surfels.size())
+        throw Error("warm start: the rows are for another surfel count or bin count");
+    std::vector<float> table = cpu_ ? cpu_->Iex() : gpu_->ReadIex(false);
+    for (const LeafAttributes& leaf : model_.leaves)
+        if (keep[leaf.surfel])
+            std::copy_n(rows.begin() + leaf.surfel * row, row, table.begin() + leaf.node * row);
+    cpu::PullPass(model_, table.data());  // clusters = Σ children again
+    if (cpu_) {
+        cpu_->SetIex(table);
+    } else {
+        gpu_->WriteIex(table, false);
+        gpu_->WriteIex(table, true);
+    }
+}
+
 std::vector<std::string> AntiradianceSolver::ValidationMessages() const {
     return gpu_ ? gpu_->ValidationMessages() : std::vector<std::string>{};
 }

@@ -26,6 +26,8 @@ class AntiradianceSolver : public Solver {
     void UpdateMaterials(const Scene& scene) override;
     void UpdateLights(const Scene& scene) override;
     SolverStats Stats() const override;
+    std::vector<float> SurfelExitant() override;
+    void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
 
     const AntiradianceModel& Model() const { return model_; }
     // Vulkan validation messages so far (settings.validation; none on the CPU back end).

@@ -33,6 +33,9 @@ class CpuBackend {
     void Iterate(LocalMode mode);
     const std::vector<float>& LeafIrradiance() const { return irradiance_; }
     size_t TableBytes() const;
+    // The I_ex table the next iteration reads, and replacing it (both ping-pong tables).
+    const std::vector<float>& Iex() const { return iex_[cur_]; }
+    void SetIex(const std::vector<float>& iex) { iex_[0] = iex_[1] = iex; }
     // Milliseconds per stage since construction: each stage's share of the threads' time,
     // scaled to the wall time of the fused walk.
     double msGlobal = 0, msPush = 0, msLocal = 0, msPull = 0;
