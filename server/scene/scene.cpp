@@ -26,7 +26,7 @@ void DeriveReflectance(Material& m) {
     } else {
         // Nearly uniform lobe: the metal's share reflects diffusely, the dielectric's 4% is
         // left out.
-        m.albedo = m.baseColor * (1.0f - metallic) + m.baseColor * metallic;
+        m.albedo = m.baseColor;  // (1 − m) · base + m · base
         m.specular = glm::vec3(0.0f);
         m.phongExponent = 0.0f;
     }

@@ -94,13 +94,13 @@ void AntiradianceSolver::CopyDirect(const Scene& scene) {
     // Glossy leaves reflect each light along its own mirror direction: per-light shares.
     lightPlaces_ = scene.lights;
     perLight_ = gpuDirect_ ? gpuDirect_->ReadPerLight(scene.lights.size()) : direct_->PerLight();
-    ReflectDirect();
+    if (ReflectDirect() && gpu_) gpu_->UploadGlossyDirect();
 }
 
-void AntiradianceSolver::ReflectDirect() {
-    if (model_.glossy.empty() || lightPlaces_.empty()) return;
+bool AntiradianceSolver::ReflectDirect() {
+    if (model_.glossy.empty() || lightPlaces_.empty()) return false;
     GlossyDirect(model_, lightPlaces_, perLight_);
-    if (gpu_) gpu_->UploadGlossy();
+    return true;
 }
 
 void AntiradianceSolver::UpdateLights(const Scene& scene) {
@@ -140,10 +140,13 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
         leaf.albedo = mat.albedo;
         leaf.emission = mat.emission;
     }
-    // Which leaves are glossy, and their lobes, may have changed with the materials.
-    BuildGlossy(model_, scene);
-    if (gpu_) gpu_->UploadGlossy();
-    ReflectDirect();
+    // Which leaves are glossy, and their lobes, may have changed with the materials (most
+    // edits, a dimmed emitter say, leave them as they are).
+    if (!GlossyMatches(model_, scene)) {
+        BuildGlossy(model_, scene);
+        ReflectDirect();
+        if (gpu_) gpu_->UploadGlossy();
+    }
     if (gpu_) gpu_->UploadLeaves();  // the CPU back end reads model_.leaves directly
 }
 

@@ -47,8 +47,9 @@ class AntiradianceSolver : public Solver {
     Environment environment_;  // as last binned into model_.environment
     // Host copies of E_d (and each light's share), from the direct stage's last update.
     void CopyDirect(const Scene& scene);
-    // The lights' direct light reflected by the glossy lobes (model_.glossyDirect).
-    void ReflectDirect();
+    // The lights' direct light reflected by the glossy lobes (model_.glossyDirect); false
+    // when there is nothing to reflect (no glossy leaves or no lights).
+    bool ReflectDirect();
     std::vector<PunctualLight> lightPlaces_;
     std::vector<float> perLight_;
     std::string deviceName_;

@@ -154,6 +154,20 @@ void BuildGlossy(AntiradianceModel& model, const Scene& scene) {
     model.glossyDirect.assign(model.glossy.size() * bins, glm::vec4(0.0f));
 }
 
+bool GlossyMatches(const AntiradianceModel& model, const Scene& scene) {
+    const float maxExponent = MaxLobeExponent(model.Bins());
+    for (const LeafAttributes& leaf : model.leaves) {
+        const Material& mat = scene.materials[model.surfels.materials[leaf.surfel]];
+        if (mat.Glossy() != ((leaf.flags & kLeafGlossy) != 0)) return false;
+        if (!mat.Glossy()) continue;
+        const GlossyLeaf& g = model.glossy[leaf.flags >> kGlossyShift];
+        if (g.specular != mat.specular ||
+            model.lobes[g.lobe].exponent != std::min(mat.phongExponent, maxExponent))
+            return false;
+    }
+    return true;
+}
+
 void GlossyDirect(AntiradianceModel& model, const std::vector<PunctualLight>& lights,
                   const std::vector<float>& perLight) {
     const int bins = model.Bins();

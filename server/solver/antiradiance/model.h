@@ -110,6 +110,9 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
 // (Re)builds the glossy data from the materials of `scene` (same geometry): flags, glossy,
 // glossyLeaves, mirror, lobes; glossyDirect is zeroed (GlossyDirect fills it).
 void BuildGlossy(AntiradianceModel& model, const Scene& scene);
+// Whether the glossy data already matches the materials of `scene` (same glossy leaves, F0
+// and lobes), so that BuildGlossy would change nothing.
+bool GlossyMatches(const AntiradianceModel& model, const Scene& scene);
 // glossyDirect from each light's direct irradiance at each leaf (`perLight`: lights ×
 // leaves, stride 4, light-major) and the lights' places.
 void GlossyDirect(AntiradianceModel& model, const std::vector<PunctualLight>& lights,

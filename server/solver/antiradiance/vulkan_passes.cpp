@@ -297,6 +297,10 @@ void VulkanAntiradiance::UploadDirect() { impl_->direct.Upload(impl_->m.leafDire
 
 void VulkanAntiradiance::UploadGlossy() { impl_->UploadGlossy(); }
 
+void VulkanAntiradiance::UploadGlossyDirect() {
+    impl_->glossyDirect->Upload(impl_->m.glossyDirect);
+}
+
 void VulkanAntiradiance::UploadEnvironment() { impl_->environment.Upload(impl_->m.environment); }
 
 gpu::Context& VulkanAntiradiance::Context() { return impl_->ctx; }

@@ -31,6 +31,8 @@ class VulkanAntiradiance {
     // Copies the model's glossy data (leaves, mirror bins, lobes, reflected direct light) to
     // the device again; buffers are remade when the data outgrew them.
     void UploadGlossy();
+    // Copies only the reflected direct light (after a light update; sizes unchanged).
+    void UploadGlossyDirect();
     // Copies the model's environment row (radiance per bin) to the device again.
     void UploadEnvironment();
     // The device and the per-leaf E_d buffer (vec4 per leaf) the local pass reads, for the
