@@ -54,6 +54,10 @@ service::Channel ChannelOf(fb::Channel c) {
 
 std::string Str(const flatbuffers::String* s) { return s ? s->str() : std::string(); }
 
+// An optional float field of an edit: negative means unchanged; NaN counts as given so that
+// the session refuses it.
+bool Given(float v) { return v >= 0.0f || std::isnan(v); }
+
 std::optional<glm::vec3> Vec(const fb::Vec3* v) {
     if (!v) return std::nullopt;
     return glm::vec3(v->x(), v->y(), v->z());
@@ -455,14 +459,12 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 service::LightEdit e;
                 e.light = Str(l->light());
                 e.color = Vec(l->color());
-                // Negative means "unchanged"; NaN is passed on to be refused.
-                auto given = [](float v) { return v >= 0.0f || std::isnan(v); };
-                if (given(l->intensity())) e.intensity = l->intensity();
+                if (Given(l->intensity())) e.intensity = l->intensity();
                 e.position = Vec(l->position());
                 e.direction = Vec(l->direction());
-                if (given(l->inner_cone())) e.innerCone = l->inner_cone();
-                if (given(l->outer_cone())) e.outerCone = l->outer_cone();
-                if (given(l->range())) e.range = l->range();
+                if (Given(l->inner_cone())) e.innerCone = l->inner_cone();
+                if (Given(l->outer_cone())) e.outerCone = l->outer_cone();
+                if (Given(l->range())) e.range = l->range();
                 SendAck(id, session->Submit(e));
                 return;
             }
@@ -473,10 +475,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 e.material = Str(s->material());
                 e.albedo = Vec(s->albedo());
                 e.emission = Vec(s->emission());
-                // Negative: unchanged; NaN is passed on to be refused.
-                auto given = [](float v) { return v >= 0.0f || std::isnan(v); };
-                if (given(s->roughness())) e.roughness = s->roughness();
-                if (given(s->metallic())) e.metallic = s->metallic();
+                if (Given(s->roughness())) e.roughness = s->roughness();
+                if (Given(s->metallic())) e.metallic = s->metallic();
                 SendAck(id, session->Submit(e));
                 return;
             }
@@ -491,8 +491,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
                         service::ErrorKind::kInvalidArgument,
                         "SetEnvironment: `off` and a new sky cannot both be given");
                 if (s->off()) e.replace = Environment{};
-                if (s->intensity() >= 0.0f || std::isnan(s->intensity()))
-                    e.intensity = s->intensity();
+                if (Given(s->intensity())) e.intensity = s->intensity();
                 if (s->set_rotation()) e.rotation = s->rotation();
                 // Reading a sky map takes a while: on the blocking pool.
                 Blocking(
