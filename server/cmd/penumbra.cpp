@@ -384,6 +384,8 @@ int main(int argc, char** argv) {
                      "auto|on|off: surfaces that do not bound a solid also block light arriving "
                      "at their backs (auto: on with an environment)")
         ->capture_default_str();
+    bake->add_flag("--motion-links", settings.motionLinks,
+                   "link dynamic nodes for their motion bounds, as the service does (Sec. 3.3)");
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
 

@@ -40,14 +40,21 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--ready-file", readyFile,
                    "write the bound addresses here, one per line, once listening");
+    std::string moves = "bounds";
+    app.add_option("--moves", moves,
+                   "how moves of dynamic nodes are taken: bounds (links built for the motion "
+                   "bounds, updated in place; Sec. 3.3) or rebuild (every move rebuilds the links)")
+        ->capture_default_str()
+        ->check(CLI::IsMember({"bounds", "rebuild"}));
     app.add_flag("-q,--quiet", quiet, "no log lines on stderr");
     CLI11_PARSE(app, argc, argv);
     if (listen.empty()) listen.push_back("tcp://127.0.0.1:7450");
     serviceLimits.maxUploadBytes = netLimits.maxFrameBytes;
 
     try {
-        SolverSettings defaults;
+        SolverSettings defaults = service::ServiceDefaults();
         defaults.device = ParseDevice(device);
+        defaults.motionLinks = moves == "bounds";
         service::Service service(sceneRoot, serviceLimits, defaults);
         asio::io_context io;
         net::Server server(io, service, netLimits);

@@ -35,7 +35,7 @@ namespace {
 class EmbeddedServer {
   public:
     EmbeddedServer(const fs::path& sceneRoot, const std::string& device) {
-        SolverSettings defaults;
+        SolverSettings defaults = service::ServiceDefaults();
         defaults.device = ParseDevice(device);
         service_ =
             std::make_unique<service::Service>(sceneRoot, service::ServiceLimits{}, defaults);

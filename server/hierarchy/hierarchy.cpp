@@ -13,25 +13,39 @@ namespace {
 struct Builder {
     const Surfels& s;
     Hierarchy& h;
-    std::vector<uint32_t> ids;
+    std::vector<uint32_t> ids;  // sorted by group: a group is a contiguous range
+
+    // Moving groups: each surfel's centroid and normal in its group's own frame (frames[g − 1]
+    // maps it to the world as built), rounded so that poses give the same keys.
+    const std::vector<glm::mat4>* frames = nullptr;
+    std::vector<glm::vec3> keyPos, keyNormal;
+
+    uint32_t Group(uint32_t id) const { return s.groups.empty() ? 0 : s.groups[id]; }
 
     // Builds the subtree over ids[begin, end) and returns its node index.
     uint32_t Build(size_t begin, size_t end, uint32_t parent, uint32_t depth) {
         uint32_t index = static_cast<uint32_t>(h.nodes.size());
         h.nodes.emplace_back();
+        const uint32_t group =
+            Group(ids[begin]) == Group(ids[end - 1]) ? Group(ids[begin]) : kMixedGroup;
+        // A moving group is clustered in its own frame: the same clusters whatever its pose.
+        const bool own = group != 0 && group != kMixedGroup && !keyPos.empty();
+        const std::vector<glm::vec3>& pos = own ? keyPos : s.centroids;
+        const std::vector<glm::vec3>& nrm = own ? keyNormal : s.normals;
         glm::vec3 lo(1e30f), hi(-1e30f), nlo(2.0f), nhi(-2.0f), nsum(0.0f);
         float area = 0.0f, maxDisc = 0.0f;
         for (size_t i = begin; i < end; ++i) {
             uint32_t id = ids[i];
-            lo = glm::min(lo, s.centroids[id]);
-            hi = glm::max(hi, s.centroids[id]);
-            nlo = glm::min(nlo, s.normals[id]);
-            nhi = glm::max(nhi, s.normals[id]);
+            lo = glm::min(lo, pos[id]);
+            hi = glm::max(hi, pos[id]);
+            nlo = glm::min(nlo, nrm[id]);
+            nhi = glm::max(nhi, nrm[id]);
             nsum += s.areas[id] * s.normals[id];
             area += s.areas[id];
             maxDisc = std::max(maxDisc, std::sqrt(s.areas[id] / std::numbers::pi_v<float>));
         }
         glm::vec3 centre = 0.5f * (lo + hi);
+        if (own) centre = glm::vec3((*frames)[group - 1] * glm::vec4(centre, 1.0f));
         float radius = 0.0f;
         for (size_t i = begin; i < end; ++i)
             radius = std::max(radius, glm::length(s.centroids[ids[i]] - centre));
@@ -45,6 +59,7 @@ struct Builder {
         node.parent = parent;
         node.depth = depth;
         node.surfel = kNoSurfel;
+        node.group = group;
         if (end - begin == 1) {
             node.surfel = ids[begin];
             node.normal = s.normals[ids[begin]];
@@ -75,12 +90,21 @@ struct Builder {
             if (ext[a] > best) best = ext[a], axis = a;
             if (next[a] > best) best = next[a], axis = 3 + a;
         }
-        auto key = [&](uint32_t id) {
-            return axis < 3 ? s.centroids[id][axis] : s.normals[id][axis - 3];
-        };
+        auto key = [&](uint32_t id) { return axis < 3 ? pos[id][axis] : nrm[id][axis - 3]; };
         size_t mid = begin + (end - begin) / 2;
-        std::nth_element(ids.begin() + begin, ids.begin() + mid, ids.begin() + end,
-                         [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+        if (node.group == kMixedGroup) {
+            // Separate the groups: split at the group boundary nearest the middle.
+            size_t best = end;
+            for (size_t i = begin + 1; i < end; ++i)
+                if (Group(ids[i]) != Group(ids[i - 1]) &&
+                    (best == end ||
+                     (i > mid ? i - mid : mid - i) < (best > mid ? best - mid : mid - best)))
+                    best = i;
+            mid = best;
+        } else {
+            std::nth_element(ids.begin() + begin, ids.begin() + mid, ids.begin() + end,
+                             [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+        }
         h.nodes[index] = node;
         Build(begin, mid, index, depth + 1);
         Build(mid, end, index, depth + 1);
@@ -93,12 +117,41 @@ struct Builder {
 
 }  // namespace
 
-Hierarchy BuildHierarchy(const Surfels& surfels) {
+Hierarchy BuildHierarchy(const Surfels& surfels, const std::vector<glm::mat4>& frames) {
     Hierarchy h;
-    Builder b{surfels, h, {}};
+    Builder b{surfels, h, {}, nullptr, {}, {}};
+    if (!frames.empty() && !surfels.groups.empty()) {
+        // Keys rounded to 2⁻¹⁶ of the group's extent: a pose's rounding noise must not
+        // reorder surfels that lie on one grid line (most of them, on a refined box).
+        b.frames = &frames;
+        b.keyPos = surfels.centroids;
+        b.keyNormal = surfels.normals;
+        std::vector<glm::mat4> inverse;
+        for (const glm::mat4& f : frames) inverse.push_back(glm::inverse(f));
+        std::vector<float> extent(frames.size(), 0.0f);
+        for (size_t i = 0; i < surfels.size(); ++i) {
+            uint32_t g = surfels.groups[i];
+            if (!g) continue;
+            b.keyPos[i] = glm::vec3(inverse[g - 1] * glm::vec4(surfels.centroids[i], 1.0f));
+            b.keyNormal[i] =
+                glm::normalize(glm::transpose(glm::mat3(frames[g - 1])) * surfels.normals[i]);
+            extent[g - 1] = std::max(extent[g - 1], glm::length(b.keyPos[i]));
+        }
+        for (size_t i = 0; i < surfels.size(); ++i) {
+            uint32_t g = surfels.groups[i];
+            if (!g) continue;
+            float q = std::max(extent[g - 1], 1e-6f) / 65536.0f;
+            b.keyPos[i] = glm::round(b.keyPos[i] / q) * q;
+            b.keyNormal[i] = glm::round(b.keyNormal[i] * 65536.0f) / 65536.0f;
+        }
+    }
     for (uint32_t i = 0; i < surfels.size(); ++i)
         if (surfels.areas[i] > 0.0f) b.ids.push_back(i);
     if (b.ids.empty()) throw Error("the scene has no surface area to light");
+    if (!surfels.groups.empty())
+        std::stable_sort(b.ids.begin(), b.ids.end(), [&](uint32_t x, uint32_t y) {
+            return surfels.groups[x] < surfels.groups[y];
+        });
     h.nodes.reserve(2 * b.ids.size());
     b.Build(0, b.ids.size(), kNoParent, 0);
 

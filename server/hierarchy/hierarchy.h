@@ -12,6 +12,8 @@ namespace penumbra {
 
 inline constexpr uint32_t kNoSurfel = 0xffffffffu;
 inline constexpr uint32_t kNoParent = 0xffffffffu;
+// HierarchyNode::group of a cluster over more than one motion group (Surfels::groups).
+inline constexpr uint32_t kMixedGroup = 0xffffffffu;
 
 struct HierarchyNode {
     glm::vec3 center;  // bounding sphere of the members' discs
@@ -27,6 +29,9 @@ struct HierarchyNode {
     // Some member occludes from both sides (Surfels::twoSided): light arriving at its back
     // must be gathered (no Fig. 7 culling) so that it can be sent on as antiradiance.
     bool twoSided;
+    // Motion group of every member (0: static), or kMixedGroup: such clusters sit above the
+    // groups' subtrees, change shape when a group moves and are never linked.
+    uint32_t group;
 
     bool IsLeaf() const { return surfel != kNoSurfel; }
 };
@@ -42,7 +47,10 @@ struct Hierarchy {
     size_t size() const { return nodes.size(); }
 };
 
-// Binary hierarchy over the surfels with positive area; one surfel per leaf.
-Hierarchy BuildHierarchy(const Surfels& surfels);
+// Binary hierarchy over the surfels with positive area; one surfel per leaf. With motion
+// groups (Surfels::groups), the top splits separate the groups first, so every node below
+// them holds one group only; `frames[g − 1]` (group g's world matrix) clusters group g in
+// its own frame, so that its clusters are the same at every pose (Sec. 3.3 moves).
+Hierarchy BuildHierarchy(const Surfels& surfels, const std::vector<glm::mat4>& frames = {});
 
 }  // namespace penumbra

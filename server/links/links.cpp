@@ -30,6 +30,25 @@ struct Refiner {
     float threshold;          // oracle × ω_bin, for the sender
     float receiverThreshold;  // oracle × receiverOracle × ω_bin
     bool paper;               // LinkOracle::kPaper
+    const std::vector<MotionBounds>& motion;
+
+    // Sec. 3.3: the smallest distance the centres of `r` and `s` can come to while their
+    // groups move within their bounds (a static node's centre stays where it is; a moving
+    // cluster's centre stays inside its group's box, which holds all its members).
+    float WorstDistance(const HierarchyNode& r, const HierarchyNode& s) const {
+        glm::vec3 lo[2], hi[2];
+        const HierarchyNode* n[2] = {&r, &s};
+        for (int i = 0; i < 2; ++i) {
+            if (n[i]->group == 0) {
+                lo[i] = hi[i] = n[i]->center;
+            } else {
+                lo[i] = motion[n[i]->group - 1].min;
+                hi[i] = motion[n[i]->group - 1].max;
+            }
+        }
+        glm::vec3 gap = glm::max(glm::vec3(0.0f), glm::max(lo[0] - hi[1], lo[1] - hi[0]));
+        return glm::length(gap);
+    }
 
     template <typename F>
     void Children(uint32_t n, F&& f) const {
@@ -67,11 +86,30 @@ struct Refiner {
             Children(r, [&](uint32_t a) { Children(s, [&](uint32_t b) { pair(a, b); }); });
             return;
         }
+        // Clusters over several motion groups change shape as the groups move: never link
+        // them, split them (they are only the few nodes above the groups' subtrees).
+        if (R.group == kMixedGroup || S.group == kMixedGroup) {
+            bool splitSender =
+                S.group == kMixedGroup && (R.group != kMixedGroup || S.radius >= R.radius);
+            if (splitSender)
+                Children(s, [&](uint32_t b) { pair(r, b); });
+            else
+                Children(r, [&](uint32_t a) { pair(a, s); });
+            return;
+        }
         glm::vec3 d = S.center - R.center;
         float dist = glm::length(d);
-        if (Culled(R, S, d, dist)) return;
+        // A pair whose ends move relative to each other (Sec. 3.3) is linked for the worst
+        // case over the motion bounds: the closest the ends can come, and no Fig. 7 culling
+        // (they may turn to face each other); a back-facing receiver's form factor is zero
+        // while it faces away (MakeLink).
+        const bool moving = R.group != S.group;
+        if (moving)
+            dist = WorstDistance(R, S);
+        else if (Culled(R, S, d, dist))
+            return;
         if (!(R.IsLeaf() && S.IsLeaf())) {
-            float dist2 = dist * dist;
+            float dist2 = std::max(dist * dist, 1e-20f);
             bool overlap = dist <= R.radius + S.radius;
             // Oracle: solid angle of sender (and receiver) against the bin's ω_bin. The
             // conservative mode bounds members by the bounding sphere, refines overlapping
@@ -80,8 +118,8 @@ struct Refiner {
             float rs = paper ? S.discRadius : S.radius;
             float omegaS = pi * rs * rs / dist2;
             float omegaR = pi * R.radius * R.radius / dist2;
-            if ((!paper && overlap) || omegaS > threshold ||
-                (!paper && omegaR > receiverThreshold)) {
+            if ((!paper && overlap) || (moving && dist <= R.radius + S.radius) ||
+                omegaS > threshold || (!paper && omegaR > receiverThreshold)) {
                 bool splitSender = R.IsLeaf() || (!S.IsLeaf() && S.radius >= R.radius);
                 if (splitSender)
                     Children(s, [&](uint32_t b) { pair(r, b); });
@@ -232,7 +270,8 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
                     near,
                     settings.oracle * dirs.BinSolidAngle(),
                     settings.oracle * settings.receiverOracle * dirs.BinSolidAngle(),
-                    settings.mode == LinkOracle::kPaper};
+                    settings.mode == LinkOracle::kPaper,
+                    settings.motion};
     std::unique_ptr<tbb::global_control> limit;
     if (settings.threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -293,6 +332,14 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
                       return a.bin != b.bin ? a.bin < b.bin : a.sender < b.sender;
                   });
     });
+    if (!settings.motion.empty()) {
+        for (uint32_t r = 0; r < h.size(); ++r)
+            for (uint32_t i = links.offsets[r]; i < links.offsets[r + 1]; ++i)
+                if (h.nodes[r].group != 0 || h.nodes[links.links[i].sender].group != 0) {
+                    links.dynamic.push_back(i);
+                    links.dynamicReceivers.push_back(r);
+                }
+    }
     links.buildSeconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return links;

@@ -29,6 +29,12 @@ enum class LinkOracle {
     kPaper,         // Sec. 3.2 as written: the sender's area-based solid angle only
 };
 
+// Where a motion group's surfaces may go (Sec. 3.3), world space: links between a group and
+// anything else are refined for the worst case over this box.
+struct MotionBounds {
+    glm::vec3 min{0.0f}, max{0.0f};
+};
+
 struct LinkSettings {
     LinkOracle mode = LinkOracle::kConservative;
     // Refine while sender or receiver subtends more than `oracle` × ω_bin.
@@ -37,12 +43,18 @@ struct LinkSettings {
     // ω_bin (a large receiver takes one direction for all its members).
     float receiverOracle = 1.0f;
     int threads = 0;  // 0: all cores
+    // Motion bounds of group g at motion[g − 1] (Surfels::groups); empty: everything static.
+    std::vector<MotionBounds> motion;
 };
 
 struct Links {
     std::vector<uint32_t> offsets;  // receiver r's links are [offsets[r], offsets[r+1])
     std::vector<Link> links;
     double buildSeconds = 0.0;
+    // Links touching a motion group (Surfels::groups), as indices into `links`, and their
+    // receivers: after a move their form factors and bins are recomputed (Sec. 3.3).
+    std::vector<uint32_t> dynamic;
+    std::vector<uint32_t> dynamicReceivers;
 
     size_t Count() const { return links.size(); }
 };

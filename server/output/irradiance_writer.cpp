@@ -51,6 +51,12 @@ nlohmann::json StatsToJson(const SolverStats& s) {
     j["two_sided_elements"] = s.twoSidedElements;
     j["glossy_elements"] = s.glossyElements;
     j["glossy_lobes"] = s.glossyLobes;
+    if (s.motionGroups > 0)
+        j["motion"] = {{"groups", s.motionGroups},
+                       {"links", s.motionLinks},
+                       {"moves", s.geometryUpdates},
+                       {"links_updated", s.linksUpdated},
+                       {"last_move_ms", s.msGeometry}};
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

@@ -1,6 +1,7 @@
 // Longest-edge bisection refinement of a Scene into surfels with areas and normals.
 #include "scene/surfels.h"
 
+#include <cmath>
 #include <unordered_map>
 
 #include "base/check.h"
@@ -21,6 +22,22 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             out.areas.push_back(0.0f);
             out.materials.push_back(prim.material);
         }
+        // A dynamic node's primitives are split by their own-space edges, measured with the
+        // metric AᵀA of the node's world matrix rounded to 2⁻²⁰ of its trace: the same splits
+        // at every pose (world-space lengths of equal edges differ by rounding noise from pose
+        // to pose, and ties would break differently), so a move keeps the surfels (Sec. 3.3).
+        const bool own = prim.nodeIndex >= 0 && scene.nodes[prim.nodeIndex].dynamic &&
+                         prim.objectPositions.size() == prim.positions.size();
+        std::vector<glm::vec3> object;  // own-space positions of this primitive's surfels
+        glm::mat3 metric(1.0f);
+        if (own) {
+            object = prim.objectPositions;
+            const glm::mat3 a(scene.nodes[prim.nodeIndex].world);
+            metric = glm::transpose(a) * a;
+            const float q = (metric[0][0] + metric[1][1] + metric[2][2]) / 1048576.0f;
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j) metric[i][j] = std::round(metric[i][j] / q) * q;
+        }
         // Edge midpoint cache keyed by the sorted surfel pair.
         std::unordered_map<uint64_t, uint32_t> midpoints;
         auto midpoint = [&](uint32_t a, uint32_t b) {
@@ -30,6 +47,7 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             uint32_t m = static_cast<uint32_t>(out.positions.size());
             moments.emplace_back(0.0f);
             out.positions.push_back(0.5f * (out.positions[a] + out.positions[b]));
+            if (own) object.push_back(0.5f * (object[a - base] + object[b - base]));
             glm::vec3 n = out.normals[a] + out.normals[b];
             float len = glm::length(n);
             out.normals.push_back(len > 1e-6f ? n / len : out.normals[a]);
@@ -50,8 +68,13 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
                                     out.positions[tri[2]]};
             float e[3];
             for (int k = 0; k < 3; ++k) {
-                glm::vec3 d = p[(k + 1) % 3] - p[k];
-                e[k] = glm::dot(d, d);
+                if (own) {
+                    glm::vec3 d = object[tri[(k + 1) % 3] - base] - object[tri[k] - base];
+                    e[k] = glm::dot(d, metric * d);
+                } else {
+                    glm::vec3 d = p[(k + 1) % 3] - p[k];
+                    e[k] = glm::dot(d, d);
+                }
             }
             int longest = e[0] >= e[1] ? (e[0] >= e[2] ? 0 : 2) : (e[1] >= e[2] ? 1 : 2);
             if (e[longest] > maxEdge2) {

@@ -26,6 +26,10 @@ struct Surfels {
     // at its front. Set for surfaces that do not close a solid (a wall of one-sided quads),
     // whose back can be reached by light, e.g. the sky (solver/antiradiance/model.h).
     std::vector<uint8_t> twoSided;
+    // Per surfel (empty: all static): its rigid motion group, 0 for static geometry, g > 0
+    // for the surfaces of one dynamic node that move together (Sec. 3.3; the antiradiance
+    // model's MotionGroup g − 1). The hierarchy keeps groups in subtrees of their own.
+    std::vector<uint32_t> groups;
 
     size_t size() const { return positions.size(); }
 };

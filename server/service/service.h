@@ -39,9 +39,19 @@ struct LoadResult {
     bool reused = false;
 };
 
+// The solver settings a service starts from: the library's defaults, with the links of
+// dynamic nodes built for their motion bounds (SolverSettings::motionLinks), so that moves
+// inside the bounds update links in place instead of rebuilding them.
+inline SolverSettings ServiceDefaults() {
+    SolverSettings s;
+    s.motionLinks = true;
+    return s;
+}
+
 class Service {
   public:
-    Service(std::filesystem::path sceneRoot, ServiceLimits limits, SolverSettings defaults = {});
+    Service(std::filesystem::path sceneRoot, ServiceLimits limits,
+            SolverSettings defaults = ServiceDefaults());
     ~Service();
 
     // Loads (or joins) the scene's session. Blocks while the solver builds. Throws

@@ -392,6 +392,7 @@ nlohmann::json Session::StatsJson() const {
     j["last_applied_edit"] = appliedEdit_;
     j["pending_edits"] = pending_.size();
     j["link_rebuilds"] = rebuilds_;
+    j["link_updates"] = linkUpdates_;
     j["rebuilding"] = rebuild_ != nullptr;
     j["subscribers"] = subscribers_.size();
     j["converged"] = converged_;
@@ -528,13 +529,18 @@ std::string Session::WarmStart(Solver& rebuilt, const Scene& next) {
 
 bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note) {
     if (rebuild_ || pending_.empty()) return false;
-    for (const auto& p : pending_)
-        if (p.moves) return false;
     Scene next = applied_;
-    bool lights = false;
+    bool lights = false, moves = false;
+    std::string moved;
     for (auto& p : pending_) {
         p.apply(next);
         lights = lights || p.lights;
+        if (p.moves) moves = true, moved += (moved.empty() ? "" : ", ") + p.what;
+    }
+    // Moves inside the motion bounds update the links in place (Sec. 3.3); others rebuild.
+    if (moves) {
+        rebuildReason_ = solver_->GeometryMismatch(next);
+        if (!rebuildReason_.empty()) return false;
     }
     const uint64_t last = pending_.back().id;
     const auto received = pending_.back().received;
@@ -542,14 +548,24 @@ bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string&
     editWaiting_ = false;
     applied_ = std::move(next);
     lock.unlock();
-    std::string failure;
+    std::string failure, done;
     try {
+        if (moves) {
+            solver_->UpdateGeometry(applied_);
+            SolverStats st = solver_->Stats();
+            done = moved + ": links updated in place (" + std::to_string(st.linksUpdated) +
+                   " so far, this move " + std::to_string(int(st.msGeometry + 0.5)) + " ms)";
+        }
         solver_->UpdateMaterials(applied_);
         if (lights) solver_->UpdateLights(applied_);  // one shadow pass
     } catch (const std::exception& e) {
-        failure = std::string("light update failed: ") + e.what();
+        failure = std::string(moves ? "update failed: " : "light update failed: ") + e.what();
     }
     lock.lock();
+    if (!done.empty()) {
+        ++linkUpdates_;
+        note += (note.empty() ? "" : "; ") + done;
+    }
     if (!failure.empty()) {
         lastError_ = failure;
         note += (note.empty() ? "" : "; ") + failure;
@@ -585,6 +601,7 @@ void Session::Run() {
                 lastSurfels_.clear();  // a new solver: its first frame is never "converged"
                 ++rebuilds_;
                 note = "links rebuilt: " + rebuild_->what + "; " + warm;
+                if (!rebuild_->reason.empty()) note += " (" + rebuild_->reason + ")";
             } else {
                 // The edits were valid but the device could not take them (memory, say):
                 // report it and keep serving the scene as it was.
@@ -617,6 +634,8 @@ void Session::Run() {
             rebuild_->lastEdit = pending_.back().id;
             rebuild_->received = pending_.back().received;
             rebuild_->what = what;
+            rebuild_->reason = rebuildReason_;
+            rebuildReason_.clear();
             pending_.clear();
             editWaiting_ = false;
             Rebuild* r = rebuild_.get();

@@ -171,7 +171,8 @@ class Session {
         uint64_t lastEdit = 0;
         std::chrono::steady_clock::time_point received;
         std::string what;
-        bool done = false;  // set by the thread, under mutex_
+        std::string reason;  // why the move could not update the links in place
+        bool done = false;   // set by the thread, under mutex_
         std::unique_ptr<Solver> result;
         std::string error;
     };
@@ -219,7 +220,8 @@ class Session {
     bool converged_ = false;
     int framesSinceEdit_ = 0;
     std::vector<glm::vec3> lastSurfels_;
-    uint64_t frames_ = 0, rebuilds_ = 0;
+    uint64_t frames_ = 0, rebuilds_ = 0, linkUpdates_ = 0;
+    std::string rebuildReason_;  // Solver::GeometryMismatch of the moves about to rebuild
     std::deque<std::chrono::steady_clock::time_point> recentFrames_;  // for fps
     std::vector<double> passTotals_;                                  // ms, as of last frame
     std::shared_ptr<const std::vector<PrimitiveKey>> layout_;

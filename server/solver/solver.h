@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "base/check.h"
 #include "scene/scene.h"
 #include "scene/surfels.h"
 
@@ -39,6 +40,12 @@ struct SolverSettings {
     bool validation = false;      // Vulkan validation layers (tests turn them on)
     int shadowMapSize = 0;        // texels per side of each shadow map; 0: from the element size
     BackOcclusion backOcclusion = BackOcclusion::kAuto;
+    // Sec. 3.3: build the links of dynamic nodes (extras.penumbra.dynamic) for the worst case
+    // over their motion bounds, so that a move recomputes only the form factors and bins of
+    // their links (Solver::UpdateGeometry) instead of rebuilding every link. Costs more links
+    // (every pair the bounds let come close is linked at the finest level); the service
+    // turns it on, a one-off bake has no use for it.
+    bool motionLinks = false;
 };
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
@@ -74,6 +81,11 @@ struct SolverStats {
     size_t twoSidedElements = 0;       // elements that occlude from both sides
     size_t glossyElements = 0;         // elements with a glossy lobe (Material::Glossy)
     size_t glossyLobes = 0;            // distinct discretised lobes
+    size_t motionGroups = 0;           // dynamic nodes linked for their motion bounds (Sec. 3.3)
+    size_t motionLinks = 0;            // links touching them, recomputed when they move
+    size_t geometryUpdates = 0;        // moves taken by UpdateGeometry
+    size_t linksUpdated = 0;           // links recomputed by those moves, in all
+    double msGeometry = 0.0;           // the last move: links, leaves, uploads, shadow maps
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };
@@ -97,6 +109,17 @@ class Solver {
     // new direct light, the environment re-binned; the iteration continues.
     virtual void UpdateLights(const Scene& scene) = 0;
     virtual SolverStats Stats() const = 0;
+    // Sec. 3.3, moving objects: why `scene` (the scene this solver was built from, dynamic
+    // nodes moved) cannot be taken by UpdateGeometry, or empty when it can: the solver was
+    // built with motionLinks, every moved node moved rigidly and stays inside its bounds.
+    virtual std::string GeometryMismatch(const Scene& scene) const {
+        (void)scene;
+        return "this solver has no motion links";
+    }
+    // Moves the surfaces of the moved dynamic nodes to their places in `scene` and recomputes
+    // the links touching them; the iteration continues from the current solution. Call only
+    // when GeometryMismatch is empty (throws penumbra::Error otherwise).
+    virtual void UpdateGeometry(const Scene& scene) { throw Error(GeometryMismatch(scene)); }
     // Carrying a solution over a rebuild (a move rebuilds the links, Sec. 3.3): each surfel's
     // exitant intensity, `Bins()` RGB rows after one another per surfel (empty when the
     // solver has no such state), and a start from such rows for the surfels marked in `keep`

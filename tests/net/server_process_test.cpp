@@ -234,11 +234,13 @@ TEST(ServerProcess, TwoClientsOneEditsOneWatchesOverTcpAndUnix) {
         << "floor where the block stood: " << oldBefore << " → " << oldAfter;
     EXPECT_LT(newAfter, 0.8f * newBefore)
         << "floor under the block's new place: " << newBefore << " → " << newAfter;
-    // Some frame on the way said the links were rebuilt.
+    // Some frame on the way said the move updated the links in place (inside the block's
+    // motion bounds, Sec. 3.3: no rebuild).
     bool noted = false;
     {
         std::lock_guard lock(watch.m);
-        for (const auto& f : watch.frames) noted = noted || f.note.find("links rebuilt") == 0;
+        for (const auto& f : watch.frames)
+            noted = noted || f.note.find("moved tall_block: links updated in place") == 0;
     }
     EXPECT_TRUE(noted);
 
@@ -349,6 +351,7 @@ TEST(ServerProcess, EnvironmentAtLoad) {
     scene.environment = ConstantEnvironment(glm::vec3(1.0f));
     scene.environment.intensity = 0.5f;
     SolverSettings s;
+    s.motionLinks = true;  // as the server builds scenes (service::ServiceDefaults)
     s.bins = 64;
     s.elementSize = 0.06f;
     s.device = DeviceChoice::kCpu;
@@ -384,6 +387,7 @@ TEST(ServerProcess, SkyChangedInALoadedSession) {
         scene.environment = ConstantEnvironment(glm::vec3(0.5f, 0.6f, 1.0f));
         scene.environment.intensity = intensity;
         SolverSettings s;
+        s.motionLinks = true;  // as the server builds scenes (service::ServiceDefaults)
         s.bins = 64;
         s.elementSize = 0.06f;
         s.device = DeviceChoice::kCpu;

@@ -35,24 +35,56 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
     }
     if (!scene.lights.empty()) {
         if (progress) progress("shadow maps", 0.0);
-        std::vector<uint32_t> order;
-        for (const LeafAttributes& leaf : model_.leaves) order.push_back(leaf.surfel);
-        auto receivers = direct::MakeReceivers(model_.surfels, order);
         mapSize_ = settings.shadowMapSize > 0
                        ? settings.shadowMapSize
                        : direct::AutoMapSize(scene.Diameter(), model_.elementSize);
-        if (gpu_)
-            gpuDirect_ = std::make_unique<direct::VulkanDirect>(
-                gpu_->Context(), scene, std::move(receivers), gpu_->DirectBuffer(), mapSize_);
-        else
-            direct_ = std::make_unique<direct::CpuDirect>(scene, std::move(receivers), mapSize_);
         lights_ = static_cast<int>(scene.lights.size());
-        CopyDirect(scene);
+        MakeDirect(scene);
     }
     setupSeconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 AntiradianceSolver::~AntiradianceSolver() = default;
+
+void AntiradianceSolver::MakeDirect(const Scene& scene) {
+    std::vector<uint32_t> order;
+    for (const LeafAttributes& leaf : model_.leaves) order.push_back(leaf.surfel);
+    auto receivers = direct::MakeReceivers(model_.surfels, order);
+    gpuDirect_.reset();
+    direct_.reset();
+    if (gpu_)
+        gpuDirect_ = std::make_unique<direct::VulkanDirect>(
+            gpu_->Context(), scene, std::move(receivers), gpu_->DirectBuffer(), mapSize_);
+    else
+        direct_ = std::make_unique<direct::CpuDirect>(scene, std::move(receivers), mapSize_);
+    CopyDirect(scene);
+}
+
+std::string AntiradianceSolver::GeometryMismatch(const Scene& scene) const {
+    if (scene.lights.size() != static_cast<size_t>(lights_))
+        return "the number of punctual lights changed";
+    // Back occlusion `auto` follows whether there is a sky, and is decided at the build.
+    if (settings_.backOcclusion == BackOcclusion::kAuto &&
+        scene.environment.Present() == model_.surfels.twoSided.empty())
+        return "a sky appeared or went, which changes back occlusion";
+    return MotionMismatch(model_, scene);
+}
+
+void AntiradianceSolver::UpdateGeometry(const Scene& scene) {
+    if (std::string why = GeometryMismatch(scene); !why.empty()) throw Error(why);
+    auto start = std::chrono::steady_clock::now();
+    linksUpdated_ += MoveGroups(model_, scene);
+    ++geometryUpdates_;
+    if (gpu_) {
+        gpu_->UploadLinks();
+        gpu_->UploadLeaves();
+        if (!model_.glossy.empty()) gpu_->UploadGlossy();
+    }
+    // Shadow maps and receivers follow the moved surfaces; the sky needs nothing.
+    if (lights_) MakeDirect(scene);
+    msGeometry_ =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
 
 void AntiradianceSolver::Iterate(int n) {
     if (n < 0) throw Error("iteration count must not be negative");
@@ -206,6 +238,11 @@ SolverStats AntiradianceSolver::Stats() const {
         s.twoSidedElements += leaf.flags & kLeafTwoSided;
     s.glossyElements = model_.glossy.size();
     s.glossyLobes = model_.lobes.size();
+    s.motionGroups = model_.motion.size();
+    s.motionLinks = model_.links.dynamic.size();
+    s.geometryUpdates = geometryUpdates_;
+    s.linksUpdated = linksUpdated_;
+    s.msGeometry = msGeometry_;
     if (direct_ || gpuDirect_) {
         s.shadowViews = gpuDirect_ ? gpuDirect_->views : direct_->views;
         s.shadowMapSize = mapSize_;

@@ -26,6 +26,8 @@ class AntiradianceSolver : public Solver {
     void UpdateMaterials(const Scene& scene) override;
     void UpdateLights(const Scene& scene) override;
     SolverStats Stats() const override;
+    std::string GeometryMismatch(const Scene& scene) const override;
+    void UpdateGeometry(const Scene& scene) override;
     std::vector<float> SurfelExitant() override;
     void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
 
@@ -56,6 +58,11 @@ class AntiradianceSolver : public Solver {
     int iterations_ = 0;
     double msTotal_ = 0.0;
     double setupSeconds_ = 0.0;
+    // Moves taken by UpdateGeometry, their links recomputed in all, the last one's time.
+    size_t geometryUpdates_ = 0, linksUpdated_ = 0;
+    double msGeometry_ = 0.0;
+    // The direct stage for the scene's lights and the model's surfels as they are now.
+    void MakeDirect(const Scene& scene);
 };
 
 }  // namespace penumbra

@@ -12,6 +12,41 @@
 
 namespace penumbra {
 
+namespace {
+
+// Sec. 3.3: one motion group per dynamic scene node with surfaces, bounded by the node's
+// motion bounds or else the scene's box (the whole scene is where it may go).
+void AssignMotionGroups(AntiradianceModel& model, const Scene& scene,
+                        std::vector<MotionBounds>& bounds) {
+    Surfels& s = model.surfels;
+    model.primitiveGroup.assign(scene.primitives.size(), 0);
+    std::vector<uint32_t> groupOfNode(scene.nodes.size(), 0);
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        int node = scene.primitives[p].nodeIndex;
+        if (node < 0 || !scene.nodes[node].dynamic) continue;
+        if (!groupOfNode[node]) {
+            const SceneNode& n = scene.nodes[node];
+            MotionGroup g;
+            g.node = node;
+            g.bounds = n.hasMotionBounds ? MotionBounds{n.boundsMin, n.boundsMax}
+                                         : MotionBounds{scene.BoundsMin(), scene.BoundsMax()};
+            g.built = g.placed = n.world;
+            model.motion.push_back(g);
+            bounds.push_back(g.bounds);
+            groupOfNode[node] = static_cast<uint32_t>(model.motion.size());
+        }
+        model.primitiveGroup[p] = groupOfNode[node];
+    }
+    if (model.motion.empty()) return;
+    s.groups.assign(s.size(), 0);
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        size_t end = p + 1 < scene.primitives.size() ? s.firstSurfel[p + 1] : s.size();
+        for (size_t i = s.firstSurfel[p]; i < end; ++i) s.groups[i] = model.primitiveGroup[p];
+    }
+}
+
+}  // namespace
+
 AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSettings& settings,
                                          const ProgressFn& progress) {
     AntiradianceModel model;
@@ -37,19 +72,32 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
             for (size_t i = s.firstSurfel[p]; i < end; ++i) s.twoSided[i] = open;
         }
     }
-    if (progress) progress("clustering", 0.0);
-    model.hierarchy = BuildHierarchy(model.surfels);
-
     LinkSettings ls;
+    if (settings.motionLinks) AssignMotionGroups(model, scene, ls.motion);
+    if (progress) progress("clustering", 0.0);
+    std::vector<glm::mat4> frames;
+    for (const MotionGroup& g : model.motion) frames.push_back(g.built);
+    model.hierarchy = BuildHierarchy(model.surfels, frames);
+
     ls.oracle = settings.oracle;
     ls.receiverOracle = settings.receiverOracle;
     ls.mode = settings.paperOracle ? LinkOracle::kPaper : LinkOracle::kConservative;
     ls.threads = settings.threads;
-    LeafNorms norms = ComputeLeafNorms(model.hierarchy, model.dirs);
-    NearField near = BuildNearField(model.surfels);
-    model.links = BuildLinks(model.hierarchy, model.dirs, norms, near, ls, [&](double f) {
+    model.norms = ComputeLeafNorms(model.hierarchy, model.dirs);
+    const LeafNorms& norms = model.norms;
+    model.near = BuildNearField(model.surfels);
+    model.links = BuildLinks(model.hierarchy, model.dirs, norms, model.near, ls, [&](double f) {
         if (progress) progress("linking", f);
     });
+    if (!model.motion.empty()) {
+        model.restPositions = model.surfels.positions;
+        model.restNormals = model.surfels.normals;
+        model.restCentroids = model.surfels.centroids;
+        for (const HierarchyNode& n : model.hierarchy.nodes) {
+            model.restCenters.push_back(n.center);
+            model.restNodeNormals.push_back(n.normal);
+        }
+    }
 
     const auto& nodes = model.hierarchy.nodes;
     model.leftChild.assign(nodes.size(), kNoParent);
@@ -117,6 +165,18 @@ GlossyLobe MakeLobe(const Directions& dirs, float n, std::vector<BinWeight>& wei
     return lobe;
 }
 
+// Glossy leaf g's mirror bin of every incoming bin, for its current normal.
+void FillMirror(AntiradianceModel& model, uint32_t g) {
+    const int bins = model.Bins();
+    const glm::vec3 n = model.leaves[model.glossyLeaves[g]].normal;
+    uint32_t* row = model.mirror.data() + size_t(g) * bins;
+    // ω_l travels towards the surface; its mirror image ω_l − 2⟨n|ω_l⟩n leaves it.
+    for (int l = 0; l < bins; ++l) {
+        glm::vec3 w = model.dirs.Direction(l);
+        row[l] = model.dirs.Lookup(w - 2.0f * glm::dot(n, w) * n);
+    }
+}
+
 }  // namespace
 
 void BuildGlossy(AntiradianceModel& model, const Scene& scene) {
@@ -144,12 +204,8 @@ void BuildGlossy(AntiradianceModel& model, const Scene& scene) {
         leaf.flags |= kLeafGlossy | (g << kGlossyShift);
         model.glossy.push_back({mat.specular, lobe});
         model.glossyLeaves.push_back(i);
-        // ω_l travels towards the surface; its mirror image ω_l − 2⟨n|ω_l⟩n leaves it.
-        for (int l = 0; l < bins; ++l) {
-            glm::vec3 w = model.dirs.Direction(l);
-            model.mirror.push_back(
-                model.dirs.Lookup(w - 2.0f * glm::dot(leaf.normal, w) * leaf.normal));
-        }
+        model.mirror.resize(model.mirror.size() + bins);
+        FillMirror(model, g);
     }
     model.glossyDirect.assign(model.glossy.size() * bins, glm::vec4(0.0f));
 }
@@ -200,6 +256,105 @@ void GlossyDirect(AntiradianceModel& model, const std::vector<PunctualLight>& li
             for (int j = 0; j < bins; ++j) row[j] += w[j] * scaled;
         }
     });
+}
+
+std::string MotionMismatch(const AntiradianceModel& model, const Scene& scene) {
+    if (model.motion.empty())
+        return "the links were built without motion bounds (no dynamic surfaces, or motion "
+               "links off)";
+    const Surfels& sf = model.surfels;
+    if (scene.primitives.size() != sf.firstSurfel.size())
+        return "the scene has other primitives than the links were built for";
+    const float slack = 1e-4f * std::max(scene.Diameter(), 1e-3f);
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        const Primitive& prim = scene.primitives[p];
+        const uint32_t g = model.primitiveGroup[p];
+        if (g == 0) {
+            // Static: input vertices are the primitive's first surfels, as built.
+            for (size_t i = 0; i < prim.positions.size(); ++i)
+                if (prim.positions[i] != model.restPositions[sf.firstSurfel[p] + i])
+                    return "static surfaces of node '" + prim.node + "' moved";
+            continue;
+        }
+        const MotionGroup& group = model.motion[g - 1];
+        const glm::mat4 delta = scene.nodes[group.node].world * glm::inverse(group.built);
+        const glm::mat3 a(delta);
+        const glm::mat3 ata = glm::transpose(a) * a;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j)
+                if (std::abs(ata[i][j] - (i == j ? 1.0f : 0.0f)) > 1e-3f)
+                    return "node '" + prim.node + "' was scaled or sheared, not moved rigidly";
+        if (glm::determinant(a) <= 0.0f) return "node '" + prim.node + "' was mirrored";
+        for (const glm::vec3& v : prim.positions)
+            if (glm::any(glm::lessThan(v, group.bounds.min - slack)) ||
+                glm::any(glm::greaterThan(v, group.bounds.max + slack)))
+                return "node '" + prim.node + "' left its motion bounds";
+    }
+    return {};
+}
+
+size_t MoveGroups(AntiradianceModel& model, const Scene& scene,
+                  std::vector<uint32_t>* movedLeaves) {
+    PENUMBRA_CHECK(MotionMismatch(model, scene).empty());
+    // Each group's rigid motion from where it was built to where its node is now.
+    std::vector<uint8_t> moved(model.motion.size() + 1, 0);
+    std::vector<glm::mat4> delta(model.motion.size() + 1, glm::mat4(1.0f));
+    for (size_t g = 0; g < model.motion.size(); ++g) {
+        MotionGroup& group = model.motion[g];
+        const glm::mat4& world = scene.nodes[group.node].world;
+        if (world == group.placed) continue;
+        group.placed = world;
+        moved[g + 1] = 1;
+        delta[g + 1] = world * glm::inverse(group.built);
+    }
+    Surfels& sf = model.surfels;
+    tbb::parallel_for(size_t(0), sf.size(), [&](size_t i) {
+        const uint32_t g = sf.groups[i];
+        if (!moved[g]) return;
+        const glm::mat3 r(delta[g]);
+        sf.positions[i] = glm::vec3(delta[g] * glm::vec4(model.restPositions[i], 1.0f));
+        sf.centroids[i] = glm::vec3(delta[g] * glm::vec4(model.restCentroids[i], 1.0f));
+        sf.normals[i] = glm::normalize(r * model.restNormals[i]);
+    });
+    auto& nodes = model.hierarchy.nodes;
+    tbb::parallel_for(size_t(0), nodes.size(), [&](size_t i) {
+        HierarchyNode& n = nodes[i];
+        if (n.group == kMixedGroup || !moved[n.group]) return;
+        const glm::mat3 r(delta[n.group]);
+        n.center = glm::vec3(delta[n.group] * glm::vec4(model.restCenters[i], 1.0f));
+        n.normal = glm::normalize(r * model.restNodeNormals[i]);
+        if (model.norms.in[i] != 0.0f) {  // oriented (ComputeLeafNorms)
+            model.norms.in[i] = model.dirs.CosineNorm(-n.normal);
+            model.norms.out[i] = model.dirs.CosineNorm(n.normal);
+        }
+    });
+    for (uint32_t i = 0; i < model.leaves.size(); ++i) {
+        LeafAttributes& leaf = model.leaves[i];
+        if (!moved[sf.groups[leaf.surfel]]) continue;
+        leaf.normal = sf.normals[leaf.surfel];
+        leaf.cosNormIn = model.norms.in[leaf.node];
+        leaf.cosNormOut = model.norms.out[leaf.node];
+        if (leaf.flags & kLeafGlossy) FillMirror(model, leaf.flags >> kGlossyShift);
+        if (movedLeaves) movedLeaves->push_back(i);
+    }
+    // The links touching a moved group, by the build's rules at the new places.
+    model.near.surfels = &model.surfels;
+    std::vector<uint32_t> redo;
+    for (size_t k = 0; k < model.links.dynamic.size(); ++k) {
+        const uint32_t r = model.links.dynamicReceivers[k];
+        const uint32_t s = model.links.links[model.links.dynamic[k]].sender;
+        if (moved[nodes[r].group] || moved[nodes[s].group]) redo.push_back(uint32_t(k));
+    }
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, redo.size(), 256),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                          for (size_t i = range.begin(); i != range.end(); ++i) {
+                              const uint32_t k = redo[i];
+                              Link& link = model.links.links[model.links.dynamic[k]];
+                              link = MakeLink(model.hierarchy, model.dirs, model.norms, model.near,
+                                              model.links.dynamicReceivers[k], link.sender);
+                          }
+                      });
+    return redo.size();
 }
 
 LocalMode ModeOfIteration(const SolverSettings& settings, int i) {

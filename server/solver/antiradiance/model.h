@@ -67,6 +67,15 @@ inline float MaxLobeExponent(int bins) { return static_cast<float>(bins) / 3.141
 // J sends incident light through as antiradiance (Eq. 19). Symmetric: both.
 enum LocalMode : uint32_t { kReflect = 1, kAntiradiance = 2, kBoth = 3 };
 
+// The surfaces of one dynamic scene node (extras.penumbra.dynamic), moving rigidly together
+// (Sec. 3.3): group g + 1 in Surfels::groups and HierarchyNode::group.
+struct MotionGroup {
+    int node = -1;           // scene node
+    MotionBounds bounds;     // world space: the node's motion bounds, else the scene's box
+    glm::mat4 built{1.0f};   // the node's world matrix when the model was built
+    glm::mat4 placed{1.0f};  // the world matrix the surfaces are placed with now
+};
+
 struct AntiradianceModel {
     float elementSize = 0.0f;
     Surfels surfels;
@@ -98,6 +107,15 @@ struct AntiradianceModel {
     std::vector<glm::vec4> glossyDirect;
     std::vector<uint32_t> leftChild;  // per node; kNoParent for leaves
     std::vector<uint32_t> rightChild;
+    // Sec. 3.3, moving objects (SolverSettings::motionLinks): the groups, each primitive's
+    // group (0: static), and what a move needs to recompute the links touching a group: the
+    // oriented nodes' cosine norms, the near field, and the surfels and nodes as built.
+    std::vector<MotionGroup> motion;
+    std::vector<uint32_t> primitiveGroup;
+    LeafNorms norms;
+    NearField near;  // its `surfels` is re-pointed at `surfels` before use
+    std::vector<glm::vec3> restPositions, restNormals, restCentroids;  // per surfel
+    std::vector<glm::vec3> restCenters, restNodeNormals;               // per node
 
     size_t Nodes() const { return hierarchy.size(); }
     int Bins() const { return dirs.Count(); }
@@ -117,6 +135,18 @@ bool GlossyMatches(const AntiradianceModel& model, const Scene& scene);
 // leaves, stride 4, light-major) and the lights' places.
 void GlossyDirect(AntiradianceModel& model, const std::vector<PunctualLight>& lights,
                   const std::vector<float>& perLight);
+
+// Sec. 3.3: why the links built for the motion bounds cannot take the geometry of `scene`
+// (no motion groups, a group scaled or sheared, or outside its bounds, a static surface
+// moved); empty when MoveGroups can.
+std::string MotionMismatch(const AntiradianceModel& model, const Scene& scene);
+// Re-places the surfels, nodes and leaves of every group whose node moved in `scene`
+// (MotionMismatch must be empty) and recomputes the form factors, bins and spread levels of
+// the links touching them (MakeLink: the same rules as the build, at the new places).
+// Returns the number of links recomputed; `movedLeaves` (optional) gets each moved leaf's
+// index into `leaves`.
+size_t MoveGroups(AntiradianceModel& model, const Scene& scene,
+                  std::vector<uint32_t>* movedLeaves = nullptr);
 
 // The local-pass mode of iteration `i` (0-based) under the settings' scheme.
 LocalMode ModeOfIteration(const SolverSettings& settings, int i);

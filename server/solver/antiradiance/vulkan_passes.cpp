@@ -293,6 +293,8 @@ std::vector<float> VulkanAntiradiance::ReadLeafIrradiance() {
 
 void VulkanAntiradiance::UploadLeaves() { impl_->leaves.Upload(impl_->m.leaves); }
 
+void VulkanAntiradiance::UploadLinks() { impl_->links.Upload(impl_->m.links.links); }
+
 void VulkanAntiradiance::UploadDirect() { impl_->direct.Upload(impl_->m.leafDirect); }
 
 void VulkanAntiradiance::UploadGlossy() { impl_->UploadGlossy(); }

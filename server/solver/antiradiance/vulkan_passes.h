@@ -26,6 +26,8 @@ class VulkanAntiradiance {
     std::vector<float> ReadLeafIrradiance();
     // Copies the model's per-leaf attributes (albedo, emission) to the device again.
     void UploadLeaves();
+    // The model's links again (their number unchanged), after MoveGroups.
+    void UploadLinks();
     // Copies the model's per-leaf direct irradiance (E_d) to the device again.
     void UploadDirect();
     // Copies the model's glossy data (leaves, mirror bins, lobes, reflected direct light) to

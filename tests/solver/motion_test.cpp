@@ -1,0 +1,201 @@
+// Moving objects with links built for their motion bounds (issue 4, Sec. 3.3 of the
+// antiradiance paper): the hierarchy keeps each dynamic node in subtrees of its own, a move
+// inside the bounds recomputes only the form factors and bins of the links touching it, and
+// the result converges to what a fresh bake of the moved scene gives.
+#include <gtest/gtest.h>
+
+#include <glm/gtc/matrix_transform.hpp>
+
+#include "scene/gltf_loader.h"
+#include "solver/antiradiance/antiradiance_solver.h"
+#include "solver/antiradiance/model.h"
+#include "test_util.h"
+
+namespace penumbra {
+namespace {
+
+const std::string kScenes = std::string(PENUMBRA_SOURCE_DIR) + "/scenes/";
+
+SolverSettings MotionSettings(int bins, float elementSize) {
+    SolverSettings s = testing::CpuSettings(bins, elementSize);
+    s.motionLinks = true;
+    return s;
+}
+
+// `node`'s local matrix turned by `degrees` about +Y through its origin, then shifted.
+glm::mat4 Moved(const Scene& scene, const std::string& node, glm::vec3 shift, float degrees) {
+    const glm::mat4& local = scene.nodes[FindNode(scene, node)].local;
+    return glm::translate(glm::mat4(1.0f), shift) * local *
+           glm::rotate(glm::mat4(1.0f), glm::radians(degrees), glm::vec3(0, 1, 0));
+}
+
+// Per-vertex irradiance of every primitive, one array.
+std::vector<glm::vec3> AllVertices(Solver& solver, const Scene& scene, Channel channel) {
+    std::vector<glm::vec3> surfels = solver.SurfelIrradiance(channel), out;
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        auto v = PrimitiveIrradiance(solver.GetSurfels(), surfels, scene, p);
+        out.insert(out.end(), v.begin(), v.end());
+    }
+    return out;
+}
+
+TEST(MotionLinks, GroupsKeepSubtreesOfTheirOwn) {
+    Scene scene = LoadGltf(kScenes + "cornell-box.gltf");
+    AntiradianceModel m = BuildAntiradianceModel(scene, MotionSettings(64, 0.1f), {});
+    ASSERT_EQ(m.motion.size(), 2u);  // short_block, tall_block
+    const auto& nodes = m.hierarchy.nodes;
+    size_t mixed = 0;
+    for (uint32_t i = 0; i < nodes.size(); ++i) {
+        if (nodes[i].group == kMixedGroup) {
+            ++mixed;
+            EXPECT_EQ(m.links.offsets[i], m.links.offsets[i + 1]) << "mixed node " << i;
+            continue;
+        }
+        for (uint32_t j = i; j < nodes[i].end; ++j) {
+            if (nodes[j].IsLeaf()) {
+                ASSERT_EQ(m.surfels.groups[nodes[j].surfel], nodes[i].group);
+            }
+        }
+    }
+    EXPECT_EQ(mixed, 2u);  // three groups (static and two blocks) need two mixed clusters
+    for (const Link& l : m.links.links) EXPECT_NE(nodes[l.sender].group, kMixedGroup);
+    // Every link touching a block is in the dynamic list, and only those.
+    size_t touching = 0;
+    for (uint32_t r = 0; r < nodes.size(); ++r)
+        for (uint32_t k = m.links.offsets[r]; k < m.links.offsets[r + 1]; ++k)
+            touching += nodes[r].group != 0 || nodes[m.links.links[k].sender].group != 0;
+    EXPECT_EQ(m.links.dynamic.size(), touching);
+    EXPECT_GT(touching, 0u);
+    // Without motion links the model is the usual one.
+    AntiradianceModel plain = BuildAntiradianceModel(scene, testing::CpuSettings(64, 0.1f), {});
+    EXPECT_TRUE(plain.motion.empty());
+    EXPECT_TRUE(plain.links.dynamic.empty());
+    std::printf("links: %zu with motion bounds (%zu touch the blocks), %zu without\n",
+                m.links.Count(), touching, plain.links.Count());
+}
+
+TEST(MotionLinks, MovingBackRestoresTheBuiltLinks) {
+    Scene scene = LoadGltf(kScenes + "cornell-box.gltf");
+    AntiradianceModel m = BuildAntiradianceModel(scene, MotionSettings(64, 0.1f), {});
+    const std::vector<Link> built = m.links.links;
+    const int node = FindNode(scene, "tall_block");
+    const glm::mat4 home = scene.nodes[node].local;
+    SetNodeTransform(scene, node, Moved(scene, "tall_block", {-0.05f, 0, 0.03f}, 25.0f));
+    ASSERT_EQ(MotionMismatch(m, scene), "");
+    size_t redone = MoveGroups(m, scene);
+    EXPECT_GT(redone, 0u);
+    EXPECT_LT(redone, m.links.dynamic.size());  // the short block's own links stay
+    size_t changed = 0;
+    for (size_t i = 0; i < built.size(); ++i)
+        changed += built[i].formFactor != m.links.links[i].formFactor;
+    EXPECT_GT(changed, redone / 4);
+    SetNodeTransform(scene, node, home);
+    MoveGroups(m, scene);
+    // Back home the links are the built ones, up to the rounding of the way there and back
+    // (relative 1e-3 of each form factor, or 1e-6 of the largest for the tiniest ones).
+    float largest = 0.0f;
+    for (const Link& l : built) largest = std::max(largest, std::abs(l.formFactor));
+    for (size_t i = 0; i < built.size(); ++i) {
+        ASSERT_EQ(built[i].sender, m.links.links[i].sender);
+        ASSERT_EQ(built[i].bin, m.links.links[i].bin) << "link " << i;
+        ASSERT_EQ(built[i].level, m.links.links[i].level) << "link " << i;
+        ASSERT_NEAR(built[i].formFactor, m.links.links[i].formFactor,
+                    1e-3f * std::abs(built[i].formFactor) + 1e-6f * largest)
+            << "link " << i;
+    }
+}
+
+TEST(MotionLinks, RefusesWhatTheLinksDoNotCover) {
+    Scene scene = LoadGltf(kScenes + "cornell-box.gltf");
+    AntiradianceSolver solver(scene, MotionSettings(64, 0.15f), {});
+    const int node = FindNode(scene, "tall_block");
+    Scene out = scene;
+    SetNodeTransform(out, node, Moved(scene, "tall_block", {0, 0.3f, 0}, 0.0f));
+    EXPECT_NE(solver.GeometryMismatch(out).find("left its motion bounds"), std::string::npos)
+        << solver.GeometryMismatch(out);
+    Scene scaled = scene;
+    SetNodeTransform(scaled, node,
+                     scene.nodes[node].local * glm::scale(glm::mat4(1.0f), glm::vec3(0.8f)));
+    EXPECT_NE(solver.GeometryMismatch(scaled).find("scaled"), std::string::npos);
+    EXPECT_THROW(solver.UpdateGeometry(scaled), Error);
+    Scene sky = scene;
+    sky.environment.constant = glm::vec3(1.0f);
+    sky.environment.source = "constant";
+    EXPECT_NE(solver.GeometryMismatch(sky).find("sky"), std::string::npos);
+    // A solver built without motion links takes no moves at all.
+    AntiradianceSolver plain(scene, testing::CpuSettings(64, 0.15f), {});
+    Scene moved = scene;
+    SetNodeTransform(moved, node, Moved(scene, "tall_block", {0.02f, 0, 0}, 0.0f));
+    EXPECT_NE(plain.GeometryMismatch(moved).find("without motion bounds"), std::string::npos);
+    EXPECT_EQ(solver.GeometryMismatch(moved), "");
+}
+
+// The issue's test: a move gives, within a stated tolerance, what baking the moved scene from
+// scratch gives. Against a fresh bake with the same settings (motion links: the same link
+// rules; surfels and clusters of a dynamic node are built in its own frame, so they are the
+// same at every pose) the in-place update agrees to 0.03% RMS (bound 1%). A plain bake uses
+// other, coarser links: at these coarse settings (64 bins, 0.1 m) the two link sets differ by
+// 13% while each is 14–15% from the path-traced reference (`penumbra bake [--motion-links]`
+// against `penumbra reference`, 2,048 paths), so that comparison is bounded by 20%.
+TEST(MotionLinks, MoveMatchesAFreshBakeOfTheMovedScene) {
+    Scene scene = LoadGltf(kScenes + "cornell-box.gltf");
+    const SolverSettings settings = MotionSettings(64, 0.1f);
+    AntiradianceSolver solver(scene, settings, {});
+    solver.Iterate(12);
+    const std::vector<glm::vec3> before = AllVertices(solver, scene, Channel::kIndirect);
+    SetNodeTransform(scene, FindNode(scene, "tall_block"),
+                     Moved(scene, "tall_block", {-0.12f, 0, -0.08f}, 30.0f));
+    SetNodeTransform(scene, FindNode(scene, "short_block"),
+                     Moved(scene, "short_block", {0.05f, 0, 0.12f}, -20.0f));
+    ASSERT_EQ(solver.GeometryMismatch(scene), "");
+    solver.UpdateGeometry(scene);
+    solver.Iterate(20);
+    const std::vector<glm::vec3> moved = AllVertices(solver, scene, Channel::kIndirect);
+
+    AntiradianceSolver fresh(scene, settings, {});
+    fresh.Iterate(32);
+    SolverSettings plainSettings = testing::CpuSettings(64, 0.1f);
+    auto plain = CreateSolver(scene, plainSettings);
+    plain->Iterate(32);
+    const double vsFresh =
+        testing::RelativeRms(moved, AllVertices(fresh, scene, Channel::kIndirect));
+    const double vsPlain =
+        testing::RelativeRms(moved, AllVertices(*plain, scene, Channel::kIndirect));
+    const double vsBefore =
+        testing::RelativeRms(before, AllVertices(fresh, scene, Channel::kIndirect));
+    std::printf(
+        "moved in place vs fresh (motion links) %.4f, vs plain bake %.4f; unmoved vs "
+        "fresh %.4f\n",
+        vsFresh, vsPlain, vsBefore);
+    EXPECT_LT(vsFresh, 0.01);
+    EXPECT_LT(vsPlain, 0.2);
+    EXPECT_GT(vsBefore, 5 * vsFresh) << "the move must change the lighting measurably";
+}
+
+// Punctual lights and glossy surfaces follow a move: the glossy box's cube (glossy, lit by a
+// spot, casting a shadow) turned and shifted inside its bounds: shadow maps, direct light and
+// the cube's mirror bins are redone, and the total converges to a fresh bake's.
+TEST(MotionLinks, MovedGlossyCubeUnderASpotMatchesAFreshBake) {
+    Scene scene = LoadGltf(kScenes + "glossy-box.gltf");
+    const SolverSettings settings = MotionSettings(64, 0.3f);
+    AntiradianceSolver solver(scene, settings, {});
+    solver.Iterate(6);
+    SetNodeTransform(scene, FindNode(scene, "glossy_cube"),
+                     Moved(scene, "glossy_cube", {0.3f, 0, -0.3f}, 20.0f));
+    ASSERT_EQ(solver.GeometryMismatch(scene), "");
+    solver.UpdateGeometry(scene);
+    solver.Iterate(60);
+    AntiradianceSolver fresh(scene, settings, {});
+    fresh.Iterate(66);
+    const double direct = testing::RelativeRms(AllVertices(solver, scene, Channel::kDirect),
+                                               AllVertices(fresh, scene, Channel::kDirect));
+    const double total = testing::RelativeRms(AllVertices(solver, scene, Channel::kTotal),
+                                              AllVertices(fresh, scene, Channel::kTotal));
+    std::printf("glossy box, cube moved: direct %.2e, total %.4f vs a fresh bake\n", direct, total);
+    EXPECT_LT(direct, 1e-3);  // same shadow maps, same receivers
+    EXPECT_LT(total, 0.02);
+    EXPECT_EQ(solver.Stats().geometryUpdates, 1u);
+}
+
+}  // namespace
+}  // namespace penumbra
