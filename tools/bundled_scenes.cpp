@@ -135,6 +135,9 @@ SceneBuilder Office() {
                      true);
             b.AddBox("computer_" + id, metal, {x + 0.5f, 0.22f, z}, {0.2f, 0.44f, 0.45f}, 0, false);
         }
+    // The first chair can be pushed about in front of its desk (Sec. 3.3 moving objects):
+    // the service links it for this box.
+    b.SetDynamic("chair_0", {1.3f, 0.0f, 0.6f}, {0.6f, 0.0f, 0.05f}, {2.0f, 1.1f, 1.0f});
     // Shelves along the west and east walls.
     for (int s = 0; s < 6; ++s) {
         std::string id = std::to_string(s);
