@@ -57,8 +57,16 @@ SceneBuilder CornellBox() {
             b.AddQuad(name, white, Mm(a.x, 0, a.z), Mm(a.x, h, a.z), Mm(d.x, h, d.z),
                       Mm(d.x, 0, d.z), Mm(out.x, out.y, out.z), kBlock);
         }
-        // Movable by the service, about the centre of its base, anywhere inside the box.
-        b.SetDynamic(name, Mm(c.x, 0, c.z), Mm(0, 0, 0), Mm(556, y, 559.2f));
+        // Movable by the service, about the centre of its base, within 16 cm of where it
+        // stands (inside the box): the service links it for that region (Sec. 3.3), and
+        // tighter bounds mean fewer links than "anywhere on the floor" would.
+        glm::vec3 lo = top[0], hi = top[0];
+        for (const auto& p : top) lo = glm::min(lo, p), hi = glm::max(hi, p);
+        constexpr float kReach = 160.0f;
+        b.SetDynamic(
+            name, Mm(c.x, 0, c.z),
+            Mm(std::max(0.0f, lo.x - kReach), 0, std::max(0.0f, lo.z - kReach)),
+            Mm(std::min(556.0f, hi.x + kReach), h + 1.0f, std::min(559.2f, hi.z + kReach)));
     };
     const glm::vec3 shortTop[4] = {{130, 0, 65}, {82, 0, 225}, {240, 0, 272}, {290, 0, 114}};
     const glm::vec3 tallTop[4] = {{423, 0, 247}, {265, 0, 296}, {314, 0, 456}, {472, 0, 406}};

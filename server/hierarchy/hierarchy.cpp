@@ -120,30 +120,11 @@ struct Builder {
 Hierarchy BuildHierarchy(const Surfels& surfels, const std::vector<glm::mat4>& frames) {
     Hierarchy h;
     Builder b{surfels, h, {}, nullptr, {}, {}};
-    if (!frames.empty() && !surfels.groups.empty()) {
-        // Keys rounded to 2⁻¹⁶ of the group's extent: a pose's rounding noise must not
-        // reorder surfels that lie on one grid line (most of them, on a refined box).
+    if (!frames.empty() && !surfels.groups.empty() && !surfels.ownCentroids.empty()) {
+        // Own-space centroids and normals: bitwise the same at every pose.
         b.frames = &frames;
-        b.keyPos = surfels.centroids;
-        b.keyNormal = surfels.normals;
-        std::vector<glm::mat4> inverse;
-        for (const glm::mat4& f : frames) inverse.push_back(glm::inverse(f));
-        std::vector<float> extent(frames.size(), 0.0f);
-        for (size_t i = 0; i < surfels.size(); ++i) {
-            uint32_t g = surfels.groups[i];
-            if (!g) continue;
-            b.keyPos[i] = glm::vec3(inverse[g - 1] * glm::vec4(surfels.centroids[i], 1.0f));
-            b.keyNormal[i] =
-                glm::normalize(glm::transpose(glm::mat3(frames[g - 1])) * surfels.normals[i]);
-            extent[g - 1] = std::max(extent[g - 1], glm::length(b.keyPos[i]));
-        }
-        for (size_t i = 0; i < surfels.size(); ++i) {
-            uint32_t g = surfels.groups[i];
-            if (!g) continue;
-            float q = std::max(extent[g - 1], 1e-6f) / 65536.0f;
-            b.keyPos[i] = glm::round(b.keyPos[i] / q) * q;
-            b.keyNormal[i] = glm::round(b.keyNormal[i] * 65536.0f) / 65536.0f;
-        }
+        b.keyPos = surfels.ownCentroids;
+        b.keyNormal = surfels.ownNormals;
     }
     for (uint32_t i = 0; i < surfels.size(); ++i)
         if (surfels.areas[i] > 0.0f) b.ids.push_back(i);

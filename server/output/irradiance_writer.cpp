@@ -57,6 +57,7 @@ nlohmann::json StatsToJson(const SolverStats& s) {
                        {"moves", s.geometryUpdates},
                        {"links_updated", s.linksUpdated},
                        {"last_move_ms", s.msGeometry}};
+    if (!s.motionDeclined.empty()) j["motion_declined"] = s.motionDeclined;
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

@@ -12,6 +12,10 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
     if (!(elementSize > 0.0f)) throw Error("element size must be a positive number of metres");
     Surfels out;
     std::vector<glm::vec3> moments;  // ∫ φ_s x dA per surfel
+    // Dynamic primitives: own-space normals, moments and areas (Surfels::ownCentroids).
+    std::vector<glm::vec3> ownNormals, ownMoments;
+    std::vector<float> ownAreas;
+    bool anyOwn = false;
     const float maxEdge2 = elementSize * elementSize;
     for (const auto& prim : scene.primitives) {
         const uint32_t base = static_cast<uint32_t>(out.positions.size());
@@ -30,7 +34,15 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
                          prim.objectPositions.size() == prim.positions.size();
         std::vector<glm::vec3> object;  // own-space positions of this primitive's surfels
         glm::mat3 metric(1.0f);
+        const size_t first = out.positions.size();
+        ownNormals.resize(first, glm::vec3(0.0f));
+        ownMoments.resize(first, glm::vec3(0.0f));
+        ownAreas.resize(first, 0.0f);
         if (own) {
+            anyOwn = true;
+            for (size_t i = 0; i < prim.positions.size(); ++i)
+                ownNormals.push_back(i < prim.objectNormals.size() ? prim.objectNormals[i]
+                                                                   : prim.normals[i]);
             object = prim.objectPositions;
             const glm::mat3 a(scene.nodes[prim.nodeIndex].world);
             metric = glm::transpose(a) * a;
@@ -47,7 +59,12 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             uint32_t m = static_cast<uint32_t>(out.positions.size());
             moments.emplace_back(0.0f);
             out.positions.push_back(0.5f * (out.positions[a] + out.positions[b]));
-            if (own) object.push_back(0.5f * (object[a - base] + object[b - base]));
+            if (own) {
+                object.push_back(0.5f * (object[a - base] + object[b - base]));
+                glm::vec3 on = ownNormals[a] + ownNormals[b];
+                float ol = glm::length(on);
+                ownNormals.push_back(ol > 1e-6f ? on / ol : ownNormals[a]);
+            }
             glm::vec3 n = out.normals[a] + out.normals[b];
             float len = glm::length(n);
             out.normals.push_back(len > 1e-6f ? n / len : out.normals[a]);
@@ -92,8 +109,30 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
                 // ∫ φ_k x dA over the triangle = A (2 p_k + p_i + p_j) / 12.
                 moments[tri[k]] += area * (sum + p[k]) / 12.0f;
             }
+            if (own) {
+                const glm::vec3 o[3] = {object[tri[0] - base], object[tri[1] - base],
+                                        object[tri[2] - base]};
+                float oa = 0.5f * glm::length(glm::cross(o[1] - o[0], o[2] - o[0]));
+                glm::vec3 osum = o[0] + o[1] + o[2];
+                ownMoments.resize(out.positions.size(), glm::vec3(0.0f));
+                ownAreas.resize(out.positions.size(), 0.0f);
+                for (int k = 0; k < 3; ++k) {
+                    ownAreas[tri[k]] += oa / 3.0f;
+                    ownMoments[tri[k]] += oa * (osum + o[k]) / 12.0f;
+                }
+            }
             out.refinedTriangles.insert(out.refinedTriangles.end(), {tri[0], tri[1], tri[2]});
         }
+    }
+    if (anyOwn) {
+        ownNormals.resize(out.size(), glm::vec3(0.0f));
+        ownMoments.resize(out.size(), glm::vec3(0.0f));
+        ownAreas.resize(out.size(), 0.0f);
+        out.ownCentroids.resize(out.size());
+        out.ownNormals = ownNormals;
+        for (size_t i = 0; i < out.size(); ++i)
+            out.ownCentroids[i] =
+                ownAreas[i] > 0.0f ? ownMoments[i] / ownAreas[i] : glm::vec3(0.0f);
     }
     out.centroids.resize(out.size());
     for (size_t i = 0; i < out.size(); ++i)

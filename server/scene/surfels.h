@@ -30,6 +30,10 @@ struct Surfels {
     // for the surfaces of one dynamic node that move together (Sec. 3.3; the antiradiance
     // model's MotionGroup g − 1). The hierarchy keeps groups in subtrees of their own.
     std::vector<uint32_t> groups;
+    // Per surfel (empty: no dynamic node): the centroid and normal in the own (mesh) space of
+    // a dynamic node's primitive, computed from its own-space vertices only, so they are
+    // bitwise the same at every pose (the hierarchy clusters moving groups by them).
+    std::vector<glm::vec3> ownCentroids, ownNormals;
 
     size_t size() const { return positions.size(); }
 };

@@ -41,10 +41,12 @@ struct LoadResult {
 
 // The solver settings a service starts from: the library's defaults, with the links of
 // dynamic nodes built for their motion bounds (SolverSettings::motionLinks), so that moves
-// inside the bounds update links in place instead of rebuilding them.
+// inside the bounds update links in place instead of rebuilding them, unless that would more
+// than double the scene's links (then moves rebuild).
 inline SolverSettings ServiceDefaults() {
     SolverSettings s;
     s.motionLinks = true;
+    s.motionLinkBudget = 1.0f;  // at most as many links for the dynamic nodes as for the rest
     return s;
 }
 

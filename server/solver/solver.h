@@ -46,6 +46,10 @@ struct SolverSettings {
     // (every pair the bounds let come close is linked at the finest level); the service
     // turns it on, a one-off bake has no use for it.
     bool motionLinks = false;
+    // With motionLinks: when the links touching dynamic nodes would outnumber the others by
+    // more than this factor, the usual links are built instead and moves rebuild them
+    // (Stats().motionDeclined says so). 0: no limit.
+    float motionLinkBudget = 0.0f;
 };
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
@@ -86,6 +90,7 @@ struct SolverStats {
     size_t geometryUpdates = 0;        // moves taken by UpdateGeometry
     size_t linksUpdated = 0;           // links recomputed by those moves, in all
     double msGeometry = 0.0;           // the last move: links, leaves, uploads, shadow maps
+    std::string motionDeclined;        // why motion links were asked for and not built
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };

@@ -67,6 +67,8 @@ std::string AntiradianceSolver::GeometryMismatch(const Scene& scene) const {
     if (settings_.backOcclusion == BackOcclusion::kAuto &&
         scene.environment.Present() == model_.surfels.twoSided.empty())
         return "a sky appeared or went, which changes back occlusion";
+    if (!model_.motionDeclined.empty())
+        return "motion links were not built: " + model_.motionDeclined;
     return MotionMismatch(model_, scene);
 }
 
@@ -243,6 +245,7 @@ SolverStats AntiradianceSolver::Stats() const {
     s.geometryUpdates = geometryUpdates_;
     s.linksUpdated = linksUpdated_;
     s.msGeometry = msGeometry_;
+    s.motionDeclined = model_.motionDeclined;
     if (direct_ || gpuDirect_) {
         s.shadowViews = gpuDirect_ ? gpuDirect_->views : direct_->views;
         s.shadowMapSize = mapSize_;

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 
 #include "base/check.h"
@@ -89,6 +90,24 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
     model.links = BuildLinks(model.hierarchy, model.dirs, norms, model.near, ls, [&](double f) {
         if (progress) progress("linking", f);
     });
+    if (!model.motion.empty() && settings.motionLinkBudget > 0.0f) {
+        // Motion links cost links: when the ones touching the groups outnumber the others by
+        // more than the budget, build the usual links instead (moves will rebuild).
+        const double moving = double(model.links.dynamic.size());
+        const double still = std::max(1.0, double(model.links.Count()) - moving);
+        if (moving > settings.motionLinkBudget * still) {
+            SolverSettings plain = settings;
+            plain.motionLinks = false;
+            AntiradianceModel fallback = BuildAntiradianceModel(scene, plain, progress);
+            char why[160];
+            std::snprintf(why, sizeof why,
+                          "%.0f links would touch the dynamic nodes, %.1f× the other %.0f "
+                          "(budget %.1f×)",
+                          moving, moving / still, still, settings.motionLinkBudget);
+            fallback.motionDeclined = why;
+            return fallback;
+        }
+    }
     if (!model.motion.empty()) {
         model.restPositions = model.surfels.positions;
         model.restNormals = model.surfels.normals;

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <glm/glm.hpp>
+#include <string>
 #include <vector>
 
 #include "hierarchy/directions.h"
@@ -116,6 +117,8 @@ struct AntiradianceModel {
     NearField near;  // its `surfels` is re-pointed at `surfels` before use
     std::vector<glm::vec3> restPositions, restNormals, restCentroids;  // per surfel
     std::vector<glm::vec3> restCenters, restNodeNormals;               // per node
+    // Why motion links were asked for but not built (SolverSettings::motionLinkBudget).
+    std::string motionDeclined;
 
     size_t Nodes() const { return hierarchy.size(); }
     int Bins() const { return dirs.Count(); }
