@@ -15,10 +15,10 @@ struct Builder {
     Hierarchy& h;
     std::vector<uint32_t> ids;  // sorted by group: a group is a contiguous range
 
-    // Moving groups: each surfel's centroid and normal in its group's own frame (frames[g − 1]
-    // maps it to the world as built), rounded so that poses give the same keys.
+    // Moving groups are clustered by their own-space centroids and normals
+    // (Surfels::ownCentroids, the same at every pose); frames[g − 1] maps group g's own space
+    // to the world as built. Null: cluster everything in world space.
     const std::vector<glm::mat4>* frames = nullptr;
-    std::vector<glm::vec3> keyPos, keyNormal;
 
     uint32_t Group(uint32_t id) const { return s.groups.empty() ? 0 : s.groups[id]; }
 
@@ -29,9 +29,9 @@ struct Builder {
         const uint32_t group =
             Group(ids[begin]) == Group(ids[end - 1]) ? Group(ids[begin]) : kMixedGroup;
         // A moving group is clustered in its own frame: the same clusters whatever its pose.
-        const bool own = group != 0 && group != kMixedGroup && !keyPos.empty();
-        const std::vector<glm::vec3>& pos = own ? keyPos : s.centroids;
-        const std::vector<glm::vec3>& nrm = own ? keyNormal : s.normals;
+        const bool own = group != 0 && group != kMixedGroup && frames;
+        const std::vector<glm::vec3>& pos = own ? s.ownCentroids : s.centroids;
+        const std::vector<glm::vec3>& nrm = own ? s.ownNormals : s.normals;
         glm::vec3 lo(1e30f), hi(-1e30f), nlo(2.0f), nhi(-2.0f), nsum(0.0f);
         float area = 0.0f, maxDisc = 0.0f;
         for (size_t i = begin; i < end; ++i) {
@@ -119,13 +119,9 @@ struct Builder {
 
 Hierarchy BuildHierarchy(const Surfels& surfels, const std::vector<glm::mat4>& frames) {
     Hierarchy h;
-    Builder b{surfels, h, {}, nullptr, {}, {}};
-    if (!frames.empty() && !surfels.groups.empty() && !surfels.ownCentroids.empty()) {
-        // Own-space centroids and normals: bitwise the same at every pose.
+    Builder b{surfels, h, {}, nullptr};
+    if (!frames.empty() && !surfels.groups.empty() && !surfels.ownCentroids.empty())
         b.frames = &frames;
-        b.keyPos = surfels.ownCentroids;
-        b.keyNormal = surfels.ownNormals;
-    }
     for (uint32_t i = 0; i < surfels.size(); ++i)
         if (surfels.areas[i] > 0.0f) b.ids.push_back(i);
     if (b.ids.empty()) throw Error("the scene has no surface area to light");

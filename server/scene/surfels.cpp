@@ -20,29 +20,27 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
     for (const auto& prim : scene.primitives) {
         const uint32_t base = static_cast<uint32_t>(out.positions.size());
         out.firstSurfel.push_back(base);
-        for (size_t i = 0; i < prim.positions.size(); ++i) {
-            out.positions.push_back(prim.positions[i]);
-            out.normals.push_back(prim.normals[i]);
-            out.areas.push_back(0.0f);
-            out.materials.push_back(prim.material);
-        }
         // A dynamic node's primitives are split by their own-space edges, measured with the
         // metric AᵀA of the node's world matrix rounded to 2⁻²⁰ of its trace: the same splits
         // at every pose (world-space lengths of equal edges differ by rounding noise from pose
         // to pose, and ties would break differently), so a move keeps the surfels (Sec. 3.3).
         const bool own = prim.nodeIndex >= 0 && scene.nodes[prim.nodeIndex].dynamic &&
                          prim.objectPositions.size() == prim.positions.size();
+        anyOwn = anyOwn || own;
+        for (size_t i = 0; i < prim.positions.size(); ++i) {
+            out.positions.push_back(prim.positions[i]);
+            out.normals.push_back(prim.normals[i]);
+            out.areas.push_back(0.0f);
+            out.materials.push_back(prim.material);
+            // The own-space arrays stay aligned with the surfels (zero where not dynamic).
+            ownNormals.push_back(own && i < prim.objectNormals.size() ? prim.objectNormals[i]
+                                                                      : glm::vec3(0.0f));
+            ownMoments.emplace_back(0.0f);
+            ownAreas.push_back(0.0f);
+        }
         std::vector<glm::vec3> object;  // own-space positions of this primitive's surfels
         glm::mat3 metric(1.0f);
-        const size_t first = out.positions.size();
-        ownNormals.resize(first, glm::vec3(0.0f));
-        ownMoments.resize(first, glm::vec3(0.0f));
-        ownAreas.resize(first, 0.0f);
         if (own) {
-            anyOwn = true;
-            for (size_t i = 0; i < prim.positions.size(); ++i)
-                ownNormals.push_back(i < prim.objectNormals.size() ? prim.objectNormals[i]
-                                                                   : prim.normals[i]);
             object = prim.objectPositions;
             const glm::mat3 a(scene.nodes[prim.nodeIndex].world);
             metric = glm::transpose(a) * a;
@@ -59,11 +57,15 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             uint32_t m = static_cast<uint32_t>(out.positions.size());
             moments.emplace_back(0.0f);
             out.positions.push_back(0.5f * (out.positions[a] + out.positions[b]));
+            ownMoments.emplace_back(0.0f);
+            ownAreas.push_back(0.0f);
             if (own) {
                 object.push_back(0.5f * (object[a - base] + object[b - base]));
                 glm::vec3 on = ownNormals[a] + ownNormals[b];
                 float ol = glm::length(on);
                 ownNormals.push_back(ol > 1e-6f ? on / ol : ownNormals[a]);
+            } else {
+                ownNormals.emplace_back(0.0f);
             }
             glm::vec3 n = out.normals[a] + out.normals[b];
             float len = glm::length(n);
@@ -114,8 +116,6 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
                                         object[tri[2] - base]};
                 float oa = 0.5f * glm::length(glm::cross(o[1] - o[0], o[2] - o[0]));
                 glm::vec3 osum = o[0] + o[1] + o[2];
-                ownMoments.resize(out.positions.size(), glm::vec3(0.0f));
-                ownAreas.resize(out.positions.size(), 0.0f);
                 for (int k = 0; k < 3; ++k) {
                     ownAreas[tri[k]] += oa / 3.0f;
                     ownMoments[tri[k]] += oa * (osum + o[k]) / 12.0f;
@@ -125,11 +125,8 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
         }
     }
     if (anyOwn) {
-        ownNormals.resize(out.size(), glm::vec3(0.0f));
-        ownMoments.resize(out.size(), glm::vec3(0.0f));
-        ownAreas.resize(out.size(), 0.0f);
         out.ownCentroids.resize(out.size());
-        out.ownNormals = ownNormals;
+        out.ownNormals = std::move(ownNormals);
         for (size_t i = 0; i < out.size(); ++i)
             out.ownCentroids[i] =
                 ownAreas[i] > 0.0f ? ownMoments[i] / ownAreas[i] : glm::vec3(0.0f);

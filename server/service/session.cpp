@@ -99,6 +99,7 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     solver_ = CreateSolver(scene, settings_.solver, progress);
     buildSeconds_ = MsSince(start) / 1000.0;
     solverStatsRaw_ = solver_->Stats();
+    motionDeclined_ = !solverStatsRaw_.motionDeclined.empty();
     for (const auto& n : scene.nodes)
         for (uint32_t pi : n.primitives)
             if (glm::any(glm::greaterThan(scene.materials[scene.primitives[pi].material].emission,
@@ -410,8 +411,10 @@ nlohmann::json Session::StatsJson() const {
     return j;
 }
 
-std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene) const {
-    return CreateSolver(scene, settings_.solver);
+std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool motionLinks) const {
+    SolverSettings settings = settings_.solver;
+    settings.motionLinks = settings.motionLinks && motionLinks;
+    return CreateSolver(scene, settings);
 }
 
 void Session::ProduceFrame(int iterations, std::string note, bool interruptible) {
@@ -639,11 +642,13 @@ void Session::Run() {
             pending_.clear();
             editWaiting_ = false;
             Rebuild* r = rebuild_.get();
-            r->thread = std::thread([this, r] {
+            // A scene whose motion links were over budget would be again: skip building them.
+            const bool motionLinks = !motionDeclined_;
+            r->thread = std::thread([this, r, motionLinks] {
                 std::unique_ptr<Solver> built;
                 std::string error;
                 try {
-                    built = BuildSolver(r->scene);
+                    built = BuildSolver(r->scene, motionLinks);
                 } catch (const std::exception& e) {
                     error = e.what();
                 }

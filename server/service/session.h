@@ -190,7 +190,8 @@ class Session {
     // `lock` held (released around the solver update); returns false, applying nothing, when
     // an edit needs a link rebuild or one is running. A failed update is put in `note`.
     bool ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note);
-    std::unique_ptr<Solver> BuildSolver(const Scene& scene) const;
+    // `motionLinks` false: the usual links even if the settings ask for motion links.
+    std::unique_ptr<Solver> BuildSolver(const Scene& scene, bool motionLinks) const;
     // Starts `rebuilt` (built for `next`) from the current solver's solution on the surfels
     // that did not move; returns what it did, for the frame note.
     std::string WarmStart(Solver& rebuilt, const Scene& next);
@@ -222,6 +223,8 @@ class Session {
     std::vector<glm::vec3> lastSurfels_;
     uint64_t frames_ = 0, rebuilds_ = 0, linkUpdates_ = 0;
     std::string rebuildReason_;  // Solver::GeometryMismatch of the moves about to rebuild
+    // The first build found motion links over budget: rebuilds build the usual links only.
+    bool motionDeclined_ = false;
     std::deque<std::chrono::steady_clock::time_point> recentFrames_;  // for fps
     std::vector<double> passTotals_;                                  // ms, as of last frame
     std::shared_ptr<const std::vector<PrimitiveKey>> layout_;

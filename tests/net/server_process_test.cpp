@@ -417,8 +417,11 @@ TEST(ServerProcess, SkyChangedInALoadedSession) {
     sky.intensity = 2.0f;
     uint64_t edit = c.SetEnvironment(sky);
     EXPECT_GT(edit, 0u);
+    // The rebuild runs on a thread; step until a frame includes it (at most a minute: on a
+    // loaded 2-core machine it can take seconds).
     client::Frame f = c.Get();
-    for (int k = 0; k < 200 && f.lastEdit < edit; ++k) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (f.lastEdit < edit && std::chrono::steady_clock::now() < deadline) {
         c.Step(1);
         f = c.Get();
     }
