@@ -167,6 +167,18 @@ uint32_t Directions::Lookup(const glm::vec3& d) const {
     return best;
 }
 
+std::vector<uint32_t> Directions::PaddedAdjacency(uint32_t& width) const {
+    width = 0;
+    for (const auto& a : adjacent_) width = std::max(width, static_cast<uint32_t>(a.size()));
+    std::vector<uint32_t> out;
+    out.reserve(size_t(count_) * width);
+    for (uint32_t b = 0; b < static_cast<uint32_t>(count_); ++b) {
+        out.insert(out.end(), adjacent_[b].begin(), adjacent_[b].end());
+        out.resize(out.size() + width - adjacent_[b].size(), b);
+    }
+    return out;
+}
+
 uint32_t Directions::LookupWithin(const glm::vec3& d, const glm::vec3& a,
                                   const glm::vec3& b) const {
     uint32_t nearest = Lookup(d);

@@ -56,7 +56,9 @@ nlohmann::json StatsToJson(const SolverStats& s) {
                        {"links", s.motionLinks},
                        {"moves", s.geometryUpdates},
                        {"links_updated", s.linksUpdated},
-                       {"last_move_ms", s.msGeometry}};
+                       {"last_move_ms", s.msGeometry},
+                       {"link_update", s.linkUpdate},
+                       {"last_link_update_device_ms", s.msLinkUpdateDevice}};
     if (!s.motionDeclined.empty()) j["motion_declined"] = s.motionDeclined;
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)

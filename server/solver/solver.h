@@ -90,6 +90,8 @@ struct SolverStats {
     size_t geometryUpdates = 0;        // moves taken by UpdateGeometry
     size_t linksUpdated = 0;           // links recomputed by those moves, in all
     double msGeometry = 0.0;           // the last move: links, leaves, uploads, shadow maps
+    std::string linkUpdate;            // where moves recompute links: "device" or "host"
+    double msLinkUpdateDevice = 0.0;   // the last move's link update pass, device time
     std::string motionDeclined;        // why motion links were asked for and not built
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }

@@ -6,10 +6,14 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <cstring>
+#include <glm/gtc/matrix_transform.hpp>
 
 #include "base/check.h"
 #include "bundled_scenes.h"
+#include "scene/scene.h"
 #include "solver/antiradiance/antiradiance_solver.h"
 #include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/model.h"
@@ -152,6 +156,92 @@ TEST(VulkanPasses, WarmStartMatchesTheCpuBackEnd) {
     // And it is a warm start: one iteration lands near the source's solution.
     EXPECT_LT(testing::RelativeRms(cpu->SurfelIrradiance(), source->SurfelIrradiance()), 0.3);
     EXPECT_THROW(cpu->WarmStart(std::vector<float>(7), keep), Error);
+    for (const auto& m : dynamic_cast<AntiradianceSolver&>(*gpu).ValidationMessages())
+        ADD_FAILURE() << "validation: " << m;
+}
+
+// Sec. 3.3 on the device: the link update of a move (shaders/links.comp) gives the links
+// the host gives (MakeLink at the new places). Tolerance: the device's atan/log2/sqrt and a
+// float near-field sum against the host's double may put a direction that falls on a bin
+// boundary in the other bin, so a few links (≤ 0.1%) may differ in bin or level; the rest
+// must agree to 1e-4 of their form factor. Links not touching the moved block stay bitwise.
+TEST(VulkanPasses, LinkUpdateOfAMoveMatchesTheHost) {
+    Scene scene = scenes::CornellBox().Build();
+    SolverSettings s;
+    s.bins = 64;
+    s.elementSize = 0.1f;
+    s.motionLinks = true;
+    AntiradianceModel host = BuildAntiradianceModel(scene, s, {});
+    AntiradianceModel device = host;
+    ASSERT_FALSE(host.links.dynamic.empty());
+    VulkanAntiradiance gpu(device, /*lavapipe=*/true, /*validation=*/true);
+    const int node = FindNode(scene, "tall_block");
+    SetNodeTransform(scene, node,
+                     glm::translate(glm::mat4(1.0f), glm::vec3(-0.06f, 0.0f, 0.05f)) *
+                         scene.nodes[node].local *
+                         glm::rotate(glm::mat4(1.0f), glm::radians(25.0f), glm::vec3(0, 1, 0)));
+    const std::vector<Link> built = host.links.links;
+    const auto start = std::chrono::steady_clock::now();
+    const size_t touched = MoveGroups(host, scene);
+    const double hostMs =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    const std::vector<uint8_t> moved = PlaceGroups(device, scene);
+    gpu.UpdateLinks(moved);
+    const std::vector<Link> got = gpu.ReadLinks();
+    ASSERT_EQ(got.size(), host.links.links.size());
+    size_t changed = 0, otherBin = 0;
+    double worst = 0.0;
+    for (size_t i = 0; i < got.size(); ++i) {
+        const Link& a = got[i];
+        const Link& b = host.links.links[i];
+        ASSERT_EQ(a.sender, b.sender) << "link " << i;
+        changed += std::memcmp(&b, &built[i], sizeof(Link)) != 0;
+        if (a.bin != b.bin || a.level != b.level) {
+            ++otherBin;
+            continue;
+        }
+        const double scale = std::max(std::abs(b.formFactor), 1e-30f);
+        worst = std::max(worst, std::abs(double(a.formFactor) - b.formFactor) / scale);
+    }
+    std::printf(
+        "moved block: %zu links touched, %zu changed, %zu in another bin/level, worst "
+        "form factor %.2e; host %.1f ms, device %.1f ms (validation on)\n",
+        touched, changed, otherBin, worst, hostMs, gpu.LinkUpdateMs());
+    EXPECT_GT(changed, touched / 4) << "the move must change the links";
+    EXPECT_LE(otherBin, got.size() / 1000);
+    EXPECT_LT(worst, 1e-4);
+    for (const auto& m : gpu.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
+}
+
+// The whole solver with a move taken in place: lavapipe (links updated on the device) and
+// the CPU back end (on the host) give the same irradiance after the move.
+TEST(VulkanPasses, MovedSolverMatchesTheCpuBackEnd) {
+    Scene scene = scenes::CornellBox().Build();
+    SolverSettings s;
+    s.bins = 64;
+    s.elementSize = 0.1f;
+    s.device = DeviceChoice::kCpu;
+    s.validation = true;
+    s.motionLinks = true;
+    auto cpu = CreateSolver(scene, s);
+    s.device = DeviceChoice::kLavapipe;
+    auto gpu = CreateSolver(scene, s);
+    cpu->Iterate(4);
+    gpu->Iterate(4);
+    const int node = FindNode(scene, "short_block");
+    SetNodeTransform(
+        scene, node,
+        glm::translate(glm::mat4(1.0f), glm::vec3(0.05f, 0.0f, 0.04f)) * scene.nodes[node].local);
+    ASSERT_EQ(gpu->GeometryMismatch(scene), "");
+    cpu->UpdateGeometry(scene);
+    gpu->UpdateGeometry(scene);
+    cpu->Iterate(4);
+    gpu->Iterate(4);
+    const double rel = testing::RelativeRms(gpu->SurfelIrradiance(), cpu->SurfelIrradiance());
+    std::printf("moved: lavapipe vs cpu %.2e; links updated %zu\n", rel, gpu->Stats().linksUpdated);
+    EXPECT_LT(rel, 1e-4);
+    EXPECT_GT(gpu->Stats().linksUpdated, 0u);
+    EXPECT_EQ(gpu->Stats().linksUpdated, cpu->Stats().linksUpdated);
     for (const auto& m : dynamic_cast<AntiradianceSolver&>(*gpu).ValidationMessages())
         ADD_FAILURE() << "validation: " << m;
 }

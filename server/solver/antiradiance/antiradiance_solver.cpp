@@ -75,13 +75,19 @@ std::string AntiradianceSolver::GeometryMismatch(const Scene& scene) const {
 void AntiradianceSolver::UpdateGeometry(const Scene& scene) {
     if (std::string why = GeometryMismatch(scene); !why.empty()) throw Error(why);
     auto start = std::chrono::steady_clock::now();
-    linksUpdated_ += MoveGroups(model_, scene);
-    ++geometryUpdates_;
+    // Surfels, nodes and leaves re-placed on the host (cheap: per element); the links touching
+    // the moved groups recomputed on the device when there is one (links.comp), else here.
+    const std::vector<uint8_t> moved = PlaceGroups(model_, scene);
+    const std::vector<uint32_t> touched = TouchedLinks(model_, moved);
     if (gpu_) {
-        gpu_->UploadLinks();
+        gpu_->UpdateLinks(moved);
         gpu_->UploadLeaves();
         if (!model_.glossy.empty()) gpu_->UploadGlossy();
+    } else {
+        RedoLinks(model_, touched);
     }
+    linksUpdated_ += touched.size();
+    ++geometryUpdates_;
     // Shadow maps and receivers follow the moved surfaces; the sky needs nothing.
     if (lights_) MakeDirect(scene);
     msGeometry_ =
@@ -245,6 +251,8 @@ SolverStats AntiradianceSolver::Stats() const {
     s.geometryUpdates = geometryUpdates_;
     s.linksUpdated = linksUpdated_;
     s.msGeometry = msGeometry_;
+    if (!model_.links.dynamic.empty()) s.linkUpdate = gpu_ ? "device" : "host";
+    s.msLinkUpdateDevice = gpu_ ? gpu_->LinkUpdateMs() : 0.0;
     s.motionDeclined = model_.motionDeclined;
     if (direct_ || gpuDirect_) {
         s.shadowViews = gpuDirect_ ? gpuDirect_->views : direct_->views;

@@ -312,8 +312,8 @@ std::string MotionMismatch(const AntiradianceModel& model, const Scene& scene) {
     return {};
 }
 
-size_t MoveGroups(AntiradianceModel& model, const Scene& scene,
-                  std::vector<uint32_t>* movedLeaves) {
+std::vector<uint8_t> PlaceGroups(AntiradianceModel& model, const Scene& scene,
+                                 std::vector<uint32_t>* movedLeaves) {
     PENUMBRA_CHECK(MotionMismatch(model, scene).empty());
     // Each group's rigid motion from where it was built to where its node is now.
     std::vector<uint8_t> moved(model.motion.size() + 1, 0);
@@ -356,24 +356,42 @@ size_t MoveGroups(AntiradianceModel& model, const Scene& scene,
         if (leaf.flags & kLeafGlossy) FillMirror(model, leaf.flags >> kGlossyShift);
         if (movedLeaves) movedLeaves->push_back(i);
     }
-    // The links touching a moved group, by the build's rules at the new places.
     model.near.surfels = &model.surfels;
-    std::vector<uint32_t> redo;
-    for (size_t k = 0; k < model.links.dynamic.size(); ++k) {
-        const uint32_t r = model.links.dynamicReceivers[k];
-        const uint32_t s = model.links.links[model.links.dynamic[k]].sender;
-        if (moved[nodes[r].group] || moved[nodes[s].group]) redo.push_back(uint32_t(k));
+    return moved;
+}
+
+std::vector<uint32_t> TouchedLinks(const AntiradianceModel& model,
+                                   const std::vector<uint8_t>& moved) {
+    const auto& nodes = model.hierarchy.nodes;
+    const Links& links = model.links;
+    std::vector<uint32_t> touched;
+    for (size_t k = 0; k < links.dynamic.size(); ++k) {
+        const uint32_t r = links.dynamicReceivers[k];
+        const uint32_t s = links.links[links.dynamic[k]].sender;
+        if (moved[nodes[r].group] || moved[nodes[s].group]) touched.push_back(uint32_t(k));
     }
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, redo.size(), 256),
+    return touched;
+}
+
+void RedoLinks(AntiradianceModel& model, const std::vector<uint32_t>& touched) {
+    model.near.surfels = &model.surfels;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, touched.size(), 256),
                       [&](const tbb::blocked_range<size_t>& range) {
                           for (size_t i = range.begin(); i != range.end(); ++i) {
-                              const uint32_t k = redo[i];
+                              const uint32_t k = touched[i];
                               Link& link = model.links.links[model.links.dynamic[k]];
                               link = MakeLink(model.hierarchy, model.dirs, model.norms, model.near,
                                               model.links.dynamicReceivers[k], link.sender);
                           }
                       });
-    return redo.size();
+}
+
+size_t MoveGroups(AntiradianceModel& model, const Scene& scene,
+                  std::vector<uint32_t>* movedLeaves) {
+    const std::vector<uint32_t> touched =
+        TouchedLinks(model, PlaceGroups(model, scene, movedLeaves));
+    RedoLinks(model, touched);
+    return touched.size();
 }
 
 LocalMode ModeOfIteration(const SolverSettings& settings, int i) {

@@ -143,11 +143,20 @@ void GlossyDirect(AntiradianceModel& model, const std::vector<PunctualLight>& li
 // (no motion groups, a group scaled or sheared, or outside its bounds, a static surface
 // moved); empty when MoveGroups can.
 std::string MotionMismatch(const AntiradianceModel& model, const Scene& scene);
-// Re-places the surfels, nodes and leaves of every group whose node moved in `scene`
-// (MotionMismatch must be empty) and recomputes the form factors, bins and spread levels of
-// the links touching them (MakeLink: the same rules as the build, at the new places).
-// Returns the number of links recomputed; `movedLeaves` (optional) gets each moved leaf's
-// index into `leaves`.
+// A move inside the bounds, in two steps. PlaceGroups re-places the surfels, nodes, cosine
+// norms, leaves and glossy mirror bins of every group whose node moved in `scene`
+// (MotionMismatch must be empty) and returns which groups moved (index g, [0] static and
+// never moved); `movedLeaves` (optional) gets each moved leaf's index into `leaves`.
+// TouchedLinks lists the links touching a moved group (indices into Links::dynamic), and
+// RedoLinks recomputes their form factors, bins and spread levels on the host (MakeLink:
+// the same rules as the build, at the new places); the Vulkan back end recomputes them on
+// the device instead (VulkanAntiradiance::UpdateLinks). MoveGroups does all three on the
+// host and returns the number of links recomputed.
+std::vector<uint8_t> PlaceGroups(AntiradianceModel& model, const Scene& scene,
+                                 std::vector<uint32_t>* movedLeaves = nullptr);
+std::vector<uint32_t> TouchedLinks(const AntiradianceModel& model,
+                                   const std::vector<uint8_t>& moved);
+void RedoLinks(AntiradianceModel& model, const std::vector<uint32_t>& touched);
 size_t MoveGroups(AntiradianceModel& model, const Scene& scene,
                   std::vector<uint32_t>* movedLeaves = nullptr);
 

@@ -26,8 +26,15 @@ class VulkanAntiradiance {
     std::vector<float> ReadLeafIrradiance();
     // Copies the model's per-leaf attributes (albedo, emission) to the device again.
     void UploadLeaves();
-    // The model's links again (their number unchanged), after MoveGroups.
-    void UploadLinks();
+    // Sec. 3.3 on the device (shaders/links.comp): after PlaceGroups, recomputes the bins,
+    // spread levels and form factors of the links touching a group with moved[group] set,
+    // from the model's nodes and surfels at their new places. The device's links are then
+    // the authority: the model's host copy keeps its senders and offsets, not these values.
+    // Needs a model with motion links.
+    void UpdateLinks(const std::vector<uint8_t>& moved);
+    // Device time of the last UpdateLinks (0 without timestamps).
+    double LinkUpdateMs() const;
+    std::vector<Link> ReadLinks() const;
     // Copies the model's per-leaf direct irradiance (E_d) to the device again.
     void UploadDirect();
     // Copies the model's glossy data (leaves, mirror bins, lobes, reflected direct light) to
