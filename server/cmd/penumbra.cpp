@@ -386,6 +386,12 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     bake->add_flag("--motion-links", settings.motionLinks,
                    "link dynamic nodes for their motion bounds, as the service does (Sec. 3.3)");
+    bake->add_option("--motion-link-budget", settings.motionLinkBudget,
+                     "with --motion-links: build the usual links instead when the links touching "
+                     "dynamic nodes would outnumber the others by more than this factor (the "
+                     "service uses 1; 0: no limit)")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
 

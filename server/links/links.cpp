@@ -292,25 +292,74 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
         work.swap(next);
     }
 
+    // Pairs within one motion group or between one and anything (both ends of one group
+    // other than the static 0, neither a cluster over several) make only links touching a
+    // group; the rest (static pairs, and the few over mixed clusters) are refined first, so
+    // that the count of links between static nodes is final before the moving ones are made
+    // and the motion link budget can stop the build as soon as it is exceeded.
+    const auto& nodes = h.nodes;
+    auto movingOnly = [&](const std::pair<uint32_t, uint32_t>& p) {
+        const uint32_t a = nodes[p.first].group, b = nodes[p.second].group;
+        return a != kMixedGroup && b != kMixedGroup && (a != 0 || b != 0);
+    };
+    std::stable_partition(work.begin(), work.end(), [&](const auto& p) { return !movingOnly(p); });
+    const size_t firstMoving =
+        static_cast<size_t>(std::find_if(work.begin(), work.end(), movingOnly) - work.begin());
+    auto touches = [&](uint32_t r, const Link& l) {
+        return nodes[r].group != 0 || nodes[l.sender].group != 0;
+    };
+
     tbb::enumerable_thread_specific<std::vector<PendingLink>> local;
     std::atomic<size_t> done{0};
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, work.size(), 1),
-                      [&](const tbb::blocked_range<size_t>& range) {
-                          auto& out = local.local();
-                          for (size_t i = range.begin(); i != range.end(); ++i) {
-                              refiner.Refine(work[i].first, work[i].second,
-                                             [&](uint32_t r, const Link& l) {
-                                                 out.push_back({r, l});
-                                             });
-                          }
-                          size_t n = done.fetch_add(range.size()) + range.size();
-                          if (progress) progress(static_cast<double>(n) / work.size());
-                      });
+    std::atomic<size_t> moving{0};
+    std::atomic<bool> stop{false};
+    size_t cap = 0;  // links touching a group allowed in all (0: no limit)
+    auto refineRange = [&](size_t first, size_t last) {
+        tbb::parallel_for(
+            tbb::blocked_range<size_t>(first, last, 1),
+            [&](const tbb::blocked_range<size_t>& range) {
+                auto& out = local.local();
+                for (size_t i = range.begin(); i != range.end(); ++i) {
+                    if (stop.load(std::memory_order_relaxed)) return;
+                    const size_t before = out.size();
+                    refiner.Refine(work[i].first, work[i].second, [&](uint32_t r, const Link& l) {
+                        out.push_back({r, l});
+                    });
+                    if (cap && i >= firstMoving) {
+                        size_t n = moving.fetch_add(out.size() - before) + (out.size() - before);
+                        if (n > cap) stop.store(true, std::memory_order_relaxed);
+                    }
+                }
+                size_t n = done.fetch_add(range.size()) + range.size();
+                if (progress) progress(static_cast<double>(n) / work.size());
+            });
+    };
+    refineRange(0, firstMoving);
+    Links links;
+    if (settings.dynamicBudget > 0.0f && !settings.motion.empty()) {
+        size_t still = 0, seen = 0;
+        auto tally = [&](const std::vector<PendingLink>& v) {
+            for (const auto& p : v) (touches(p.receiver, p.link) ? seen : still)++;
+        };
+        tally(seedLinks);
+        for (const auto& v : local) tally(v);
+        cap = static_cast<size_t>(settings.dynamicBudget * double(std::max<size_t>(1, still)));
+        moving = seen;
+        links.staticLinks = still;
+        if (seen > cap) stop = true;
+    }
+    refineRange(firstMoving, work.size());
+    if (stop) {
+        links.overBudget = true;
+        links.dynamicSeen = moving;
+        links.buildSeconds =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        return links;
+    }
 
     // Counting sort by receiver; within a receiver by spread level (the CPU gather's
     // fixed-width spread loop then runs the same trip count link after link), then by
     // sender for locality of I_ex reads.
-    Links links;
     links.offsets.assign(h.size() + 1, 0);
     auto count = [&](const std::vector<PendingLink>& v) {
         for (const auto& p : v) links.offsets[p.receiver + 1]++;

@@ -45,6 +45,9 @@ struct LinkSettings {
     int threads = 0;  // 0: all cores
     // Motion bounds of group g at motion[g − 1] (Surfels::groups); empty: everything static.
     std::vector<MotionBounds> motion;
+    // With motion: stop as soon as the links touching a group outnumber the others by more
+    // than this factor (Links::overBudget; the links are then incomplete). 0: no limit.
+    float dynamicBudget = 0.0f;
 };
 
 struct Links {
@@ -55,6 +58,11 @@ struct Links {
     // receivers: after a move their form factors and bins are recomputed (Sec. 3.3).
     std::vector<uint32_t> dynamic;
     std::vector<uint32_t> dynamicReceivers;
+    // LinkSettings::dynamicBudget was exceeded: the build stopped early and these links are
+    // incomplete; `dynamicSeen` links touching a group had been made by then, against
+    // `staticLinks` others (all of them).
+    bool overBudget = false;
+    size_t dynamicSeen = 0, staticLinks = 0;
 
     size_t Count() const { return links.size(); }
 };

@@ -197,5 +197,47 @@ TEST(MotionLinks, MovedGlossyCubeUnderASpotMatchesAFreshBake) {
     EXPECT_EQ(solver.Stats().geometryUpdates, 1u);
 }
 
+// The motion link budget (SolverSettings::motionLinkBudget): the build refines the static pairs
+// first, so it knows how many links the rest has, then stops as soon as the links touching
+// the dynamic nodes pass the budget, and the model falls back to the usual links.
+TEST(MotionLinks, BudgetStopsTheBuildEarlyAndFallsBack) {
+    Scene scene = LoadGltf(kScenes + "cornell-box.gltf");
+    const SolverSettings settings = MotionSettings(64, 0.1f);
+    AntiradianceModel full = BuildAntiradianceModel(scene, settings, {});
+    const size_t moving = full.links.dynamic.size();
+    const size_t still = full.links.Count() - moving;
+    ASSERT_GT(moving, 0u);
+    full.near.surfels = &full.surfels;  // re-pointed after the model was moved (model.h)
+    LinkSettings ls;
+    ls.oracle = settings.oracle;
+    ls.receiverOracle = settings.receiverOracle;
+    for (const MotionGroup& g : full.motion) ls.motion.push_back(g.bounds);
+    const double ratio = double(moving) / double(still);
+    // A budget of half the ratio: stopped well before all the moving links were made.
+    ls.dynamicBudget = float(0.5 * ratio);
+    Links stopped = BuildLinks(full.hierarchy, full.dirs, full.norms, full.near, ls);
+    EXPECT_TRUE(stopped.overBudget);
+    EXPECT_EQ(stopped.staticLinks, still);
+    EXPECT_GT(double(stopped.dynamicSeen), 0.5 * ratio * double(still));
+    EXPECT_LT(stopped.dynamicSeen, moving);
+    // Twice the ratio: the same links as without a budget.
+    ls.dynamicBudget = float(2.0 * ratio);
+    Links kept = BuildLinks(full.hierarchy, full.dirs, full.norms, full.near, ls);
+    EXPECT_FALSE(kept.overBudget);
+    ASSERT_EQ(kept.Count(), full.links.Count());
+    EXPECT_EQ(kept.dynamic, full.links.dynamic);
+    // The model over budget is the usual one, and says why.
+    SolverSettings tight = settings;
+    tight.motionLinkBudget = float(0.5 * ratio);
+    AntiradianceModel fallback = BuildAntiradianceModel(scene, tight, {});
+    AntiradianceModel plain = BuildAntiradianceModel(scene, testing::CpuSettings(64, 0.1f), {});
+    EXPECT_TRUE(fallback.motion.empty());
+    EXPECT_EQ(fallback.links.Count(), plain.links.Count());
+    EXPECT_NE(fallback.motionDeclined.find("would touch the dynamic nodes"), std::string::npos)
+        << fallback.motionDeclined;
+    std::printf("budget %.2f×: stopped at %zu of %zu moving links (%zu static); %s\n", 0.5 * ratio,
+                stopped.dynamicSeen, moving, still, fallback.motionDeclined.c_str());
+}
+
 }  // namespace
 }  // namespace penumbra

@@ -84,29 +84,29 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
     ls.receiverOracle = settings.receiverOracle;
     ls.mode = settings.paperOracle ? LinkOracle::kPaper : LinkOracle::kConservative;
     ls.threads = settings.threads;
+    ls.dynamicBudget = settings.motionLinkBudget;
     model.norms = ComputeLeafNorms(model.hierarchy, model.dirs);
     const LeafNorms& norms = model.norms;
     model.near = BuildNearField(model.surfels);
     model.links = BuildLinks(model.hierarchy, model.dirs, norms, model.near, ls, [&](double f) {
         if (progress) progress("linking", f);
     });
-    if (!model.motion.empty() && settings.motionLinkBudget > 0.0f) {
-        // Motion links cost links: when the ones touching the groups outnumber the others by
-        // more than the budget, build the usual links instead (moves will rebuild).
-        const double moving = double(model.links.dynamic.size());
-        const double still = std::max(1.0, double(model.links.Count()) - moving);
-        if (moving > settings.motionLinkBudget * still) {
-            SolverSettings plain = settings;
-            plain.motionLinks = false;
-            AntiradianceModel fallback = BuildAntiradianceModel(scene, plain, progress);
-            char why[160];
-            std::snprintf(why, sizeof why,
-                          "%.0f links would touch the dynamic nodes, %.1f× the other %.0f "
-                          "(budget %.1f×)",
-                          moving, moving / still, still, settings.motionLinkBudget);
-            fallback.motionDeclined = why;
-            return fallback;
-        }
+    if (model.links.overBudget) {
+        // Motion links cost links: the ones touching the groups outnumbered the others by more
+        // than the budget (BuildLinks stopped there), so build the usual links instead (moves
+        // will rebuild).
+        SolverSettings plain = settings;
+        plain.motionLinks = false;
+        AntiradianceModel fallback = BuildAntiradianceModel(scene, plain, progress);
+        const double still = double(std::max<size_t>(1, model.links.staticLinks));
+        char why[200];
+        std::snprintf(why, sizeof why,
+                      "more than %.0f links would touch the dynamic nodes, over %.2f× the other "
+                      "%.0f (budget %.2f×)",
+                      double(model.links.dynamicSeen), double(model.links.dynamicSeen) / still,
+                      still, settings.motionLinkBudget);
+        fallback.motionDeclined = why;
+        return fallback;
     }
     if (!model.motion.empty()) {
         model.restPositions = model.surfels.positions;
