@@ -330,6 +330,13 @@ CpuDirect::CpuDirect(const Scene& scene, std::vector<GpuReceiver> receivers, int
     Update(scene);
 }
 
+void CpuDirect::Move(const Scene& scene, std::vector<GpuReceiver> receivers) {
+    PENUMBRA_CHECK(receivers.size() == receivers_.size());
+    triangles_ = SceneTriangles(scene);
+    receivers_ = std::move(receivers);
+    Update(scene);
+}
+
 void CpuDirect::Update(const Scene& scene) {
     Plan plan = PlanShadows(scene, mapSize_);
     views = static_cast<int>(plan.views.size());

@@ -88,6 +88,9 @@ class CpuDirect {
     CpuDirect(const Scene& scene, std::vector<GpuReceiver> receivers, int mapSize);
     // Re-plans from the scene's lights (geometry as at construction) and recomputes.
     void Update(const Scene& scene);
+    // After a rigid move (same triangles and receivers, at new places): takes the scene's
+    // triangles and `receivers` again, then Update.
+    void Move(const Scene& scene, std::vector<GpuReceiver> receivers);
     const std::vector<float>& Irradiance() const { return out_; }     // stride 4
     const std::vector<float>& PerLight() const { return perLight_; }  // lights × receivers × 4
     const std::vector<float>& Maps() const { return maps_; }

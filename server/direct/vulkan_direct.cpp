@@ -167,6 +167,16 @@ VulkanDirect::~VulkanDirect() = default;
 
 void VulkanDirect::Update(const Scene& scene) { impl_->Update(scene, msShadow, msDirect, views); }
 
+void VulkanDirect::Move(const Scene& scene, std::vector<GpuReceiver> receivers) {
+    Impl& s = *impl_;
+    PENUMBRA_CHECK(receivers.size() == s.receiverList.size() &&
+                   scene.TriangleCount() * 3 == s.triangleVertices);
+    s.receiverList = std::move(receivers);
+    s.receivers.Upload(s.receiverList);
+    s.vertices.Upload(Impl::Vertices(scene));
+    Update(scene);
+}
+
 std::vector<float> VulkanDirect::ReadIrradiance() const {
     std::vector<float> v(impl_->receiverList.size() * 4);
     impl_->out.Download(v.data(), v.size() * sizeof(float));

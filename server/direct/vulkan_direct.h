@@ -27,6 +27,9 @@ class VulkanDirect {
 
     // Plans from the scene's lights (geometry as at construction), renders, waits.
     void Update(const Scene& scene);
+    // After a rigid move (same triangles and receivers, at new places): uploads the scene's
+    // triangles and `receivers` into the buffers there are, then Update.
+    void Move(const Scene& scene, std::vector<GpuReceiver> receivers);
     std::vector<float> ReadIrradiance() const;  // stride 4, as the CPU twin's
     // Each of the first `lights` lights' share, as CpuDirect::PerLight.
     std::vector<float> ReadPerLight(size_t lights) const;

@@ -88,8 +88,18 @@ void AntiradianceSolver::UpdateGeometry(const Scene& scene) {
     }
     linksUpdated_ += touched.size();
     ++geometryUpdates_;
-    // Shadow maps and receivers follow the moved surfaces; the sky needs nothing.
-    if (lights_) MakeDirect(scene);
+    // Shadow casters and receivers follow the moved surfaces (the same buffers, new
+    // places); the sky needs nothing.
+    if (lights_) {
+        std::vector<uint32_t> order;
+        for (const LeafAttributes& leaf : model_.leaves) order.push_back(leaf.surfel);
+        auto receivers = direct::MakeReceivers(model_.surfels, order);
+        if (gpuDirect_)
+            gpuDirect_->Move(scene, std::move(receivers));
+        else
+            direct_->Move(scene, std::move(receivers));
+        CopyDirect(scene);
+    }
     msGeometry_ =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
