@@ -384,7 +384,7 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
     if (!settings.motion.empty()) {
         for (uint32_t r = 0; r < h.size(); ++r)
             for (uint32_t i = links.offsets[r]; i < links.offsets[r + 1]; ++i)
-                if (h.nodes[r].group != 0 || h.nodes[links.links[i].sender].group != 0) {
+                if (touches(r, links.links[i])) {
                     links.dynamic.push_back(i);
                     links.dynamicReceivers.push_back(r);
                 }

@@ -46,10 +46,14 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
 
 AntiradianceSolver::~AntiradianceSolver() = default;
 
-void AntiradianceSolver::MakeDirect(const Scene& scene) {
+std::vector<direct::GpuReceiver> AntiradianceSolver::LeafReceivers() const {
     std::vector<uint32_t> order;
     for (const LeafAttributes& leaf : model_.leaves) order.push_back(leaf.surfel);
-    auto receivers = direct::MakeReceivers(model_.surfels, order);
+    return direct::MakeReceivers(model_.surfels, order);
+}
+
+void AntiradianceSolver::MakeDirect(const Scene& scene) {
+    auto receivers = LeafReceivers();
     gpuDirect_.reset();
     direct_.reset();
     if (gpu_)
@@ -91,13 +95,10 @@ void AntiradianceSolver::UpdateGeometry(const Scene& scene) {
     // Shadow casters and receivers follow the moved surfaces (the same buffers, new
     // places); the sky needs nothing.
     if (lights_) {
-        std::vector<uint32_t> order;
-        for (const LeafAttributes& leaf : model_.leaves) order.push_back(leaf.surfel);
-        auto receivers = direct::MakeReceivers(model_.surfels, order);
         if (gpuDirect_)
-            gpuDirect_->Move(scene, std::move(receivers));
+            gpuDirect_->Move(scene, LeafReceivers());
         else
-            direct_->Move(scene, std::move(receivers));
+            direct_->Move(scene, LeafReceivers());
         CopyDirect(scene);
     }
     msGeometry_ =

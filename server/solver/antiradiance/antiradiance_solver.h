@@ -63,6 +63,8 @@ class AntiradianceSolver : public Solver {
     double msGeometry_ = 0.0;
     // The direct stage for the scene's lights and the model's surfels as they are now.
     void MakeDirect(const Scene& scene);
+    // The direct stage's receivers: the leaves' surfels where they are now.
+    std::vector<direct::GpuReceiver> LeafReceivers() const;
 };
 
 }  // namespace penumbra

@@ -246,10 +246,7 @@ struct VulkanAntiradiance::Impl {
                 cb.writeTimestamp(vk::PipelineStageFlagBits::eComputeShader, *u.queries, 1);
         });
         if (*u.queries) {
-            auto [result, ticks] = u.queries.getResults<uint64_t>(
-                0, 2, 2 * sizeof(uint64_t), sizeof(uint64_t),
-                vk::QueryResultFlagBits::e64 | vk::QueryResultFlagBits::eWait);
-            if (result != vk::Result::eSuccess) gpu::ThrowVulkan("vkGetQueryPoolResults", result);
+            const std::vector<uint64_t> ticks = Ticks(u.queries, 2);
             u.ms = (ticks[1] - ticks[0]) * ctx.TimestampPeriodNs() * 1e-6;
         }
     }
@@ -413,12 +410,18 @@ struct VulkanAntiradiance::Impl {
         cur = 1 - cur;
     }
 
-    void ReadTimestamps() {
-        if (!*queries) return;
-        auto [result, ticks] = queries.getResults<uint64_t>(
-            0, kTimestamps, kTimestamps * sizeof(uint64_t), sizeof(uint64_t),
+    // The first `count` timestamps of `pool`, waiting for them.
+    static std::vector<uint64_t> Ticks(const vk::raii::QueryPool& pool, uint32_t count) {
+        auto [result, ticks] = pool.getResults<uint64_t>(
+            0, count, count * sizeof(uint64_t), sizeof(uint64_t),
             vk::QueryResultFlagBits::e64 | vk::QueryResultFlagBits::eWait);
         if (result != vk::Result::eSuccess) gpu::ThrowVulkan("vkGetQueryPoolResults", result);
+        return ticks;
+    }
+
+    void ReadTimestamps() {
+        if (!*queries) return;
+        const std::vector<uint64_t> ticks = Ticks(queries, kTimestamps);
         double ns = ctx.TimestampPeriodNs();
         for (int p = 0; p < 4; ++p) msPass[p] += (ticks[p + 1] - ticks[p]) * ns * 1e-6;
     }
