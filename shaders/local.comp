@@ -5,6 +5,7 @@
 // Glossy leaves add their lobe's share of Eq. 18 (cpu_passes.cpp, GlossyReflection: keep
 // the arithmetic in step): incoming light gathered at the mirror bin of each incoming bin,
 // then every outgoing bin reads its lobe row there.
+// Tables are read through texel buffers (lavapipe gathers them; gpu/pipeline.h, Slot).
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
@@ -12,17 +13,17 @@
 layout(local_size_x_id = 0) in;
 
 layout(std430, binding = 0) readonly buffer Leaves { Leaf leaves[]; };
-layout(std430, binding = 1) readonly buffer Dirs { vec4 dirs[]; };
-layout(std430, binding = 2) readonly buffer Lin { float lin[]; };
-layout(std430, binding = 3) readonly buffer IexOld { float iexOld[]; };
+layout(binding = 1) uniform samplerBuffer dirs;  // xyz_ per bin
+layout(binding = 2) uniform samplerBuffer lin;
+layout(binding = 3) uniform samplerBuffer iexOld;
 layout(std430, binding = 4) writeonly buffer IexNew { float iexNew[]; };
 layout(std430, binding = 5) writeonly buffer Irradiance { float irradiance[]; };
-layout(std430, binding = 6) readonly buffer Direct { vec4 direct[]; };
+layout(binding = 6) uniform samplerBuffer direct;  // rgb_ per leaf
 layout(std430, binding = 7) readonly buffer Glossy { GlossyLeaf glossy[]; };
-layout(std430, binding = 8) readonly buffer Mirror { uint mirror[]; };
+layout(binding = 8) uniform usamplerBuffer mirror;
 layout(std430, binding = 9) readonly buffer Lobes { Lobe lobes[]; };
-layout(std430, binding = 10) readonly buffer LobeWeights { BinWeight lobeWeights[]; };
-layout(std430, binding = 11) readonly buffer GlossyDirect { vec4 glossyDirect[]; };
+layout(binding = 10) uniform usamplerBuffer lobeWeights;   // BinWeight as two uints
+layout(binding = 11) uniform samplerBuffer glossyDirect;  // rgb_ per glossy leaf and bin
 
 layout(push_constant) uniform Push { uint count; uint mode; float binSolidAngle; } pc;
 
@@ -30,6 +31,12 @@ const float kInvPi = 0.31830988618379067;
 
 // Light arriving at the front of a glossy leaf, summed at the mirror bin of each bin.
 vec3 arrived[BINS];
+
+vec3 Fetch3(samplerBuffer table, uint k) {
+    int i = int(k);
+    return vec3(texelFetch(table, i).x, texelFetch(table, i + 1).x, texelFetch(table, i + 2).x);
+}
+float Cos(vec3 normal, uint bin) { return dot(normal, Fetch3(dirs, 4u * bin)); }
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
@@ -40,15 +47,15 @@ void main() {
     // Irradiance E = ω_bin Σ ⟨n|−ω_l⟩ L_in(ω_l) over bins arriving at the front.
     vec3 e = vec3(0.0);
     for (uint b = 0; b < BINS; ++b) {
-        float c = dot(leaf.normal, dirs[b].xyz);
-        if (c < 0.0) e -= c * vec3(lin[row + b * 3u], lin[row + b * 3u + 1u], lin[row + b * 3u + 2u]);
+        float c = Cos(leaf.normal, b);
+        if (c < 0.0) e -= c * Fetch3(lin, row + b * 3u);
     }
     e *= pc.binSolidAngle * leaf.cosNormIn;
     irradiance[i * 3u] = e.x;
     irradiance[i * 3u + 1u] = e.y;
     irradiance[i * 3u + 2u] = e.z;
 
-    vec3 front = leaf.area * leaf.cosNormOut * (leaf.emission + leaf.albedo * (e + direct[i].xyz) * kInvPi);
+    vec3 front = leaf.area * leaf.cosNormOut * (leaf.emission + leaf.albedo * (e + Fetch3(direct, 4u * i)) * kInvPi);
     bool glossyLeaf = (leaf.flags & kLeafGlossy) != 0u && (pc.mode & kReflect) != 0u;
     uint g = leaf.flags >> kGlossyShift;
     Lobe lobe = Lobe(0u, 0u, 0.0, 0.0);
@@ -56,37 +63,31 @@ void main() {
     if (glossyLeaf) {
         for (uint b = 0; b < BINS; ++b) arrived[b] = vec3(0.0);
         for (uint l = 0; l < BINS; ++l) {
-            float c = dot(leaf.normal, dirs[l].xyz);
-            uint k = row + l * 3u;
-            if (c < 0.0) arrived[mirror[g * BINS + l]] -= c * vec3(lin[k], lin[k + 1u], lin[k + 2u]);
+            float c = Cos(leaf.normal, l);
+            if (c < 0.0) arrived[texelFetch(mirror, int(g * BINS + l)).x] -= c * Fetch3(lin, row + l * 3u);
         }
         lobe = lobes[glossy[g].lobe];
         f0 = leaf.area * glossy[g].specular;
     }
     for (uint b = 0; b < BINS; ++b) {
-        float c = dot(leaf.normal, dirs[b].xyz);
+        float c = Cos(leaf.normal, b);
         uint k = row + b * 3u;
         vec3 v;
         if (c > 0.0) {
             // A two-sided leaf sends light arriving at its back on through its front.
-            vec3 through = (leaf.flags & kLeafTwoSided) != 0u
-                               ? leaf.area * c * vec3(lin[k], lin[k + 1u], lin[k + 2u])
-                               : vec3(0.0);
-            v = (pc.mode & kReflect) != 0u ? c * front - through
-                                           : vec3(iexOld[k], iexOld[k + 1u], iexOld[k + 2u]);
+            vec3 through = (leaf.flags & kLeafTwoSided) != 0u ? leaf.area * c * Fetch3(lin, k) : vec3(0.0);
+            v = (pc.mode & kReflect) != 0u ? c * front - through : Fetch3(iexOld, k);
             if (glossyLeaf) {
                 vec3 sum = vec3(0.0);
                 uint start = lobe.start + b * lobe.width;
                 for (uint w = 0; w < lobe.width; ++w) {
-                    BinWeight bw = lobeWeights[start + w];
-                    sum += bw.weight * arrived[bw.bin];
+                    int at = int(2u * (start + w));
+                    sum += uintBitsToFloat(texelFetch(lobeWeights, at + 1).x) * arrived[texelFetch(lobeWeights, at).x];
                 }
-                v += c * f0 * (pc.binSolidAngle * sum + glossyDirect[g * BINS + b].xyz);
+                v += c * f0 * (pc.binSolidAngle * sum + Fetch3(glossyDirect, 4u * (g * BINS + b)));
             }
         } else {
-            v = (pc.mode & kAntiradiance) != 0u
-                    ? leaf.area * c * vec3(lin[k], lin[k + 1u], lin[k + 2u])
-                    : vec3(iexOld[k], iexOld[k + 1u], iexOld[k + 2u]);
+            v = (pc.mode & kAntiradiance) != 0u ? leaf.area * c * Fetch3(lin, k) : Fetch3(iexOld, k);
         }
         iexNew[k] = v.x;
         iexNew[k + 1u] = v.y;

@@ -7,9 +7,12 @@
 
 layout(local_size_x_id = 0) in;
 
-layout(std430, binding = 0) buffer Lin { vec4 lin[]; };  // rows of BINS·3/4 vec4
-layout(std430, binding = 1) readonly buffer Parents { uint parents[]; };
-layout(std430, binding = 2) readonly buffer NodesByDepth { uint nodesByDepth[]; };
+// L_in written through a storage buffer and read through a texel buffer (lavapipe gathers
+// texel fetches; gpu/pipeline.h, Slot): rows of BINS·3 floats.
+layout(std430, binding = 0) writeonly buffer Lin { vec4 lin[]; };
+layout(binding = 1) uniform samplerBuffer linIn;
+layout(std430, binding = 2) readonly buffer Parents { uint parents[]; };
+layout(std430, binding = 3) readonly buffer NodesByDepth { uint nodesByDepth[]; };
 
 layout(push_constant) uniform Push { uint first; uint count; } pc;
 
@@ -19,5 +22,11 @@ void main() {
     uint row = BINS * 3u / 4u;
     uint node = nodesByDepth[pc.first + i];
     uint dst = node * row, src = parents[node] * row;
-    for (uint k = 0u; k < row; ++k) lin[dst + k] += lin[src + k];
+    for (uint k = 0u; k < row; ++k) {
+        int a = int(4u * (dst + k)), b = int(4u * (src + k));
+        lin[dst + k] = vec4(texelFetch(linIn, a).x + texelFetch(linIn, b).x,
+                            texelFetch(linIn, a + 1).x + texelFetch(linIn, b + 1).x,
+                            texelFetch(linIn, a + 2).x + texelFetch(linIn, b + 2).x,
+                            texelFetch(linIn, a + 3).x + texelFetch(linIn, b + 3).x);
+    }
 }

@@ -45,11 +45,12 @@ Buffer::Buffer(Context& ctx, size_t bytes)
                     std::to_string(ctx.Limits().maxStorageBufferRange >> 20) +
                     " MiB storage-buffer limit; use fewer bins, a larger element size, or "
                     "--device cpu");
-    buffer_ = vk::raii::Buffer(ctx.Device(),
-                               vk::BufferCreateInfo({}, bytes_,
-                                                    vk::BufferUsageFlagBits::eStorageBuffer |
-                                                        vk::BufferUsageFlagBits::eTransferSrc |
-                                                        vk::BufferUsageFlagBits::eTransferDst));
+    buffer_ = vk::raii::Buffer(
+        ctx.Device(), vk::BufferCreateInfo({}, bytes_,
+                                           vk::BufferUsageFlagBits::eStorageBuffer |
+                                               vk::BufferUsageFlagBits::eUniformTexelBuffer |
+                                               vk::BufferUsageFlagBits::eTransferSrc |
+                                               vk::BufferUsageFlagBits::eTransferDst));
     auto req = buffer_.getMemoryRequirements();
     // Prefer memory that is both device-local and host-visible (lavapipe, resizable BAR).
     uint32_t type = FindMemory(ctx, req.memoryTypeBits,
@@ -74,6 +75,22 @@ Buffer::Buffer(Context& ctx, size_t bytes)
         ctx.RunNow(
             [&](const vk::raii::CommandBuffer& cb) { cb.fillBuffer(*buffer_, 0, bytes_, 0); });
     }
+}
+
+vk::BufferView Buffer::View(vk::Format format) const {
+    for (const auto& [f, view] : views_)
+        if (f == format) return *view;
+    // Every format used here is 32 bits a texel.
+    if (bytes_ / 4 > ctx_.Limits().maxTexelBufferElements)
+        throw Error("a " + std::to_string(bytes_ >> 20) +
+                    " MiB table exceeds this Vulkan device's " +
+                    std::to_string(ctx_.Limits().maxTexelBufferElements) +
+                    "-element texel-buffer limit; use fewer bins, a larger element size, or "
+                    "--device cpu");
+    views_.emplace_back(
+        format, vk::raii::BufferView(ctx_.Device(), vk::BufferViewCreateInfo({}, *buffer_, format,
+                                                                             0, VK_WHOLE_SIZE)));
+    return *views_.back().second;
 }
 
 void Buffer::Upload(const void* data, size_t bytes) {

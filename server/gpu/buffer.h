@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstring>
+#include <utility>
 #include <vector>
 
 #include "gpu/context.h"
@@ -19,6 +20,10 @@ class Buffer {
 
     size_t Bytes() const { return bytes_; }
     vk::Buffer Handle() const { return *buffer_; }
+    // A view of the whole buffer as a uniform texel buffer of one 32-bit `format` (made on
+    // first use, kept with the buffer). Throws when the device's texel-buffer limit is below
+    // the buffer's size.
+    vk::BufferView View(vk::Format format) const;
 
     void Upload(const void* data, size_t bytes);
     void Download(void* data, size_t bytes) const;
@@ -40,6 +45,7 @@ class Buffer {
     vk::raii::Buffer buffer_{nullptr};
     vk::raii::DeviceMemory memory_{nullptr};
     void* mapped_ = nullptr;
+    mutable std::vector<std::pair<vk::Format, vk::raii::BufferView>> views_;
 };
 
 }  // namespace penumbra::gpu

@@ -1,34 +1,60 @@
 // Shader modules, layouts, descriptor pools, and compute and raster pipelines.
 #include "gpu/pipeline.h"
 
+#include "base/check.h"
+
 namespace penumbra::gpu {
 
 BufferSetLayout::BufferSetLayout(Context& ctx, uint32_t count, vk::ShaderStageFlags stages)
-    : ctx_(ctx) {
+    : BufferSetLayout(ctx, std::vector<Slot>(count, Slot::kStorage), stages) {}
+
+namespace {
+vk::DescriptorType TypeOf(Slot slot) {
+    return slot == Slot::kStorage ? vk::DescriptorType::eStorageBuffer
+                                  : vk::DescriptorType::eUniformTexelBuffer;
+}
+}  // namespace
+
+BufferSetLayout::BufferSetLayout(Context& ctx, std::vector<Slot> slots, vk::ShaderStageFlags stages)
+    : ctx_(ctx), slots_(std::move(slots)) {
     const auto& dev = ctx.Device();
     std::vector<vk::DescriptorSetLayoutBinding> bindings;
-    for (uint32_t i = 0; i < count; ++i)
-        bindings.emplace_back(i, vk::DescriptorType::eStorageBuffer, 1, stages);
+    uint32_t storage = 0, texel = 0;
+    for (uint32_t i = 0; i < slots_.size(); ++i) {
+        bindings.emplace_back(i, TypeOf(slots_[i]), 1, stages);
+        ++(slots_[i] == Slot::kStorage ? storage : texel);
+    }
     setLayout_ =
         vk::raii::DescriptorSetLayout(dev, vk::DescriptorSetLayoutCreateInfo({}, bindings));
     // Enough sets for the ping-pong variants a pass needs.
     constexpr uint32_t kMaxSets = 8;
-    vk::DescriptorPoolSize size(vk::DescriptorType::eStorageBuffer, count * kMaxSets);
+    std::vector<vk::DescriptorPoolSize> sizes;
+    if (storage) sizes.emplace_back(vk::DescriptorType::eStorageBuffer, storage * kMaxSets);
+    if (texel) sizes.emplace_back(vk::DescriptorType::eUniformTexelBuffer, texel * kMaxSets);
     pool_ = vk::raii::DescriptorPool(
         dev, vk::DescriptorPoolCreateInfo(vk::DescriptorPoolCreateFlagBits::eFreeDescriptorSet,
-                                          kMaxSets, size));
+                                          kMaxSets, sizes));
 }
 
 vk::raii::DescriptorSet BufferSetLayout::MakeSet(std::span<const Buffer* const> buffers) const {
+    PENUMBRA_CHECK_EQ(buffers.size(), slots_.size());
     vk::DescriptorSetLayout raw = *setLayout_;
     vk::raii::DescriptorSets sets(ctx_.Device(), vk::DescriptorSetAllocateInfo(*pool_, raw));
     vk::raii::DescriptorSet set = std::move(sets.front());
-    std::vector<vk::DescriptorBufferInfo> infos;
-    infos.reserve(buffers.size());
-    for (const Buffer* b : buffers) infos.emplace_back(b->Handle(), 0, VK_WHOLE_SIZE);
+    std::vector<vk::DescriptorBufferInfo> infos(buffers.size());
+    std::vector<vk::BufferView> views(buffers.size());
     std::vector<vk::WriteDescriptorSet> writes;
-    for (uint32_t i = 0; i < buffers.size(); ++i)
-        writes.emplace_back(*set, i, 0, 1, vk::DescriptorType::eStorageBuffer, nullptr, &infos[i]);
+    for (uint32_t i = 0; i < buffers.size(); ++i) {
+        const Slot slot = slots_[i];
+        if (slot == Slot::kStorage) {
+            infos[i] = vk::DescriptorBufferInfo(buffers[i]->Handle(), 0, VK_WHOLE_SIZE);
+            writes.emplace_back(*set, i, 0, 1, TypeOf(slot), nullptr, &infos[i]);
+        } else {
+            views[i] = buffers[i]->View(slot == Slot::kTexelFloat ? vk::Format::eR32Sfloat
+                                                                  : vk::Format::eR32Uint);
+            writes.emplace_back(*set, i, 0, 1, TypeOf(slot), nullptr, nullptr, &views[i]);
+        }
+    }
     ctx_.Device().updateDescriptorSets(writes, {});
     return set;
 }
@@ -51,7 +77,12 @@ vk::raii::ShaderModule MakeShaderModule(Context& ctx, std::span<const uint32_t> 
 
 Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t bufferCount,
                    std::span<const uint32_t> specialization, uint32_t pushConstantBytes)
-    : sets_(ctx, bufferCount, vk::ShaderStageFlagBits::eCompute) {
+    : Pipeline(ctx, spirv, std::vector<Slot>(bufferCount, Slot::kStorage), specialization,
+               pushConstantBytes) {}
+
+Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, std::vector<Slot> slots,
+                   std::span<const uint32_t> specialization, uint32_t pushConstantBytes)
+    : sets_(ctx, std::move(slots), vk::ShaderStageFlagBits::eCompute) {
     layout_ = MakePipelineLayout(ctx, sets_, vk::ShaderStageFlagBits::eCompute, pushConstantBytes);
     module_ = MakeShaderModule(ctx, spirv);
     std::vector<vk::SpecializationMapEntry> entries;

@@ -12,16 +12,26 @@
 
 namespace penumbra::gpu {
 
-// Set 0 with `count` storage buffers visible to `stages`, and a pool for a few sets of it.
+// What one binding of set 0 holds: a storage buffer, or a buffer read through a uniform
+// texel buffer view of 32-bit floats or uints (`samplerBuffer` / `usamplerBuffer`). lavapipe
+// (Mesa 22.3) loads a storage buffer lane by lane behind a branch per lane and component,
+// but gathers texel fetches into vector registers: random reads in hot loops go faster as
+// texel fetches there.
+enum class Slot : uint8_t { kStorage, kTexelFloat, kTexelUint };
+
+// Set 0 with one binding per slot (or `count` storage buffers) visible to `stages`, and a
+// pool for a few sets of it.
 class BufferSetLayout {
   public:
     BufferSetLayout(Context& ctx, uint32_t count, vk::ShaderStageFlags stages);
+    BufferSetLayout(Context& ctx, std::vector<Slot> slots, vk::ShaderStageFlags stages);
     // A descriptor set binding `buffers` in order to bindings 0..N−1.
     vk::raii::DescriptorSet MakeSet(std::span<const Buffer* const> buffers) const;
     vk::DescriptorSetLayout Handle() const { return *setLayout_; }
 
   private:
     Context& ctx_;
+    std::vector<Slot> slots_;
     vk::raii::DescriptorSetLayout setLayout_{nullptr};
     vk::raii::DescriptorPool pool_{nullptr};
 };
@@ -29,6 +39,8 @@ class BufferSetLayout {
 class Pipeline {
   public:
     Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t bufferCount,
+             std::span<const uint32_t> specialization, uint32_t pushConstantBytes);
+    Pipeline(Context& ctx, std::span<const uint32_t> spirv, std::vector<Slot> slots,
              std::span<const uint32_t> specialization, uint32_t pushConstantBytes);
 
     vk::raii::DescriptorSet MakeSet(std::span<const Buffer* const> buffers) const {

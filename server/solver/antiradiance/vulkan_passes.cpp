@@ -69,6 +69,11 @@ struct LinkPush {
 // the 65,535 every device allows).
 constexpr uint32_t kLinkChunk = 1u << 20;
 
+// Push and pull: a table written as rows, the same table read through texel fetches, and
+// two index tables.
+const std::vector<gpu::Slot> kRowSlots = {gpu::Slot::kStorage, gpu::Slot::kTexelFloat,
+                                          gpu::Slot::kStorage, gpu::Slot::kStorage};
+
 }  // namespace
 
 struct VulkanAntiradiance::Impl {
@@ -123,9 +128,18 @@ struct VulkanAntiradiance::Impl {
           lin(ctx, m.TableFloats() * 4),
           irradiance(ctx, m.leaves.size() * 12),
           direct(ctx, m.leaves.size() * sizeof(glm::vec4)),
-          global(ctx, Words(kSpirv_global), 8, Spec(), sizeof(uint32_t)),
-          push(ctx, Words(kSpirv_push), 3, Spec(), sizeof(RangePush)),
-          local(ctx, Words(kSpirv_local), 12, Spec(), sizeof(LocalPush)),
+          global(ctx, Words(kSpirv_global),
+                 {gpu::Slot::kStorage, gpu::Slot::kTexelUint, gpu::Slot::kTexelUint,
+                  gpu::Slot::kTexelUint, gpu::Slot::kTexelFloat, gpu::Slot::kStorage,
+                  gpu::Slot::kStorage, gpu::Slot::kStorage},
+                 Spec(), sizeof(uint32_t)),
+          push(ctx, Words(kSpirv_push), kRowSlots, Spec(), sizeof(RangePush)),
+          local(ctx, Words(kSpirv_local),
+                {gpu::Slot::kStorage, gpu::Slot::kTexelFloat, gpu::Slot::kTexelFloat,
+                 gpu::Slot::kTexelFloat, gpu::Slot::kStorage, gpu::Slot::kStorage,
+                 gpu::Slot::kTexelFloat, gpu::Slot::kStorage, gpu::Slot::kTexelUint,
+                 gpu::Slot::kStorage, gpu::Slot::kTexelUint, gpu::Slot::kTexelFloat},
+                Spec(), sizeof(LocalPush)),
           pull(ctx, Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
         Upload();
         const gpu::Buffer* g0[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
@@ -139,7 +153,7 @@ struct VulkanAntiradiance::Impl {
         const gpu::Buffer* p1[] = {&iex1, &children, &nodesByDepth};
         pullSet[0] = pull.MakeSet(p0);
         pullSet[1] = pull.MakeSet(p1);
-        const gpu::Buffer* ps[] = {&lin, &parents, &nodesByDepth};
+        const gpu::Buffer* ps[] = {&lin, &lin, &parents, &nodesByDepth};
         pushSet = push.MakeSet(ps);
         if (ctx.TimestampPeriodNs() > 0.0f)
             queries = vk::raii::QueryPool(
