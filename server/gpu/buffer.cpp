@@ -93,16 +93,16 @@ vk::BufferView Buffer::View(vk::Format format) const {
     return *views_.back().second;
 }
 
-void Buffer::Upload(const void* data, size_t bytes) {
-    PENUMBRA_CHECK_LE(bytes, bytes_);
+void Buffer::Upload(const void* data, size_t bytes, size_t offset) {
+    PENUMBRA_CHECK_LE(offset + bytes, bytes_);
     if (mapped_) {
-        std::memcpy(mapped_, data, bytes);
+        std::memcpy(static_cast<char*>(mapped_) + offset, data, bytes);
         return;
     }
     Staging staging(ctx_, bytes);
     std::memcpy(staging.mapped, data, bytes);
     ctx_.RunNow([&](const vk::raii::CommandBuffer& cb) {
-        cb.copyBuffer(*staging.buffer, *buffer_, vk::BufferCopy(0, 0, bytes));
+        cb.copyBuffer(*staging.buffer, *buffer_, vk::BufferCopy(0, offset, bytes));
     });
 }
 

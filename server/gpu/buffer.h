@@ -25,7 +25,8 @@ class Buffer {
     // the buffer's size.
     vk::BufferView View(vk::Format format) const;
 
-    void Upload(const void* data, size_t bytes);
+    // Copies `bytes` from `data` to the buffer at byte `offset`.
+    void Upload(const void* data, size_t bytes, size_t offset = 0);
     void Download(void* data, size_t bytes) const;
 
     template <typename T>

@@ -82,18 +82,40 @@ Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t buffe
 
 Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, std::vector<Slot> slots,
                    std::span<const uint32_t> specialization, uint32_t pushConstantBytes)
-    : sets_(ctx, std::move(slots), vk::ShaderStageFlagBits::eCompute) {
+    : Pipeline(ctx, spirv, std::move(slots),
+               std::vector<std::vector<uint32_t>>{
+                   std::vector<uint32_t>(specialization.begin(), specialization.end())},
+               pushConstantBytes) {}
+
+Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, std::vector<Slot> slots,
+                   std::vector<std::vector<uint32_t>> variants, uint32_t pushConstantBytes)
+    : ctx_(ctx),
+      sets_(ctx, std::move(slots), vk::ShaderStageFlagBits::eCompute),
+      variants_(std::move(variants)) {
+    PENUMBRA_CHECK(!variants_.empty());
     layout_ = MakePipelineLayout(ctx, sets_, vk::ShaderStageFlagBits::eCompute, pushConstantBytes);
     module_ = MakeShaderModule(ctx, spirv);
-    std::vector<vk::SpecializationMapEntry> entries;
-    for (uint32_t i = 0; i < specialization.size(); ++i)
-        entries.emplace_back(i, i * sizeof(uint32_t), sizeof(uint32_t));
-    vk::SpecializationInfo spec(static_cast<uint32_t>(entries.size()), entries.data(),
-                                specialization.size_bytes(), specialization.data());
-    vk::PipelineShaderStageCreateInfo stage({}, vk::ShaderStageFlagBits::eCompute, *module_, "main",
-                                            &spec);
-    pipeline_ = vk::raii::Pipeline(ctx.Device(), nullptr,
-                                   vk::ComputePipelineCreateInfo({}, stage, *layout_));
+    Handle(0);  // the first variant now, so that a broken shader fails at set-up
+}
+
+vk::Pipeline Pipeline::Handle(size_t variant) const {
+    PENUMBRA_CHECK_LT(variant, variants_.size());
+    if (pipelines_.empty())
+        for (size_t v = 0; v < variants_.size(); ++v) pipelines_.emplace_back(nullptr);
+    if (!*pipelines_[variant]) {
+        const std::vector<uint32_t>& specialization = variants_[variant];
+        std::vector<vk::SpecializationMapEntry> entries;
+        for (uint32_t i = 0; i < specialization.size(); ++i)
+            entries.emplace_back(i, i * sizeof(uint32_t), sizeof(uint32_t));
+        vk::SpecializationInfo spec(static_cast<uint32_t>(entries.size()), entries.data(),
+                                    specialization.size() * sizeof(uint32_t),
+                                    specialization.data());
+        vk::PipelineShaderStageCreateInfo stage({}, vk::ShaderStageFlagBits::eCompute, *module_,
+                                                "main", &spec);
+        pipelines_[variant] = vk::raii::Pipeline(
+            ctx_.Device(), nullptr, vk::ComputePipelineCreateInfo({}, stage, *layout_));
+    }
+    return *pipelines_[variant];
 }
 
 RasterPipeline::RasterPipeline(Context& ctx, std::span<const uint32_t> vertexSpirv,

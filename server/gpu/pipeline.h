@@ -36,24 +36,31 @@ class BufferSetLayout {
     vk::raii::DescriptorPool pool_{nullptr};
 };
 
+// A compute pipeline. With several specializations it holds one variant per list (the
+// shader compiled with other constants: dead code gone), made on first use; all variants
+// share the layout, so one descriptor set serves them all.
 class Pipeline {
   public:
     Pipeline(Context& ctx, std::span<const uint32_t> spirv, uint32_t bufferCount,
              std::span<const uint32_t> specialization, uint32_t pushConstantBytes);
     Pipeline(Context& ctx, std::span<const uint32_t> spirv, std::vector<Slot> slots,
              std::span<const uint32_t> specialization, uint32_t pushConstantBytes);
+    Pipeline(Context& ctx, std::span<const uint32_t> spirv, std::vector<Slot> slots,
+             std::vector<std::vector<uint32_t>> variants, uint32_t pushConstantBytes);
 
     vk::raii::DescriptorSet MakeSet(std::span<const Buffer* const> buffers) const {
         return sets_.MakeSet(buffers);
     }
-    vk::Pipeline Handle() const { return *pipeline_; }
+    vk::Pipeline Handle(size_t variant = 0) const;
     vk::PipelineLayout Layout() const { return *layout_; }
 
   private:
+    Context& ctx_;
     BufferSetLayout sets_;
     vk::raii::PipelineLayout layout_{nullptr};
     vk::raii::ShaderModule module_{nullptr};
-    vk::raii::Pipeline pipeline_{nullptr};
+    std::vector<std::vector<uint32_t>> variants_;
+    mutable std::vector<vk::raii::Pipeline> pipelines_;
 };
 
 // Triangles from a vertex and a fragment shader over a width × height render area with no

@@ -1,5 +1,6 @@
 // Upload of the model, descriptor sets for both ping-pong parities, and recording of the
-// global → push → local → pull sequence with a barrier between dependent dispatches.
+// global (clusters, depth by depth, push folded in) → local (leaves: gather + local pass) →
+// pull sequence with a barrier between dependent dispatches.
 #include "solver/antiradiance/vulkan_passes.h"
 
 #include <algorithm>
@@ -13,14 +14,13 @@
 #include "shaders/links_spv.h"
 #include "shaders/local_spv.h"
 #include "shaders/pull_spv.h"
-#include "shaders/push_spv.h"
 #include "solver/antiradiance/cpu_passes.h"
 
 namespace penumbra {
 namespace {
 
 constexpr uint32_t kWorkgroup = 64;
-constexpr uint32_t kTimestamps = 5;  // start, after global, push, local, pull
+constexpr uint32_t kTimestamps = 4;  // start, after global, local, pull
 
 uint32_t Groups(uint64_t invocations) {
     return static_cast<uint32_t>((invocations + kWorkgroup - 1) / kWorkgroup);
@@ -32,9 +32,10 @@ std::span<const uint32_t> Words(const T& array) {
 }
 
 struct LocalPush {
+    uint32_t first;
     uint32_t count;
-    uint32_t mode;
     float binSolidAngle;
+    uint32_t envRow;
 };
 struct RangePush {
     uint32_t first;
@@ -69,10 +70,14 @@ struct LinkPush {
 // the 65,535 every device allows).
 constexpr uint32_t kLinkChunk = 1u << 20;
 
-// Push and pull: a table written as rows, the same table read through texel fetches, and
-// two index tables.
-const std::vector<gpu::Slot> kRowSlots = {gpu::Slot::kStorage, gpu::Slot::kTexelFloat,
-                                          gpu::Slot::kStorage, gpu::Slot::kStorage};
+// Bindings 0–5 of both passes that gather (shaders/gather.glsl), then each pass's own.
+std::vector<gpu::Slot> GatherSlots(std::vector<gpu::Slot> own) {
+    std::vector<gpu::Slot> slots = {gpu::Slot::kStorage,    gpu::Slot::kTexelUint,
+                                    gpu::Slot::kTexelUint,  gpu::Slot::kTexelUint,
+                                    gpu::Slot::kTexelFloat, gpu::Slot::kTexelFloat};
+    for (gpu::Slot slot : own) slots.push_back(slot);
+    return slots;
+}
 
 }  // namespace
 
@@ -80,14 +85,14 @@ struct VulkanAntiradiance::Impl {
     const AntiradianceModel& m;
     gpu::Context ctx;
     // Model data (read only).
-    gpu::Buffer linkOffsets, links, spreadLevels, neighbours, receivers, leaves, dirs, parents,
-        children, nodesByDepth, environment;
-    // Tables.
+    gpu::Buffer linkOffsets, links, spreadLevels, neighbours, clusterOrder, leafOrder, leaves, dirs,
+        children, nodesByDepth;
+    // Tables. L_in has one row per node plus the environment row (row Nodes()).
     gpu::Buffer iex0, iex1, lin, irradiance, direct;
     // Glossy data (model.h), remade when it grows: GlossyLeaf, mirror bins, GlossyLobe,
     // lobe weights, reflected direct light.
     std::unique_ptr<gpu::Buffer> glossy, mirror, lobes, lobeWeights, glossyDirect;
-    gpu::Pipeline global, push, local, pull;
+    gpu::Pipeline global, local, pull;
     // The link update of moves (Sec. 3.3), made when the model has motion links: the
     // dynamic links, nodes and surfels at their current places, moved groups, the bin
     // lookup's tables and the near field.
@@ -102,12 +107,13 @@ struct VulkanAntiradiance::Impl {
     };
     std::unique_ptr<LinkUpdate> linkUpdate;
     vk::raii::DescriptorSet globalSet[2]{nullptr, nullptr}, localSet[2]{nullptr, nullptr},
-        pullSet[2]{nullptr, nullptr}, pushSet{nullptr};
+        pullSet[2]{nullptr, nullptr};
     vk::raii::QueryPool queries{nullptr};
-    // Depth ranges into nodesByDepth (push uses all nodes, pull only clusters).
-    std::vector<RangePush> pushLevels, pullLevels;
+    // Depth ranges into clusterOrder (root first) and into nodesByDepth (pull: deepest first).
+    std::vector<RangePush> globalLevels, pullLevels;
     int cur = 0;
-    double msPass[4] = {0, 0, 0, 0};
+    uint32_t glossyLeaves = 0;  // the first entries of leafOrder
+    double msPass[3] = {0, 0, 0};
 
     Impl(const AntiradianceModel& model, bool lavapipe, bool validation)
         : m(model),
@@ -116,36 +122,31 @@ struct VulkanAntiradiance::Impl {
           links(ctx, m.links.links.size() * sizeof(Link)),
           spreadLevels(ctx, Directions::kLevels * 8),
           neighbours(ctx, m.dirs.PaddedWeights().size() * sizeof(BinWeight)),
-          receivers(ctx, m.Nodes() * 4),
+          clusterOrder(ctx, m.Nodes() * sizeof(glm::uvec2)),
+          leafOrder(ctx, m.leaves.size() * 4),
           leaves(ctx, m.leaves.size() * sizeof(LeafAttributes)),
           dirs(ctx, m.Bins() * 16),
-          parents(ctx, m.Nodes() * 4),
           children(ctx, m.Nodes() * 8),
-          nodesByDepth(ctx, m.Nodes() * 4 * 2),
-          environment(ctx, m.Bins() * sizeof(glm::vec3)),
+          nodesByDepth(ctx, m.Nodes() * 4),
           iex0(ctx, m.TableFloats() * 4),
           iex1(ctx, m.TableFloats() * 4),
-          lin(ctx, m.TableFloats() * 4),
+          lin(ctx, (m.TableFloats() + m.Bins() * 3) * 4),
           irradiance(ctx, m.leaves.size() * 12),
           direct(ctx, m.leaves.size() * sizeof(glm::vec4)),
-          global(ctx, Words(kSpirv_global),
-                 {gpu::Slot::kStorage, gpu::Slot::kTexelUint, gpu::Slot::kTexelUint,
-                  gpu::Slot::kTexelUint, gpu::Slot::kTexelFloat, gpu::Slot::kStorage,
-                  gpu::Slot::kStorage, gpu::Slot::kStorage},
-                 Spec(), sizeof(uint32_t)),
-          push(ctx, Words(kSpirv_push), kRowSlots, Spec(), sizeof(RangePush)),
+          global(ctx, Words(kSpirv_global), GatherSlots({gpu::Slot::kStorage, gpu::Slot::kStorage}),
+                 Spec(), sizeof(RangePush)),
           local(ctx, Words(kSpirv_local),
-                {gpu::Slot::kStorage, gpu::Slot::kTexelFloat, gpu::Slot::kTexelFloat,
-                 gpu::Slot::kTexelFloat, gpu::Slot::kStorage, gpu::Slot::kStorage,
-                 gpu::Slot::kTexelFloat, gpu::Slot::kStorage, gpu::Slot::kTexelUint,
-                 gpu::Slot::kStorage, gpu::Slot::kTexelUint, gpu::Slot::kTexelFloat},
-                Spec(), sizeof(LocalPush)),
+                GatherSlots({gpu::Slot::kStorage, gpu::Slot::kTexelFloat, gpu::Slot::kStorage,
+                             gpu::Slot::kStorage, gpu::Slot::kTexelFloat, gpu::Slot::kStorage,
+                             gpu::Slot::kTexelUint, gpu::Slot::kStorage, gpu::Slot::kTexelUint,
+                             gpu::Slot::kTexelFloat, gpu::Slot::kStorage}),
+                LocalVariants(), sizeof(LocalPush)),
           pull(ctx, Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
         Upload();
         const gpu::Buffer* g0[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
-                                   &iex0,        &lin,   &receivers,    &environment};
+                                   &iex0,        &lin,   &lin,          &clusterOrder};
         const gpu::Buffer* g1[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
-                                   &iex1,        &lin,   &receivers,    &environment};
+                                   &iex1,        &lin,   &lin,          &clusterOrder};
         globalSet[0] = global.MakeSet(g0);
         globalSet[1] = global.MakeSet(g1);
         UploadGlossy();
@@ -153,8 +154,6 @@ struct VulkanAntiradiance::Impl {
         const gpu::Buffer* p1[] = {&iex1, &children, &nodesByDepth};
         pullSet[0] = pull.MakeSet(p0);
         pullSet[1] = pull.MakeSet(p1);
-        const gpu::Buffer* ps[] = {&lin, &lin, &parents, &nodesByDepth};
-        pushSet = push.MakeSet(ps);
         if (ctx.TimestampPeriodNs() > 0.0f)
             queries = vk::raii::QueryPool(
                 ctx.Device(), vk::QueryPoolCreateInfo({}, vk::QueryType::eTimestamp, kTimestamps));
@@ -282,28 +281,53 @@ struct VulkanAntiradiance::Impl {
         fit(lobes, m.lobes);
         fit(lobeWeights, m.lobeWeights);
         fit(glossyDirect, m.glossyDirect);
+        OrderLeaves();
         if (!remade && *localSet[0]) return;
         // Parity p reads I_ex from table p and writes the other.
         for (int p = 0; p < 2; ++p) {
             gpu::Buffer* from = p == 0 ? &iex0 : &iex1;
             gpu::Buffer* to = p == 0 ? &iex1 : &iex0;
-            const gpu::Buffer* set[] = {&leaves,
-                                        &dirs,
-                                        &lin,
-                                        from,
-                                        to,
-                                        &irradiance,
-                                        &direct,
-                                        glossy.get(),
-                                        mirror.get(),
-                                        lobes.get(),
-                                        lobeWeights.get(),
-                                        glossyDirect.get()};
+            const gpu::Buffer* set[] = {
+                &linkOffsets, &links,      &spreadLevels,     &neighbours,
+                from,         &lin,        &leaves,           &dirs,
+                to,           &irradiance, &direct,           glossy.get(),
+                mirror.get(), lobes.get(), lobeWeights.get(), glossyDirect.get(),
+                &leafOrder};
             localSet[p] = local.MakeSet(set);
         }
     }
 
     std::vector<uint32_t> Spec() const { return {kWorkgroup, static_cast<uint32_t>(m.Bins())}; }
+    // The local pass's variants, LocalVariant(mode, glossy) → its specialization.
+    static size_t LocalVariant(LocalMode mode, bool glossy) {
+        return (static_cast<size_t>(mode) - 1) * 2 + (glossy ? 1 : 0);
+    }
+    std::vector<std::vector<uint32_t>> LocalVariants() const {
+        std::vector<std::vector<uint32_t>> v;
+        for (LocalMode mode : {kReflect, kAntiradiance, kBoth})
+            for (uint32_t glossy : {0u, 1u}) {
+                PENUMBRA_CHECK_EQ(LocalVariant(mode, glossy != 0), v.size());
+                v.push_back({kWorkgroup, static_cast<uint32_t>(m.Bins()),
+                             static_cast<uint32_t>(mode), glossy});
+            }
+        return v;
+    }
+
+    // The local pass's leaves: glossy ones first (their variant), then the diffuse ones, each
+    // with the most links first. Redone whenever leaf flags may have changed.
+    void OrderLeaves() {
+        const auto& lo = m.links.offsets;
+        const auto glossy = [&](uint32_t i) { return (m.leaves[i].flags & kLeafGlossy) != 0; };
+        std::vector<uint32_t> order(m.leaves.size());
+        std::iota(order.begin(), order.end(), 0u);
+        std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+            if (glossy(a) != glossy(b)) return glossy(a);
+            const uint32_t na = m.leaves[a].node, nb = m.leaves[b].node;
+            return lo[na + 1] - lo[na] > lo[nb + 1] - lo[nb];
+        });
+        glossyLeaves = static_cast<uint32_t>(std::count_if(order.begin(), order.end(), glossy));
+        leafOrder.Upload(order);
+    }
 
     void Upload() {
         linkOffsets.Upload(m.links.offsets);
@@ -313,41 +337,47 @@ struct VulkanAntiradiance::Impl {
             spread.emplace_back(m.dirs.PaddedStart(k), m.dirs.PaddedWidth(k));
         spreadLevels.Upload(spread);
         neighbours.Upload(m.dirs.PaddedWeights());
-        // Receivers with the most links first: neighbouring lanes do similar work.
-        std::vector<uint32_t> order(m.Nodes());
-        std::iota(order.begin(), order.end(), 0u);
-        const auto& lo = m.links.offsets;
-        std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-            return lo[a + 1] - lo[a] > lo[b + 1] - lo[b];
-        });
-        receivers.Upload(order);
         leaves.Upload(m.leaves);
         direct.Upload(m.leafDirect);
-        environment.Upload(m.environment);
+        UploadEnvironment();
         std::vector<glm::vec4> d;
         for (const auto& v : m.dirs.All()) d.emplace_back(v, 0.0f);
         dirs.Upload(d);
-        std::vector<uint32_t> par(m.Nodes());
+        // Receivers with the most links first, so neighbouring lanes do similar work: clusters
+        // depth by depth (each starting from its parent's row, the root from the environment
+        // row), leaves all at once.
+        const auto& lo = m.links.offsets;
+        const auto byLinks = [&](uint32_t a, uint32_t b) {
+            return lo[a + 1] - lo[a] > lo[b + 1] - lo[b];
+        };
+        const auto& nodes = m.hierarchy.nodes;
+        const auto& byDepth = m.hierarchy.byDepth;
+        const uint32_t envRow = static_cast<uint32_t>(m.Nodes());
+        std::vector<glm::uvec2> clusters;
+        for (const auto& depth : byDepth) {
+            std::vector<uint32_t> level;
+            for (uint32_t n : depth)
+                if (!nodes[n].IsLeaf()) level.push_back(n);
+            if (level.empty()) continue;
+            std::stable_sort(level.begin(), level.end(), byLinks);
+            globalLevels.push_back(
+                {static_cast<uint32_t>(clusters.size()), static_cast<uint32_t>(level.size())});
+            for (uint32_t n : level)
+                clusters.emplace_back(n, nodes[n].parent == kNoParent ? envRow : nodes[n].parent);
+        }
+        clusterOrder.Upload(clusters);
+        OrderLeaves();
         std::vector<glm::uvec2> ch(m.Nodes());
-        for (size_t i = 0; i < m.Nodes(); ++i) {
-            par[i] = m.hierarchy.nodes[i].parent == kNoParent ? 0 : m.hierarchy.nodes[i].parent;
+        for (size_t i = 0; i < m.Nodes(); ++i)
             ch[i] = glm::uvec2(m.leftChild[i] == kNoParent ? 0 : m.leftChild[i],
                                m.rightChild[i] == kNoParent ? 0 : m.rightChild[i]);
-        }
-        parents.Upload(par);
         children.Upload(ch);
-        // Push: every node below the root, depth by depth. Pull: clusters, deepest first.
+        // Pull: clusters, deepest first.
         std::vector<uint32_t> flat;
-        const auto& byDepth = m.hierarchy.byDepth;
-        for (size_t d = 1; d < byDepth.size(); ++d) {
-            pushLevels.push_back(
-                {static_cast<uint32_t>(flat.size()), static_cast<uint32_t>(byDepth[d].size())});
-            flat.insert(flat.end(), byDepth[d].begin(), byDepth[d].end());
-        }
         for (size_t d = byDepth.size(); d-- > 0;) {
             RangePush range{static_cast<uint32_t>(flat.size()), 0};
             for (uint32_t n : byDepth[d])
-                if (!m.hierarchy.nodes[n].IsLeaf()) flat.push_back(n), range.count++;
+                if (!nodes[n].IsLeaf()) flat.push_back(n), range.count++;
             if (range.count) pullLevels.push_back(range);
         }
         nodesByDepth.Upload(flat);
@@ -358,35 +388,44 @@ struct VulkanAntiradiance::Impl {
         iex1.Upload(init);
     }
 
+    // The environment row of the L_in table, where the root's gather starts.
+    void UploadEnvironment() {
+        static_assert(sizeof(m.environment[0]) == 3 * sizeof(float));
+        PENUMBRA_CHECK_EQ(m.environment.size(), static_cast<size_t>(m.Bins()));
+        lin.Upload(m.environment.data(), m.environment.size() * sizeof(m.environment[0]),
+                   m.TableFloats() * sizeof(float));
+    }
+
     void Stamp(const vk::raii::CommandBuffer& cb, uint32_t i) {
         if (*queries) cb.writeTimestamp(vk::PipelineStageFlagBits::eComputeShader, *queries, i);
     }
 
+    // Clusters depth by depth from the root down: each depth starts from the rows the
+    // previous one wrote.
     void RecordGlobal(const vk::raii::CommandBuffer& cb) {
         cb.bindPipeline(vk::PipelineBindPoint::eCompute, global.Handle());
         cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, global.Layout(), 0,
                               {*globalSet[cur]}, {});
-        uint32_t count = static_cast<uint32_t>(m.Nodes());
-        cb.pushConstants<uint32_t>(global.Layout(), vk::ShaderStageFlagBits::eCompute, 0, count);
-        cb.dispatch(Groups(count), 1, 1);
-    }
-    void RecordPush(const vk::raii::CommandBuffer& cb) {
-        cb.bindPipeline(vk::PipelineBindPoint::eCompute, push.Handle());
-        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, push.Layout(), 0, {*pushSet}, {});
-        for (const auto& level : pushLevels) {
-            cb.pushConstants<RangePush>(push.Layout(), vk::ShaderStageFlagBits::eCompute, 0, level);
+        for (const auto& level : globalLevels) {
+            cb.pushConstants<RangePush>(global.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
+                                        level);
             cb.dispatch(Groups(level.count), 1, 1);
-            // Each depth reads the rows the previous depth wrote.
             gpu::ComputeBarrier(cb);
         }
     }
     void RecordLocal(const vk::raii::CommandBuffer& cb, LocalMode mode) {
-        cb.bindPipeline(vk::PipelineBindPoint::eCompute, local.Handle());
         cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, local.Layout(), 0, {*localSet[cur]},
                               {});
-        LocalPush pc{static_cast<uint32_t>(m.leaves.size()), mode, m.dirs.BinSolidAngle()};
-        cb.pushConstants<LocalPush>(local.Layout(), vk::ShaderStageFlagBits::eCompute, 0, pc);
-        cb.dispatch(Groups(pc.count), 1, 1);
+        const uint32_t total = static_cast<uint32_t>(m.leaves.size());
+        for (bool glossy : {true, false}) {
+            LocalPush pc{glossy ? 0u : glossyLeaves, glossy ? glossyLeaves : total - glossyLeaves,
+                         m.dirs.BinSolidAngle(), static_cast<uint32_t>(m.Nodes())};
+            if (pc.count == 0) continue;
+            cb.bindPipeline(vk::PipelineBindPoint::eCompute,
+                            local.Handle(LocalVariant(mode, glossy)));
+            cb.pushConstants<LocalPush>(local.Layout(), vk::ShaderStageFlagBits::eCompute, 0, pc);
+            cb.dispatch(Groups(pc.count), 1, 1);
+        }
     }
     // Pulls into the table the local pass just wrote (`target` parity).
     void RecordPull(const vk::raii::CommandBuffer& cb, int target) {
@@ -406,18 +445,14 @@ struct VulkanAntiradiance::Impl {
         cb.begin({vk::CommandBufferUsageFlagBits::eOneTimeSubmit});
         if (*queries) cb.resetQueryPool(*queries, 0, kTimestamps);
         Stamp(cb, 0);
-        RecordGlobal(cb);
-        // L_in written by the global pass is read and updated by push.
-        gpu::ComputeBarrier(cb);
+        RecordGlobal(cb);  // ends with a barrier: the leaves read their parents' rows
         Stamp(cb, 1);
-        RecordPush(cb);
-        Stamp(cb, 2);
         RecordLocal(cb, mode);
         // The local pass's I_ex rows are summed by pull.
         gpu::ComputeBarrier(cb);
-        Stamp(cb, 3);
+        Stamp(cb, 2);
         RecordPull(cb, 1 - cur);
-        Stamp(cb, 4);
+        Stamp(cb, 3);
         cb.end();
         ctx.SubmitAndWait(cb);
         ReadTimestamps();
@@ -437,7 +472,7 @@ struct VulkanAntiradiance::Impl {
         if (!*queries) return;
         const std::vector<uint64_t> ticks = Ticks(queries, kTimestamps);
         double ns = ctx.TimestampPeriodNs();
-        for (int p = 0; p < 4; ++p) msPass[p] += (ticks[p + 1] - ticks[p]) * ns * 1e-6;
+        for (int p = 0; p < 3; ++p) msPass[p] += (ticks[p + 1] - ticks[p]) * ns * 1e-6;
     }
 };
 
@@ -458,7 +493,10 @@ std::vector<float> VulkanAntiradiance::ReadLeafIrradiance() {
     return impl_->irradiance.Download<float>();
 }
 
-void VulkanAntiradiance::UploadLeaves() { impl_->leaves.Upload(impl_->m.leaves); }
+void VulkanAntiradiance::UploadLeaves() {
+    impl_->leaves.Upload(impl_->m.leaves);
+    impl_->OrderLeaves();
+}
 
 void VulkanAntiradiance::UpdateLinks(const std::vector<uint8_t>& moved) {
     impl_->UpdateLinks(moved);
@@ -478,7 +516,7 @@ void VulkanAntiradiance::UploadGlossyDirect() {
     impl_->glossyDirect->Upload(impl_->m.glossyDirect);
 }
 
-void VulkanAntiradiance::UploadEnvironment() { impl_->environment.Upload(impl_->m.environment); }
+void VulkanAntiradiance::UploadEnvironment() { impl_->UploadEnvironment(); }
 
 gpu::Context& VulkanAntiradiance::Context() { return impl_->ctx; }
 
@@ -487,10 +525,7 @@ gpu::Buffer& VulkanAntiradiance::DirectBuffer() { return impl_->direct; }
 std::string VulkanAntiradiance::DeviceName() const { return "vulkan:" + impl_->ctx.DeviceName(); }
 
 std::vector<PassTiming> VulkanAntiradiance::PassTimings() const {
-    return {{"global", impl_->msPass[0]},
-            {"push", impl_->msPass[1]},
-            {"local", impl_->msPass[2]},
-            {"pull", impl_->msPass[3]}};
+    return {{"global", impl_->msPass[0]}, {"local", impl_->msPass[1]}, {"pull", impl_->msPass[2]}};
 }
 
 size_t VulkanAntiradiance::TableBytes() const {
@@ -509,9 +544,6 @@ void VulkanAntiradiance::RunPass(Pass pass, LocalMode mode) {
             case Pass::kGlobal:
                 s.RecordGlobal(cb);
                 break;
-            case Pass::kPush:
-                s.RecordPush(cb);
-                break;
             case Pass::kLocal:
                 s.RecordLocal(cb, mode);
                 break;
@@ -527,7 +559,11 @@ std::vector<float> VulkanAntiradiance::ReadIex(bool next) const {
     return ((s.cur == 0) != next ? s.iex0 : s.iex1).Download<float>();
 }
 
-std::vector<float> VulkanAntiradiance::ReadLin() const { return impl_->lin.Download<float>(); }
+std::vector<float> VulkanAntiradiance::ReadLin() const {
+    std::vector<float> lin(impl_->m.TableFloats());
+    impl_->lin.Download(lin.data(), lin.size() * sizeof(float));
+    return lin;
+}
 
 void VulkanAntiradiance::WriteIex(const std::vector<float>& iex, bool next) {
     Impl& s = *impl_;

@@ -53,10 +53,15 @@ class VulkanAntiradiance {
     size_t TableBytes() const;
     std::vector<std::string> ValidationMessages() const;
 
-    // Single passes on the current tables, for GPU ≡ CPU twin tests.
-    enum class Pass { kGlobal, kPush, kLocal, kPull };
+    // Single passes on the current tables, for GPU ≡ CPU twin tests. The passes are not
+    // the CPU twin's one for one: kGlobal gathers the clusters depth by depth, each starting
+    // from its parent's row (the CPU's global pass plus its push, on cluster rows); kLocal
+    // gathers each leaf on its parent's row and runs the local pass on it without writing
+    // the leaf's L_in row; kPull is the CPU's pull.
+    enum class Pass { kGlobal, kLocal, kPull };
     void RunPass(Pass pass, LocalMode mode = kBoth);
-    // Tables as they are now: I_ex (current), L_in, I_ex (next), irradiance.
+    // Tables as they are now: I_ex (current), L_in (one row per node; leaf rows are not
+    // written by the passes), I_ex (next), irradiance.
     std::vector<float> ReadIex(bool next) const;
     std::vector<float> ReadLin() const;
     void WriteIex(const std::vector<float>& iex, bool next);
