@@ -9,6 +9,7 @@
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "gpu/pipeline.h"
+#include "gpu/timestamps.h"
 #include "shaders/direct_spv.h"
 #include "shaders/shadow_frag_spv.h"
 #include "shaders/shadow_vert_spv.h"
@@ -48,7 +49,7 @@ struct VulkanDirect::Impl {
     gpu::RasterPipeline shadow;
     gpu::Pipeline directPass;
     vk::raii::DescriptorSet shadowSet{nullptr}, directSet{nullptr};
-    vk::raii::QueryPool queries{nullptr};
+    gpu::Timestamps stamps;
 
     static std::vector<glm::vec4> Vertices(const Scene& scene) {
         std::vector<glm::vec4> v;
@@ -66,12 +67,10 @@ struct VulkanDirect::Impl {
           receivers(c, std::max<size_t>(1, receiverList.size()) * sizeof(GpuReceiver)),
           shadow(c, Words(kSpirv_shadow_vert), Words(kSpirv_shadow_frag), 2, sizeof(ShadowPush),
                  static_cast<uint32_t>(s), static_cast<uint32_t>(s)),
-          directPass(c, Words(kSpirv_direct), 6, {}, sizeof(DirectPush)) {
+          directPass(c, Words(kSpirv_direct), 6, {}, sizeof(DirectPush)),
+          stamps(c, 3) {
         vertices.Upload(Vertices(scene));
         receivers.Upload(receiverList);
-        if (ctx.TimestampPeriodNs() > 0.0f)
-            queries = vk::raii::QueryPool(
-                ctx.Device(), vk::QueryPoolCreateInfo({}, vk::QueryType::eTimestamp, 3));
     }
 
     // Buffers sized for the plan; sets made again when they grow.
@@ -101,10 +100,8 @@ struct VulkanDirect::Impl {
         lights->Upload(plan.lights);
         auto start = std::chrono::steady_clock::now();
         ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
-            if (*queries) {
-                cb.resetQueryPool(*queries, 0, 3);
-                cb.writeTimestamp(vk::PipelineStageFlagBits::eTopOfPipe, *queries, 0);
-            }
+            stamps.Reset(cb);
+            stamps.Write(cb, 0, vk::PipelineStageFlagBits::eTopOfPipe);
             cb.fillBuffer(maps->Handle(), 0, plan.MapTexels() * 4, kOneDepth);
             gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
                          vk::AccessFlagBits::eTransferWrite,
@@ -122,8 +119,7 @@ struct VulkanDirect::Impl {
             gpu::Barrier(cb, vk::PipelineStageFlagBits::eFragmentShader,
                          vk::AccessFlagBits::eShaderWrite,
                          vk::PipelineStageFlagBits::eComputeShader);
-            if (*queries)
-                cb.writeTimestamp(vk::PipelineStageFlagBits::eFragmentShader, *queries, 1);
+            stamps.Write(cb, 1, vk::PipelineStageFlagBits::eFragmentShader);
             cb.bindPipeline(vk::PipelineBindPoint::eCompute, directPass.Handle());
             cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, directPass.Layout(), 0,
                                   {*directSet}, {});
@@ -133,16 +129,12 @@ struct VulkanDirect::Impl {
                                          dp);
             cb.dispatch(static_cast<uint32_t>((receiverList.size() + 63) / 64), 1, 1);
             gpu::ComputeBarrier(cb);
-            if (*queries) cb.writeTimestamp(vk::PipelineStageFlagBits::eComputeShader, *queries, 2);
+            stamps.Write(cb, 2);
         });
-        if (*queries) {
-            auto [result, stamps] = queries.getResults<uint64_t>(
-                0, 3, 3 * sizeof(uint64_t), sizeof(uint64_t),
-                vk::QueryResultFlagBits::e64 | vk::QueryResultFlagBits::eWait);
-            if (result != vk::Result::eSuccess) gpu::ThrowVulkan("vkGetQueryPoolResults", result);
-            double ns = ctx.TimestampPeriodNs();
-            msShadow = (stamps[1] - stamps[0]) * ns * 1e-6;
-            msDirect = (stamps[2] - stamps[1]) * ns * 1e-6;
+        if (stamps) {
+            const std::vector<double> ms = stamps.Milliseconds();
+            msShadow = ms[0];
+            msDirect = ms[1];
         } else {
             msShadow =
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)

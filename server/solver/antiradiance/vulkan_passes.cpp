@@ -10,6 +10,7 @@
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "gpu/pipeline.h"
+#include "gpu/timestamps.h"
 #include "shaders/global_spv.h"
 #include "shaders/links_spv.h"
 #include "shaders/local_spv.h"
@@ -101,14 +102,14 @@ struct VulkanAntiradiance::Impl {
             triangles;
         gpu::Pipeline pipeline;
         vk::raii::DescriptorSet set{nullptr};
-        vk::raii::QueryPool queries{nullptr};
+        gpu::Timestamps stamps;
         uint32_t adjacentWidth = 0;
         double ms = 0.0;  // device time of the last update
     };
     std::unique_ptr<LinkUpdate> linkUpdate;
     vk::raii::DescriptorSet globalSet[2]{nullptr, nullptr}, localSet[2]{nullptr, nullptr},
         pullSet[2]{nullptr, nullptr};
-    vk::raii::QueryPool queries{nullptr};
+    gpu::Timestamps stamps{ctx, kTimestamps};
     // Depth ranges into clusterOrder (root first) and into nodesByDepth (pull: deepest first).
     std::vector<RangePush> globalLevels, pullLevels;
     int cur = 0;
@@ -154,9 +155,6 @@ struct VulkanAntiradiance::Impl {
         const gpu::Buffer* p1[] = {&iex1, &children, &nodesByDepth};
         pullSet[0] = pull.MakeSet(p0);
         pullSet[1] = pull.MakeSet(p1);
-        if (ctx.TimestampPeriodNs() > 0.0f)
-            queries = vk::raii::QueryPool(
-                ctx.Device(), vk::QueryPoolCreateInfo({}, vk::QueryType::eTimestamp, kTimestamps));
         if (!m.links.dynamic.empty()) MakeLinkUpdate();
     }
 
@@ -178,6 +176,8 @@ struct VulkanAntiradiance::Impl {
             gpu::Buffer(ctx, size(m.near.triangles)),
             gpu::Buffer(ctx, size(sf.refinedTriangles)),
             gpu::Pipeline(ctx, Words(kSpirv_links), 13, Spec(), sizeof(LinkPush)),
+            {nullptr},
+            gpu::Timestamps(ctx, 2),
         });
         LinkUpdate& u = *linkUpdate;
         u.adjacentWidth = width;
@@ -196,9 +196,6 @@ struct VulkanAntiradiance::Impl {
                                     &neighbours, &u.surfels, &u.nearOffsets, &u.nearTriangles,
                                     &u.triangles};
         u.set = u.pipeline.MakeSet(set);
-        if (ctx.TimestampPeriodNs() > 0.0f)
-            u.queries = vk::raii::QueryPool(
-                ctx.Device(), vk::QueryPoolCreateInfo({}, vk::QueryType::eTimestamp, 2));
     }
 
     // The nodes and surfels where the model has them now, and which groups moved.
@@ -237,10 +234,8 @@ struct VulkanAntiradiance::Impl {
         UploadPlaces(moved);
         const uint32_t total = static_cast<uint32_t>(m.links.dynamic.size());
         ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
-            if (*u.queries) {
-                cb.resetQueryPool(*u.queries, 0, 2);
-                cb.writeTimestamp(vk::PipelineStageFlagBits::eComputeShader, *u.queries, 0);
-            }
+            u.stamps.Reset(cb);
+            u.stamps.Write(cb, 0);
             cb.bindPipeline(vk::PipelineBindPoint::eCompute, u.pipeline.Handle());
             cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, u.pipeline.Layout(), 0, {*u.set},
                                   {});
@@ -255,13 +250,9 @@ struct VulkanAntiradiance::Impl {
                                            0, pc);
                 cb.dispatch(Groups(pc.count), 1, 1);
             }
-            if (*u.queries)
-                cb.writeTimestamp(vk::PipelineStageFlagBits::eComputeShader, *u.queries, 1);
+            u.stamps.Write(cb, 1);
         });
-        if (*u.queries) {
-            const std::vector<uint64_t> ticks = Ticks(u.queries, 2);
-            u.ms = (ticks[1] - ticks[0]) * ctx.TimestampPeriodNs() * 1e-6;
-        }
+        if (u.stamps) u.ms = u.stamps.Milliseconds()[0];
     }
 
     // Glossy buffers sized for the model's data (at least one element each), uploaded, and
@@ -396,10 +387,6 @@ struct VulkanAntiradiance::Impl {
                    m.TableFloats() * sizeof(float));
     }
 
-    void Stamp(const vk::raii::CommandBuffer& cb, uint32_t i) {
-        if (*queries) cb.writeTimestamp(vk::PipelineStageFlagBits::eComputeShader, *queries, i);
-    }
-
     // Clusters depth by depth from the root down: each depth starts from the rows the
     // previous one wrote.
     void RecordGlobal(const vk::raii::CommandBuffer& cb) {
@@ -443,36 +430,25 @@ struct VulkanAntiradiance::Impl {
     void Iterate(LocalMode mode) {
         vk::raii::CommandBuffer cb = ctx.AllocateCommandBuffer();
         cb.begin({vk::CommandBufferUsageFlagBits::eOneTimeSubmit});
-        if (*queries) cb.resetQueryPool(*queries, 0, kTimestamps);
-        Stamp(cb, 0);
+        stamps.Reset(cb);
+        stamps.Write(cb, 0);
         RecordGlobal(cb);  // ends with a barrier: the leaves read their parents' rows
-        Stamp(cb, 1);
+        stamps.Write(cb, 1);
         RecordLocal(cb, mode);
         // The local pass's I_ex rows are summed by pull.
         gpu::ComputeBarrier(cb);
-        Stamp(cb, 2);
+        stamps.Write(cb, 2);
         RecordPull(cb, 1 - cur);
-        Stamp(cb, 3);
+        stamps.Write(cb, 3);
         cb.end();
         ctx.SubmitAndWait(cb);
         ReadTimestamps();
         cur = 1 - cur;
     }
 
-    // The first `count` timestamps of `pool`, waiting for them.
-    static std::vector<uint64_t> Ticks(const vk::raii::QueryPool& pool, uint32_t count) {
-        auto [result, ticks] = pool.getResults<uint64_t>(
-            0, count, count * sizeof(uint64_t), sizeof(uint64_t),
-            vk::QueryResultFlagBits::e64 | vk::QueryResultFlagBits::eWait);
-        if (result != vk::Result::eSuccess) gpu::ThrowVulkan("vkGetQueryPoolResults", result);
-        return ticks;
-    }
-
     void ReadTimestamps() {
-        if (!*queries) return;
-        const std::vector<uint64_t> ticks = Ticks(queries, kTimestamps);
-        double ns = ctx.TimestampPeriodNs();
-        for (int p = 0; p < 3; ++p) msPass[p] += (ticks[p + 1] - ticks[p]) * ns * 1e-6;
+        const std::vector<double> ms = stamps.Milliseconds();
+        for (size_t p = 0; p < ms.size(); ++p) msPass[p] += ms[p];
     }
 };
 
