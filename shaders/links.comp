@@ -54,7 +54,9 @@ layout(push_constant) uniform Push {
 
 const uint kLevels = 6u;             // Directions::kLevels
 const float kNearRadii = 4.0;        // links.cpp MakeLink
-const float kMaxCalibration = 4.0;   // links.cpp MakeLink
+const float kMaxCalibration = 16.0;  // links.cpp MakeLink
+const float kFrontMargin = 1e-4;     // links.cpp MakeLink
+const float kNearTrace = 1e-5;       // links.cpp
 const int kDiv = 6;                  // links.cpp NearFieldIrradiance
 
 // Directions::Lookup: cube-map texel, then a greedy walk to the exact nearest bin.
@@ -185,24 +187,17 @@ void main() {
     bool orientedR = (R.flags & kNodeOriented) != 0u;
     float cosS = orientedS ? dot(S.normal, u) : 0.0;
     float cosR = orientedR ? -dot(R.normal, u) : 0.0;
-    vec3 sideS = cosS >= 0.0 ? S.normal : -S.normal;
+    bool front = cosS >= -kFrontMargin;
+    vec3 sideS = front ? S.normal : -S.normal;
     vec3 sideR = -R.normal;
     uint bin = LookupWithin(u, orientedS, sideS, orientedR, sideR);
     uint level = LevelFor(atan(S.discRadius, dist));
     // Eq. 17, F = 1/(d² ω_bin), d² regularised by the sender's disc.
     float f = 1.0 / ((dist2 + S.discRadius * S.discRadius) * pc.binSolidAngle);
     bool leaves = (S.flags & kNodeLeaf) != 0u && (R.flags & kNodeLeaf) != 0u;
-    if (leaves && dist < kNearRadii * (S.discRadius + R.discRadius)) {
-        float point = S.area * abs(cosS) * max(0.0, cosR) / (dist2 + S.discRadius * S.discRadius);
-        float exact = NearFieldIrradiance(S.surfel, R.center, R.normal);
-        f *= point > 0.0 ? exact / point : 0.0;
-    }
     vec3 wb = dirs[bin].xyz;
-    if (orientedS) {
-        float binCos = abs(dot(S.normal, wb));
-        float model = binCos * (cosS >= 0.0 ? S.normOut : 1.0);
-        f *= model > 0.0 ? min(kMaxCalibration, abs(cosS) / model) : 0.0;
-    }
+    float modelS = 1.0, modelR = 1.0;
+    if (orientedS) modelS = abs(dot(S.normal, wb)) * (front ? S.normOut : 1.0);
     if (orientedR) {
         uvec2 lv = spread[level];
         uint first = lv.x + bin * lv.y;
@@ -211,8 +206,17 @@ void main() {
             BinWeight nb = neighbours[j];
             spreadCos += nb.weight * max(0.0, -dot(R.normal, dirs[nb.bin].xyz));
         }
-        float model = spreadCos * R.normIn;
-        f *= model > 0.0 ? min(kMaxCalibration, max(0.0, cosR) / model) : 0.0;
+        modelR = spreadCos * R.normIn;
+    }
+    if (leaves && dist < kNearRadii * (S.discRadius + R.discRadius)) {
+        // Near field: the integral carried through the models of both ends (links.cpp).
+        float model = S.area * modelS * modelR * pc.binSolidAngle;
+        float exact = NearFieldIrradiance(S.surfel, R.center, R.normal);
+        if (exact < kNearTrace * S.area / dist2) exact = 0.0;  // coplanar neighbours
+        f = model > 0.0 ? exact / model : 0.0;
+    } else {
+        if (orientedS) f *= modelS > 0.0 ? min(kMaxCalibration, abs(cosS) / modelS) : 0.0;
+        if (orientedR) f *= modelR > 0.0 ? min(kMaxCalibration, max(0.0, cosR) / modelR) : 0.0;
     }
     links[entry.x] = Link(sender, bin | (level << 16), f);
 }

@@ -15,6 +15,21 @@
 #include "base/check.h"
 
 namespace penumbra {
+
+// Nodes whose members share an orientation to within ~8°: leaves and planar clusters.
+// Their links are calibrated like a single oriented surface.
+constexpr float kOrientedCos = 0.99f;
+bool Oriented(const HierarchyNode& n) { return n.coneCos >= kOrientedCos; }
+
+// Leaves closer than a few element radii: the link's transfer is the integral over the
+// sender's area (NearFieldIrradiance) instead of the point-to-point kernel.
+constexpr float kNearRadii = 4.0f;
+// A near-field transfer below this fraction of the normal-incidence a_s / d² is zero.
+constexpr float kNearTrace = 1e-5f;
+bool InNearField(const HierarchyNode& r, const HierarchyNode& s, float dist) {
+    return r.IsLeaf() && s.IsLeaf() && dist < kNearRadii * (s.discRadius + r.discRadius);
+}
+
 namespace {
 
 struct PendingLink {
@@ -31,6 +46,7 @@ struct Refiner {
     float receiverThreshold;  // oracle × receiverOracle × ω_bin
     bool paper;               // LinkOracle::kPaper
     const std::vector<MotionBounds>& motion;
+    float grazeMargin;  // radians: GrazesAMember
 
     // Sec. 3.3: the smallest distance the centres of `r` and `s` can come to while their
     // groups move within their bounds (a static node's centre stays where it is; a moving
@@ -64,6 +80,10 @@ struct Refiner {
     bool Culled(const HierarchyNode& r, const HierarchyNode& s, const glm::vec3& d,
                 float dist) const {
         if (r.coneCos <= -1.0f || r.twoSided) return false;
+        // Near leaves: kept while any of the sender's extent lies in front (a sender on the
+        // edge of a junction has its centre on the receiver's plane and its area in front);
+        // MakeLink's integral then says how much arrives.
+        if (near.surfels && InNearField(r, s, dist)) return glm::dot(r.normal, d) <= -s.radius;
         if (r.IsLeaf() && s.IsLeaf()) return glm::dot(r.normal, d) <= 1e-6f * dist;
         if (dist <= r.radius + s.radius) return false;
         if (r.IsLeaf()) return glm::dot(r.normal, d) <= -s.radius;
@@ -128,7 +148,29 @@ struct Refiner {
                 return;
             }
         }
-        emit(r, MakeLink(h, dirs, norms, near, r, s));
+        // A receiver of several orientations (a cluster over a junction of surfaces) is not
+        // calibrated (MakeLink): its members evaluate the link at the bin centre, after the
+        // spread, and lose the spread's weight that falls below their horizon. Where the
+        // link arrives near the horizon of some member, refine the receiver until its
+        // pieces are oriented (conservative oracle only).
+        if (!paper && !R.IsLeaf() && !Oriented(R) && GrazesAMember(R, d / dist)) {
+            Children(r, [&](uint32_t a) { pair(a, s); });
+            return;
+        }
+        Link link = MakeLink(h, dirs, norms, near, r, s);
+        // Near leaves the integral says nothing arrives (coplanar neighbours): no link.
+        if (!moving && link.formFactor == 0.0f && R.IsLeaf() && S.IsLeaf()) return;
+        emit(r, link);
+    }
+
+    // Whether `toSender` lies within the widest spread of a bin (plus the receiver's cone)
+    // of the horizon of some member of `r`.
+    bool GrazesAMember(const HierarchyNode& r, const glm::vec3& toSender) const {
+        if (r.coneCos <= -1.0f) return true;
+        const float halfPi = 0.5f * std::numbers::pi_v<float>;
+        float axisAngle = std::acos(std::clamp(glm::dot(r.normal, toSender), -1.0f, 1.0f));
+        float coneAngle = std::acos(std::clamp(r.coneCos, -1.0f, 1.0f));
+        return std::abs(axisAngle - halfPi) < coneAngle + grazeMargin;
     }
 
     template <typename Emit>
@@ -138,11 +180,6 @@ struct Refiner {
 };
 
 }  // namespace
-
-// Nodes whose members share an orientation to within ~8°: leaves and planar clusters.
-// Their links are calibrated like a single oriented surface.
-constexpr float kOrientedCos = 0.99f;
-bool Oriented(const HierarchyNode& n) { return n.coneCos >= kOrientedCos; }
 
 LeafNorms ComputeLeafNorms(const Hierarchy& h, const Directions& dirs) {
     LeafNorms n;
@@ -219,7 +256,11 @@ Link MakeLink(const Hierarchy& h, const Directions& dirs, const LeafNorms& norms
     const bool orientedS = Oriented(S), orientedR = Oriented(R);
     float cosS = orientedS ? glm::dot(S.normal, u) : 0.0f;
     float cosR = orientedR ? -glm::dot(R.normal, u) : 0.0f;
-    glm::vec3 sideS = orientedS ? (cosS >= 0.0f ? S.normal : -S.normal) : glm::vec3(0.0f);
+    // A receiver in the sender's plane (a junction of surfaces, near field only) takes the
+    // sender's front: decided with a margin so that rounding cannot flip the side.
+    constexpr float kFrontMargin = 1e-4f;
+    const bool front = cosS >= -kFrontMargin;
+    glm::vec3 sideS = orientedS ? (front ? S.normal : -S.normal) : glm::vec3(0.0f);
     glm::vec3 sideR = orientedR ? -R.normal : glm::vec3(0.0f);
     Link link;
     link.sender = sender;
@@ -228,34 +269,38 @@ Link MakeLink(const Hierarchy& h, const Directions& dirs, const LeafNorms& norms
     // Eq. 17, F = 1/(d² ω_bin); d² + r_s² is the disc-to-point regularisation, exact for a
     // coaxial disc of radius r_s and negligible once the oracle has made the sender small.
     float f = 1.0f / ((dist2 + S.discRadius * S.discRadius) * dirs.BinSolidAngle());
-    // Near field: between leaves closer than a few element radii, replace the point-to-
-    // point kernel a_s cos_s cos_r / d² by the integral over the sender's area.
-    constexpr float kNearRadii = 4.0f;
-    if (S.IsLeaf() && R.IsLeaf() && near.surfels &&
-        dist < kNearRadii * (S.discRadius + R.discRadius)) {
-        float point =
-            S.area * std::abs(cosS) * std::max(0.0f, cosR) / (dist2 + S.discRadius * S.discRadius);
-        float exact = NearFieldIrradiance(near, S.surfel, R.center, R.normal);
-        f *= point > 0.0f ? exact / point : 0.0f;
-    }
     // Calibration of oriented ends (leaves, planar clusters): the local pass evaluates
     // cosines at bin centres (and after the σ spread at the receiver), scaled by the
     // per-leaf norms. Rescale F so this link carries the exact cosines of the true
     // direction; bounded, since a bin near a horizon can have a tiny cosine.
-    constexpr float kMaxCalibration = 4.0f;
+    constexpr float kMaxCalibration = 16.0f;
     const glm::vec3 wb = dirs.Direction(link.bin);
+    float modelS = 1.0f, modelR = 1.0f;
     if (orientedS) {
         float binCos = std::abs(glm::dot(S.normal, wb));
-        float model = binCos * (cosS >= 0.0f ? norms.out[sender] : 1.0f);
-        f *= model > 0.0f ? std::min(kMaxCalibration, std::abs(cosS) / model) : 0.0f;
+        modelS = binCos * (front ? norms.out[sender] : 1.0f);
     }
     if (orientedR) {
         float spread = 0.0f;
         for (const BinWeight& nb : dirs.Neighbours(link.level, link.bin))
             spread += nb.weight * std::max(0.0f, -glm::dot(R.normal, dirs.Direction(nb.bin)));
-        float model = spread * norms.in[receiver];
-        f *= model > 0.0f ? std::min(kMaxCalibration, std::max(0.0f, cosR) / model) : 0.0f;
+        modelR = spread * norms.in[receiver];
     }
+    // Near field: between leaves closer than a few element radii, the transfer is the
+    // integral of a_s cos_s cos_r / d² over the sender's area, carried through the models
+    // of both ends: F = ∫ / (a_s · model_s · model_r · ω_bin). The centre-to-centre cosines
+    // do not enter: at a junction of surfaces they are 0 while the areas face each other.
+    if (near.surfels && InNearField(R, S, dist)) {
+        float exact = NearFieldIrradiance(near, S.surfel, R.center, R.normal);
+        // Coplanar neighbours exchange nothing; rounding leaves them a trace.
+        if (exact < kNearTrace * S.area / dist2) exact = 0.0f;
+        float model = S.area * modelS * modelR * dirs.BinSolidAngle();
+        link.formFactor = model > 0.0f ? exact / model : 0.0f;
+        return link;
+    }
+    if (orientedS) f *= modelS > 0.0f ? std::min(kMaxCalibration, std::abs(cosS) / modelS) : 0.0f;
+    if (orientedR)
+        f *= modelR > 0.0f ? std::min(kMaxCalibration, std::max(0.0f, cosR) / modelR) : 0.0f;
     link.formFactor = f;
     return link;
 }
@@ -264,14 +309,16 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
                  const NearField& near, const LinkSettings& settings,
                  const std::function<void(double)>& progress) {
     auto start = std::chrono::steady_clock::now();
-    Refiner refiner{h,
-                    dirs,
-                    norms,
-                    near,
-                    settings.oracle * dirs.BinSolidAngle(),
-                    settings.oracle * settings.receiverOracle * dirs.BinSolidAngle(),
-                    settings.mode == LinkOracle::kPaper,
-                    settings.motion};
+    Refiner refiner{
+        h,
+        dirs,
+        norms,
+        near,
+        settings.oracle * dirs.BinSolidAngle(),
+        settings.oracle * settings.receiverOracle * dirs.BinSolidAngle(),
+        settings.mode == LinkOracle::kPaper,
+        settings.motion,
+        2.5f * dirs.LevelSigma(0) + std::sqrt(dirs.BinSolidAngle() / std::numbers::pi_v<float>)};
     std::unique_ptr<tbb::global_control> limit;
     if (settings.threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,

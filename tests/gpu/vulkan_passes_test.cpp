@@ -302,8 +302,8 @@ namespace {
 // the next one's flush, so every pass read the time of the pass after it (gpu/timestamps.h).
 // The leaf pass (each leaf's gather and the local pass) does far more work than the pull
 // (a sum of two rows per cluster): correctly attributed, it reads several times longer;
-// shifted by one, it read the pull's time and the pull read almost nothing. The ratio
-// between the two is about 7 either way, so the bound (2) holds on a loaded machine.
+// shifted by one, it read the pull's time and the pull read more than it (measured: local
+// 2.0, pull 4.4 ms; attributed right: 33 and 6).
 TEST(VulkanPasses, PassTimesBelongToTheirPassesAfterTheShadowPass) {
     Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/glossy-box.gltf");
     ASSERT_FALSE(scene.lights.empty());
@@ -319,8 +319,8 @@ TEST(VulkanPasses, PassTimesBelongToTheirPassesAfterTheShadowPass) {
     ASSERT_TRUE(ms.count("local") && ms.count("pull") && ms.count("global"));
     std::printf("4 iterations: global %.2f, local %.2f, pull %.2f ms\n", ms["global"], ms["local"],
                 ms["pull"]);
-    EXPECT_GT(ms["local"], 2.0 * ms["pull"]);
-    EXPECT_GT(ms["global"], 2.0 * ms["pull"]);
+    EXPECT_GT(ms["local"], ms["pull"]);
+    EXPECT_GT(ms["global"], ms["pull"]);
     for (const auto& m : dynamic_cast<AntiradianceSolver&>(*gpu).ValidationMessages())
         ADD_FAILURE() << "validation: " << m;
 }

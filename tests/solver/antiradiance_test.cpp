@@ -70,6 +70,14 @@ INSTANTIATE_TEST_SUITE_P(Antiradiance, FormFactor,
 
 // Closed box with blockers inside; every surface emits Le with albedo ρ. The exact
 // solution is L = Le/(1−ρ) everywhere, so E = π Le/(1−ρ) at every surfel.
+// Settings: 256 bins, 5 cm elements, oracle 0.25 for senders and 0.0625 (receiverOracle
+// 0.25) for receivers. A receiver cluster hands the same L_in to all its members, so a
+// member nearer the sender than the cluster's centre gets too little and one farther too
+// much: an error of the first order in the receiver's size over the distance, where the
+// sender's size costs only the second. Surfels next to a junction of walls, lit mostly from
+// one side by the wall beside them, keep that error: with the receivers held to the
+// senders' threshold (receiverOracle 1) the worst surfel is 3.9% low (mean 1.1%, 9M links);
+// at 0.25 every surfel is within 2% (30M links). docs/SOLVER.md, "Known limits".
 TEST(Antiradiance, WhiteFurnaceConvergesWithBlockers) {
     const float Le = 1.0f, rho = 0.5f;
     SceneBuilder b;
@@ -80,6 +88,7 @@ TEST(Antiradiance, WhiteFurnaceConvergesWithBlockers) {
     Scene scene = b.Build();
     SolverSettings settings = CpuSettings(256, 0.05f);
     settings.oracle = 0.25f;
+    settings.receiverOracle = 0.25f;
     auto solver = CreateSolver(scene, settings);
     solver->Iterate(24);
     auto irr = solver->SurfelIrradiance();
@@ -98,11 +107,8 @@ TEST(Antiradiance, WhiteFurnaceConvergesWithBlockers) {
     std::printf("furnace: %zu surfels, mean |E−πLe/(1−ρ)|/E %.4f, max %.4f at (%.3f %.3f %.3f)\n",
                 n, meanErr, maxErr, s.positions[worst].x, s.positions[worst].y,
                 s.positions[worst].z);
-    // The mean is held to the 2%. Single surfels scatter further (measured 4.1%
-    // at 256 bins) where links through non-planar clusters quantise cosines to bin
-    // centres; 5% bounds that scatter until it is reduced (docs/STATUS.md).
     EXPECT_LT(meanErr, 0.02) << "expected E = " << expected;
-    EXPECT_LT(maxErr, 0.05) << "expected E = " << expected << ", worst surfel got "
+    EXPECT_LT(maxErr, 0.02) << "expected E = " << expected << ", worst surfel got "
                             << Mean(irr[worst]);
 }
 
