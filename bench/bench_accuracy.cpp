@@ -59,12 +59,15 @@ struct Run {
 struct Sweep {
     float element = 0.1f;
     std::vector<float> finer{0.05f, 0.025f};
-    bool paperOracle = false;
+    LinkOracle linkOracle = LinkOracle::kConservative;
     float oracle = 1.0f;
+    // With the paper's oracle: the area oracle's threshold that gives about as many links,
+    // to compare the two at one cost (0: not run).
+    float areaOracle = 0.0f;
 };
 
 Sweep SweepFor(const std::string& name) {
-    if (name == "office") return {0.5f, {0.35f}, true, 2.15f};
+    if (name == "office") return {0.5f, {0.35f}, LinkOracle::kPaper, 2.15f, 3.3f};
     return {};
 }
 
@@ -74,7 +77,7 @@ Run Solve(const Scene& scene, const IrradianceFile& truth, int bins, int iterati
     s.bins = bins;
     s.elementSize = elementSize;
     s.device = DeviceChoice::kCpu;
-    s.paperOracle = sweep.paperOracle;
+    s.linkOracle = sweep.linkOracle;
     s.oracle = sweep.oracle;
     auto t = Clock::now();
     auto solver = CreateSolver(scene, s);
@@ -143,7 +146,8 @@ int main(int argc, char** argv) {
             js["reference"]["samples_for_1pct"] = n1;
             js["reference"]["seconds_for_1pct"] = t1;
             const Sweep sweep = SweepFor(name);
-            if (sweep.paperOracle) {
+            const bool paper = sweep.linkOracle == LinkOracle::kPaper;
+            if (paper) {
                 std::snprintf(line, sizeof line,
                               "Links by the paper's oracle at %.2f (as `make bench`), elements "
                               "of %.2f m unless stated.\n\n",
@@ -180,7 +184,7 @@ int main(int argc, char** argv) {
                                         {"ms_per_iteration", r.msPerIteration},
                                         {"seconds", r.seconds}});
             }
-            if (sweep.paperOracle) {
+            if (paper) {
                 // What the paper's oracle costs in accuracy against the default one.
                 Run c = Solve(scene, truth, 128, 8, sweep.element, Sweep{});
                 std::fprintf(stderr, "  conservative oracle: RMSE %.4f in %.2f s\n", c.rmse,
@@ -197,6 +201,28 @@ int main(int argc, char** argv) {
                                              {"mean_rel", c.meanRel},
                                              {"ms_per_iteration", c.msPerIteration},
                                              {"seconds", c.seconds}};
+            }
+            if (paper && sweep.areaOracle > 0.0f) {
+                // The area oracle (a receiver test added to the paper's) at about as many links.
+                Sweep a = sweep;
+                a.linkOracle = LinkOracle::kArea;
+                a.oracle = sweep.areaOracle;
+                Run c = Solve(scene, truth, 128, 8, sweep.element, a);
+                std::fprintf(stderr, "  area oracle: RMSE %.4f in %.2f s\n", c.rmse, c.seconds);
+                std::snprintf(line, sizeof line,
+                              "\nWith the area oracle (`--link-oracle area`) at %.2f, tuned to "
+                              "about the paper's link count, 128 bins, 8 iterations, %.2f m: %zu "
+                              "links, rel. RMSE %.1f%%, mean rel. %.1f%%, %.2f ms/iteration, "
+                              "%.2f s.\n",
+                              a.oracle, c.elementSize, c.links, 100 * c.rmse, 100 * c.meanRel,
+                              c.msPerIteration, c.seconds);
+                md << line;
+                js["area_oracle"] = {{"oracle", a.oracle},
+                                     {"links", c.links},
+                                     {"rel_rmse", c.rmse},
+                                     {"mean_rel", c.meanRel},
+                                     {"ms_per_iteration", c.msPerIteration},
+                                     {"seconds", c.seconds}};
             }
             // The path tracer at growing sample counts against the same truth (another seed).
             md << "\nPath tracer alone (seed differs from the truth's): samples, rel. RMSE "

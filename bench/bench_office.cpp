@@ -27,7 +27,7 @@ int main(int argc, char** argv) {
     SolverSettings settings;
     settings.bins = 128;
     settings.elementSize = 0.5f;
-    settings.paperOracle = true;
+    settings.linkOracle = LinkOracle::kPaper;
     settings.oracle = 2.15f;  // 626K links: the paper office has 632K
     app.add_option("--scene", scenePath, "office-scale glTF")->capture_default_str();
     app.add_option("--out", out, "folder for the results JSON")->capture_default_str();

@@ -92,7 +92,7 @@ struct LoadOptions {
     float elementSize = 0.0f;  // 0: automatic
     std::string device;        // "" = server default
     bool reload = false;
-    std::string linkOracle;  // "" (server default: conservative) | "paper"
+    std::string linkOracle;  // "" (server default: conservative) | "paper" | "area"
     float oracle = 1.0f;
     float convergedChange = 1e-3f;  // 0: frames stream continuously, never idle
     // The sky: an equirectangular EXR under the server's scene root, or a constant colour.

@@ -365,7 +365,8 @@ int main(int argc, char** argv) {
                      "receiver solid-angle threshold relative to --oracle")
         ->capture_default_str();
     bake->add_option("--link-oracle", linkOracle,
-                     "conservative (accurate) or paper (Sec. 3.2: fewer links)")
+                     "conservative (accurate), paper (Sec. 3.2: fewer links) or area (the "
+                     "paper's with a receiver test)")
         ->capture_default_str();
     bake->add_option("--threads", settings.threads, "CPU threads (0: all cores)")
         ->capture_default_str();
@@ -493,7 +494,7 @@ int main(int argc, char** argv) {
     if (service.Parsed()) return service.Run();
     try {
         if (bake->parsed()) {
-            settings.paperOracle = ParsePaperOracle(linkOracle);
+            settings.linkOracle = ParseLinkOracle(linkOracle);
             settings.backOcclusion = ParseBackOcclusion(backOcclusion);
             return Bake(scenePath, outPath, settings, iterations, device, scheme, channel, bakeEnv,
                         quiet);

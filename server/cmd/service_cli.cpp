@@ -201,7 +201,7 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
                        "metres (0: scene diameter / 40)");
     s.load->add_option("--device", s.loadOptions.device, "auto|gpu|lavapipe|cpu");
     s.load->add_flag("--reload", s.loadOptions.reload, "rebuild even if already loaded");
-    s.load->add_option("--link-oracle", s.loadOptions.linkOracle, "conservative|paper");
+    s.load->add_option("--link-oracle", s.loadOptions.linkOracle, "conservative|paper|area");
     s.load->add_option("--oracle", s.loadOptions.oracle, "link refinement threshold")
         ->capture_default_str();
     s.load

@@ -44,9 +44,8 @@ struct Refiner {
     const NearField& near;
     float threshold;          // oracle × ω_bin, for the sender
     float receiverThreshold;  // oracle × receiverOracle × ω_bin
-    bool paper;               // LinkOracle::kPaper
+    LinkOracle mode;
     const std::vector<MotionBounds>& motion;
-    float grazeMargin;  // radians: GrazesAMember
 
     // Sec. 3.3: the smallest distance the centres of `r` and `s` can come to while their
     // groups move within their bounds (a static node's centre stays where it is; a moving
@@ -133,13 +132,16 @@ struct Refiner {
             bool overlap = dist <= R.radius + S.radius;
             // Oracle: solid angle of sender (and receiver) against the bin's ω_bin. The
             // conservative mode bounds members by the bounding sphere, refines overlapping
-            // pairs and also tests the receiver; the paper's tests the sender's area only.
+            // pairs and also tests the receiver; the paper's tests the sender's area only,
+            // the area mode the areas of both.
             float pi = std::numbers::pi_v<float>;
-            float rs = paper ? S.discRadius : S.radius;
+            const bool conservative = mode == LinkOracle::kConservative;
+            float rs = conservative ? S.radius : S.discRadius;
+            float rr = conservative ? R.radius : R.discRadius;
             float omegaS = pi * rs * rs / dist2;
-            float omegaR = pi * R.radius * R.radius / dist2;
-            if ((!paper && overlap) || (moving && dist <= R.radius + S.radius) ||
-                omegaS > threshold || (!paper && omegaR > receiverThreshold)) {
+            float omegaR = pi * rr * rr / dist2;
+            if ((conservative && overlap) || (moving && dist <= R.radius + S.radius) ||
+                omegaS > threshold || (mode != LinkOracle::kPaper && omegaR > receiverThreshold)) {
                 bool splitSender = R.IsLeaf() || (!S.IsLeaf() && S.radius >= R.radius);
                 if (splitSender)
                     Children(s, [&](uint32_t b) { pair(r, b); });
@@ -148,29 +150,10 @@ struct Refiner {
                 return;
             }
         }
-        // A receiver of several orientations (a cluster over a junction of surfaces) is not
-        // calibrated (MakeLink): its members evaluate the link at the bin centre, after the
-        // spread, and lose the spread's weight that falls below their horizon. Where the
-        // link arrives near the horizon of some member, refine the receiver until its
-        // pieces are oriented (conservative oracle only).
-        if (!paper && !R.IsLeaf() && !Oriented(R) && GrazesAMember(R, d / dist)) {
-            Children(r, [&](uint32_t a) { pair(a, s); });
-            return;
-        }
         Link link = MakeLink(h, dirs, norms, near, r, s);
         // Near leaves the integral says nothing arrives (coplanar neighbours): no link.
         if (!moving && link.formFactor == 0.0f && R.IsLeaf() && S.IsLeaf()) return;
         emit(r, link);
-    }
-
-    // Whether `toSender` lies within the widest spread of a bin (plus the receiver's cone)
-    // of the horizon of some member of `r`.
-    bool GrazesAMember(const HierarchyNode& r, const glm::vec3& toSender) const {
-        if (r.coneCos <= -1.0f) return true;
-        const float halfPi = 0.5f * std::numbers::pi_v<float>;
-        float axisAngle = std::acos(std::clamp(glm::dot(r.normal, toSender), -1.0f, 1.0f));
-        float coneAngle = std::acos(std::clamp(r.coneCos, -1.0f, 1.0f));
-        return std::abs(axisAngle - halfPi) < coneAngle + grazeMargin;
     }
 
     template <typename Emit>
@@ -309,16 +292,14 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
                  const NearField& near, const LinkSettings& settings,
                  const std::function<void(double)>& progress) {
     auto start = std::chrono::steady_clock::now();
-    Refiner refiner{
-        h,
-        dirs,
-        norms,
-        near,
-        settings.oracle * dirs.BinSolidAngle(),
-        settings.oracle * settings.receiverOracle * dirs.BinSolidAngle(),
-        settings.mode == LinkOracle::kPaper,
-        settings.motion,
-        2.5f * dirs.LevelSigma(0) + std::sqrt(dirs.BinSolidAngle() / std::numbers::pi_v<float>)};
+    Refiner refiner{h,
+                    dirs,
+                    norms,
+                    near,
+                    settings.oracle * dirs.BinSolidAngle(),
+                    settings.oracle * settings.receiverOracle * dirs.BinSolidAngle(),
+                    settings.mode,
+                    settings.motion};
     std::unique_ptr<tbb::global_control> limit;
     if (settings.threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,

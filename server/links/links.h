@@ -8,6 +8,7 @@
 
 #include "hierarchy/directions.h"
 #include "hierarchy/hierarchy.h"
+#include "links/oracle.h"
 #include "scene/surfels.h"
 
 namespace penumbra {
@@ -24,11 +25,6 @@ static_assert(sizeof(Link) == 12);
 static_assert(offsetof(Link, bin) == 4 && offsetof(Link, level) == 6 &&
               offsetof(Link, formFactor) == 8);
 
-enum class LinkOracle {
-    kConservative,  // bounding spheres, both ends, overlapping pairs refined (default)
-    kPaper,         // Sec. 3.2 as written: the sender's area-based solid angle only
-};
-
 // Where a motion group's surfaces may go (Sec. 3.3), world space: links between a group and
 // anything else are refined for the worst case over this box.
 struct MotionBounds {
@@ -39,8 +35,8 @@ struct LinkSettings {
     LinkOracle mode = LinkOracle::kConservative;
     // Refine while sender or receiver subtends more than `oracle` × ω_bin.
     float oracle = 1.0f;
-    // Conservative mode: refine while the receiver subtends more than oracle × this ×
-    // ω_bin (a large receiver takes one direction for all its members).
+    // Conservative and area modes: refine while the receiver subtends more than oracle ×
+    // this × ω_bin (a large receiver takes one direction for all its members).
     float receiverOracle = 1.0f;
     int threads = 0;  // 0: all cores
     // Motion bounds of group g at motion[g − 1] (Surfels::groups); empty: everything static.

@@ -413,7 +413,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
                     req.settings.maxFramesPerEdit = std::numeric_limits<int>::max();
                 if (!Str(l->link_oracle()).empty()) {
                     try {
-                        req.settings.solver.paperOracle = ParsePaperOracle(Str(l->link_oracle()));
+                        req.settings.solver.linkOracle = ParseLinkOracle(Str(l->link_oracle()));
                     } catch (const Error& e) {
                         throw ServiceError(ErrorKind::kInvalidArgument, e.what());
                     }

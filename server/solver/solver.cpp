@@ -21,10 +21,22 @@ DeviceChoice ParseDevice(const std::string& name) {
     throw Error("unknown device '" + name + "' (use auto, gpu, lavapipe or cpu)");
 }
 
-bool ParsePaperOracle(const std::string& name) {
-    if (name == "conservative") return false;
-    if (name == "paper") return true;
-    throw Error("unknown link oracle '" + name + "' (use conservative or paper)");
+LinkOracle ParseLinkOracle(const std::string& name) {
+    if (name == "conservative") return LinkOracle::kConservative;
+    if (name == "paper") return LinkOracle::kPaper;
+    if (name == "area") return LinkOracle::kArea;
+    throw Error("unknown link oracle '" + name + "' (use conservative, paper or area)");
+}
+
+const char* LinkOracleName(LinkOracle oracle) {
+    switch (oracle) {
+        case LinkOracle::kPaper:
+            return "paper";
+        case LinkOracle::kArea:
+            return "area";
+        default:
+            return "conservative";
+    }
 }
 
 Scheme ParseScheme(const std::string& name) {

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "base/check.h"
+#include "links/oracle.h"
 #include "scene/scene.h"
 #include "scene/surfels.h"
 
@@ -35,10 +36,10 @@ struct SolverSettings {
     DeviceChoice device = DeviceChoice::kAuto;
     float oracle = 1.0f;          // link refinement threshold in units of ω_bin
     float receiverOracle = 1.0f;  // receiver threshold relative to `oracle`
-    bool paperOracle = false;     // Sec. 3.2's oracle (fewer links, less accurate)
-    int threads = 0;              // CPU threads; 0 = all cores
-    bool validation = false;      // Vulkan validation layers (tests turn them on)
-    int shadowMapSize = 0;        // texels per side of each shadow map; 0: from the element size
+    LinkOracle linkOracle = LinkOracle::kConservative;  // links/oracle.h
+    int threads = 0;                                    // CPU threads; 0 = all cores
+    bool validation = false;  // Vulkan validation layers (tests turn them on)
+    int shadowMapSize = 0;    // texels per side of each shadow map; 0: from the element size
     BackOcclusion backOcclusion = BackOcclusion::kAuto;
     // Sec. 3.3: build the links of dynamic nodes (extras.penumbra.dynamic) for the worst case
     // over their motion bounds, so that a move recomputes only the form factors and bins of
@@ -146,7 +147,8 @@ std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& s
 
 // Parses "auto|gpu|lavapipe|cpu" and "symmetric|asymmetric"; throws penumbra::Error.
 DeviceChoice ParseDevice(const std::string& name);
-bool ParsePaperOracle(const std::string& name);  // "conservative" | "paper"
+LinkOracle ParseLinkOracle(const std::string& name);  // "conservative" | "paper" | "area"
+const char* LinkOracleName(LinkOracle oracle);
 Scheme ParseScheme(const std::string& name);
 Channel ParseChannel(const std::string& name);              // "indirect" | "direct" | "total"
 BackOcclusion ParseBackOcclusion(const std::string& name);  // "auto" | "on" | "off"

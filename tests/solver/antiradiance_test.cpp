@@ -6,7 +6,9 @@
 #include <cmath>
 #include <numbers>
 
+#include "bundled_scenes.h"
 #include "scene/scene_builder.h"
+#include "solver/antiradiance/model.h"
 #include "solver/solver.h"
 #include "test_util.h"
 
@@ -220,6 +222,52 @@ TEST(Antiradiance, MaterialEditsConvergeToAFreshSolve) {
         // ρ ≤ 0.6: 36 more steps than needed leave < 0.6^36 ≈ 1e-8 of the old solution.
         EXPECT_LT(worst, 1e-4 * peak) << (device == DeviceChoice::kCpu ? "cpu" : "lavapipe")
                                       << ": max |edited − fresh| " << worst << " of " << peak;
+    }
+}
+
+// The area oracle (links/oracle.h) refines wherever the paper's does, and also every
+// receiver cluster whose area subtends more than oracle × receiverOracle × ω_bin: more
+// links than the paper's, and no static link into a cluster past that bound.
+TEST(LinkOracles, AreaOracleBoundsTheReceiversToo) {
+    Scene scene = scenes::CornellBox().Build();
+    SolverSettings s = CpuSettings(64, 0.1f);
+    s.oracle = 2.0f;
+    s.linkOracle = ParseLinkOracle("paper");
+    const AntiradianceModel paper = BuildAntiradianceModel(scene, s, {});
+    s.linkOracle = ParseLinkOracle("area");
+    const AntiradianceModel area = BuildAntiradianceModel(scene, s, {});
+    EXPECT_GT(area.links.links.size(), paper.links.links.size());
+    const float bound = s.oracle * area.dirs.BinSolidAngle() * 1.0001f;
+    size_t clusterLinks = 0, paperOver = 0;
+    const auto over = [&](const AntiradianceModel& m, uint32_t r, const Link& l) {
+        const HierarchyNode& R = m.hierarchy.nodes[r];
+        const HierarchyNode& S = m.hierarchy.nodes[l.sender];
+        const glm::vec3 d = R.center - S.center;
+        return std::numbers::pi_v<float> * R.discRadius * R.discRadius / glm::dot(d, d) > bound;
+    };
+    for (uint32_t r = 0; r + 1 < area.links.offsets.size(); ++r) {
+        if (area.hierarchy.nodes[r].IsLeaf()) continue;
+        for (uint32_t i = area.links.offsets[r]; i < area.links.offsets[r + 1]; ++i) {
+            ++clusterLinks;
+            EXPECT_FALSE(over(area, r, area.links.links[i])) << "receiver " << r;
+        }
+    }
+    for (uint32_t r = 0; r + 1 < paper.links.offsets.size(); ++r)
+        if (!paper.hierarchy.nodes[r].IsLeaf())
+            for (uint32_t i = paper.links.offsets[r]; i < paper.links.offsets[r + 1]; ++i)
+                paperOver += over(paper, r, paper.links.links[i]);
+    std::printf(
+        "links: paper %zu, area %zu (%zu into clusters); paper links past the receiver "
+        "bound: %zu\n",
+        paper.links.links.size(), area.links.links.size(), clusterLinks, paperOver);
+    EXPECT_GT(clusterLinks, 0u);
+    EXPECT_GT(paperOver, 0u);  // else the test would not tell the two apart
+    EXPECT_STREQ(LinkOracleName(LinkOracle::kArea), "area");
+    try {
+        ParseLinkOracle("sphere");
+        ADD_FAILURE() << "an unknown oracle was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("conservative, paper or area"), std::string::npos);
     }
 }
 

@@ -82,7 +82,7 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
 
     ls.oracle = settings.oracle;
     ls.receiverOracle = settings.receiverOracle;
-    ls.mode = settings.paperOracle ? LinkOracle::kPaper : LinkOracle::kConservative;
+    ls.mode = settings.linkOracle;
     ls.threads = settings.threads;
     ls.dynamicBudget = settings.motionLinkBudget;
     model.norms = ComputeLeafNorms(model.hierarchy, model.dirs);
