@@ -28,8 +28,11 @@ struct Receiver {
 
 layout(std430, binding = 0) readonly buffer Receivers { Receiver receivers[]; };
 layout(std430, binding = 1) readonly buffer Lights { Light lights[]; };
-layout(std430, binding = 2) readonly buffer Views { View views[]; };
-layout(std430, binding = 3) readonly buffer Maps { float maps[]; };
+// Views (24 floats each: viewProj, eye, forward) and depth maps through texel buffers: the
+// taps read them at per-lane places, which lavapipe gathers in vector registers where it
+// loads storage buffers lane by lane (gpu/pipeline.h, Slot).
+layout(binding = 2) uniform samplerBuffer views;
+layout(binding = 3) uniform samplerBuffer maps;
 layout(std430, binding = 4) writeonly buffer Out { vec4 direct[]; };
 // Each light's share, light-major: perLight[light · receiverCount + receiver].
 layout(std430, binding = 5) writeonly buffer PerLight { vec4 perLight[]; };
@@ -41,6 +44,19 @@ layout(push_constant) uniform Push {
 } pc;
 
 const int kTaps = 16;
+
+vec4 ViewRow(int vi, int k) {
+    int at = 24 * vi + 4 * k;
+    return vec4(texelFetch(views, at).x, texelFetch(views, at + 1).x, texelFetch(views, at + 2).x,
+                texelFetch(views, at + 3).x);
+}
+
+View LoadView(int vi) {
+    return View(mat4(ViewRow(vi, 0), ViewRow(vi, 1), ViewRow(vi, 2), ViewRow(vi, 3)),
+                ViewRow(vi, 4), ViewRow(vi, 5));
+}
+
+float Depth(uint at) { return texelFetch(maps, int(at)).x; }
 
 int ViewOf(Light light, vec3 q) {
     int first = int(light.cone.z);
@@ -54,7 +70,7 @@ int ViewOf(Light light, vec3 q) {
 
 float TapVisibility(Light light, vec3 q, vec3 n, vec3 toLight) {
     int vi = ViewOf(light, q);
-    View view = views[vi];
+    View view = LoadView(vi);
     int size = int(pc.size);
     float texel = view.eye.w > 0.5 ? view.forward.w
                                    : view.forward.w * max(dot(q - view.eye.xyz, view.forward.xyz), 0.0);
@@ -71,10 +87,10 @@ float TapVisibility(Light light, vec3 q, vec3 n, vec3 toLight) {
     uint base = uint(vi) * uint(size) * uint(size);
     int xa = clamp(x0, 0, size - 1), xb = clamp(x0 + 1, 0, size - 1);
     int ya = clamp(y0, 0, size - 1), yb = clamp(y0 + 1, 0, size - 1);
-    float l00 = ndc.z <= maps[base + uint(ya * size + xa)] ? 1.0 : 0.0;
-    float l10 = ndc.z <= maps[base + uint(ya * size + xb)] ? 1.0 : 0.0;
-    float l01 = ndc.z <= maps[base + uint(yb * size + xa)] ? 1.0 : 0.0;
-    float l11 = ndc.z <= maps[base + uint(yb * size + xb)] ? 1.0 : 0.0;
+    float l00 = ndc.z <= Depth(base + uint(ya * size + xa)) ? 1.0 : 0.0;
+    float l10 = ndc.z <= Depth(base + uint(ya * size + xb)) ? 1.0 : 0.0;
+    float l01 = ndc.z <= Depth(base + uint(yb * size + xa)) ? 1.0 : 0.0;
+    float l11 = ndc.z <= Depth(base + uint(yb * size + xb)) ? 1.0 : 0.0;
     return (1.0 - wv) * ((1.0 - wu) * l00 + wu * l10) + wv * ((1.0 - wu) * l01 + wu * l11);
 }
 

@@ -67,7 +67,10 @@ struct VulkanDirect::Impl {
           receivers(c, std::max<size_t>(1, receiverList.size()) * sizeof(GpuReceiver)),
           shadow(c, Words(kSpirv_shadow_vert), Words(kSpirv_shadow_frag), 2, sizeof(ShadowPush),
                  static_cast<uint32_t>(s), static_cast<uint32_t>(s)),
-          directPass(c, Words(kSpirv_direct), 6, {}, sizeof(DirectPush)),
+          directPass(c, Words(kSpirv_direct),
+                     {gpu::Slot::kStorage, gpu::Slot::kStorage, gpu::Slot::kTexelFloat,
+                      gpu::Slot::kTexelFloat, gpu::Slot::kStorage, gpu::Slot::kStorage},
+                     std::span<const uint32_t>{}, sizeof(DirectPush)),
           stamps(c, 3) {
         vertices.Upload(Vertices(scene));
         receivers.Upload(receiverList);
