@@ -289,13 +289,15 @@ struct VulkanAntiradiance::Impl {
     }
 
     std::vector<uint32_t> Spec() const { return {kWorkgroup, static_cast<uint32_t>(m.Bins())}; }
-    // The local pass's variants, LocalVariant(mode, glossy) → its specialization.
+    // The local pass's variants, LocalVariant(mode, glossy) → its specialization. The
+    // symmetric scheme's diffuse variant comes first: the pipeline compiles it at set-up
+    // (lavapipe takes tens of milliseconds a variant), the others on first use.
     static size_t LocalVariant(LocalMode mode, bool glossy) {
-        return (static_cast<size_t>(mode) - 1) * 2 + (glossy ? 1 : 0);
+        return (mode == kBoth ? 0 : static_cast<size_t>(mode)) * 2 + (glossy ? 1 : 0);
     }
     std::vector<std::vector<uint32_t>> LocalVariants() const {
         std::vector<std::vector<uint32_t>> v;
-        for (LocalMode mode : {kReflect, kAntiradiance, kBoth})
+        for (LocalMode mode : {kBoth, kReflect, kAntiradiance})
             for (uint32_t glossy : {0u, 1u}) {
                 PENUMBRA_CHECK_EQ(LocalVariant(mode, glossy != 0), v.size());
                 v.push_back({kWorkgroup, static_cast<uint32_t>(m.Bins()),
