@@ -184,45 +184,39 @@ int main(int argc, char** argv) {
                                         {"ms_per_iteration", r.msPerIteration},
                                         {"seconds", r.seconds}});
             }
-            if (paper) {
-                // What the paper's oracle costs in accuracy against the default one.
-                Run c = Solve(scene, truth, 128, 8, sweep.element, Sweep{});
-                std::fprintf(stderr, "  conservative oracle: RMSE %.4f in %.2f s\n", c.rmse,
-                             c.seconds);
+            // Another oracle at the sweep's element size, 128 bins, 8 iterations: one line of
+            // the report (`what` opens its sentence) and js[key].
+            const auto other = [&](const Sweep& o, const char* key, const std::string& what) {
+                Run c = Solve(scene, truth, 128, 8, sweep.element, o);
+                std::fprintf(stderr, "  %s: RMSE %.4f in %.2f s\n", key, c.rmse, c.seconds);
                 std::snprintf(line, sizeof line,
-                              "\nWith the default (conservative) oracle instead, 128 bins, 8 "
-                              "iterations, %.2f m: %zu links, rel. RMSE %.1f%%, mean rel. %.1f%%, "
-                              "%.2f ms/iteration, %.2f s.\n",
-                              c.elementSize, c.links, 100 * c.rmse, 100 * c.meanRel,
+                              "\n%s, 128 bins, 8 iterations, %.2f m: %zu links, rel. RMSE %.1f%%, "
+                              "mean rel. %.1f%%, %.2f ms/iteration, %.2f s.\n",
+                              what.c_str(), c.elementSize, c.links, 100 * c.rmse, 100 * c.meanRel,
                               c.msPerIteration, c.seconds);
                 md << line;
-                js["conservative_oracle"] = {{"links", c.links},
-                                             {"rel_rmse", c.rmse},
-                                             {"mean_rel", c.meanRel},
-                                             {"ms_per_iteration", c.msPerIteration},
-                                             {"seconds", c.seconds}};
-            }
+                js[key] = {{"oracle", o.oracle},
+                           {"links", c.links},
+                           {"rel_rmse", c.rmse},
+                           {"mean_rel", c.meanRel},
+                           {"ms_per_iteration", c.msPerIteration},
+                           {"seconds", c.seconds}};
+            };
+            // What the paper's oracle costs in accuracy against the default one, and the area
+            // oracle (a receiver test added to the paper's) at about as many links.
+            if (paper)
+                other(Sweep{}, "conservative_oracle",
+                      "With the default (conservative) oracle instead");
             if (paper && sweep.areaOracle > 0.0f) {
-                // The area oracle (a receiver test added to the paper's) at about as many links.
                 Sweep a = sweep;
                 a.linkOracle = LinkOracle::kArea;
                 a.oracle = sweep.areaOracle;
-                Run c = Solve(scene, truth, 128, 8, sweep.element, a);
-                std::fprintf(stderr, "  area oracle: RMSE %.4f in %.2f s\n", c.rmse, c.seconds);
-                std::snprintf(line, sizeof line,
-                              "\nWith the area oracle (`--link-oracle area`) at %.2f, tuned to "
-                              "about the paper's link count, 128 bins, 8 iterations, %.2f m: %zu "
-                              "links, rel. RMSE %.1f%%, mean rel. %.1f%%, %.2f ms/iteration, "
-                              "%.2f s.\n",
-                              a.oracle, c.elementSize, c.links, 100 * c.rmse, 100 * c.meanRel,
-                              c.msPerIteration, c.seconds);
-                md << line;
-                js["area_oracle"] = {{"oracle", a.oracle},
-                                     {"links", c.links},
-                                     {"rel_rmse", c.rmse},
-                                     {"mean_rel", c.meanRel},
-                                     {"ms_per_iteration", c.msPerIteration},
-                                     {"seconds", c.seconds}};
+                char what[160];
+                std::snprintf(what, sizeof what,
+                              "With the area oracle (`--link-oracle area`) at %.2f, tuned to about "
+                              "the paper's link count",
+                              a.oracle);
+                other(a, "area_oracle", what);
             }
             // The path tracer at growing sample counts against the same truth (another seed).
             md << "\nPath tracer alone (seed differs from the truth's): samples, rel. RMSE "
