@@ -1,17 +1,7 @@
-// Shadow pass, fragment stage: keeps the nearest NDC depth per texel with atomicMin on the
-// float's bits (non-negative floats order as their bits do). The map is a storage buffer,
-// not a depth attachment, so the direct pass and the CPU twin read the same layout.
+// Shadow pass, fragment stage: the fragment's depth into a float colour target. With the
+// depth test LESS the colour that remains is the nearest surface's depth (gpu::DepthTarget).
 #version 450
 
-layout(std430, binding = 1) buffer Maps { uint maps[]; };
+layout(location = 0) out float depth;
 
-layout(push_constant) uniform Push {
-    mat4 viewProj;
-    uint mapOffset;
-    uint size;
-} pc;
-
-void main() {
-    uvec2 texel = uvec2(gl_FragCoord.xy);
-    atomicMin(maps[pc.mapOffset + texel.y * pc.size + texel.x], floatBitsToUint(gl_FragCoord.z));
-}
+void main() { depth = gl_FragCoord.z; }

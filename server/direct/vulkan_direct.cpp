@@ -1,5 +1,5 @@
-// Vulkan shadow pass (attachment-less raster, depth kept with atomicMin in a buffer) and
-// direct pass (compute), timed with timestamps.
+// Vulkan shadow pass (depth-only raster into an image, copied into the maps buffer view by
+// view) and direct pass (compute), timed with timestamps.
 #include "direct/vulkan_direct.h"
 
 #include <chrono>
@@ -9,6 +9,7 @@
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "gpu/pipeline.h"
+#include "gpu/render_target.h"
 #include "gpu/timestamps.h"
 #include "shaders/direct_spv.h"
 #include "shaders/shadow_frag_spv.h"
@@ -33,8 +34,6 @@ struct DirectPush {
     uint32_t size;
 };
 
-constexpr uint32_t kOneDepth = 0x3F800000u;  // the bits of 1.0f: nothing drawn
-
 }  // namespace
 
 struct VulkanDirect::Impl {
@@ -46,7 +45,7 @@ struct VulkanDirect::Impl {
     gpu::Buffer vertices, receivers;
     std::unique_ptr<gpu::Buffer> lights, views, maps, perLight;
     size_t viewCapacity = 0, lightCapacity = 0;
-    gpu::RasterPipeline shadow;
+    gpu::DepthTarget shadow;
     gpu::Pipeline directPass;
     vk::raii::DescriptorSet shadowSet{nullptr}, directSet{nullptr};
     gpu::Timestamps stamps;
@@ -65,7 +64,7 @@ struct VulkanDirect::Impl {
           out(o),
           vertices(c, std::max<size_t>(1, triangleVertices) * sizeof(glm::vec4)),
           receivers(c, std::max<size_t>(1, receiverList.size()) * sizeof(GpuReceiver)),
-          shadow(c, Words(kSpirv_shadow_vert), Words(kSpirv_shadow_frag), 2, sizeof(ShadowPush),
+          shadow(c, Words(kSpirv_shadow_vert), Words(kSpirv_shadow_frag), 1, sizeof(ShadowPush),
                  static_cast<uint32_t>(s), static_cast<uint32_t>(s)),
           directPass(c, Words(kSpirv_direct),
                      {gpu::Slot::kStorage, gpu::Slot::kStorage, gpu::Slot::kTexelFloat,
@@ -87,8 +86,10 @@ struct VulkanDirect::Impl {
         maps = std::make_unique<gpu::Buffer>(ctx, viewCapacity * size_t(size) * size * 4);
         perLight = std::make_unique<gpu::Buffer>(
             ctx, lightCapacity * std::max<size_t>(1, receiverList.size()) * sizeof(glm::vec4));
-        const gpu::Buffer* s[] = {&vertices, maps.get()};
-        shadowSet = shadow.MakeSet(s);
+        if (!*shadowSet) {
+            const gpu::Buffer* s[] = {&vertices};
+            shadowSet = shadow.MakeSet(s);
+        }
         const gpu::Buffer* d[] = {&receivers, lights.get(), views.get(),
                                   maps.get(), &out,         perLight.get()};
         directSet = directPass.MakeSet(d);
@@ -105,24 +106,19 @@ struct VulkanDirect::Impl {
         ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
             stamps.Reset(cb);
             stamps.Write(cb, 0, vk::PipelineStageFlagBits::eTopOfPipe);
-            cb.fillBuffer(maps->Handle(), 0, plan.MapTexels() * 4, kOneDepth);
-            gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
-                         vk::AccessFlagBits::eTransferWrite,
-                         vk::PipelineStageFlagBits::eFragmentShader);
             for (size_t v = 0; v < plan.views.size(); ++v) {
                 shadow.Begin(cb, shadowSet);
                 ShadowPush push{plan.views[v].viewProj,
                                 static_cast<uint32_t>(v * size_t(size) * size),
                                 static_cast<uint32_t>(size)};
-                cb.pushConstants<ShadowPush>(shadow.Layout(), gpu::RasterPipeline::kStages, 0,
-                                             push);
+                cb.pushConstants<ShadowPush>(shadow.Layout(), gpu::DepthTarget::kStages, 0, push);
                 if (triangleVertices) cb.draw(triangleVertices, 1, 0, 0);
-                cb.endRenderPass();
+                shadow.EndAndCopy(cb, *maps, v * size_t(size) * size * sizeof(float));
             }
-            gpu::Barrier(cb, vk::PipelineStageFlagBits::eFragmentShader,
-                         vk::AccessFlagBits::eShaderWrite,
+            gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
+                         vk::AccessFlagBits::eTransferWrite,
                          vk::PipelineStageFlagBits::eComputeShader);
-            stamps.Write(cb, 1, vk::PipelineStageFlagBits::eFragmentShader);
+            stamps.Write(cb, 1, vk::PipelineStageFlagBits::eTransfer);
             cb.bindPipeline(vk::PipelineBindPoint::eCompute, directPass.Handle());
             cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, directPass.Layout(), 0,
                                   {*directSet}, {});
@@ -149,10 +145,9 @@ struct VulkanDirect::Impl {
 
 VulkanDirect::VulkanDirect(gpu::Context& ctx, const Scene& scene,
                            std::vector<GpuReceiver> receivers, gpu::Buffer& out, int mapSize) {
-    if (!ctx.FragmentStores())
+    if (!ctx.Graphics())
         throw Error("Vulkan device " + ctx.DeviceName() +
-                    " cannot write storage buffers from fragment shaders (needed by the shadow "
-                    "pass); use --device cpu");
+                    " has no graphics queue (needed by the shadow pass); use --device cpu");
     if (mapSize < 16 || mapSize > 8192) throw Error("shadow map size must be 16…8192 texels");
     impl_ = std::make_unique<Impl>(ctx, scene, std::move(receivers), out, mapSize);
     Update(scene);

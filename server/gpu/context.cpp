@@ -117,8 +117,6 @@ Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<
         float priority = 1.0f;
         vk::DeviceQueueCreateInfo qi({}, family_, 1, &priority);
         vk::PhysicalDeviceFeatures features;
-        fragmentStores_ = graphics_ && physical_->getFeatures().fragmentStoresAndAtomics;
-        features.fragmentStoresAndAtomics = fragmentStores_ ? VK_TRUE : VK_FALSE;
         vk::DeviceCreateInfo di({}, qi, {}, {}, &features);
         device_ = std::make_unique<vk::raii::Device>(*physical_, di);
         queue_ = std::make_unique<vk::raii::Queue>(*device_, family_, 0);

@@ -26,8 +26,8 @@ class Context {
     bool IsLavapipe() const { return lavapipe_; }
     float TimestampPeriodNs() const { return timestampPeriod_; }
     const vk::PhysicalDeviceLimits& Limits() const { return limits_; }
-    // The queue rasterises and fragment shaders may write storage buffers (the shadow pass).
-    bool FragmentStores() const { return fragmentStores_; }
+    // The queue rasterises (the shadow pass and `penumbra render` need it).
+    bool Graphics() const { return graphics_; }
 
     const vk::raii::Device& Device() const { return *device_; }
     const vk::raii::PhysicalDevice& Physical() const { return *physical_; }
@@ -70,7 +70,6 @@ class Context {
     float timestampPeriod_ = 1.0f;
     bool lavapipe_ = false;
     bool graphics_ = false;
-    bool fragmentStores_ = false;
     bool validation_ = false;
     std::string name_;
 };

@@ -118,23 +118,6 @@ vk::Pipeline Pipeline::Handle(size_t variant) const {
     return *pipelines_[variant];
 }
 
-RasterPipeline::RasterPipeline(Context& ctx, std::span<const uint32_t> vertexSpirv,
-                               std::span<const uint32_t> fragmentSpirv, uint32_t bufferCount,
-                               uint32_t pushConstantBytes, uint32_t width, uint32_t height)
-    : sets_(ctx, bufferCount, kStages), width_(width), height_(height) {
-    const auto& dev = ctx.Device();
-    layout_ = MakePipelineLayout(ctx, sets_, kStages, pushConstantBytes);
-    // One subpass without attachments; the framebuffer only gives the area its size.
-    vk::SubpassDescription subpass({}, vk::PipelineBindPoint::eGraphics);
-    renderPass_ = vk::raii::RenderPass(dev, vk::RenderPassCreateInfo({}, {}, subpass));
-    framebuffer_ = vk::raii::Framebuffer(
-        dev, vk::FramebufferCreateInfo({}, *renderPass_, {}, width, height, 1));
-    vertex_ = MakeShaderModule(ctx, vertexSpirv);
-    fragment_ = MakeShaderModule(ctx, fragmentSpirv);
-    pipeline_ = MakeTrianglePipeline(ctx, *vertex_, *fragment_, *layout_, *renderPass_, width,
-                                     height, false);
-}
-
 vk::raii::Pipeline MakeTrianglePipeline(Context& ctx, vk::ShaderModule vertex,
                                         vk::ShaderModule fragment, vk::PipelineLayout layout,
                                         vk::RenderPass renderPass, uint32_t width, uint32_t height,
@@ -142,6 +125,7 @@ vk::raii::Pipeline MakeTrianglePipeline(Context& ctx, vk::ShaderModule vertex,
     vk::PipelineShaderStageCreateInfo stages[] = {
         {{}, vk::ShaderStageFlagBits::eVertex, vertex, "main"},
         {{}, vk::ShaderStageFlagBits::eFragment, fragment, "main"}};
+
     vk::PipelineVertexInputStateCreateInfo vertexInput;
     vk::PipelineInputAssemblyStateCreateInfo assembly({}, vk::PrimitiveTopology::eTriangleList);
     vk::Viewport viewport(0.0f, 0.0f, float(width), float(height), 0.0f, 1.0f);
@@ -162,15 +146,6 @@ vk::raii::Pipeline MakeTrianglePipeline(Context& ctx, vk::ShaderModule vertex,
         {}, stages, &vertexInput, &assembly, nullptr, &viewportState, &raster, &multisample,
         colorDepth ? &depth : nullptr, &blend, nullptr, layout, renderPass, 0);
     return vk::raii::Pipeline(ctx.Device(), nullptr, info);
-}
-
-void RasterPipeline::Begin(const vk::raii::CommandBuffer& cb,
-                           const vk::raii::DescriptorSet& set) const {
-    vk::RenderPassBeginInfo begin(*renderPass_, *framebuffer_,
-                                  vk::Rect2D({0, 0}, {width_, height_}), {});
-    cb.beginRenderPass(begin, vk::SubpassContents::eInline);
-    cb.bindPipeline(vk::PipelineBindPoint::eGraphics, *pipeline_);
-    cb.bindDescriptorSets(vk::PipelineBindPoint::eGraphics, *layout_, 0, {*set}, {});
 }
 
 void ComputeBarrier(const vk::raii::CommandBuffer& cb) {

@@ -1,6 +1,7 @@
-// Pipelines from embedded SPIR-V whose resources are storage buffers at bindings 0..N−1 of
-// set 0, plus a push-constant block: compute pipelines (with uint specialization
-// constants by id) and attachment-less raster pipelines whose fragments write buffers.
+// Pipelines from embedded SPIR-V whose resources are buffers at bindings 0..N−1 of set 0
+// (storage buffers, or texel-buffer views of them), plus a push-constant block: compute
+// pipelines (with uint specialization constants by id), and the graphics pipeline of the
+// raster targets (gpu/render_target.h).
 #pragma once
 
 #include <cstdint>
@@ -61,35 +62,6 @@ class Pipeline {
     vk::raii::ShaderModule module_{nullptr};
     std::vector<std::vector<uint32_t>> variants_;
     mutable std::vector<vk::raii::Pipeline> pipelines_;
-};
-
-// Triangles from a vertex and a fragment shader over a width × height render area with no
-// attachments: the fragment shader writes storage buffers (the shadow pass keeps depth
-// with atomics). No vertex input: the vertex shader reads its buffer by gl_VertexIndex.
-// Both windings are drawn. Needs Context::FragmentStores().
-class RasterPipeline {
-  public:
-    RasterPipeline(Context& ctx, std::span<const uint32_t> vertexSpirv,
-                   std::span<const uint32_t> fragmentSpirv, uint32_t bufferCount,
-                   uint32_t pushConstantBytes, uint32_t width, uint32_t height);
-
-    vk::raii::DescriptorSet MakeSet(std::span<const Buffer* const> buffers) const {
-        return sets_.MakeSet(buffers);
-    }
-    // Begins the render pass over the whole area and binds the pipeline and `set`.
-    void Begin(const vk::raii::CommandBuffer& cb, const vk::raii::DescriptorSet& set) const;
-    vk::PipelineLayout Layout() const { return *layout_; }
-    static constexpr vk::ShaderStageFlags kStages =
-        vk::ShaderStageFlagBits::eVertex | vk::ShaderStageFlagBits::eFragment;
-
-  private:
-    BufferSetLayout sets_;
-    uint32_t width_, height_;
-    vk::raii::PipelineLayout layout_{nullptr};
-    vk::raii::RenderPass renderPass_{nullptr};
-    vk::raii::Framebuffer framebuffer_{nullptr};
-    vk::raii::ShaderModule vertex_{nullptr}, fragment_{nullptr};
-    vk::raii::Pipeline pipeline_{nullptr};
 };
 
 // A shader module from SPIR-V words, and a pipeline layout of `sets` plus a push-constant

@@ -12,11 +12,10 @@ constexpr vk::Format kDepth = vk::Format::eD32Sfloat;
 
 }  // namespace
 
-RenderTarget::Attachment RenderTarget::MakeAttachment(Context& ctx, vk::Format format,
-                                                      vk::ImageUsageFlags usage,
-                                                      vk::ImageAspectFlags aspect) const {
+Attachment MakeAttachment(Context& ctx, uint32_t width, uint32_t height, vk::Format format,
+                          vk::ImageUsageFlags usage, vk::ImageAspectFlags aspect) {
     Attachment a;
-    vk::ImageCreateInfo info({}, vk::ImageType::e2D, format, vk::Extent3D(width_, height_, 1), 1, 1,
+    vk::ImageCreateInfo info({}, vk::ImageType::e2D, format, vk::Extent3D(width, height, 1), 1, 1,
                              vk::SampleCountFlagBits::e1, vk::ImageTiling::eOptimal, usage);
     a.image = vk::raii::Image(ctx.Device(), info);
     auto req = a.image.getMemoryRequirements();
@@ -36,11 +35,12 @@ RenderTarget::RenderTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
     : sets_(ctx, bufferCount, kStages), width_(width), height_(height) {
     const auto& dev = ctx.Device();
     color_ = MakeAttachment(
-        ctx, kColor,
+        ctx, width, height, kColor,
         vk::ImageUsageFlagBits::eColorAttachment | vk::ImageUsageFlagBits::eTransferSrc,
         vk::ImageAspectFlagBits::eColor);
-    depth_ = MakeAttachment(ctx, kDepth, vk::ImageUsageFlagBits::eDepthStencilAttachment,
-                            vk::ImageAspectFlagBits::eDepth);
+    depth_ =
+        MakeAttachment(ctx, width, height, kDepth, vk::ImageUsageFlagBits::eDepthStencilAttachment,
+                       vk::ImageAspectFlagBits::eDepth);
 
     layout_ = MakePipelineLayout(ctx, sets_, kStages, pushConstantBytes);
 
@@ -108,6 +108,85 @@ void RenderTarget::EndAndCopy(const vk::raii::CommandBuffer& cb, const Buffer& o
     vk::MemoryBarrier toHost(vk::AccessFlagBits::eTransferWrite, vk::AccessFlagBits::eHostRead);
     cb.pipelineBarrier(vk::PipelineStageFlagBits::eTransfer, vk::PipelineStageFlagBits::eHost, {},
                        toHost, {}, {});
+}
+
+DepthTarget::DepthTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
+                         std::span<const uint32_t> fragmentSpirv, uint32_t bufferCount,
+                         uint32_t pushConstantBytes, uint32_t width, uint32_t height)
+    : sets_(ctx, bufferCount, kStages), width_(width), height_(height) {
+    const auto& dev = ctx.Device();
+    constexpr vk::Format kNearest = vk::Format::eR32Sfloat;
+    color_ = MakeAttachment(
+        ctx, width, height, kNearest,
+        vk::ImageUsageFlagBits::eColorAttachment | vk::ImageUsageFlagBits::eTransferSrc,
+        vk::ImageAspectFlagBits::eColor);
+    depth_ =
+        MakeAttachment(ctx, width, height, kDepth, vk::ImageUsageFlagBits::eDepthStencilAttachment,
+                       vk::ImageAspectFlagBits::eDepth);
+    layout_ = MakePipelineLayout(ctx, sets_, kStages, pushConstantBytes);
+    // Colour (the nearest depth): cleared, stored, left in TRANSFER_SRC for the copy.
+    // Depth: cleared, dropped.
+    vk::AttachmentDescription attachments[] = {{{},
+                                                kNearest,
+                                                vk::SampleCountFlagBits::e1,
+                                                vk::AttachmentLoadOp::eClear,
+                                                vk::AttachmentStoreOp::eStore,
+                                                vk::AttachmentLoadOp::eDontCare,
+                                                vk::AttachmentStoreOp::eDontCare,
+                                                vk::ImageLayout::eUndefined,
+                                                vk::ImageLayout::eTransferSrcOptimal},
+                                               {{},
+                                                kDepth,
+                                                vk::SampleCountFlagBits::e1,
+                                                vk::AttachmentLoadOp::eClear,
+                                                vk::AttachmentStoreOp::eDontCare,
+                                                vk::AttachmentLoadOp::eDontCare,
+                                                vk::AttachmentStoreOp::eDontCare,
+                                                vk::ImageLayout::eUndefined,
+                                                vk::ImageLayout::eDepthStencilAttachmentOptimal}};
+    vk::AttachmentReference colorRef(0, vk::ImageLayout::eColorAttachmentOptimal);
+    vk::AttachmentReference depthRef(1, vk::ImageLayout::eDepthStencilAttachmentOptimal);
+    vk::SubpassDescription subpass({}, vk::PipelineBindPoint::eGraphics, {}, colorRef, {},
+                                   &depthRef);
+    vk::SubpassDependency dependencies[] = {
+        // The previous view's copy has read the colour image before this pass clears it.
+        {VK_SUBPASS_EXTERNAL, 0, vk::PipelineStageFlagBits::eTransfer,
+         vk::PipelineStageFlagBits::eColorAttachmentOutput, vk::AccessFlagBits::eTransferRead,
+         vk::AccessFlagBits::eColorAttachmentWrite},
+        // The colour writes finish before the copy that follows the pass reads them.
+        {0, VK_SUBPASS_EXTERNAL, vk::PipelineStageFlagBits::eColorAttachmentOutput,
+         vk::PipelineStageFlagBits::eTransfer, vk::AccessFlagBits::eColorAttachmentWrite,
+         vk::AccessFlagBits::eTransferRead}};
+    renderPass_ =
+        vk::raii::RenderPass(dev, vk::RenderPassCreateInfo({}, attachments, subpass, dependencies));
+    vk::ImageView views[] = {*color_.view, *depth_.view};
+    framebuffer_ = vk::raii::Framebuffer(
+        dev, vk::FramebufferCreateInfo({}, *renderPass_, views, width, height, 1));
+    vertex_ = MakeShaderModule(ctx, vertexSpirv);
+    fragment_ = MakeShaderModule(ctx, fragmentSpirv);
+    pipeline_ = MakeTrianglePipeline(ctx, *vertex_, *fragment_, *layout_, *renderPass_, width,
+                                     height, true);
+}
+
+void DepthTarget::Begin(const vk::raii::CommandBuffer& cb,
+                        const vk::raii::DescriptorSet& set) const {
+    vk::ClearValue values[] = {vk::ClearColorValue(std::array<float, 4>{1.0f, 1.0f, 1.0f, 1.0f}),
+                               vk::ClearDepthStencilValue(1.0f, 0)};
+    vk::RenderPassBeginInfo begin(*renderPass_, *framebuffer_,
+                                  vk::Rect2D({0, 0}, {width_, height_}), values);
+    cb.beginRenderPass(begin, vk::SubpassContents::eInline);
+    cb.bindPipeline(vk::PipelineBindPoint::eGraphics, *pipeline_);
+    cb.bindDescriptorSets(vk::PipelineBindPoint::eGraphics, *layout_, 0, {*set}, {});
+}
+
+void DepthTarget::EndAndCopy(const vk::raii::CommandBuffer& cb, const Buffer& out,
+                             size_t offset) const {
+    PENUMBRA_CHECK_LE(offset + size_t(width_) * height_ * 4, out.Bytes());
+    cb.endRenderPass();
+    vk::BufferImageCopy region(offset, 0, 0,
+                               vk::ImageSubresourceLayers(vk::ImageAspectFlagBits::eColor, 0, 0, 1),
+                               {0, 0, 0}, {width_, height_, 1});
+    cb.copyImageToBuffer(*color_.image, vk::ImageLayout::eTransferSrcOptimal, out.Handle(), region);
 }
 
 }  // namespace penumbra::gpu
