@@ -82,7 +82,13 @@ struct Refiner {
         // Near leaves: kept while any of the sender's extent lies in front (a sender on the
         // edge of a junction has its centre on the receiver's plane and its area in front);
         // MakeLink's integral then says how much arrives.
-        if (near.surfels && InNearField(r, s, dist)) return glm::dot(r.normal, d) <= -s.radius;
+        if (near.surfels && InNearField(r, s, dist)) {
+            const float front = glm::dot(r.normal, d);
+            // Neighbours in the receiver's own plane exchange nothing (cos_r = 0 over them).
+            const bool coplanar = std::abs(front) <= 1e-4f * dist &&
+                                  std::abs(glm::dot(r.normal, s.normal)) >= 0.9999f;
+            return coplanar || front <= -s.radius;
+        }
         if (r.IsLeaf() && s.IsLeaf()) return glm::dot(r.normal, d) <= 1e-6f * dist;
         if (dist <= r.radius + s.radius) return false;
         if (r.IsLeaf()) return glm::dot(r.normal, d) <= -s.radius;
