@@ -45,7 +45,7 @@ struct VulkanDirect::Impl {
     gpu::Buffer vertices, receivers;
     std::unique_ptr<gpu::Buffer> lights, views, maps, perLight;
     size_t viewCapacity = 0, lightCapacity = 0;
-    gpu::DepthTarget shadow;
+    gpu::RenderTarget shadow;  // R32: each view's nearest depth
     gpu::Pipeline directPass;
     vk::raii::DescriptorSet shadowSet{nullptr}, directSet{nullptr};
     gpu::Timestamps stamps;
@@ -65,7 +65,7 @@ struct VulkanDirect::Impl {
           vertices(c, std::max<size_t>(1, triangleVertices) * sizeof(glm::vec4)),
           receivers(c, std::max<size_t>(1, receiverList.size()) * sizeof(GpuReceiver)),
           shadow(c, Words(kSpirv_shadow_vert), Words(kSpirv_shadow_frag), 1, sizeof(ShadowPush),
-                 static_cast<uint32_t>(s), static_cast<uint32_t>(s)),
+                 static_cast<uint32_t>(s), static_cast<uint32_t>(s), vk::Format::eR32Sfloat),
           directPass(c, Words(kSpirv_direct),
                      {gpu::Slot::kStorage, gpu::Slot::kStorage, gpu::Slot::kTexelFloat,
                       gpu::Slot::kTexelFloat, gpu::Slot::kStorage, gpu::Slot::kStorage},
@@ -107,11 +107,12 @@ struct VulkanDirect::Impl {
             stamps.Reset(cb);
             stamps.Write(cb, 0, vk::PipelineStageFlagBits::eTopOfPipe);
             for (size_t v = 0; v < plan.views.size(); ++v) {
-                shadow.Begin(cb, shadowSet);
+                const float far[4] = {1.0f, 1.0f, 1.0f, 1.0f};  // nothing drawn: depth 1
+                shadow.Begin(cb, shadowSet, far);
                 ShadowPush push{plan.views[v].viewProj,
                                 static_cast<uint32_t>(v * size_t(size) * size),
                                 static_cast<uint32_t>(size)};
-                cb.pushConstants<ShadowPush>(shadow.Layout(), gpu::DepthTarget::kStages, 0, push);
+                cb.pushConstants<ShadowPush>(shadow.Layout(), gpu::RenderTarget::kStages, 0, push);
                 if (triangleVertices) cb.draw(triangleVertices, 1, 0, 0);
                 shadow.EndAndCopy(cb, *maps, v * size_t(size) * size * sizeof(float));
             }

@@ -7,7 +7,6 @@
 namespace penumbra::gpu {
 namespace {
 
-constexpr vk::Format kColor = vk::Format::eR32G32B32A32Sfloat;
 constexpr vk::Format kDepth = vk::Format::eD32Sfloat;
 
 }  // namespace
@@ -31,11 +30,14 @@ Attachment MakeAttachment(Context& ctx, uint32_t width, uint32_t height, vk::For
 
 RenderTarget::RenderTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
                            std::span<const uint32_t> fragmentSpirv, uint32_t bufferCount,
-                           uint32_t pushConstantBytes, uint32_t width, uint32_t height)
+                           uint32_t pushConstantBytes, uint32_t width, uint32_t height,
+                           vk::Format color)
     : sets_(ctx, bufferCount, kStages), width_(width), height_(height) {
+    PENUMBRA_CHECK(color == vk::Format::eR32G32B32A32Sfloat || color == vk::Format::eR32Sfloat);
+    texelBytes_ = color == vk::Format::eR32Sfloat ? 4 : 16;
     const auto& dev = ctx.Device();
     color_ = MakeAttachment(
-        ctx, width, height, kColor,
+        ctx, width, height, color,
         vk::ImageUsageFlagBits::eColorAttachment | vk::ImageUsageFlagBits::eTransferSrc,
         vk::ImageAspectFlagBits::eColor);
     depth_ =
@@ -46,7 +48,7 @@ RenderTarget::RenderTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
 
     // Colour: cleared, stored, left in TRANSFER_SRC for the copy. Depth: cleared, dropped.
     vk::AttachmentDescription attachments[] = {{{},
-                                                kColor,
+                                                color,
                                                 vk::SampleCountFlagBits::e1,
                                                 vk::AttachmentLoadOp::eClear,
                                                 vk::AttachmentStoreOp::eStore,
@@ -67,13 +69,17 @@ RenderTarget::RenderTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
     vk::AttachmentReference depthRef(1, vk::ImageLayout::eDepthStencilAttachmentOptimal);
     vk::SubpassDescription subpass({}, vk::PipelineBindPoint::eGraphics, {}, colorRef, {},
                                    &depthRef);
-    // The colour writes finish before the copy that follows the pass reads them.
-    vk::SubpassDependency done(
-        0, VK_SUBPASS_EXTERNAL, vk::PipelineStageFlagBits::eColorAttachmentOutput,
-        vk::PipelineStageFlagBits::eTransfer, vk::AccessFlagBits::eColorAttachmentWrite,
-        vk::AccessFlagBits::eTransferRead);
+    vk::SubpassDependency dependencies[] = {
+        // A previous copy has read the colour image before this pass clears it.
+        {VK_SUBPASS_EXTERNAL, 0, vk::PipelineStageFlagBits::eTransfer,
+         vk::PipelineStageFlagBits::eColorAttachmentOutput, vk::AccessFlagBits::eTransferRead,
+         vk::AccessFlagBits::eColorAttachmentWrite},
+        // The colour writes finish before the copy that follows the pass reads them.
+        {0, VK_SUBPASS_EXTERNAL, vk::PipelineStageFlagBits::eColorAttachmentOutput,
+         vk::PipelineStageFlagBits::eTransfer, vk::AccessFlagBits::eColorAttachmentWrite,
+         vk::AccessFlagBits::eTransferRead}};
     renderPass_ =
-        vk::raii::RenderPass(dev, vk::RenderPassCreateInfo({}, attachments, subpass, done));
+        vk::raii::RenderPass(dev, vk::RenderPassCreateInfo({}, attachments, subpass, dependencies));
     vk::ImageView views[] = {*color_.view, *depth_.view};
     framebuffer_ = vk::raii::Framebuffer(
         dev, vk::FramebufferCreateInfo({}, *renderPass_, views, width, height, 1));
@@ -97,10 +103,11 @@ void RenderTarget::Begin(const vk::raii::CommandBuffer& cb, const vk::raii::Desc
     cb.bindDescriptorSets(vk::PipelineBindPoint::eGraphics, *layout_, 0, {*set}, {});
 }
 
-void RenderTarget::EndAndCopy(const vk::raii::CommandBuffer& cb, const Buffer& out) const {
-    PENUMBRA_CHECK_LE(size_t(width_) * height_ * 16, out.Bytes());
+void RenderTarget::EndAndCopy(const vk::raii::CommandBuffer& cb, const Buffer& out,
+                              size_t offset) const {
+    PENUMBRA_CHECK_LE(offset + size_t(width_) * height_ * texelBytes_, out.Bytes());
     cb.endRenderPass();
-    vk::BufferImageCopy region(0, 0, 0,
+    vk::BufferImageCopy region(offset, 0, 0,
                                vk::ImageSubresourceLayers(vk::ImageAspectFlagBits::eColor, 0, 0, 1),
                                {0, 0, 0}, {width_, height_, 1});
     cb.copyImageToBuffer(*color_.image, vk::ImageLayout::eTransferSrcOptimal, out.Handle(), region);
@@ -108,85 +115,6 @@ void RenderTarget::EndAndCopy(const vk::raii::CommandBuffer& cb, const Buffer& o
     vk::MemoryBarrier toHost(vk::AccessFlagBits::eTransferWrite, vk::AccessFlagBits::eHostRead);
     cb.pipelineBarrier(vk::PipelineStageFlagBits::eTransfer, vk::PipelineStageFlagBits::eHost, {},
                        toHost, {}, {});
-}
-
-DepthTarget::DepthTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
-                         std::span<const uint32_t> fragmentSpirv, uint32_t bufferCount,
-                         uint32_t pushConstantBytes, uint32_t width, uint32_t height)
-    : sets_(ctx, bufferCount, kStages), width_(width), height_(height) {
-    const auto& dev = ctx.Device();
-    constexpr vk::Format kNearest = vk::Format::eR32Sfloat;
-    color_ = MakeAttachment(
-        ctx, width, height, kNearest,
-        vk::ImageUsageFlagBits::eColorAttachment | vk::ImageUsageFlagBits::eTransferSrc,
-        vk::ImageAspectFlagBits::eColor);
-    depth_ =
-        MakeAttachment(ctx, width, height, kDepth, vk::ImageUsageFlagBits::eDepthStencilAttachment,
-                       vk::ImageAspectFlagBits::eDepth);
-    layout_ = MakePipelineLayout(ctx, sets_, kStages, pushConstantBytes);
-    // Colour (the nearest depth): cleared, stored, left in TRANSFER_SRC for the copy.
-    // Depth: cleared, dropped.
-    vk::AttachmentDescription attachments[] = {{{},
-                                                kNearest,
-                                                vk::SampleCountFlagBits::e1,
-                                                vk::AttachmentLoadOp::eClear,
-                                                vk::AttachmentStoreOp::eStore,
-                                                vk::AttachmentLoadOp::eDontCare,
-                                                vk::AttachmentStoreOp::eDontCare,
-                                                vk::ImageLayout::eUndefined,
-                                                vk::ImageLayout::eTransferSrcOptimal},
-                                               {{},
-                                                kDepth,
-                                                vk::SampleCountFlagBits::e1,
-                                                vk::AttachmentLoadOp::eClear,
-                                                vk::AttachmentStoreOp::eDontCare,
-                                                vk::AttachmentLoadOp::eDontCare,
-                                                vk::AttachmentStoreOp::eDontCare,
-                                                vk::ImageLayout::eUndefined,
-                                                vk::ImageLayout::eDepthStencilAttachmentOptimal}};
-    vk::AttachmentReference colorRef(0, vk::ImageLayout::eColorAttachmentOptimal);
-    vk::AttachmentReference depthRef(1, vk::ImageLayout::eDepthStencilAttachmentOptimal);
-    vk::SubpassDescription subpass({}, vk::PipelineBindPoint::eGraphics, {}, colorRef, {},
-                                   &depthRef);
-    vk::SubpassDependency dependencies[] = {
-        // The previous view's copy has read the colour image before this pass clears it.
-        {VK_SUBPASS_EXTERNAL, 0, vk::PipelineStageFlagBits::eTransfer,
-         vk::PipelineStageFlagBits::eColorAttachmentOutput, vk::AccessFlagBits::eTransferRead,
-         vk::AccessFlagBits::eColorAttachmentWrite},
-        // The colour writes finish before the copy that follows the pass reads them.
-        {0, VK_SUBPASS_EXTERNAL, vk::PipelineStageFlagBits::eColorAttachmentOutput,
-         vk::PipelineStageFlagBits::eTransfer, vk::AccessFlagBits::eColorAttachmentWrite,
-         vk::AccessFlagBits::eTransferRead}};
-    renderPass_ =
-        vk::raii::RenderPass(dev, vk::RenderPassCreateInfo({}, attachments, subpass, dependencies));
-    vk::ImageView views[] = {*color_.view, *depth_.view};
-    framebuffer_ = vk::raii::Framebuffer(
-        dev, vk::FramebufferCreateInfo({}, *renderPass_, views, width, height, 1));
-    vertex_ = MakeShaderModule(ctx, vertexSpirv);
-    fragment_ = MakeShaderModule(ctx, fragmentSpirv);
-    pipeline_ = MakeTrianglePipeline(ctx, *vertex_, *fragment_, *layout_, *renderPass_, width,
-                                     height, true);
-}
-
-void DepthTarget::Begin(const vk::raii::CommandBuffer& cb,
-                        const vk::raii::DescriptorSet& set) const {
-    vk::ClearValue values[] = {vk::ClearColorValue(std::array<float, 4>{1.0f, 1.0f, 1.0f, 1.0f}),
-                               vk::ClearDepthStencilValue(1.0f, 0)};
-    vk::RenderPassBeginInfo begin(*renderPass_, *framebuffer_,
-                                  vk::Rect2D({0, 0}, {width_, height_}), values);
-    cb.beginRenderPass(begin, vk::SubpassContents::eInline);
-    cb.bindPipeline(vk::PipelineBindPoint::eGraphics, *pipeline_);
-    cb.bindDescriptorSets(vk::PipelineBindPoint::eGraphics, *layout_, 0, {*set}, {});
-}
-
-void DepthTarget::EndAndCopy(const vk::raii::CommandBuffer& cb, const Buffer& out,
-                             size_t offset) const {
-    PENUMBRA_CHECK_LE(offset + size_t(width_) * height_ * 4, out.Bytes());
-    cb.endRenderPass();
-    vk::BufferImageCopy region(offset, 0, 0,
-                               vk::ImageSubresourceLayers(vk::ImageAspectFlagBits::eColor, 0, 0, 1),
-                               {0, 0, 0}, {width_, height_, 1});
-    cb.copyImageToBuffer(*color_.image, vk::ImageLayout::eTransferSrcOptimal, out.Handle(), region);
 }
 
 }  // namespace penumbra::gpu
