@@ -51,6 +51,12 @@ struct SolverSettings {
     // more than this factor, the usual links are built instead and moves rebuild them
     // (Stats().motionDeclined says so). 0: no limit.
     float motionLinkBudget = 0.0f;
+    // Where a move inside the bounds recomputes its links on a Vulkan back end: on the device
+    // (shaders/links.comp), or on the host with the links uploaded after. Default: the
+    // device, except lavapipe, whose "device" is the host's own cores and runs the pass
+    // slower than the host code does (office chair: 17 against 22 ms a move).
+    enum class LinkUpdate { kAuto, kDevice, kHost };
+    LinkUpdate linkUpdate = LinkUpdate::kAuto;
 };
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;

@@ -76,6 +76,12 @@ std::string AntiradianceSolver::GeometryMismatch(const Scene& scene) const {
     return MotionMismatch(model_, scene);
 }
 
+bool AntiradianceSolver::DeviceLinkUpdate() const {
+    using LinkUpdate = SolverSettings::LinkUpdate;
+    if (!gpu_ || settings_.linkUpdate == LinkUpdate::kHost) return false;
+    return settings_.linkUpdate == LinkUpdate::kDevice || !gpu_->OnCpu();
+}
+
 void AntiradianceSolver::UpdateGeometry(const Scene& scene) {
     if (std::string why = GeometryMismatch(scene); !why.empty()) throw Error(why);
     auto start = std::chrono::steady_clock::now();
@@ -83,7 +89,12 @@ void AntiradianceSolver::UpdateGeometry(const Scene& scene) {
     // the moved groups recomputed on the device when there is one (links.comp), else here.
     const std::vector<uint8_t> moved = PlaceGroups(model_, scene);
     const std::vector<uint32_t> touched = TouchedLinks(model_, moved);
-    if (gpu_) {
+    if (gpu_ && !DeviceLinkUpdate()) {
+        RedoLinks(model_, touched);
+        gpu_->UploadLinks();
+        gpu_->UploadLeaves();
+        if (!model_.glossy.empty()) gpu_->UploadGlossy();
+    } else if (gpu_) {
         gpu_->UpdateLinks(moved);
         gpu_->UploadLeaves();
         if (!model_.glossy.empty()) gpu_->UploadGlossy();
@@ -262,7 +273,7 @@ SolverStats AntiradianceSolver::Stats() const {
     s.geometryUpdates = geometryUpdates_;
     s.linksUpdated = linksUpdated_;
     s.msGeometry = msGeometry_;
-    if (!model_.links.dynamic.empty()) s.linkUpdate = gpu_ ? "device" : "host";
+    if (!model_.links.dynamic.empty()) s.linkUpdate = DeviceLinkUpdate() ? "device" : "host";
     s.msLinkUpdateDevice = gpu_ ? gpu_->LinkUpdateMs() : 0.0;
     s.motionDeclined = model_.motionDeclined;
     if (direct_ || gpuDirect_) {

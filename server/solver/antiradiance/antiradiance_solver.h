@@ -36,6 +36,8 @@ class AntiradianceSolver : public Solver {
     std::vector<std::string> ValidationMessages() const;
 
   private:
+    // Whether moves recompute links on the Vulkan device (SolverSettings::linkUpdate).
+    bool DeviceLinkUpdate() const;
     SolverSettings settings_;
     ProgressFn progress_;
     AntiradianceModel model_;

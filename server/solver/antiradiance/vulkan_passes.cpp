@@ -486,6 +486,10 @@ double VulkanAntiradiance::LinkUpdateMs() const {
 
 std::vector<Link> VulkanAntiradiance::ReadLinks() const { return impl_->links.Download<Link>(); }
 
+void VulkanAntiradiance::UploadLinks() { impl_->links.Upload(impl_->m.links.links); }
+
+bool VulkanAntiradiance::OnCpu() const { return impl_->ctx.IsLavapipe(); }
+
 void VulkanAntiradiance::UploadDirect() { impl_->direct.Upload(impl_->m.leafDirect); }
 
 void VulkanAntiradiance::UploadGlossy() { impl_->UploadGlossy(); }

@@ -32,6 +32,10 @@ class VulkanAntiradiance {
     // the authority: the model's host copy keeps its senders and offsets, not these values.
     // Needs a model with motion links.
     void UpdateLinks(const std::vector<uint8_t>& moved);
+    // Copies the model's links to the device again (after RedoLinks on the host).
+    void UploadLinks();
+    // Whether the device is lavapipe, which runs on the host's own cores.
+    bool OnCpu() const;
     // Device time of the last UpdateLinks (0 without timestamps).
     double LinkUpdateMs() const;
     std::vector<Link> ReadLinks() const;
