@@ -61,9 +61,10 @@ struct Sweep {
     std::vector<float> finer{0.05f, 0.025f};
     LinkOracle linkOracle = LinkOracle::kConservative;
     float oracle = 1.0f;
-    // With the paper's oracle: the area oracle's threshold that gives about as many links,
-    // to compare the two at one cost (0: not run).
+    // With the paper's oracle: the area oracle's threshold that gives about as many links
+    // (with receiverOracle 1), to compare the two at one cost (0: not run).
     float areaOracle = 0.0f;
+    float receiverOracle = SolverSettings{}.receiverOracle;
 };
 
 Sweep SweepFor(const std::string& name) {
@@ -79,6 +80,7 @@ Run Solve(const Scene& scene, const IrradianceFile& truth, int bins, int iterati
     s.device = DeviceChoice::kCpu;
     s.linkOracle = sweep.linkOracle;
     s.oracle = sweep.oracle;
+    s.receiverOracle = sweep.receiverOracle;
     auto t = Clock::now();
     auto solver = CreateSolver(scene, s);
     solver->Iterate(iterations);
@@ -211,10 +213,11 @@ int main(int argc, char** argv) {
                 Sweep a = sweep;
                 a.linkOracle = LinkOracle::kArea;
                 a.oracle = sweep.areaOracle;
+                a.receiverOracle = 1.0f;
                 char what[160];
                 std::snprintf(what, sizeof what,
-                              "With the area oracle (`--link-oracle area`) at %.2f, tuned to about "
-                              "the paper's link count",
+                              "With the area oracle (`--link-oracle area`) at %.2f, receiver "
+                              "oracle 1, tuned to about the paper's link count",
                               a.oracle);
                 other(a, "area_oracle", what);
             }
