@@ -38,7 +38,7 @@ struct LinkSettings {
     // Conservative and area modes: refine while the receiver subtends more than oracle ×
     // this × ω_bin (a large receiver takes one direction for all its members).
     float receiverOracle = 0.5f;  // SolverSettings::receiverOracle
-    int threads = 0;  // 0: all cores
+    int threads = 0;              // 0: all cores
     // Motion bounds of group g at motion[g − 1] (Surfels::groups); empty: everything static.
     std::vector<MotionBounds> motion;
     // With motion: stop as soon as the links touching a group outnumber the others by more

@@ -34,7 +34,7 @@ struct SolverSettings {
     Scheme scheme = Scheme::kSymmetric;
     int antiradianceSteps = 3;  // asymmetric: antiradiance steps after each radiance step
     DeviceChoice device = DeviceChoice::kAuto;
-    float oracle = 1.0f;          // link refinement threshold in units of ω_bin
+    float oracle = 1.0f;  // link refinement threshold in units of ω_bin
     // Receiver threshold relative to `oracle` (conservative and area oracles). 0.5: a
     // receiver cluster's error is of the first order in its size (docs/SOLVER.md, "Receiver
     // size"); against 1, at 128 bins and 0.1 m, the blocker goes from 16.2 to 12.5% RMSE, the

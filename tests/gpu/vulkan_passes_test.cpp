@@ -27,6 +27,16 @@ namespace {
 
 using Pass = VulkanAntiradiance::Pass;
 
+// The solver settings of these tests: 64 bins, validation layers on.
+SolverSettings TestSettings(float elementSize, DeviceChoice device) {
+    SolverSettings s;
+    s.bins = 64;
+    s.elementSize = elementSize;
+    s.device = device;
+    s.validation = true;
+    return s;
+}
+
 class VulkanTwin : public ::testing::Test {
   protected:
     void SetUp() override {
@@ -143,11 +153,7 @@ namespace {
 // the CPU back end: same rows in, same irradiance after an iteration.
 TEST(VulkanPasses, WarmStartMatchesTheCpuBackEnd) {
     Scene scene = scenes::CornellBox().Build();
-    SolverSettings s;
-    s.bins = 64;
-    s.elementSize = 0.1f;
-    s.device = DeviceChoice::kCpu;
-    s.validation = true;
+    SolverSettings s = TestSettings(0.1f, DeviceChoice::kCpu);
     auto source = CreateSolver(scene, s);
     source->Iterate(8);
     std::vector<float> rows = source->SurfelExitant();
@@ -249,11 +255,7 @@ TEST_P(MovedSolver, MatchesTheCpuBackEnd) {
           Case{"glossy-box.gltf", "glossy_cube", 0.3f, {0.3f, 0, -0.3f}, 20.0f, 2e-3}}) {
         SCOPED_TRACE(c.file);
         Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/" + c.file);
-        SolverSettings s;
-        s.bins = 64;
-        s.elementSize = c.elementSize;
-        s.device = DeviceChoice::kCpu;
-        s.validation = true;
+        SolverSettings s = TestSettings(c.elementSize, DeviceChoice::kCpu);
         s.motionLinks = true;
         auto cpu = CreateSolver(scene, s);
         s.device = DeviceChoice::kLavapipe;
@@ -317,12 +319,7 @@ namespace {
 TEST(VulkanPasses, PassTimesBelongToTheirPassesAfterTheShadowPass) {
     Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/glossy-box.gltf");
     ASSERT_FALSE(scene.lights.empty());
-    SolverSettings s;
-    s.bins = 64;
-    s.elementSize = 0.3f;
-    s.device = DeviceChoice::kLavapipe;
-    s.validation = true;
-    auto gpu = CreateSolver(scene, s);
+    auto gpu = CreateSolver(scene, TestSettings(0.3f, DeviceChoice::kLavapipe));
     gpu->Iterate(4);
     std::map<std::string, double> ms;
     for (const auto& p : gpu->Stats().passes) ms[p.name] = p.msTotal;

@@ -113,7 +113,8 @@ struct VulkanAntiradiance::Impl {
     // Depth ranges into clusterOrder (root first) and into nodesByDepth (pull: deepest first).
     std::vector<RangePush> globalLevels, pullLevels;
     int cur = 0;
-    uint32_t glossyLeaves = 0;  // the first entries of leafOrder
+    uint32_t glossyLeaves = 0;        // the first entries of leafOrder
+    std::vector<bool> orderedGlossy;  // the glossy flags leafOrder was made for
     double msPass[3] = {0, 0, 0};
 
     Impl(const AntiradianceModel& model, bool lavapipe, bool validation)
@@ -308,9 +309,15 @@ struct VulkanAntiradiance::Impl {
 
     // The local pass's leaves: glossy ones first (their variant), then the diffuse ones, each
     // with the most links first. Redone whenever leaf flags may have changed.
+    // Only the glossy flags change the order after set-up (material edits, moves): the
+    // leaves are sorted again only when those changed.
     void OrderLeaves() {
         const auto& lo = m.links.offsets;
         const auto glossy = [&](uint32_t i) { return (m.leaves[i].flags & kLeafGlossy) != 0; };
+        std::vector<bool> flags(m.leaves.size());
+        for (uint32_t i = 0; i < flags.size(); ++i) flags[i] = glossy(i);
+        if (flags == orderedGlossy) return;
+        orderedGlossy = std::move(flags);
         std::vector<uint32_t> order(m.leaves.size());
         std::iota(order.begin(), order.end(), 0u);
         std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
