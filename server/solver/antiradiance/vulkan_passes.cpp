@@ -71,6 +71,20 @@ struct LinkPush {
 // the 65,535 every device allows).
 constexpr uint32_t kLinkChunk = 1u << 20;
 
+// Receivers are dispatched window by window in node order (depth first, so a window is a
+// patch of nearby surfaces), and by link count within a window, so the lanes of a workgroup
+// finish together. Nearby receivers read much the same senders' I_ex rows, which stay in
+// the cache while a window is gathered: on lavapipe (office bench) windows of 2,048 nodes
+// took an iteration from 80 to 58–64 ms against a sort by link count alone (512–8,192 were
+// all within the machine's noise of it).
+constexpr uint32_t kLocalityWindow = 2048;
+
+// Whether receiver node a goes before node b (see kLocalityWindow).
+bool DispatchedBefore(const std::vector<uint32_t>& linkOffsets, uint32_t a, uint32_t b) {
+    if (a / kLocalityWindow != b / kLocalityWindow) return a < b;
+    return linkOffsets[a + 1] - linkOffsets[a] > linkOffsets[b + 1] - linkOffsets[b];
+}
+
 // Bindings 0–5 of both passes that gather (shaders/gather.glsl), then each pass's own.
 std::vector<gpu::Slot> GatherSlots(std::vector<gpu::Slot> own) {
     std::vector<gpu::Slot> slots = {gpu::Slot::kStorage,    gpu::Slot::kTexelUint,
@@ -308,7 +322,7 @@ struct VulkanAntiradiance::Impl {
     }
 
     // The local pass's leaves: glossy ones first (their variant), then the diffuse ones, each
-    // with the most links first. Redone whenever leaf flags may have changed.
+    // in DispatchedBefore order. Redone whenever leaf flags may have changed.
     // Only the glossy flags change the order after set-up (material edits, moves): the
     // leaves are sorted again only when those changed.
     void OrderLeaves() {
@@ -322,8 +336,7 @@ struct VulkanAntiradiance::Impl {
         std::iota(order.begin(), order.end(), 0u);
         std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
             if (glossy(a) != glossy(b)) return glossy(a);
-            const uint32_t na = m.leaves[a].node, nb = m.leaves[b].node;
-            return lo[na + 1] - lo[na] > lo[nb + 1] - lo[nb];
+            return DispatchedBefore(lo, m.leaves[a].node, m.leaves[b].node);
         });
         glossyLeaves = static_cast<uint32_t>(std::count_if(order.begin(), order.end(), glossy));
         leafOrder.Upload(order);
@@ -343,13 +356,10 @@ struct VulkanAntiradiance::Impl {
         std::vector<glm::vec4> d;
         for (const auto& v : m.dirs.All()) d.emplace_back(v, 0.0f);
         dirs.Upload(d);
-        // Receivers with the most links first, so neighbouring lanes do similar work: clusters
-        // depth by depth (each starting from its parent's row, the root from the environment
-        // row), leaves all at once.
+        // Receivers in DispatchedBefore order: clusters depth by depth (each starting from its
+        // parent's row, the root from the environment row), leaves all at once.
         const auto& lo = m.links.offsets;
-        const auto byLinks = [&](uint32_t a, uint32_t b) {
-            return lo[a + 1] - lo[a] > lo[b + 1] - lo[b];
-        };
+        const auto byLinks = [&](uint32_t a, uint32_t b) { return DispatchedBefore(lo, a, b); };
         const auto& nodes = m.hierarchy.nodes;
         const auto& byDepth = m.hierarchy.byDepth;
         const uint32_t envRow = static_cast<uint32_t>(m.Nodes());
