@@ -359,7 +359,7 @@ struct VulkanAntiradiance::Impl {
         // Receivers in DispatchedBefore order: clusters depth by depth (each starting from its
         // parent's row, the root from the environment row), leaves all at once.
         const auto& lo = m.links.offsets;
-        const auto byLinks = [&](uint32_t a, uint32_t b) { return DispatchedBefore(lo, a, b); };
+        const auto inOrder = [&](uint32_t a, uint32_t b) { return DispatchedBefore(lo, a, b); };
         const auto& nodes = m.hierarchy.nodes;
         const auto& byDepth = m.hierarchy.byDepth;
         const uint32_t envRow = static_cast<uint32_t>(m.Nodes());
@@ -369,7 +369,7 @@ struct VulkanAntiradiance::Impl {
             for (uint32_t n : depth)
                 if (!nodes[n].IsLeaf()) level.push_back(n);
             if (level.empty()) continue;
-            std::stable_sort(level.begin(), level.end(), byLinks);
+            std::stable_sort(level.begin(), level.end(), inOrder);
             globalLevels.push_back(
                 {static_cast<uint32_t>(clusters.size()), static_cast<uint32_t>(level.size())});
             for (uint32_t n : level)
