@@ -38,9 +38,13 @@ int main(int argc, char** argv) {
     app.add_option("--bins", settings.bins)->capture_default_str();
     app.add_option("--element-size", settings.elementSize)->capture_default_str();
     app.add_option("--oracle", settings.oracle, "paper oracle threshold")->capture_default_str();
+    std::string tables = "auto";
+    app.add_option("--tables", tables, "CPU back end tables: auto|fp32|fp16")
+        ->capture_default_str();
     CLI11_PARSE(app, argc, argv);
 
     try {
+        settings.tables = ParseTablePrecision(tables);
         Scene scene = LoadGltf(scenePath);
         nlohmann::json report;
         report["benchmark"] = "office";
@@ -58,12 +62,13 @@ int main(int argc, char** argv) {
             "%d iterations/frame, median of %d frames\n",
             scene.TriangleCount(), settings.bins, settings.elementSize, settings.oracle, iterations,
             frames);
-        std::printf("%-34s %8s %9s %8s %8s %8s %8s %8s %9s %7s %8s\n", "device", "elements",
-                    "links", "build s", "global", "push", "local", "pull", "ms/iter", "fps",
-                    "tbl MiB");
+        std::printf("%-34s %6s %8s %9s %8s %8s %8s %8s %8s %9s %7s %8s\n", "device", "tables",
+                    "elements", "links", "build s", "global", "push", "local", "pull", "ms/iter",
+                    "fps", "tbl MiB");
         for (const auto& d : devices) {
             SolverSettings s = settings;
             s.device = ParseDevice(d);
+            if (s.device != DeviceChoice::kCpu) s.tables = TablePrecision::kAuto;
             nlohmann::json r;
             try {
                 r = RunDevice(scene, s, frames, iterations);
@@ -82,8 +87,9 @@ int main(int argc, char** argv) {
                     std::snprintf(cell, sizeof cell, "%8s", "-");
                 return std::string(cell);
             };
-            std::printf("%-34.34s %8zu %9zu %8.3f %s %s %s %s %9.2f %7.1f %8.1f\n",
-                        r["device"].get<std::string>().c_str(), r["elements"].get<size_t>(),
+            std::printf("%-34.34s %6s %8zu %9zu %8.3f %s %s %s %s %9.2f %7.1f %8.1f\n",
+                        r["device"].get<std::string>().c_str(),
+                        r["tables"].get<std::string>().c_str(), r["elements"].get<size_t>(),
                         r["links"].get<size_t>(), r["link_build_seconds"].get<double>(),
                         pass("global").c_str(), pass("push").c_str(), pass("local").c_str(),
                         pass("pull").c_str(), r["ms_per_iteration_median"].get<double>(),

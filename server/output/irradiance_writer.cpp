@@ -65,6 +65,7 @@ nlohmann::json StatsToJson(const SolverStats& s) {
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;
     j["passes"] = passes;
     j["table_bytes"] = s.tableBytes;
+    j["tables"] = s.tables;
     j["link_bytes"] = s.linkBytes;
     return j;
 }

@@ -59,6 +59,13 @@ BackOcclusion ParseBackOcclusion(const std::string& name) {
     throw Error("unknown back occlusion '" + name + "' (use auto, on or off)");
 }
 
+TablePrecision ParseTablePrecision(const std::string& name) {
+    if (name == "auto") return TablePrecision::kAuto;
+    if (name == "fp32") return TablePrecision::kFp32;
+    if (name == "fp16") return TablePrecision::kFp16;
+    throw Error("unknown table precision '" + name + "' (use auto, fp32 or fp16)");
+}
+
 const char* ChannelName(Channel channel) {
     return channel == Channel::kDirect  ? "direct"
            : channel == Channel::kTotal ? "total"

@@ -26,6 +26,10 @@ enum class DeviceChoice { kAuto, kGpu, kLavapipe, kCpu };
 // every back side; without one, light reaches a back only from inside the scene, which the
 // paper's front-side rule (Fig. 7) ignores at the cost of leaks through thin walls.
 enum class BackOcclusion { kAuto, kOn, kOff };
+// How the CPU back end stores its I_ex tables (cpu_passes.h): fp32, or fp16 over each
+// node's area (half the memory traffic, about 5·10⁻⁴ relative). kAuto: fp16 where the CPU
+// has F16C. The Vulkan passes use fp32.
+enum class TablePrecision { kAuto, kFp32, kFp16 };
 
 struct SolverSettings {
     std::string solver = "antiradiance";
@@ -45,6 +49,7 @@ struct SolverSettings {
     bool validation = false;  // Vulkan validation layers (tests turn them on)
     int shadowMapSize = 0;    // texels per side of each shadow map; 0: from the element size
     BackOcclusion backOcclusion = BackOcclusion::kAuto;
+    TablePrecision tables = TablePrecision::kAuto;
     // Sec. 3.3: build the links of dynamic nodes (extras.penumbra.dynamic) for the worst case
     // over their motion bounds, so that a move recomputes only the form factors and bins of
     // their links (Solver::UpdateGeometry) instead of rebuilding every link. Costs more links
@@ -84,6 +89,7 @@ struct SolverStats {
     double msTotal = 0.0;       // wall time of all iterations
     std::vector<PassTiming> passes;
     size_t tableBytes = 0;
+    std::string tables;  // "fp32" or "fp16": how I_ex is stored
     size_t linkBytes = 0;
     int lights = 0;           // punctual lights
     int shadowViews = 0;      // shadow maps rendered per light update (cube faces count 6)
@@ -160,8 +166,9 @@ DeviceChoice ParseDevice(const std::string& name);
 LinkOracle ParseLinkOracle(const std::string& name);  // "conservative" | "paper" | "area"
 const char* LinkOracleName(LinkOracle oracle);
 Scheme ParseScheme(const std::string& name);
-Channel ParseChannel(const std::string& name);              // "indirect" | "direct" | "total"
-BackOcclusion ParseBackOcclusion(const std::string& name);  // "auto" | "on" | "off"
+Channel ParseChannel(const std::string& name);                // "indirect" | "direct" | "total"
+BackOcclusion ParseBackOcclusion(const std::string& name);    // "auto" | "on" | "off"
+TablePrecision ParseTablePrecision(const std::string& name);  // "auto" | "fp32" | "fp16"
 const char* ChannelName(Channel channel);
 
 // Per-vertex irradiance for primitive `p` in its input vertex order, clamped at zero.

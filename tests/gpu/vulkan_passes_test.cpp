@@ -33,6 +33,7 @@ SolverSettings TestSettings(float elementSize, DeviceChoice device) {
     s.bins = 64;
     s.elementSize = elementSize;
     s.device = device;
+    s.tables = TablePrecision::kFp32;  // the CPU twin, exact to the shaders' layout
     s.validation = true;
     return s;
 }
@@ -133,7 +134,7 @@ TEST_F(VulkanTwin, PullPassMatchesCpu) {
 }
 
 TEST_F(VulkanTwin, IterationsMatchCpuBackend) {
-    cpu::CpuBackend cpu(*model_);
+    cpu::CpuBackend cpu(*model_, cpu::TableFormat::kFloat);
     for (int i = 0; i < 4; ++i) {
         cpu.Iterate(kBoth);
         gpu_->Iterate(kBoth);

@@ -4,10 +4,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
 #include <numbers>
 
 #include "bundled_scenes.h"
+#include "scene/gltf_loader.h"
 #include "scene/scene_builder.h"
+#include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/model.h"
 #include "solver/solver.h"
 #include "test_util.h"
@@ -276,6 +279,85 @@ TEST(LinkOracles, AreaOracleBoundsTheReceiversToo) {
         ADD_FAILURE() << "an unknown oracle was accepted";
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("conservative, paper or area"), std::string::npos);
+    }
+}
+
+// fp16 tables (cpu_half.cpp) hold I_ex over each node's area, scaled each iteration to the
+// light's peak: the answer is fp32's to about 10⁻³ whatever the scene's units of light or
+// length. A 5 mm box's 0.25 mm elements carry I_ex ≈ 10⁻⁷ (fp16's subnormals, were the rows
+// not over the area); 10⁸ nits overflow fp16 unscaled.
+std::vector<glm::vec3> SolveWithTables(const Scene& scene, SolverSettings s, TablePrecision t,
+                                       int iterations, Channel channel) {
+    s.tables = t;
+    auto solver = CreateSolver(scene, s);
+    solver->Iterate(iterations);
+    EXPECT_EQ(solver->Stats().tables, t == TablePrecision::kFp16 ? "fp16" : "fp32");
+    return solver->SurfelIrradiance(channel);
+}
+
+TEST(HalfTables, MatchFp32WhateverTheUnits) {
+    if (!cpu::CpuBackend::HalfSupported()) GTEST_SKIP() << "this CPU has no F16C";
+    struct Case {
+        const char* name;
+        float emission, length;
+    };
+    for (const Case& c : {Case{"as built", 1.0f, 1.0f}, Case{"1e8 x emission", 1e8f, 1.0f},
+                          Case{"1e-8 x emission", 1e-8f, 1.0f}, Case{"5 mm box", 1.0f, 0.01f}}) {
+        SCOPED_TRACE(c.name);
+        Scene scene = scenes::CornellBox().Build();
+        for (Material& m : scene.materials) m.emission *= c.emission;
+        for (size_t n = 0; n < scene.nodes.size(); ++n)
+            if (scene.nodes[n].parent < 0)
+                SetNodeTransform(
+                    scene, static_cast<int>(n),
+                    glm::scale(glm::mat4(1.0f), glm::vec3(c.length)) * scene.nodes[n].local);
+        const SolverSettings s = CpuSettings(64, 0.05f * c.length);
+        auto f32 = SolveWithTables(scene, s, TablePrecision::kFp32, 6, Channel::kIndirect);
+        auto f16 = SolveWithTables(scene, s, TablePrecision::kFp16, 6, Channel::kIndirect);
+        for (const glm::vec3& e : f16) ASSERT_TRUE(std::isfinite(e.x + e.y + e.z));
+        EXPECT_LT(testing::RelativeRms(f16, f32), 2e-3);
+    }
+}
+
+// The same with everything the local pass adds: a spot light (direct light reflected),
+// glossy lobes, a sky, a light turned 10⁶ times brighter between iterations (the scale of
+// the next table follows what the iteration adds, not only the last peak).
+TEST(HalfTables, MatchFp32WithLightsGlossAndSky) {
+    if (!cpu::CpuBackend::HalfSupported()) GTEST_SKIP() << "this CPU has no F16C";
+    Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/glossy-box.gltf");
+    ASSERT_FALSE(scene.lights.empty());
+    scene.environment.constant = glm::vec3(0.2f);
+    scene.environment.source = "constant";
+    SolverSettings s = CpuSettings(64, 0.3f);
+    std::vector<glm::vec3> result[2];
+    for (int k = 0; k < 2; ++k) {
+        s.tables = k ? TablePrecision::kFp16 : TablePrecision::kFp32;
+        auto solver = CreateSolver(scene, s);
+        solver->Iterate(3);
+        Scene bright = scene;
+        for (PunctualLight& l : bright.lights) l.intensity *= 1e6f;
+        solver->UpdateLights(bright);
+        solver->Iterate(3);
+        result[k] = solver->SurfelIrradiance(Channel::kTotal);
+    }
+    for (const glm::vec3& e : result[1]) ASSERT_TRUE(std::isfinite(e.x + e.y + e.z));
+    EXPECT_LT(testing::RelativeRms(result[1], result[0]), 2e-3);
+}
+
+TEST(HalfTables, AreACpuBackEndOption) {
+    EXPECT_EQ(ParseTablePrecision("fp16"), TablePrecision::kFp16);
+    EXPECT_THROW(ParseTablePrecision("fp8"), Error);
+    Scene scene = scenes::CornellBox().Build();
+    SolverSettings s = CpuSettings(32, 0.2f);
+    s.device = DeviceChoice::kLavapipe;
+    s.tables = TablePrecision::kFp16;
+    try {
+        CreateSolver(scene, s);
+        ADD_FAILURE() << "fp16 tables on a Vulkan device were accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("fp16 tables are a CPU back end option"),
+                  std::string::npos)
+            << e.what();
     }
 }
 

@@ -169,6 +169,7 @@ MirrorProbe ProbeFloor(const Material& floorMaterial, bool emitter, DeviceChoice
     Scene scene = MirrorScene(floorMaterial, emitter);
     SolverSettings settings = CpuSettings(bins, 0.1f);
     settings.device = device;
+    settings.tables = TablePrecision::kFp32;  // Glossy.LavapipeMatchesTheCpuSolver: 1e-4
     settings.oracle = 0.5f;
     settings.validation = true;
     auto solver = CreateSolver(scene, settings);

@@ -22,11 +22,21 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
         // (PERFORMANCE-NOTES.md), so `auto` takes a real GPU only.
         device = gpu::FindRealGpu(&gpuName) ? DeviceChoice::kGpu : DeviceChoice::kCpu;
     }
+    if (settings.tables == TablePrecision::kFp16 && device != DeviceChoice::kCpu)
+        throw Error(
+            "fp16 tables are a CPU back end option (--device cpu); the Vulkan passes "
+            "keep fp32 tables");
     ValidateEnvironment(scene.environment);
     model_ = BuildAntiradianceModel(scene, settings, progress);
     environment_ = scene.environment;
     if (device == DeviceChoice::kCpu) {
-        cpu_ = std::make_unique<cpu::CpuBackend>(model_);
+        // fp16 where the CPU converts in hardware, unless asked otherwise (kFp16 on a CPU
+        // without F16C throws).
+        const bool half =
+            settings.tables == TablePrecision::kFp16 ||
+            (settings.tables == TablePrecision::kAuto && cpu::CpuBackend::HalfSupported());
+        cpu_ = std::make_unique<cpu::CpuBackend>(
+            model_, half ? cpu::TableFormat::kHalf : cpu::TableFormat::kFloat);
         deviceName_ = "cpu";
     } else {
         gpu_ = std::make_unique<VulkanAntiradiance>(model_, device == DeviceChoice::kLavapipe,
@@ -288,9 +298,11 @@ SolverStats AntiradianceSolver::Stats() const {
                     {"local", cpu_->msLocal},
                     {"pull", cpu_->msPull}};
         s.tableBytes = cpu_->TableBytes();
+        s.tables = cpu_->Format() == cpu::TableFormat::kHalf ? "fp16" : "fp32";
     } else {
         s.passes = gpu_->PassTimings();
         s.tableBytes = gpu_->TableBytes();
+        s.tables = "fp32";
     }
     return s;
 }

@@ -23,30 +23,49 @@ void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld
 // Pull: interior I_ex = Σ children, bottom up (deepest clusters first).
 void PullPass(const AntiradianceModel& m, float* iex);
 
+// How the CPU back end stores its I_ex tables: fp32 I_ex (the shaders' layout), or fp16
+// I_ex over each node's area (cpu_half.cpp; needs F16C): half the memory traffic of the
+// gather's random reads and of the rows written, to about 5·10⁻⁴ relative.
+enum class TableFormat { kFloat, kHalf };
+
 // The CPU back end: one parallel walk of the hierarchy per iteration fuses all four
-// passes. Each node's L_in = its parent's (pushed down on the stack) + its own links'
-// gather; leaves run the local pass; clusters sum their children's fresh I_ex rows while
-// they are still in cache. Only I_ex (ping-pong) lives in memory.
+// passes (cpu_walk.h). Each node's L_in = its parent's (pushed down on the stack) + its
+// own links' gather; leaves run the local pass; clusters sum their children's fresh I_ex
+// rows while they are still in cache. Only I_ex (ping-pong) lives in memory.
 class CpuBackend {
   public:
-    explicit CpuBackend(const AntiradianceModel& model);
+    // Throws penumbra::Error for kHalf on a CPU without F16C.
+    CpuBackend(const AntiradianceModel& model, TableFormat format);
+    static bool HalfSupported();  // whether kHalf runs on this CPU
     void Iterate(LocalMode mode);
     const std::vector<float>& LeafIrradiance() const { return irradiance_; }
     size_t TableBytes() const;
-    // The I_ex table the next iteration reads, and replacing it (both ping-pong tables).
-    const std::vector<float>& Iex() const { return iex_[cur_]; }
-    void SetIex(const std::vector<float>& iex) { iex_[0] = iex_[1] = iex; }
+    TableFormat Format() const { return format_; }
+    // The I_ex table the next iteration reads (fp32 I_ex whatever the format), and
+    // replacing it (both ping-pong tables).
+    std::vector<float> Iex() const;
+    void SetIex(const std::vector<float>& iex);
     // Milliseconds per stage since construction: each stage's share of the threads' time,
     // scaled to the wall time of the fused walk.
     double msGlobal = 0, msPush = 0, msLocal = 0, msPull = 0;
 
   private:
-    struct Walk;
+    static float ScaleFor(float peak);
+    float InputPeak() const;
+
     const AntiradianceModel& m_;
-    std::vector<float> iex_[2];
+    TableFormat format_;
+    std::vector<float> iex_[2];  // kFloat
     std::vector<float> irradiance_;
     std::vector<uint32_t> leafIndex_;  // node → index into m_.leaves
     int cur_ = 0;
+    // kHalf: rows of half_[cur_] hold I_ex · scale_ / norm_[node] (norm_: the node's area,
+    // 1 without one); readScale_ = norm_ / scale_, writeScale_ the next table's inverse;
+    // a cluster's row = pullLeft_ · left child's + pullRight_ · right child's; peak_ the
+    // largest |I_ex / area| written last.
+    std::vector<uint16_t> half_[2];
+    std::vector<float> norm_, readScale_, writeScale_, pullLeft_, pullRight_;
+    float scale_ = 1.0f, peak_ = 0.0f;
 };
 
 }  // namespace penumbra::cpu
