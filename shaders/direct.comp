@@ -14,6 +14,7 @@ struct Light {
     vec4 direction;  // w: range (0 none)
     vec4 radiant;
     vec4 cone;       // cos outer, 1/(cos inner − cos outer), first view, view count
+    vec4 cube;       // cube lights: f/(f−n), n·f/(f−n), 1/tan(half fov), texel per metre
 };
 struct View {
     mat4 viewProj;
@@ -58,27 +59,18 @@ View LoadView(int vi) {
 
 float Depth(uint at) { return texelFetch(maps, int(at)).x; }
 
-int ViewOf(Light light, vec3 q) {
-    int first = int(light.cone.z);
-    if (light.cone.w < 6.0) return first;
-    vec3 v = q - light.position.xyz;
+// Which face of a cube light sees the point at v from the light (+x, −x, +y, −y, +z, −z).
+int CubeFace(vec3 v) {
     vec3 a = abs(v);
-    if (a.x >= a.y && a.x >= a.z) return first + (v.x >= 0.0 ? 0 : 1);
-    if (a.y >= a.z) return first + (v.y >= 0.0 ? 2 : 3);
-    return first + (v.z >= 0.0 ? 4 : 5);
+    if (a.x >= a.y && a.x >= a.z) return v.x >= 0.0 ? 0 : 1;
+    if (a.y >= a.z) return v.y >= 0.0 ? 2 : 3;
+    return v.z >= 0.0 ? 4 : 5;
 }
 
-float TapVisibility(Light light, vec3 q, vec3 n, vec3 toLight) {
-    int vi = ViewOf(light, q);
-    View view = LoadView(vi);
-    int size = int(pc.size);
-    float texel = view.eye.w > 0.5 ? view.forward.w
-                                   : view.forward.w * max(dot(q - view.eye.xyz, view.forward.xyz), 0.0);
-    q += n * (2.0 * texel) + toLight * texel;
-    vec4 clip = view.viewProj * vec4(q, 1.0);
-    if (!(clip.w > 0.0)) return 1.0;
-    vec3 ndc = clip.xyz / clip.w;
+// The lit fraction of a bilinear 2×2 footprint of view vi's map around ndc.
+float MapVisibility(int vi, vec3 ndc) {
     if (abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 || ndc.z < 0.0 || ndc.z > 1.0) return 1.0;
+    int size = int(pc.size);
     float u = (ndc.x * 0.5 + 0.5) * float(size) - 0.5;
     float v = (ndc.y * 0.5 + 0.5) * float(size) - 0.5;
     float fu = floor(u), fv = floor(v);
@@ -92,6 +84,38 @@ float TapVisibility(Light light, vec3 q, vec3 n, vec3 toLight) {
     float l01 = ndc.z <= Depth(base + uint(yb * size + xa)) ? 1.0 : 0.0;
     float l11 = ndc.z <= Depth(base + uint(yb * size + xb)) ? 1.0 : 0.0;
     return (1.0 - wv) * ((1.0 - wu) * l00 + wu * l10) + wv * ((1.0 - wu) * l01 + wu * l11);
+}
+
+// Where a tap at q falls in its light's shadow maps: the view and NDC (w = 0 when q is
+// behind the view: lit). A single-view light's view is loaded once a receiver (`view`); a
+// cube light's tap takes its face and the face's projection from light.cube, the frame as
+// glm::lookAtRH builds it, so no view is loaded per tap (24 texel fetches on lavapipe).
+// Both projections are plain arithmetic and selected without a branch: lavapipe would run
+// both sides of one anyway.
+vec4 TapNdc(Light light, View view, vec3 q, vec3 n, vec3 toLight, out int vi) {
+    vec3 eye = light.position.xyz;
+    int face = CubeFace(q - eye);
+    vec3 forward = vec3(0.0);
+    forward[face / 2] = (face & 1) != 0 ? -1.0 : 1.0;
+    bool cube = light.cone.w >= 6.0;
+    vi = int(light.cone.z) + (cube ? face : 0);
+    float texel;
+    if (cube)
+        texel = light.cube.w * max(dot(q - eye, forward), 0.0);
+    else
+        texel = view.eye.w > 0.5 ? view.forward.w
+                                 : view.forward.w * max(dot(q - view.eye.xyz, view.forward.xyz), 0.0);
+    q += n * (2.0 * texel) + toLight * texel;
+    // The cube face's projection (CubeNdc in C++).
+    vec3 up = abs(forward.y) > 0.9 ? vec3(0.0, 0.0, 1.0) : vec3(0.0, 1.0, 0.0);
+    vec3 right = cross(forward, up), top = cross(right, forward);
+    vec3 v = q - eye;
+    float depth = dot(forward, v);
+    vec4 faceClip = vec4(dot(right, v) * light.cube.z, dot(top, v) * light.cube.z,
+                         light.cube.x * depth - light.cube.y, depth);
+    vec4 clip = cube ? faceClip : view.viewProj * vec4(q, 1.0);
+    if (!(clip.w > 0.0)) return vec4(0.0);
+    return vec4(clip.xyz / clip.w, 1.0);
 }
 
 void main() {
@@ -135,12 +159,15 @@ void main() {
         float cosine = dot(n, toLight);
         if (cosine <= 0.0 || scale <= 0.0) continue;
         float visible = 0.0;
+        View view = LoadView(int(light.cone.z));  // single-view lights: once, not per tap
         for (int k = 0; k < kTaps; ++k) {
             float rr = r.position.w * sqrt((float(k) + 0.5) / float(kTaps));
             float phi = 2.3999632 * float(k);
             vec3 q = c + rr * (cos(phi) * t + sin(phi) * b);
             vec3 qToLight = light.position.w == 2.0 ? toLight : normalize(light.position.xyz - q);
-            visible += TapVisibility(light, q, n, qToLight);
+            int vi;
+            vec4 ndc = TapNdc(light, view, q, n, qToLight, vi);
+            visible += ndc.w > 0.0 ? MapVisibility(vi, ndc.xyz) : 1.0;
         }
         vec3 ek = light.radiant.xyz * (scale * cosine * visible / float(kTaps));
         e += ek;

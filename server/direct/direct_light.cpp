@@ -45,23 +45,56 @@ void TangentBasis(const glm::vec3& n, glm::vec3& t, glm::vec3& b) {
     b = glm::vec3(c, sign + n.y * n.y * a, -n.y);
 }
 
-// Which of a light's views sees world point q.
-int ViewOf(const GpuLight& light, const glm::vec3& q) {
-    int first = static_cast<int>(light.cone.z);
-    if (light.cone.w < 6.0f) return first;
-    glm::vec3 v = q - glm::vec3(light.position);
-    glm::vec3 a = glm::abs(v);
-    if (a.x >= a.y && a.x >= a.z) return first + (v.x >= 0.0f ? 0 : 1);
-    if (a.y >= a.z) return first + (v.y >= 0.0f ? 2 : 3);
-    return first + (v.z >= 0.0f ? 4 : 5);
+}  // namespace
+
+bool CubeNdc(const GpuLight& light, int face, const glm::vec3& q, glm::vec3& ndc) {
+    glm::vec3 forward(0.0f);
+    forward[face / 2] = face % 2 ? -1.0f : 1.0f;
+    const glm::vec3 up = std::abs(forward.y) > 0.9f ? glm::vec3(0, 0, 1) : glm::vec3(0, 1, 0);
+    const glm::vec3 right = glm::cross(forward, up), top = glm::cross(right, forward);
+    const glm::vec3 v = q - glm::vec3(light.position);
+    const float depth = glm::dot(forward, v);
+    if (!(depth > 0.0f)) return false;
+    ndc = glm::vec3(glm::dot(right, v) * light.cube.z / depth,
+                    glm::dot(top, v) * light.cube.z / depth, light.cube.x - light.cube.y / depth);
+    return true;
 }
 
-// Fraction of a bilinear 2×2 footprint around q that the light reaches. `toLight` is the
-// unit direction to the light, n the receiver's normal (for the offset against acne).
-float TapVisibility(const Plan& plan, const float* maps, const GpuLight& light, glm::vec3 q,
-                    const glm::vec3& n, const glm::vec3& toLight) {
-    const GpuShadowView& view = plan.views[ViewOf(light, q)];
+namespace {
+
+// Which face of a cube light sees the point at v from the light: 0…5 for +x, −x, +y, −y,
+// +z, −z (PlanShadows's order).
+int CubeFace(const glm::vec3& v) {
+    glm::vec3 a = glm::abs(v);
+    if (a.x >= a.y && a.x >= a.z) return v.x >= 0.0f ? 0 : 1;
+    if (a.y >= a.z) return v.y >= 0.0f ? 2 : 3;
+    return v.z >= 0.0f ? 4 : 5;
+}
+
+// The lit fraction of a bilinear 2×2 footprint of view `vi`'s map around `ndc`.
+float MapVisibility(const Plan& plan, const float* maps, int vi, const glm::vec3& ndc) {
+    if (std::abs(ndc.x) > 1.0f || std::abs(ndc.y) > 1.0f || ndc.z < 0.0f || ndc.z > 1.0f)
+        return 1.0f;
     const int size = plan.mapSize;
+    float u = (ndc.x * 0.5f + 0.5f) * size - 0.5f, v = (ndc.y * 0.5f + 0.5f) * size - 0.5f;
+    float fu = std::floor(u), fv = std::floor(v);
+    float wu = u - fu, wv = v - fv;
+    int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
+    const float* map = maps + size_t(vi) * size * size;
+    auto lit = [&](int x, int y) {
+        x = std::clamp(x, 0, size - 1);
+        y = std::clamp(y, 0, size - 1);
+        return ndc.z <= map[size_t(y) * size + x] ? 1.0f : 0.0f;
+    };
+    return (1.0f - wv) * ((1.0f - wu) * lit(x0, y0) + wu * lit(x0 + 1, y0)) +
+           wv * ((1.0f - wu) * lit(x0, y0 + 1) + wu * lit(x0 + 1, y0 + 1));
+}
+
+// Fraction of a tap at q that a single-view light reaches (its view loaded once a
+// receiver). `toLight` is the unit direction to the light, n the receiver's normal (for
+// the offset against acne).
+float ViewTapVisibility(const Plan& plan, const float* maps, int vi, const GpuShadowView& view,
+                        glm::vec3 q, const glm::vec3& n, const glm::vec3& toLight) {
     float texel =
         view.eye.w > 0.5f
             ? view.forward.w
@@ -70,21 +103,23 @@ float TapVisibility(const Plan& plan, const float* maps, const GpuLight& light, 
     q += n * (2.0f * texel) + toLight * texel;
     glm::vec4 clip = view.viewProj * glm::vec4(q, 1.0f);
     if (!(clip.w > 0.0f)) return 1.0f;
-    glm::vec3 ndc = glm::vec3(clip) / clip.w;
-    if (std::abs(ndc.x) > 1.0f || std::abs(ndc.y) > 1.0f || ndc.z < 0.0f || ndc.z > 1.0f)
-        return 1.0f;
-    float u = (ndc.x * 0.5f + 0.5f) * size - 0.5f, v = (ndc.y * 0.5f + 0.5f) * size - 0.5f;
-    float fu = std::floor(u), fv = std::floor(v);
-    float wu = u - fu, wv = v - fv;
-    int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
-    const float* map = maps + size_t(&view - plan.views.data()) * size * size;
-    auto lit = [&](int x, int y) {
-        x = std::clamp(x, 0, size - 1);
-        y = std::clamp(y, 0, size - 1);
-        return ndc.z <= map[size_t(y) * size + x] ? 1.0f : 0.0f;
-    };
-    return (1.0f - wv) * ((1.0f - wu) * lit(x0, y0) + wu * lit(x0 + 1, y0)) +
-           wv * ((1.0f - wu) * lit(x0, y0 + 1) + wu * lit(x0 + 1, y0 + 1));
+    return MapVisibility(plan, maps, vi, glm::vec3(clip) / clip.w);
+}
+
+// The same for a cube light: the tap's face and its projection from the light's `cube`
+// parameters, the face's frame as glm::lookAtRH builds it (PerspectiveView, UpFor), so no
+// view is loaded per tap (on lavapipe, 24 texel fetches).
+float CubeTapVisibility(const Plan& plan, const float* maps, const GpuLight& light, glm::vec3 q,
+                        const glm::vec3& n, const glm::vec3& toLight) {
+    const glm::vec3 eye(light.position);
+    const int face = CubeFace(q - eye);
+    glm::vec3 forward(0.0f);
+    forward[face / 2] = face % 2 ? -1.0f : 1.0f;
+    float texel = light.cube.w * std::max(glm::dot(q - eye, forward), 0.0f);
+    q += n * (2.0f * texel) + toLight * texel;
+    glm::vec3 ndc;
+    if (!CubeNdc(light, face, q, ndc)) return 1.0f;
+    return MapVisibility(plan, maps, static_cast<int>(light.cone.z) + face, ndc);
 }
 
 // One screen-space triangle: texel coordinates and NDC depth.
@@ -211,6 +246,10 @@ Plan PlanShadows(const Scene& scene, int mapSize) {
                     plan.views.push_back(
                         PerspectiveView(light.position, axis, margin, nearZ, farZ, mapSize));
                 g.cone.w = 6.0f;
+                // The faces' projection (glm::perspectiveRH_ZO: NDC depth = f/(f−n) −
+                // n f/(f−n) / depth).
+                g.cube = glm::vec4(farZ / (farZ - nearZ), nearZ * farZ / (farZ - nearZ),
+                                   1.0f / margin, 2.0f * margin / static_cast<float>(mapSize));
             }
         }
         plan.lights.push_back(g);
@@ -304,6 +343,8 @@ void DirectIrradiance(const Plan& plan, const float* maps,
             float cosine = glm::dot(n, toLight);
             if (cosine <= 0.0f || scale <= 0.0f) continue;
             float visible = 0.0f;
+            const bool cube = light.cone.w >= 6.0f;
+            const int first = static_cast<int>(light.cone.z);
             for (int k = 0; k < kTaps; ++k) {
                 float rr = r.position.w * std::sqrt((k + 0.5f) / kTaps);
                 float phi = 2.3999632f * k;  // the golden angle: a Vogel disc
@@ -311,7 +352,9 @@ void DirectIrradiance(const Plan& plan, const float* maps,
                 glm::vec3 qToLight = light.position.w == 2.0f
                                          ? toLight
                                          : glm::normalize(glm::vec3(light.position) - q);
-                visible += TapVisibility(plan, maps, light, q, n, qToLight);
+                visible +=
+                    cube ? CubeTapVisibility(plan, maps, light, q, n, qToLight)
+                         : ViewTapVisibility(plan, maps, first, plan.views[first], q, n, qToLight);
             }
             glm::vec3 ek = glm::vec3(light.radiant) * (scale * cosine * visible / kTaps);
             e += ek;

@@ -42,6 +42,10 @@ struct GpuLight {
     glm::vec4 radiant;    // colour × intensity (cd or lux); w unused
     glm::vec4 cone;       // x = cos outer, y = 1 / (cos inner − cos outer), z = first view,
                           // w = view count (1 or 6)
+    // Cube lights (6 views): every face's projection, so a tap projects into its face
+    // without loading the face's view: x = f / (f − n), y = n f / (f − n) (NDC depth =
+    // x − y / depth), z = 1 / tan(half field of view), w = texel size per metre of depth.
+    glm::vec4 cube;
 };
 struct GpuShadowView {
     glm::mat4 viewProj;
@@ -54,7 +58,12 @@ struct GpuReceiver {
     glm::vec4 normal;    // xyz unit
     glm::vec4 centroid;  // xyz; centre of the footprint
 };
-static_assert(sizeof(GpuLight) == 64 && sizeof(GpuShadowView) == 96 && sizeof(GpuReceiver) == 48);
+static_assert(sizeof(GpuLight) == 80 && sizeof(GpuShadowView) == 96 && sizeof(GpuReceiver) == 48);
+
+// A cube light's face `face` (0…5: +x, −x, +y, −y, +z, −z) projects world point q to
+// NDC as that face's view matrix does, from the light's `cube` parameters (direct.comp
+// has the same lines). False when q is not in front of the face.
+bool CubeNdc(const GpuLight& light, int face, const glm::vec3& q, glm::vec3& ndc);
 
 // The views to render for the scene's lights, and the lights as the shaders read them.
 struct Plan {

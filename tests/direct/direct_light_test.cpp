@@ -73,6 +73,41 @@ TEST(DirectLight, PointLightOverAPlaneIsICosOverDSquared) {
     EXPECT_EQ(solver->Stats().shadowViews, 6);
 }
 
+// The direct pass projects a cube light's taps into their face from the light's `cube`
+// parameters instead of loading the face's view (direct.comp, CubeNdc): the same NDC as
+// the matrices the shadow maps were rendered with, on every face, out to the guard band.
+TEST(DirectLight, CubeFacesProjectAsTheirViews) {
+    SceneBuilder b = Floor(true);
+    b.AddLight(testing::MakeLight("lamp", LightType::kPoint, {0.3f, 1.2f, -0.2f}, {0, -1, 0}, 5));
+    const direct::Plan plan = direct::PlanShadows(b.Build(), 256);
+    ASSERT_EQ(plan.views.size(), 6u);
+    const direct::GpuLight& light = plan.lights[0];
+    const glm::vec3 eye(light.position);
+    int checked = 0;
+    for (int face = 0; face < 6; ++face) {
+        glm::vec3 forward(0.0f);
+        forward[face / 2] = face % 2 ? -1.0f : 1.0f;
+        for (int i = 0; i < 50; ++i) {
+            // Points across the face, to its edges, at depths from near to far.
+            glm::vec3 q = eye + (0.05f + 0.2f * i) * forward;
+            for (int axis = 0; axis < 3; ++axis)
+                if (axis != face / 2)
+                    q[axis] += (0.05f + 0.2f * i) * std::sin(1.7f * i + axis) * 0.999f;
+            glm::vec3 ndc;
+            ASSERT_TRUE(direct::CubeNdc(light, face, q, ndc));
+            glm::vec4 clip = plan.views[face].viewProj * glm::vec4(q, 1.0f);
+            glm::vec3 want = glm::vec3(clip) / clip.w;
+            EXPECT_NEAR(ndc.x, want.x, 1e-5f) << "face " << face;
+            EXPECT_NEAR(ndc.y, want.y, 1e-5f) << "face " << face;
+            EXPECT_NEAR(ndc.z, want.z, 1e-5f) << "face " << face;
+            ++checked;
+        }
+        glm::vec3 ndc;
+        EXPECT_FALSE(direct::CubeNdc(light, face, eye - forward, ndc));  // behind the face
+    }
+    EXPECT_EQ(checked, 300);
+}
+
 TEST(DirectLight, SpotLightFollowsItsConeFalloff) {
     SceneBuilder b = Floor(false);
     PunctualLight spot =
