@@ -265,6 +265,22 @@ std::vector<glm::vec3> SceneTriangles(const Scene& scene) {
     return tris;
 }
 
+void ViewTriangles(const glm::mat4& viewProj, const std::vector<glm::vec3>& triangles,
+                   std::vector<uint32_t>& indices) {
+    indices.clear();
+    for (size_t t = 0; t + 2 < triangles.size(); t += 3) {
+        // Bit k set: the vertex is beyond plane k.
+        uint32_t all = 0x3f;
+        for (int k = 0; k < 3; ++k) {
+            const glm::vec4 c = viewProj * glm::vec4(triangles[t + k], 1.0f);
+            all &= (c.x < -c.w ? 1u : 0u) | (c.x > c.w ? 2u : 0u) | (c.y < -c.w ? 4u : 0u) |
+                   (c.y > c.w ? 8u : 0u) | (c.z < 0.0f ? 16u : 0u) | (c.z > c.w ? 32u : 0u);
+        }
+        if (all) continue;
+        for (int k = 0; k < 3; ++k) indices.push_back(static_cast<uint32_t>(t + k));
+    }
+}
+
 std::vector<GpuReceiver> MakeReceivers(const Surfels& surfels, const std::vector<uint32_t>& order) {
     std::vector<GpuReceiver> out;
     out.reserve(order.size());

@@ -78,6 +78,14 @@ Plan PlanShadows(const Scene& scene, int mapSize = kDefaultMapSize);
 // The scene's triangles in world space, three vertices each: the shadow casters.
 std::vector<glm::vec3> SceneTriangles(const Scene& scene);
 
+// The triangles (three entries of `triangles` each) that may cover a texel of `viewProj`'s
+// map, as the indices of their vertices: those with all three vertices beyond one plane of
+// the clip volume (−w ≤ x, y ≤ w, 0 ≤ z ≤ w) are left out. A cube face sees about a sixth
+// of a room; the shadow pass draws only these (on lavapipe vertex work dominates at the
+// automatic map size).
+void ViewTriangles(const glm::mat4& viewProj, const std::vector<glm::vec3>& triangles,
+                   std::vector<uint32_t>& indices);
+
 // Receivers for `order` (surfel indices, e.g. hierarchy leaves), footprints from surfel areas.
 std::vector<GpuReceiver> MakeReceivers(const Surfels& surfels, const std::vector<uint32_t>& order);
 

@@ -2,6 +2,8 @@
 // view) and direct pass (compute), timed with timestamps.
 #include "direct/vulkan_direct.h"
 
+#include <tbb/parallel_for.h>
+
 #include <chrono>
 #include <cstring>
 
@@ -40,29 +42,27 @@ struct VulkanDirect::Impl {
     gpu::Context& ctx;
     int size;
     std::vector<GpuReceiver> receiverList;
+    std::vector<glm::vec3> triangles;  // the shadow casters, world space (SceneTriangles)
     uint32_t triangleVertices;
     gpu::Buffer& out;
-    gpu::Buffer vertices, receivers;
+    gpu::Buffer receivers;
     std::unique_ptr<gpu::Buffer> lights, views, maps, perLight;
+    // Each view's triangles (ViewTriangles), view after view, as the shadow pass reads them.
+    std::unique_ptr<gpu::Buffer> vertices;
+    std::vector<glm::vec4> viewVertices;
     size_t viewCapacity = 0, lightCapacity = 0;
     gpu::RenderTarget shadow;  // R32: each view's nearest depth
     gpu::Pipeline directPass;
     vk::raii::DescriptorSet shadowSet{nullptr}, directSet{nullptr};
     gpu::Timestamps stamps;
 
-    static std::vector<glm::vec4> Vertices(const Scene& scene) {
-        std::vector<glm::vec4> v;
-        for (const glm::vec3& p : SceneTriangles(scene)) v.emplace_back(p, 1.0f);
-        return v;
-    }
-
     Impl(gpu::Context& c, const Scene& scene, std::vector<GpuReceiver> r, gpu::Buffer& o, int s)
         : ctx(c),
           size(s),
           receiverList(std::move(r)),
-          triangleVertices(static_cast<uint32_t>(scene.TriangleCount() * 3)),
+          triangles(SceneTriangles(scene)),
+          triangleVertices(static_cast<uint32_t>(triangles.size())),
           out(o),
-          vertices(c, std::max<size_t>(1, triangleVertices) * sizeof(glm::vec4)),
           receivers(c, std::max<size_t>(1, receiverList.size()) * sizeof(GpuReceiver)),
           shadow(c, Words(kSpirv_shadow_vert), Words(kSpirv_shadow_frag), 1, sizeof(ShadowPush),
                  static_cast<uint32_t>(s), static_cast<uint32_t>(s), vk::Format::eR32Sfloat),
@@ -71,7 +71,6 @@ struct VulkanDirect::Impl {
                       gpu::Slot::kTexelFloat, gpu::Slot::kStorage, gpu::Slot::kStorage},
                      std::span<const uint32_t>{}, sizeof(DirectPush)),
           stamps(c, 3) {
-        vertices.Upload(Vertices(scene));
         receivers.Upload(receiverList);
     }
 
@@ -86,10 +85,6 @@ struct VulkanDirect::Impl {
         maps = std::make_unique<gpu::Buffer>(ctx, viewCapacity * size_t(size) * size * 4);
         perLight = std::make_unique<gpu::Buffer>(
             ctx, lightCapacity * std::max<size_t>(1, receiverList.size()) * sizeof(glm::vec4));
-        if (!*shadowSet) {
-            const gpu::Buffer* s[] = {&vertices};
-            shadowSet = shadow.MakeSet(s);
-        }
         const gpu::Buffer* d[] = {&receivers, lights.get(), views.get(),
                                   maps.get(), &out,         perLight.get()};
         directSet = directPass.MakeSet(d);
@@ -102,6 +97,28 @@ struct VulkanDirect::Impl {
         Reserve(plan);
         views->Upload(plan.views);
         lights->Upload(plan.lights);
+        // Each view draws only the triangles that can reach its map (ViewTriangles), from
+        // its own run of vertices: lavapipe draws an index buffer slower than the vertices.
+        std::vector<uint32_t> first(plan.views.size() + 1, 0);
+        {
+            std::vector<std::vector<uint32_t>> lists(plan.views.size());
+            tbb::parallel_for(size_t(0), plan.views.size(), [&](size_t v) {
+                ViewTriangles(plan.views[v].viewProj, triangles, lists[v]);
+            });
+            viewVertices.clear();
+            for (size_t v = 0; v < lists.size(); ++v) {
+                for (uint32_t i : lists[v]) viewVertices.emplace_back(triangles[i], 1.0f);
+                first[v + 1] = static_cast<uint32_t>(viewVertices.size());
+            }
+            if (viewVertices.empty()) viewVertices.emplace_back(0.0f);
+            if (!vertices || vertices->Bytes() < viewVertices.size() * sizeof(glm::vec4)) {
+                vertices =
+                    std::make_unique<gpu::Buffer>(ctx, viewVertices.size() * sizeof(glm::vec4));
+                const gpu::Buffer* sv[] = {vertices.get()};
+                shadowSet = shadow.MakeSet(sv);
+            }
+            vertices->Upload(viewVertices);
+        }
         auto start = std::chrono::steady_clock::now();
         ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
             stamps.Reset(cb);
@@ -113,7 +130,7 @@ struct VulkanDirect::Impl {
                                 static_cast<uint32_t>(v * size_t(size) * size),
                                 static_cast<uint32_t>(size)};
                 cb.pushConstants<ShadowPush>(shadow.Layout(), gpu::RenderTarget::kStages, 0, push);
-                if (triangleVertices) cb.draw(triangleVertices, 1, 0, 0);
+                if (first[v + 1] > first[v]) cb.draw(first[v + 1] - first[v], 1, first[v], 0);
                 shadow.EndAndCopy(cb, *maps, v * size_t(size) * size * sizeof(float));
             }
             gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
@@ -164,7 +181,7 @@ void VulkanDirect::Move(const Scene& scene, std::vector<GpuReceiver> receivers) 
                    scene.TriangleCount() * 3 == s.triangleVertices);
     s.receiverList = std::move(receivers);
     s.receivers.Upload(s.receiverList);
-    s.vertices.Upload(Impl::Vertices(scene));
+    s.triangles = SceneTriangles(scene);
     Update(scene);
 }
 

@@ -108,6 +108,26 @@ TEST(DirectLight, CubeFacesProjectAsTheirViews) {
     EXPECT_EQ(checked, 300);
 }
 
+// The shadow pass draws, per view, only the triangles that can reach its map: those wholly
+// beyond one plane of the clip volume are left out, all others kept (one corner in view,
+// or spanning the view with every corner outside).
+TEST(DirectLight, ViewsDrawOnlyTheTrianglesThatCanReachTheirMaps) {
+    // A 90° view from the origin down −z, depth 0.1…10.
+    const glm::mat4 viewProj = glm::perspectiveRH_ZO(glm::radians(90.0f), 1.0f, 0.1f, 10.0f) *
+                               glm::lookAtRH(glm::vec3(0), glm::vec3(0, 0, -1), glm::vec3(0, 1, 0));
+    const std::vector<glm::vec3> tris = {
+        {-0.5f, -0.5f, -2}, {0.5f, -0.5f, -2}, {0, 0.5f, -2},  // in view: kept
+        {3, 0, -2},         {4, 0, -2},        {3, 1, -2},     // right of the view: dropped
+        {-1, 0, 2},         {1, 0, 2},         {0, 1, 2},      // behind the eye: dropped
+        {-1, 0, -20},       {1, 0, -20},       {0, 1, -20},    // beyond the far plane: dropped
+        {-9, -1, -2},       {9, -1, -2},       {0, 9, -2},     // every corner out, spans it
+        {1.5f, 0, -2},      {-1, 0, 1},        {0, 0, -5},     // one corner in view: kept
+    };
+    std::vector<uint32_t> indices;
+    direct::ViewTriangles(viewProj, tris, indices);
+    EXPECT_EQ(indices, (std::vector<uint32_t>{0, 1, 2, 12, 13, 14, 15, 16, 17}));
+}
+
 TEST(DirectLight, SpotLightFollowsItsConeFalloff) {
     SceneBuilder b = Floor(false);
     PunctualLight spot =
