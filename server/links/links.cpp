@@ -392,8 +392,12 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
     }
 
     // Counting sort by receiver; within a receiver by spread level (the CPU gather's
-    // fixed-width spread loop then runs the same trip count link after link), then by
-    // sender for locality of I_ex reads.
+    // fixed-width spread loop then runs the same trip count link after link), then by bin
+    // (links of one level and bin are adjacent and spread once), then by sender for
+    // locality of I_ex reads. The bins come in a scrambled order, (37·bin) mod 1024 first:
+    // neighbouring bins spread into mostly the same accumulator entries, and spreads of
+    // neighbouring bins back to back wait on each other's stores (office, CPU back end:
+    // gather 7.3 → 6.9 ms in same-run pairs).
     links.offsets.assign(h.size() + 1, 0);
     auto count = [&](const std::vector<PendingLink>& v) {
         for (const auto& p : v) links.offsets[p.receiver + 1]++;
@@ -412,6 +416,8 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
         std::sort(links.links.begin() + links.offsets[r],
                   links.links.begin() + links.offsets[r + 1], [](const Link& a, const Link& b) {
                       if (a.level != b.level) return a.level < b.level;
+                      const uint32_t ka = (a.bin * 37u) & 1023u, kb = (b.bin * 37u) & 1023u;
+                      if (ka != kb) return ka < kb;
                       return a.bin != b.bin ? a.bin < b.bin : a.sender < b.sender;
                   });
     });
