@@ -33,21 +33,28 @@ struct HalfRows {
     template <class Value>
     static float Store(uint16_t* out, int bins, Value&& value) {
         const __m128 sign = _mm_set1_ps(-0.0f);
-        __m128 peak = _mm_setzero_ps();
+        // Two running maxima: one would chain every bin's store on the last one's max.
+        __m128 peak[2] = {_mm_setzero_ps(), _mm_setzero_ps()};
         auto convert = [&](int b, bool clamp) {
             __m128 x = __m128(value(b));
             if (clamp) x = _mm_min_ps(_mm_max_ps(x, _mm_set1_ps(-kHalfMax)), _mm_set1_ps(kHalfMax));
-            peak = _mm_max_ps(peak, _mm_andnot_ps(sign, x));
+            peak[b & 1] = _mm_max_ps(peak[b & 1], _mm_andnot_ps(sign, x));
             return _mm_cvtps_ph(x, _MM_FROUND_TO_NEAREST_INT);
         };
         auto store = [&](bool clamp) {
-            for (int b = 0; b + 1 < bins; ++b)
+            int b = 0;
+            for (; b + 2 < bins; b += 2) {
+                _mm_storel_epi64(reinterpret_cast<__m128i*>(out + b * 3), convert(b, clamp));
+                _mm_storel_epi64(reinterpret_cast<__m128i*>(out + b * 3 + 3),
+                                 convert(b + 1, clamp));
+            }
+            for (; b + 1 < bins; ++b)
                 _mm_storel_epi64(reinterpret_cast<__m128i*>(out + b * 3), convert(b, clamp));
             uint16_t last[8];
             _mm_storeu_si128(reinterpret_cast<__m128i*>(last), convert(bins - 1, clamp));
             std::memcpy(out + (bins - 1) * 3, last, 3 * sizeof(uint16_t));
             alignas(16) float p[4];
-            _mm_store_ps(p, peak);
+            _mm_store_ps(p, _mm_max_ps(peak[0], peak[1]));
             return std::max({p[0], p[1], p[2]});  // lane 3 is the dropped pad
         };
         const float result = store(false);
