@@ -113,9 +113,8 @@ float CubeTapVisibility(const Plan& plan, const float* maps, const GpuLight& lig
                         const glm::vec3& n, const glm::vec3& toLight) {
     const glm::vec3 eye(light.position);
     const int face = CubeFace(q - eye);
-    glm::vec3 forward(0.0f);
-    forward[face / 2] = face % 2 ? -1.0f : 1.0f;
-    float texel = light.cube.w * std::max(glm::dot(q - eye, forward), 0.0f);
+    // Depth along the face's axis: the largest |coordinate|, the one CubeFace picked.
+    float texel = light.cube.w * std::abs((q - eye)[face / 2]);
     q += n * (2.0f * texel) + toLight * texel;
     glm::vec3 ndc;
     if (!CubeNdc(light, face, q, ndc)) return 1.0f;

@@ -81,8 +81,7 @@ std::vector<glm::vec3> SceneTriangles(const Scene& scene);
 // The triangles (three entries of `triangles` each) that may cover a texel of `viewProj`'s
 // map, as the indices of their vertices: those with all three vertices beyond one plane of
 // the clip volume (−w ≤ x, y ≤ w, 0 ≤ z ≤ w) are left out. A cube face sees about a sixth
-// of a room; the shadow pass draws only these (on lavapipe vertex work dominates at the
-// automatic map size).
+// of a room; the shadow pass draws only these.
 void ViewTriangles(const glm::mat4& viewProj, const std::vector<glm::vec3>& triangles,
                    std::vector<uint32_t>& indices);
 

@@ -167,6 +167,7 @@ void AntiradianceSolver::CopyDirect(const Scene& scene) {
     lightPlaces_ = scene.lights;
     perLight_ = gpuDirect_ ? gpuDirect_->ReadPerLight(scene.lights.size()) : direct_->PerLight();
     if (ReflectDirect() && gpu_) gpu_->UploadGlossyDirect();
+    if (cpu_) cpu_->InputsChanged();
 }
 
 bool AntiradianceSolver::ReflectDirect() {
@@ -183,6 +184,7 @@ void AntiradianceSolver::UpdateLights(const Scene& scene) {
         env.intensity != environment_.intensity || env.rotation != environment_.rotation) {
         model_.environment = direct::EnvironmentBins(env, model_.dirs);
         if (gpu_) gpu_->UploadEnvironment();  // the CPU back end reads model_.environment
+        if (cpu_) cpu_->InputsChanged();
         environment_ = env;
     }
     if (!direct_ && !gpuDirect_) {
@@ -220,6 +222,7 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
         if (gpu_) gpu_->UploadGlossy();
     }
     if (gpu_) gpu_->UploadLeaves();  // the CPU back end reads model_.leaves directly
+    if (cpu_) cpu_->InputsChanged();
 }
 
 std::vector<float> AntiradianceSolver::SurfelExitant() {

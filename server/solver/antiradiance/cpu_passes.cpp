@@ -195,7 +195,7 @@ float CpuBackend::ScaleFor(float peak) {
     return std::ldexp(1.0f, kPeakExponent - std::ilogb(peak) - 1);
 }
 
-float CpuBackend::InputPeak() const {
+void CpuBackend::InputsChanged() {
     // What this iteration adds to a leaf's I_ex / area whatever the transport: emission,
     // reflected direct light, the sky (which every node's L_in starts from) and the
     // lobes' direct reflection. Light arriving from surfaces is bounded by the last table.
@@ -212,7 +212,7 @@ float CpuBackend::InputPeak() const {
         for (int j = 0; j < m_.Bins(); ++j)
             peak = std::max(peak, f0 * maxOf(m_.glossyDirect[g * m_.Bins() + j]));
     }
-    return peak;
+    inputPeak_ = peak;
 }
 
 std::vector<float> CpuBackend::Iex() const {
@@ -234,7 +234,8 @@ void CpuBackend::SetIex(const std::vector<float>& iex) {
     for (size_t n = 0; n < m_.Nodes(); ++n)
         for (size_t k = 0; k < row; ++k)
             peak = std::max(peak, std::abs(iex[n * row + k]) / norm_[n]);
-    peak_ = std::max(peak, InputPeak());
+    InputsChanged();
+    peak_ = std::max(peak, inputPeak_);
     scale_ = ScaleFor(peak_);
     for (size_t n = 0; n < m_.Nodes(); ++n) writeScale_[n] = scale_ / norm_[n];
     for (size_t n = 0; n < m_.Nodes(); ++n) readScale_[n] = norm_[n] / scale_;
@@ -252,7 +253,7 @@ void CpuBackend::Iterate(LocalMode mode) {
     } else {
         // The table read holds I_ex · scale_ / area (readScale_ undoes it); the one written
         // gets a scale for the larger of the last iteration's peak and what this one adds.
-        float next = ScaleFor(std::max(peak_, InputPeak()));
+        float next = ScaleFor(std::max(peak_, inputPeak_));
         for (size_t n = 0; n < m_.Nodes(); ++n) writeScale_[n] = next / norm_[n];
         detail::WalkTables<uint16_t> tables{half_[cur_].data(), half_[1 - cur_].data(),
                                             readScale_.data(),  writeScale_.data(),

@@ -45,13 +45,16 @@ class CpuBackend {
     // replacing it (both ping-pong tables).
     std::vector<float> Iex() const;
     void SetIex(const std::vector<float>& iex);
+    // The model's emission, albedo, direct light, sky or glossy direct light changed (the
+    // solver calls this where the Vulkan back end uploads them): the fp16 tables' scale
+    // follows what an iteration adds, measured here once instead of every iteration.
+    void InputsChanged();
     // Milliseconds per stage since construction: each stage's share of the threads' time,
     // scaled to the wall time of the fused walk.
     double msGlobal = 0, msPush = 0, msLocal = 0, msPull = 0;
 
   private:
     static float ScaleFor(float peak);
-    float InputPeak() const;
 
     const AntiradianceModel& m_;
     TableFormat format_;
@@ -66,6 +69,7 @@ class CpuBackend {
     std::vector<uint16_t> half_[2];
     std::vector<float> norm_, readScale_, writeScale_, pullLeft_, pullRight_;
     float scale_ = 1.0f, peak_ = 0.0f;
+    float inputPeak_ = 0.0f;  // InputsChanged
 };
 
 }  // namespace penumbra::cpu
