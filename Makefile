@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check bench bench-service bench-direct bench-glossy accuracy images format clean
+.PHONY: all deps build demo check bench bench-service bench-direct bench-glossy bench-stability accuracy images format clean
 
 all: build
 
@@ -34,6 +34,9 @@ bench-direct: build
 
 bench-glossy: build
 	$(BUILD)/bench/penumbra-bench-glossy --out bench/results
+
+bench-stability: build
+	$(BUILD)/bench/penumbra-bench-stability --devices cpu,lavapipe --out bench/results
 
 accuracy: build
 	$(BUILD)/bench/penumbra-bench-accuracy --out bench/results

@@ -1,16 +1,28 @@
 // Writes the bundled scenes (tools/bundled_scenes.cpp) as glTF into a folder.
-// Usage: make_scenes OUTDIR
+// Usage: make_scenes OUTDIR [--clutter]; --clutter writes the stability suite
+// (tools/clutter_scenes.h) instead.
 #include <cstdio>
+#include <cstring>
 
 #include "base/check.h"
 #include "bundled_scenes.h"
+#include "clutter_scenes.h"
 
 int main(int argc, char** argv) {
-    if (argc != 2) {
-        std::fprintf(stderr, "usage: make_scenes OUTDIR\n");
+    const bool clutter = argc == 3 && std::strcmp(argv[2], "--clutter") == 0;
+    if (argc != 2 && !clutter) {
+        std::fprintf(stderr, "usage: make_scenes OUTDIR [--clutter]\n");
         return 2;
     }
     try {
+        if (clutter) {
+            for (auto& s : penumbra::scenes::ClutterSuite()) {
+                std::string path = std::string(argv[1]) + "/" + s.name;
+                s.builder.WriteGltf(path);
+                std::printf("wrote %s\n", path.c_str());
+            }
+            return 0;
+        }
         for (const auto& s : penumbra::scenes::All()) {
             std::string path = std::string(argv[1]) + "/" + s.file;
             s.make().WriteGltf(path);

@@ -70,6 +70,9 @@ void CheckOutputPath(const std::string& outPath) {
         throw Error("output '" + outPath + "' must end in .json, .glb or .gltf");
 }
 
+// Exit status of `bake` when the solution diverged (SolverStats::divergence).
+constexpr int kDiverged = 6;
+
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
          int iterations, const std::string& device, const std::string& scheme,
          const std::string& channelName, const EnvironmentOptions& environment, bool quiet) {
@@ -88,6 +91,12 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
         scene, settings, [&](const std::string& stage, double f) { progress.Update(stage, f); });
     solver->Iterate(iterations);
     progress.Done();
+    // A diverged solution is not written: no file is better than a wrong one.
+    if (std::string why = solver->Stats().divergence; !why.empty()) {
+        std::fprintf(stderr, "penumbra: error: %s: the solution %s; nothing written\n",
+                     scenePath.c_str(), why.c_str());
+        return kDiverged;
+    }
 
     IrradianceResult result = CollectIrradiance(scene, *solver, channel);
     WriteResult(scenePath, outPath, scene, result);
@@ -353,7 +362,8 @@ int main(int argc, char** argv) {
     bake->add_option("--iterations", iterations, "solver iterations")->capture_default_str();
     bake->add_option("--element-size", settings.elementSize,
                      "longest element edge after refinement, metres (default: scene diameter/40)");
-    bake->add_option("--scheme", scheme, "symmetric or asymmetric iteration (Sec. 2.2)")
+    bake->add_option("--scheme", scheme,
+                     "adaptive, symmetric or asymmetric iteration (Sec. 2.2; docs/SOLVER.md)")
         ->capture_default_str();
     bake->add_option("--device", device,
                      "auto, gpu, lavapipe or cpu (auto: a real GPU if present, else cpu)")

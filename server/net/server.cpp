@@ -109,7 +109,8 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
         b, session.Name().c_str(), stats.solver.c_str(), stats.device.c_str(), &nodes, &materials,
         static_cast<uint32_t>(stats.elements), stats.links, session.BuildSeconds(), reused, &lights,
         scene.environment.Active() ? scene.environment.source.c_str() : nullptr,
-        scene.environment.intensity));
+        scene.environment.intensity,
+        stats.divergence.empty() ? nullptr : stats.divergence.c_str()));
 }
 
 }  // namespace

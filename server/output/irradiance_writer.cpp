@@ -3,6 +3,7 @@
 
 #include <tiny_gltf.h>
 
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -60,6 +61,11 @@ nlohmann::json StatsToJson(const SolverStats& s) {
                        {"link_update", s.linkUpdate},
                        {"last_link_update_device_ms", s.msLinkUpdateDevice}};
     if (!s.motionDeclined.empty()) j["motion_declined"] = s.motionDeclined;
+    j["bounces"] = s.bounces;
+    j["last_antiradiance_steps"] = s.lastAntiradianceSteps;
+    j["antiradiance_cap_hits"] = s.antiradianceCapHits;
+    if (std::isfinite(s.irradianceBound)) j["irradiance_bound"] = s.irradianceBound;
+    if (!s.divergence.empty()) j["divergence"] = s.divergence;
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

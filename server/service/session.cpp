@@ -400,6 +400,7 @@ nlohmann::json Session::StatsJson() const {
     j["rebuilding"] = rebuild_ != nullptr;
     j["subscribers"] = subscribers_.size();
     j["converged"] = converged_;
+    if (!diverged_.empty()) j["diverged"] = diverged_;
     j["iterations_per_frame"] = settings_.iterationsPerFrame;
     j["build_seconds"] = buildSeconds_;
     // Frames in the last second: the rate while the scene changes, 0 while idle.
@@ -430,6 +431,12 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
             if (!ApplyEditsInPlace(lock, note)) break;  // a move: at the frame boundary
         }
     }
+    // A diverged solver stops and keeps its last bounded irradiance (SurfelIrradiance):
+    // this frame carries that and says why; no more frames are iterated.
+    const std::string divergence = solver_->Stats().divergence;
+    if (!divergence.empty())
+        note += (note.empty() ? "" : "; ") + std::string("stopped: the solution ") + divergence +
+                "; the last bounded irradiance is kept";
     std::vector<glm::vec3> surfels = solver_->SurfelIrradiance();
     double changed = 0.0, total = 0.0;
     bool comparable = lastSurfels_.size() == surfels.size();
@@ -473,8 +480,12 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
             latencyReported_ = true;
         }
         ++framesSinceEdit_;
-        converged_ =
-            change < settings_.convergedChange || framesSinceEdit_ >= settings_.maxFramesPerEdit;
+        converged_ = divergence.empty() && (change < settings_.convergedChange ||
+                                            framesSinceEdit_ >= settings_.maxFramesPerEdit);
+        if (!divergence.empty() && diverged_.empty()) {
+            diverged_ = divergence;
+            lastError_ = "the solution " + divergence + "; iteration stopped";
+        }
         frame->converged = converged_;
         frame->frameMs = MsSince(start);
         latest_ = frame;
@@ -634,7 +645,7 @@ void Session::Run() {
     while (true) {
         wake_.wait(lock, [&] {
             return stop_ || (rebuild_ && rebuild_->done) || (!rebuild_ && !pending_.empty()) ||
-                   !steps_.empty() || !converged_;
+                   !steps_.empty() || (!converged_ && diverged_.empty());
         });
         if (stop_) return;
         std::string note;
@@ -650,6 +661,7 @@ void Session::Run() {
                 applied_ = std::move(rebuild_->scene);
                 passTotals_.clear();
                 lastSurfels_.clear();  // a new solver: its first frame is never "converged"
+                diverged_.clear();
                 ++rebuilds_;
                 note = "links rebuilt: " + rebuild_->what + "; " + warm;
                 if (!rebuild_->reason.empty()) note += " (" + rebuild_->reason + ")";
@@ -732,7 +744,7 @@ void Session::Run() {
                 promise.set_exception(failure);
             else
                 promise.set_value(frames_);
-        } else if (!converged_) {
+        } else if (!converged_ && diverged_.empty()) {
             produce(settings_.iterationsPerFrame, true);
         }
     }

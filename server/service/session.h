@@ -231,6 +231,9 @@ class Session {
     std::vector<std::string> lightNodes_;  // nodes that emitted light when loaded
     SolverStats solverStatsRaw_;
     std::string lastError_;
+    // The solver's SolverStats::divergence once it stopped: no more iterations until a rebuild
+    // brings a new solver; frames keep the last bounded irradiance.
+    std::string diverged_;
     std::atomic<bool> editWaiting_{false};  // an edit is queued and no rebuild runs
     std::thread worker_;
 };

@@ -42,7 +42,20 @@ const char* LinkOracleName(LinkOracle oracle) {
 Scheme ParseScheme(const std::string& name) {
     if (name == "symmetric") return Scheme::kSymmetric;
     if (name == "asymmetric") return Scheme::kAsymmetric;
-    throw Error("unknown scheme '" + name + "' (use symmetric or asymmetric)");
+    if (name == "adaptive") return Scheme::kAdaptive;
+    throw Error("unknown scheme '" + name + "' (use adaptive, symmetric or asymmetric)");
+}
+
+const char* SchemeName(Scheme scheme) {
+    switch (scheme) {
+        case Scheme::kSymmetric:
+            return "symmetric";
+        case Scheme::kAsymmetric:
+            return "asymmetric";
+        case Scheme::kAdaptive:
+            return "adaptive";
+    }
+    return "?";
 }
 
 Channel ParseChannel(const std::string& name) {

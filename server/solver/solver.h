@@ -15,7 +15,12 @@
 
 namespace penumbra {
 
-enum class Scheme { kSymmetric, kAsymmetric };
+// How the local pass's two operators are scheduled (Sec. 2.2, docs/SOLVER.md "Stability").
+// kSymmetric: K and J in every pass (the paper's default; diverges on stacks of occluders).
+// kAsymmetric: one radiance step (K), then `antiradianceSteps` antiradiance steps (J).
+// kAdaptive: one radiance step, then antiradiance steps until the antiradiance has
+// converged for that radiance (at most `maxAntiradianceSteps`).
+enum class Scheme { kSymmetric, kAsymmetric, kAdaptive };
 // What a solver reports (DESIGN.md, Channels): `direct` is the shadowed direct light of
 // punctual lights, `indirect` everything else (emitters, environment, every bounce),
 // `total` their sum.
@@ -35,8 +40,16 @@ struct SolverSettings {
     std::string solver = "antiradiance";
     int bins = 128;
     float elementSize = 0.0f;  // metres; 0 picks kDefaultElementFraction × scene diameter
+    // Still the paper's symmetric scheme by default: the adaptive one settles every scene
+    // the symmetric one does and the rows of boxes it diverges on, but not yet rows of books
+    // (docs/STATUS.md, issue 18); the default moves when it does.
     Scheme scheme = Scheme::kSymmetric;
     int antiradianceSteps = 3;  // asymmetric: antiradiance steps after each radiance step
+    // Adaptive: antiradiance steps end when no leaf's irradiance moved by more than
+    // `antiradianceTolerance` × the largest leaf irradiance in the last step, or after
+    // `maxAntiradianceSteps` (SolverStats::antiradianceCapHits counts those).
+    float antiradianceTolerance = 1e-4f;
+    int maxAntiradianceSteps = 64;
     DeviceChoice device = DeviceChoice::kAuto;
     float oracle = 1.0f;  // link refinement threshold in units of ω_bin
     // Receiver threshold relative to `oracle` (conservative and area oracles). 0.5: a
@@ -110,14 +123,32 @@ struct SolverStats {
     std::string linkUpdate;            // where moves recompute links: "device" or "host"
     double msLinkUpdateDevice = 0.0;   // the last move's link update pass, device time
     std::string motionDeclined;        // why motion links were asked for and not built
+    // Convergence (docs/SOLVER.md "Stability"). The adaptive scheme: radiance steps done,
+    // the antiradiance steps the last finished bounce took, bounces that hit the cap.
+    int bounces = 0;
+    int lastAntiradianceSteps = 0;
+    size_t antiradianceCapHits = 0;
+    // No surface can receive more than `irradianceBound` lux (the furnace bound of the
+    // scene's emitters, lights, sky and albedos; infinite when an albedo reaches 1). A solution
+    // past kDivergenceMargin × it, or not finite, has diverged: `divergence` says where, and
+    // the solver stops iterating (Iterate does nothing more).
+    float irradianceBound = 0.0f;
+    std::string divergence;
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };
 
+// How far past SolverStats::irradianceBound a leaf may go before the solver calls the
+// solution diverged: the discretisation (calibrated form factors, bin spread) may overshoot
+// the bound a little near contacts; a diverging iteration passes any margin within passes.
+inline constexpr float kDivergenceMargin = 2.0f;
+
 class Solver {
   public:
     virtual ~Solver() = default;
-    // Runs `n` more iterations (one global + local pass each).
+    // Runs `n` more iterations (one global + local pass each; the scheme says which
+    // operators each pass applies). Does nothing once the solution has diverged
+    // (Stats().divergence).
     virtual void Iterate(int n) = 0;
     // Irradiance per surfel in lux: `indirect` (all light arriving from surfaces),
     // `direct` (punctual lights, shadowed) or `total`.
@@ -161,11 +192,12 @@ using ProgressFn = std::function<void(const std::string& stage, double fraction)
 std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& settings,
                                      const ProgressFn& progress = {});
 
-// Parses "auto|gpu|lavapipe|cpu" and "symmetric|asymmetric"; throws penumbra::Error.
+// Parses "auto|gpu|lavapipe|cpu" and "adaptive|symmetric|asymmetric"; throws penumbra::Error.
 DeviceChoice ParseDevice(const std::string& name);
 LinkOracle ParseLinkOracle(const std::string& name);  // "conservative" | "paper" | "area"
 const char* LinkOracleName(LinkOracle oracle);
 Scheme ParseScheme(const std::string& name);
+const char* SchemeName(Scheme scheme);
 Channel ParseChannel(const std::string& name);                // "indirect" | "direct" | "total"
 BackOcclusion ParseBackOcclusion(const std::string& name);    // "auto" | "on" | "off"
 TablePrecision ParseTablePrecision(const std::string& name);  // "auto" | "fp32" | "fp16"

@@ -2,6 +2,7 @@
 #include "solver/antiradiance/antiradiance_solver.h"
 
 #include <chrono>
+#include <limits>
 
 #include "base/check.h"
 #include "direct/environment_light.h"
@@ -12,7 +13,7 @@ namespace penumbra {
 
 AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings& settings,
                                        const ProgressFn& progress)
-    : settings_(settings), progress_(progress) {
+    : settings_(settings), progress_(progress), schedule_(settings) {
     auto start = std::chrono::steady_clock::now();
     // Resolve the device before the (long) model build so a bad choice fails fast.
     DeviceChoice device = settings.device;
@@ -126,16 +127,32 @@ void AntiradianceSolver::UpdateGeometry(const Scene& scene) {
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
+std::vector<float> AntiradianceSolver::LeafIrradiance() {
+    return cpu_ ? cpu_->LeafIrradiance() : gpu_->ReadLeafIrradiance();
+}
+
 void AntiradianceSolver::Iterate(int n) {
     if (n < 0) throw Error("iteration count must not be negative");
     auto start = std::chrono::steady_clock::now();
-    for (int i = 0; i < n; ++i) {
-        LocalMode mode = ModeOfIteration(settings_, iterations_);
+    bound_ = IrradianceBound(model_);
+    for (int i = 0; i < n && divergence_.empty(); ++i) {
+        const LocalMode mode = schedule_.Next();
         if (cpu_)
             cpu_->Iterate(mode);
         else
             gpu_->Iterate(mode);
         ++iterations_;
+        // Every pass's irradiance is read (on a Vulkan device 12 bytes a leaf after a pass
+        // that was waited for anyway): the adaptive schedule goes by it, and the guard.
+        // Settled solutions are held to the bound, the transients in between only to being
+        // finite.
+        std::vector<float> e = LeafIrradiance();
+        const bool settled = schedule_.Finished(e);
+        const float bound = settled ? bound_ : std::numeric_limits<float>::infinity();
+        if (std::string why = Divergence(e, bound); !why.empty())
+            divergence_ = "diverged at iteration " + std::to_string(iterations_) + ": " + why;
+        else if (settled)
+            settled_ = std::move(e);
         if (progress_) progress_("iterating", static_cast<double>(i + 1) / n);
     }
     msTotal_ +=
@@ -145,7 +162,7 @@ void AntiradianceSolver::Iterate(int n) {
 std::vector<glm::vec3> AntiradianceSolver::SurfelIrradiance(Channel channel) {
     std::vector<float> leaf;
     if (channel != Channel::kDirect)
-        leaf = cpu_ ? cpu_->LeafIrradiance() : gpu_->ReadLeafIrradiance();
+        leaf = settled_.empty() ? std::vector<float>(model_.leaves.size() * 3, 0.0f) : settled_;
     std::vector<glm::vec3> out(model_.surfels.size(), glm::vec3(0.0f));
     for (size_t i = 0; i < model_.leaves.size(); ++i) {
         glm::vec3 e(0.0f);
@@ -289,6 +306,11 @@ SolverStats AntiradianceSolver::Stats() const {
     if (!model_.links.dynamic.empty()) s.linkUpdate = DeviceLinkUpdate() ? "device" : "host";
     s.msLinkUpdateDevice = gpu_ ? gpu_->LinkUpdateMs() : 0.0;
     s.motionDeclined = model_.motionDeclined;
+    s.bounces = schedule_.bounces;
+    s.lastAntiradianceSteps = schedule_.lastSteps;
+    s.antiradianceCapHits = schedule_.capHits;
+    s.irradianceBound = IrradianceBound(model_);
+    s.divergence = divergence_;
     if (direct_ || gpuDirect_) {
         s.shadowViews = gpuDirect_ ? gpuDirect_->views : direct_->views;
         s.shadowMapSize = mapSize_;

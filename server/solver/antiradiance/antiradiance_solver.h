@@ -8,6 +8,7 @@
 #include "direct/vulkan_direct.h"
 #include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/model.h"
+#include "solver/antiradiance/schedule.h"
 #include "solver/solver.h"
 
 namespace penumbra {
@@ -58,6 +59,15 @@ class AntiradianceSolver : public Solver {
     std::vector<float> perLight_;
     std::string deviceName_;
     int iterations_ = 0;
+    PassSchedule schedule_;
+    std::string divergence_;  // SolverStats::divergence
+    float bound_ = 0.0f;      // IrradianceBound as of the last Iterate
+    // The leaves' E as the last pass left it (RGB per leaf).
+    std::vector<float> LeafIrradiance();
+    // The leaves' E when the schedule last settled (PassSchedule::Finished): what
+    // SurfelIrradiance reports. Zero until the first settles: the adaptive scheme's first
+    // antiradiance steps have no answer to show yet, only transients.
+    std::vector<float> settled_;
     double msTotal_ = 0.0;
     double setupSeconds_ = 0.0;
     // Moves taken by UpdateGeometry, their links recomputed in all, the last one's time.
