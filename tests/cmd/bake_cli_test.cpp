@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "base/image.h"
+#include "clutter_scenes.h"
 #include "gpu/context.h"
 #include "test_util.h"
 
@@ -165,6 +166,36 @@ TEST(BakeCli, EnvironmentLightsTheSceneThroughItsOpening) {
     EXPECT_NE(both.run.exitCode, 0);
     auto negative = BakeJson("bake-sky-neg", base + " --environment-color 1,-1,1");
     EXPECT_EQ(negative.run.exitCode, 1) << negative.run.output;
+}
+
+}  // namespace
+}  // namespace penumbra
+
+namespace penumbra {
+namespace {
+
+using testing::Execute;
+using testing::ProcessResult;
+
+// Issue 18: a solution that diverges is not written. The paper's symmetric scheme diverges on
+// a row of ten boxes 2 cm apart; bake says which scene and iteration, exits 6, writes nothing.
+TEST(BakeCli, DivergedSolutionExitsSixAndWritesNothing) {
+    const auto dir = testing::TempDir("bake-diverged");
+    const std::string scene = (dir / "row.gltf").string(), out = (dir / "row.json").string();
+    scenes::BoxRow(10, 0.02f).WriteGltf(scene);
+    ProcessResult r = Execute("bake " + scene + " -o " + out +
+                              " --scheme symmetric --bins 64 --element-size 0.12 --iterations 200 "
+                              "--device cpu -q");
+    EXPECT_EQ(r.exitCode, 6) << r.output;
+    EXPECT_NE(r.output.find(scene + ": the solution diverged at iteration "), std::string::npos)
+        << r.output;
+    EXPECT_FALSE(std::filesystem::exists(out));
+    // The adaptive scheme settles the same scene.
+    ProcessResult ok = Execute("bake " + scene + " -o " + out +
+                               " --scheme adaptive --bins 64 --element-size 0.12 --iterations 60 "
+                               "--device cpu -q");
+    EXPECT_EQ(ok.exitCode, 0) << ok.output;
+    EXPECT_TRUE(std::filesystem::exists(out));
 }
 
 }  // namespace
