@@ -6,6 +6,7 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
+#include "clutter_scenes.h"
 #include "scene/gltf_loader.h"
 #include "test_util.h"
 
@@ -398,6 +399,49 @@ TEST(Session, StepRunsIterationsEvenWhenConverged) {
     uint64_t frame = session.Step(3);
     EXPECT_EQ(frame, f->frame + 1);
     EXPECT_EQ(session.Latest()->iterations, f->iterations + 3);
+}
+
+}  // namespace
+}  // namespace penumbra::service
+
+namespace penumbra::service {
+namespace {
+
+// Issue 18: a session whose solution diverges (the symmetric scheme on a row of ten boxes
+// 2 cm apart) says so in a frame note and in stats, stops iterating, and its frames carry
+// the last bounded irradiance: finite and within the guard's bound.
+TEST(Session, DivergedSolutionStopsAndKeepsTheLastBoundedFrame) {
+    SessionSettings settings = Settings();
+    settings.solver.scheme = Scheme::kSymmetric;
+    settings.solver.elementSize = 0.12f;
+    const Scene scene = scenes::BoxRow(10, 0.02f).Build();
+    const float bound = scenes::FurnaceBound(scene);
+    Session session("row", scene, settings);
+    std::mutex m;
+    std::condition_variable cv;
+    FramePtr stopped;
+    int id = session.AddSubscriber([&](const FramePtr& f) {
+        std::lock_guard lock(m);
+        if (f->note.find("stopped: the solution diverged at iteration") != std::string::npos)
+            stopped = f;
+        cv.notify_all();
+    });
+    {
+        std::unique_lock lock(m);
+        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(60), [&] { return stopped != nullptr; }))
+            << "no frame said the solution diverged";
+    }
+    session.RemoveSubscriber(id);
+    for (const auto& primitive : stopped->irradiance)
+        for (const glm::vec3& e : primitive)
+            ASSERT_TRUE(std::isfinite(e.x) && std::isfinite(e.y) && std::isfinite(e.z) &&
+                        std::max({e.x, e.y, e.z}) <= kDivergenceMargin * bound);
+    const uint64_t frames = session.Latest()->frame;
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    EXPECT_EQ(session.Latest()->frame, frames) << "a diverged session must stop iterating";
+    const nlohmann::json stats = session.StatsJson();
+    ASSERT_TRUE(stats.contains("diverged")) << stats.dump();
+    EXPECT_NE(stats["solver"]["divergence"].get<std::string>(), "");
 }
 
 }  // namespace
