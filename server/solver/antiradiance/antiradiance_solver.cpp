@@ -52,6 +52,7 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
         lights_ = static_cast<int>(scene.lights.size());
         MakeDirect(scene);
     }
+    bound_ = IrradianceBound(model_);
     setupSeconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
@@ -134,7 +135,6 @@ std::vector<float> AntiradianceSolver::LeafIrradiance() {
 void AntiradianceSolver::Iterate(int n) {
     if (n < 0) throw Error("iteration count must not be negative");
     auto start = std::chrono::steady_clock::now();
-    bound_ = IrradianceBound(model_);
     for (int i = 0; i < n && divergence_.empty(); ++i) {
         const LocalMode mode = schedule_.Next();
         if (cpu_)
@@ -185,6 +185,7 @@ void AntiradianceSolver::CopyDirect(const Scene& scene) {
     perLight_ = gpuDirect_ ? gpuDirect_->ReadPerLight(scene.lights.size()) : direct_->PerLight();
     if (ReflectDirect() && gpu_) gpu_->UploadGlossyDirect();
     if (cpu_) cpu_->InputsChanged();
+    bound_ = IrradianceBound(model_);
 }
 
 bool AntiradianceSolver::ReflectDirect() {
@@ -202,6 +203,7 @@ void AntiradianceSolver::UpdateLights(const Scene& scene) {
         model_.environment = direct::EnvironmentBins(env, model_.dirs);
         if (gpu_) gpu_->UploadEnvironment();  // the CPU back end reads model_.environment
         if (cpu_) cpu_->InputsChanged();
+        bound_ = IrradianceBound(model_);
         environment_ = env;
     }
     if (!direct_ && !gpuDirect_) {
@@ -240,6 +242,7 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
     }
     if (gpu_) gpu_->UploadLeaves();  // the CPU back end reads model_.leaves directly
     if (cpu_) cpu_->InputsChanged();
+    bound_ = IrradianceBound(model_);
 }
 
 std::vector<float> AntiradianceSolver::SurfelExitant() {
@@ -309,7 +312,7 @@ SolverStats AntiradianceSolver::Stats() const {
     s.bounces = schedule_.bounces;
     s.lastAntiradianceSteps = schedule_.lastSteps;
     s.antiradianceCapHits = schedule_.capHits;
-    s.irradianceBound = IrradianceBound(model_);
+    s.irradianceBound = bound_;
     s.divergence = divergence_;
     if (direct_ || gpuDirect_) {
         s.shadowViews = gpuDirect_ ? gpuDirect_->views : direct_->views;

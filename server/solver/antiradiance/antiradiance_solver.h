@@ -61,7 +61,7 @@ class AntiradianceSolver : public Solver {
     int iterations_ = 0;
     PassSchedule schedule_;
     std::string divergence_;  // SolverStats::divergence
-    float bound_ = 0.0f;      // IrradianceBound as of the last Iterate
+    float bound_ = 0.0f;      // IrradianceBound, redone where the solver's inputs change
     // The leaves' E as the last pass left it (RGB per leaf).
     std::vector<float> LeafIrradiance();
     // The leaves' E when the schedule last settled (PassSchedule::Finished): what
