@@ -4,9 +4,11 @@
 // 4.6K elements and 177K links, at 14.9 fps for 3 iterations). The diffuse variant replaces
 // every glossy material by a diffuse one of albedo ρ_d + F0; the all-glossy variant makes
 // every material a glossy dielectric (roughness 0.4), the local pass's worst case. Prints a
-// table and writes JSON to --out.
+// table and writes JSON to --out; beside each frame rate, the relative RMSE of the answer
+// those settings converge to against `penumbra reference` (issue 18).
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <thread>
 
@@ -22,7 +24,7 @@ int main(int argc, char** argv) {
     CLI::App app{"penumbra glossy benchmark (local pass with lobes, issue 5)"};
     std::string scenePath = "scenes/glossy-box.gltf", out = "bench/results";
     std::vector<std::string> devices{"cpu", "lavapipe"};
-    int frames = 10, iterations = 3;
+    int frames = 10, iterations = 3, samples = 1024;
     SolverSettings settings;
     settings.bins = 128;
     settings.elementSize = 0.25f;
@@ -31,7 +33,10 @@ int main(int argc, char** argv) {
     app.add_option("--devices", devices, "devices to run: cpu, lavapipe, gpu")
         ->capture_default_str();
     app.add_option("--frames", frames, "frames measured per case")->capture_default_str();
-    app.add_option("--iterations", iterations, "iterations per frame")->capture_default_str();
+    app.add_option("--iterations", iterations, "iterations (bounces) per frame")
+        ->capture_default_str();
+    app.add_option("--samples", samples, "reference paths per vertex for the RMSE (0: none)")
+        ->capture_default_str();
     app.add_option("--bins", settings.bins)->capture_default_str();
     app.add_option("--element-size", settings.elementSize)->capture_default_str();
     CLI11_PARSE(app, argc, argv);
@@ -54,33 +59,44 @@ int main(int argc, char** argv) {
         report["settings"] = {{"bins", settings.bins},
                               {"element_size", settings.elementSize},
                               {"link_oracle", "conservative"},
-                              {"iterations_per_frame", iterations}};
+                              {"scheme", SchemeName(settings.scheme)},
+                              {"iterations_per_frame", iterations},
+                              {"reference_samples", samples}};
+        std::map<std::string, IrradianceFile> truth;
+        if (samples > 0)
+            for (const auto& [name, scene] : variants)
+                truth[name] = bench::Reference(*scene, samples);
         std::printf(
             "%s: %zu triangles, %d bins, element %.2f m, %d iterations/frame, median of "
             "%d frames\n",
             scenePath.c_str(), glossy.TriangleCount(), settings.bins, settings.elementSize,
             iterations, frames);
-        std::printf("%-30s %-10s %8s %7s %9s %9s %9s %9s %7s\n", "device", "surfaces", "elements",
-                    "glossy", "links", "local ms", "ms/iter", "frame ms", "fps");
+        std::printf("%-30s %-10s %8s %7s %9s %9s %9s %9s %7s %9s\n", "device", "surfaces",
+                    "elements", "glossy", "links", "local ms", "ms/iter", "frame ms", "fps",
+                    "rel.RMSE");
         for (const auto& d : devices) {
             for (const auto& [name, scene] : variants) {
                 SolverSettings s = settings;
                 s.device = ParseDevice(d);
                 nlohmann::json r;
                 try {
-                    r = RunDevice(*scene, s, frames, iterations);
+                    r = RunDevice(*scene, s, frames, iterations,
+                                  samples > 0 ? &truth.at(name) : nullptr);
                 } catch (const Error& e) {
                     std::printf("%-30s unavailable: %s\n", d.c_str(), e.what());
                     break;
                 }
                 r["surfaces"] = name;
-                double local = r["passes"].value("local_ms_per_iteration_median", 0.0);
-                std::printf("%-30.30s %-10s %8zu %7zu %9zu %9.2f %9.2f %9.1f %7.1f\n",
+                double local = r["passes"].value("local_ms_per_pass_median", 0.0);
+                char rmse[16] = "-";
+                if (r.contains("rel_rmse"))
+                    std::snprintf(rmse, sizeof rmse, "%.1f%%", 100 * r["rel_rmse"].get<double>());
+                std::printf("%-30.30s %-10s %8zu %7zu %9zu %9.2f %9.2f %9.1f %7.1f %9s\n",
                             r["device"].get<std::string>().c_str(),
                             r["surfaces"].get<std::string>().c_str(), r["elements"].get<size_t>(),
                             r.value("glossy_elements", size_t(0)), r["links"].get<size_t>(), local,
                             r["ms_per_iteration_median"].get<double>(),
-                            r["frame_ms_median"].get<double>(), r["fps"].get<double>());
+                            r["frame_ms_median"].get<double>(), r["fps"].get<double>(), rmse);
                 report["results"].push_back(r);
             }
         }

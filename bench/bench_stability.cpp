@@ -1,7 +1,7 @@
 // Stability and accuracy on cluttered scenes (issue 18): each scene of the clutter suite
-// (tools/clutter_scenes.h) iterated for a number of passes on each device; per scene the
-// largest |E| any pass produced against the furnace bound, the change over the last 100
-// passes, the bounces and antiradiance steps the schedule took, ms per pass, and the relative
+// (tools/clutter_scenes.h) iterated for a number of iterations on each device; per scene the
+// largest |E| any iteration produced against the furnace bound, the change over the last 100
+// iterations, the passes and antiradiance steps the schedule took, ms per pass, and the relative
 // RMSE against `penumbra reference` at the same scene. Prints a table and writes
 // bench/results/stability.json.
 #include <CLI/CLI.hpp>
@@ -35,50 +35,40 @@ std::vector<std::string> Split(const std::string& s) {
     return out;
 }
 
-// Σ|a − b| / Σ|b| over every surfel and channel.
-double RelativeChange(const std::vector<glm::vec3>& a, const std::vector<glm::vec3>& b) {
-    double num = 0, den = 0;
-    for (size_t i = 0; i < a.size(); ++i)
-        for (int c = 0; c < 3; ++c) {
-            num += std::abs(a[i][c] - b[i][c]);
-            den += std::abs(b[i][c]);
-        }
-    return den > 0 ? num / den : 0.0;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
     CLI::App app{"Stability and accuracy of the solver on cluttered scenes"};
     std::string out, devices = "cpu", scenes, scheme = "adaptive";
-    int passes = 500, samples = 2048, bins = 128;
+    int iterations = 500, samples = 2048, bins = 128;
     float elementSize = 0.0f;
     app.add_option("--out", out, "folder for stability.json (none: print only)");
     app.add_option("--devices", devices, "comma-separated: cpu, lavapipe, gpu")
         ->capture_default_str();
     app.add_option("--scenes", scenes, "comma-separated scene names (default: the whole suite)");
     app.add_option("--scheme", scheme, "adaptive, symmetric or asymmetric")->capture_default_str();
-    app.add_option("--passes", passes, "passes per scene (>= 101)")->capture_default_str();
+    app.add_option("--iterations", iterations, "iterations (bounces) per scene (>= 101)")
+        ->capture_default_str();
     app.add_option("--samples", samples, "reference samples per vertex (0: no reference)")
         ->capture_default_str();
     app.add_option("--bins", bins, "direction bins")->capture_default_str();
     app.add_option("--element-size", elementSize, "metres (0: the scene's default)");
     CLI11_PARSE(app, argc, argv);
-    if (passes < 101) {
-        std::fprintf(stderr, "--passes must be at least 101\n");
+    if (iterations < 101) {
+        std::fprintf(stderr, "--iterations must be at least 101\n");
         return 2;
     }
     const std::vector<std::string> wanted = Split(scenes);
 
     nlohmann::json report;
     report["machine"] = {{"cpu", bench::CpuModel()}};
-    report["settings"] = {{"passes", passes},
+    report["settings"] = {{"iterations", iterations},
                           {"bins", bins},
                           {"scheme", scheme},
                           {"reference_samples", samples},
                           {"element_size", elementSize}};
     std::printf(
-        "| scene | device | elements | links | max |E| / bound | change last 100 | bounces "
+        "| scene | device | elements | links | max |E| / bound | change last 100 | passes "
         "| AR steps (last) | ms/pass | rel. RMSE |\n|---|---|---|---|---|---|---|---|---|---|\n");
     for (auto& entry : scenes::ClutterSuite()) {
         std::string name = entry.name.substr(0, entry.name.size() - 5);
@@ -106,13 +96,13 @@ int main(int argc, char** argv) {
             float largest = 0.0f;
             std::vector<glm::vec3> before;
             auto start = Clock::now();
-            for (int p = 0; p < passes; ++p) {
+            for (int i = 0; i < iterations; ++i) {
                 solver->Iterate(1);
                 if (!solver->Stats().divergence.empty()) break;
                 std::vector<glm::vec3> e = solver->SurfelIrradiance();
                 for (const glm::vec3& v : e)
                     largest = std::max({largest, std::abs(v.x), std::abs(v.y), std::abs(v.z)});
-                if (p == passes - 101) before = std::move(e);
+                if (i == iterations - 101) before = std::move(e);
             }
             const double ms = MsSince(start);
             const SolverStats s = solver->Stats();
@@ -120,13 +110,14 @@ int main(int argc, char** argv) {
                                   {"device", s.device},
                                   {"elements", s.elements},
                                   {"links", s.links},
-                                  {"passes", s.iterations},
+                                  {"iterations", s.iterations},
+                                  {"passes", s.gathers},
                                   {"bound_lux", bound},
                                   {"max_abs_irradiance_lux", largest},
                                   {"bounces", s.bounces},
                                   {"last_antiradiance_steps", s.lastAntiradianceSteps},
                                   {"antiradiance_cap_hits", s.antiradianceCapHits},
-                                  {"ms_per_pass", ms / std::max(1, s.iterations)}};
+                                  {"ms_per_pass", ms / std::max(1, s.gathers)}};
             std::string change = "-", rmse = "-";
             if (!s.divergence.empty()) {
                 row["divergence"] = s.divergence;
@@ -148,7 +139,7 @@ int main(int argc, char** argv) {
             }
             std::printf("| %s | %s | %zu | %zu | %.3g | %s | %d | %d | %.2f | %s |\n", name.c_str(),
                         s.device.c_str(), s.elements, s.links, largest / bound, change.c_str(),
-                        s.bounces, s.lastAntiradianceSteps, ms / std::max(1, s.iterations),
+                        s.gathers, s.lastAntiradianceSteps, ms / std::max(1, s.gathers),
                         rmse.c_str());
             std::fflush(stdout);
             report["runs"].push_back(row);

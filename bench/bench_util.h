@@ -12,7 +12,9 @@
 #include <string>
 #include <vector>
 
+#include "output/compare.h"
 #include "output/irradiance_writer.h"
+#include "reference/path_tracer.h"
 #include "solver/solver.h"
 
 namespace penumbra::bench {
@@ -43,15 +45,43 @@ inline void WriteReport(const nlohmann::json& report, const std::string& folder,
     std::printf("wrote %s\n", path.c_str());
 }
 
+// `penumbra reference` of `scene` (channel `indirect`, the solvers' default) at `samples`
+// paths per vertex, as `compare` reads it.
+inline IrradianceFile Reference(const Scene& scene, int samples,
+                                Channel channel = Channel::kIndirect) {
+    ReferenceSettings rs;
+    rs.samples = samples;
+    rs.channel = channel;
+    ReferenceResult ref = RenderReference(scene, rs);
+    IrradianceResult res;
+    res.solver = "reference";
+    res.channel = ChannelName(channel);
+    res.primitives = ref.irradiance;
+    return ToIrradianceFile(scene, res);
+}
+
+// Accuracy beside speed (issue 18): the solver iterated on until an iteration changes the
+// answer by less than 10⁻³ (at most 500), its relative RMSE against `truth`.
+inline void AddAccuracy(nlohmann::json& j, const Scene& scene, Solver& solver,
+                        const IrradianceFile& truth, Channel channel = Channel::kIndirect) {
+    Convergence c = IterateUntilConverged(solver, 1e-3, 500);
+    IrradianceFile mine = ToIrradianceFile(scene, CollectIrradiance(scene, solver, channel));
+    j["rel_rmse"] = Compare(mine, truth).overall.relRmse;
+    j["rmse_after_iterations"] = solver.Stats().iterations;
+    j["rmse_converged"] = c.converged;
+}
+
 // Builds the solver, runs a warm-up frame, then `frames` frames of `iterationsPerFrame`
-// iterations: the bake stats plus median frame and per-pass times.
+// iterations (bounces): the bake stats plus median frame and per-pass times; with `truth`, the
+// relative RMSE of the answer those settings converge to (AddAccuracy).
 inline nlohmann::json RunDevice(const Scene& scene, SolverSettings settings, int frames,
-                                int iterationsPerFrame) {
+                                int iterationsPerFrame, const IrradianceFile* truth = nullptr) {
     auto solver = CreateSolver(scene, settings);
     solver->Iterate(iterationsPerFrame);  // warm-up frame
     std::vector<double> frameMs;
     std::map<std::string, std::vector<double>> passMs;
     SolverStats before = solver->Stats();
+    const int gathersBefore = before.gathers;
     for (int f = 0; f < frames; ++f) {
         auto t0 = std::chrono::steady_clock::now();
         solver->Iterate(iterationsPerFrame);
@@ -59,9 +89,10 @@ inline nlohmann::json RunDevice(const Scene& scene, SolverSettings settings, int
             std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                 .count());
         SolverStats after = solver->Stats();
+        const int passes = std::max(1, after.gathers - before.gathers);
         for (size_t p = 0; p < after.passes.size(); ++p)
             passMs[after.passes[p].name].push_back(
-                (after.passes[p].msTotal - before.passes[p].msTotal) / iterationsPerFrame);
+                (after.passes[p].msTotal - before.passes[p].msTotal) / passes);
         before = after;
     }
     SolverStats s = solver->Stats();
@@ -73,8 +104,10 @@ inline nlohmann::json RunDevice(const Scene& scene, SolverSettings settings, int
     j["frame_ms_median"] = frame;
     j["ms_per_iteration_median"] = frame / iterationsPerFrame;
     j["fps"] = 1000.0 / frame;
-    for (const auto& [name, v] : passMs) j["passes"][name + "_ms_per_iteration_median"] = Median(v);
+    for (const auto& [name, v] : passMs) j["passes"][name + "_ms_per_pass_median"] = Median(v);
     j["table_mib"] = s.tableBytes / 1048576.0;
+    j["passes_per_frame"] = static_cast<double>(s.gathers - gathersBefore) / frames;
+    if (truth) AddAccuracy(j, scene, *solver, *truth);
     return j;
 }
 

@@ -51,6 +51,9 @@ vec3 Fetch3(samplerBuffer table, uint k) {
 float Cos(vec3 normal, uint bin) { return dot(normal, Fetch3(dirs, 4u * bin)); }
 // The gathered L_in of bin b.
 vec3 In(uint b) { return vec3(acc[3u * b], acc[3u * b + 1u], acc[3u * b + 2u]); }
+// What a leaf blocks and sends on as antiradiance: L_in at zero or above (docs/SOLVER.md
+// "Stability"; LocalLeaf in cpu_walk.h, with E ≥ 0 below).
+vec3 Blocked(uint b) { return max(In(b), vec3(0.0)); }
 
 void main() {
     uint invocation = gl_GlobalInvocationID.x;
@@ -68,12 +71,13 @@ void main() {
         cosines[b] = c;
         if (c < 0.0) e -= c * In(b);
     }
-    e *= pc.binSolidAngle * leaf.cosNormIn;
+    e = max(e * (pc.binSolidAngle * leaf.cosNormIn), vec3(0.0));
     irradiance[i * 3u] = e.x;
     irradiance[i * 3u + 1u] = e.y;
     irradiance[i * 3u + 2u] = e.z;
 
-    vec3 front = leaf.area * leaf.cosNormOut * (leaf.emission + leaf.albedo * (e + Fetch3(direct, 4u * i)) * kInvPi);
+    vec3 front = leaf.area * leaf.cosNormOut *
+                 (leaf.emission + leaf.albedo * (e + Fetch3(direct, 4u * i)) * kInvPi);
     bool glossyLeaf = GLOSSY && (leaf.flags & kLeafGlossy) != 0u && (MODE & kReflect) != 0u;
     uint g = leaf.flags >> kGlossyShift;
     Lobe lobe = Lobe(0u, 0u, 0.0, 0.0);
@@ -93,19 +97,21 @@ void main() {
         vec3 v;
         if (c > 0.0) {
             // A two-sided leaf sends light arriving at its back on through its front.
-            vec3 through = (leaf.flags & kLeafTwoSided) != 0u ? leaf.area * c * In(b) : vec3(0.0);
+            vec3 through =
+                (leaf.flags & kLeafTwoSided) != 0u ? leaf.area * c * Blocked(b) : vec3(0.0);
             v = (MODE & kReflect) != 0u ? c * front - through : Fetch3(iex, k);
             if (glossyLeaf) {
                 vec3 sum = vec3(0.0);
                 uint start = lobe.start + b * lobe.width;
                 for (uint w = 0; w < lobe.width; ++w) {
                     int at = int(2u * (start + w));
-                    sum += uintBitsToFloat(texelFetch(lobeWeights, at + 1).x) * arrived[texelFetch(lobeWeights, at).x];
+                    sum += uintBitsToFloat(texelFetch(lobeWeights, at + 1).x) *
+                           arrived[texelFetch(lobeWeights, at).x];
                 }
                 v += c * f0 * (pc.binSolidAngle * sum + Fetch3(glossyDirect, 4u * (g * BINS + b)));
             }
         } else {
-            v = (MODE & kAntiradiance) != 0u ? leaf.area * c * In(b) : Fetch3(iex, k);
+            v = (MODE & kAntiradiance) != 0u ? leaf.area * c * Blocked(b) : Fetch3(iex, k);
         }
         iexNew[k] = v.x;
         iexNew[k + 1u] = v.y;

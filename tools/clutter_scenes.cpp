@@ -185,9 +185,9 @@ std::vector<ClutterScene> ClutterSuite() {
     suite.push_back({"box-row-15-5mm.gltf", BoxRow(15, 0.005f)});
     suite.push_back({"box-row-10-10cm.gltf", BoxRow(10, 0.1f)});
     suite.push_back({"box-stacks-0cm.gltf", BoxStacks(3, 8, 0.0f)});
-    suite.push_back({"box-stacks-1cm.gltf", BoxStacks(3, 8, 0.01f), true});
-    suite.push_back({"bookshelf-5mm.gltf", Bookshelf(4, 0.005f, 7), true});
-    suite.push_back({"bookshelf-0mm.gltf", Bookshelf(3, 0.0f, 11), true});
+    suite.push_back({"box-stacks-1cm.gltf", BoxStacks(3, 8, 0.01f)});
+    suite.push_back({"bookshelf-5mm.gltf", Bookshelf(2, 0.005f, 7)});
+    suite.push_back({"bookshelf-0mm.gltf", Bookshelf(2, 0.0f, 11)});
     suite.push_back({"chairs-under-desks.gltf", ChairsUnderDesks()});
     for (uint32_t seed : {1u, 2u, 3u, 4u})
         suite.push_back({"random-boxes-" + std::to_string(seed) + ".gltf", RandomBoxes(40, seed)});

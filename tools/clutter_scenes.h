@@ -37,11 +37,6 @@ float FurnaceBound(const Scene& scene);
 struct ClutterScene {
     std::string name;  // file name under the output folder, "box-row-10-2cm.gltf"
     SceneBuilder builder;
-    // Rows of books and stacks with gaps still defeat the adaptive scheme (docs/SOLVER.md
-    // "Stability", what is open): its antiradiance steps go through transients that grow
-    // like binomial coefficients of the stack depth. The tests hold these to the divergence
-    // guard (stopped, never streamed) and the others to convergence.
-    bool open = false;
 };
 // The stability suite (tests/solver/stability_test.cpp uses the same list): the box rows of
 // issue 18 at every gap, stacks, shelves, desks and random boxes on several seeds.

@@ -73,15 +73,63 @@ void CheckOutputPath(const std::string& outPath) {
 // Exit status of `bake` when the solution diverged (SolverStats::divergence).
 constexpr int kDiverged = 6;
 
+// How many iterations `bake` and `render` run: --iterations N, or (0) until an iteration
+// changes the answer by less than --tolerance, at most --max-iterations.
+struct IterationOptions {
+    int iterations = 0;
+    double tolerance = 1e-3;
+    int maxIterations = 500;
+
+    void Add(CLI::App* command) {
+        command
+            ->add_option("--iterations", iterations,
+                         "solver iterations (bounces of light); 0: until an iteration changes "
+                         "the answer by less than --tolerance")
+            ->capture_default_str();
+        command
+            ->add_option("--tolerance", tolerance,
+                         "with --iterations 0: the relative change (sum |dE| / sum |E|) of one "
+                         "iteration at which the answer counts as converged")
+            ->capture_default_str();
+        command
+            ->add_option("--max-iterations", maxIterations,
+                         "with --iterations 0: give up converging after this many")
+            ->capture_default_str();
+    }
+    void Check() const {
+        if (iterations < 0 || iterations > 100000)
+            throw Error("--iterations must be between 0 and 100000");
+        if (!(tolerance > 0.0 && tolerance < 1.0))
+            throw Error("--tolerance must be between 0 and 1 (exclusive)");
+        if (maxIterations < 1 || maxIterations > 100000)
+            throw Error("--max-iterations must be between 1 and 100000");
+    }
+    // Runs the solver; says on stderr (unless quiet) when it did not converge.
+    void Run(Solver& solver, const std::string& scenePath, Progress& progress, bool quiet) const {
+        auto report = [&](const std::string& stage, double f) { progress.Update(stage, f); };
+        if (iterations > 0) {
+            solver.Iterate(iterations);
+            return;
+        }
+        Convergence c = IterateUntilConverged(solver, tolerance, maxIterations, report);
+        if (!c.converged && solver.Stats().divergence.empty() && !quiet) {
+            progress.Done();
+            std::fprintf(stderr,
+                         "penumbra: warning: %s: not converged after %d iterations (the last "
+                         "changed the answer by %.2g, --tolerance %.2g); writing it anyway\n",
+                         scenePath.c_str(), c.iterations, c.change, tolerance);
+        }
+    }
+};
+
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
-         int iterations, const std::string& device, const std::string& scheme,
+         const IterationOptions& iterations, const std::string& device, const std::string& scheme,
          const std::string& channelName, const EnvironmentOptions& environment, bool quiet) {
     Channel channel = ParseChannel(channelName);
     CheckOutputPath(outPath);
     settings.device = ParseDevice(device);
     settings.scheme = ParseScheme(scheme);
-    if (iterations < 0 || iterations > 100000)
-        throw Error("--iterations must be between 0 and 100000");
+    iterations.Check();
 
     Progress progress(!quiet && StderrIsTerminal());
     progress.Update("loading " + scenePath, 0.0);
@@ -89,7 +137,7 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     environment.Apply(scene);
     auto solver = CreateSolver(
         scene, settings, [&](const std::string& stage, double f) { progress.Update(stage, f); });
-    solver->Iterate(iterations);
+    iterations.Run(*solver, scenePath, progress, quiet);
     progress.Done();
     // A diverged solution is not written: no file is better than a wrong one.
     if (std::string why = solver->Stats().divergence; !why.empty()) {
@@ -105,13 +153,14 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
         const SolverStats& s = solver->Stats();
         std::fprintf(stderr,
                      "%s: %zu triangles -> %zu elements, %zu links, %d bins, element size %.4g m\n"
-                     "  device %s; links built in %.3f s; %d iterations at %.2f ms each",
+                     "  device %s; links built in %.3f s; %d iterations (%d passes, scheme %s) "
+                     "at %.2f ms a pass",
                      scenePath.c_str(), scene.TriangleCount(), s.elements, s.links, s.bins,
-                     s.elementSize, s.device.c_str(), s.linkBuildSeconds, s.iterations,
-                     s.MsPerIteration());
+                     s.elementSize, s.device.c_str(), s.linkBuildSeconds, s.iterations, s.gathers,
+                     SchemeName(settings.scheme), s.gathers ? s.msTotal / s.gathers : 0.0);
         for (const auto& p : s.passes)
             std::fprintf(stderr, " | %s %.2f", p.name.c_str(),
-                         s.iterations ? p.msTotal / s.iterations : 0.0);
+                         s.gathers ? p.msTotal / s.gathers : 0.0);
         if (s.lights)
             std::fprintf(stderr,
                          "\n  %d punctual lights: %d shadow maps of %d² in %.2f ms, direct light "
@@ -201,7 +250,7 @@ struct RenderOptions {
     bool quiet = false;
 };
 
-int Render(const RenderOptions& o, SolverSettings settings, int iterations,
+int Render(const RenderOptions& o, SolverSettings settings, const IterationOptions& iterations,
            const std::string& device, const std::string& channelName,
            const EnvironmentOptions& environment) {
     // Everything the command line says is checked before any work.
@@ -221,8 +270,7 @@ int Render(const RenderOptions& o, SolverSettings settings, int iterations,
         throw Error("--mesh refined needs the solver's own result (drop --lighting)");
     Channel channel = ParseChannel(channelName);
     settings.device = ParseDevice(device);
-    if (iterations < 0 || iterations > 100000)
-        throw Error("--iterations must be between 0 and 100000");
+    iterations.Check();
 
     Progress progress(!o.quiet && StderrIsTerminal());
     progress.Update("loading " + o.scene, 0.0);
@@ -260,12 +308,13 @@ int Render(const RenderOptions& o, SolverSettings settings, int iterations,
         solver = CreateSolver(scene, settings, [&](const std::string& stage, double f) {
             progress.Update(stage, f);
         });
-        solver->Iterate(iterations);
+        iterations.Run(*solver, o.scene, progress, o.quiet);
         perSurfel = solver->SurfelIrradiance(channel);
         for (size_t p = 0; p < scene.primitives.size(); ++p)
             perVertex.push_back(PrimitiveIrradiance(solver->GetSurfels(), perSurfel, scene, p));
-        source = "antiradiance on " + solver->Stats().device + ", " + std::to_string(iterations) +
-                 " iterations, channel " + ChannelName(channel);
+        source = "antiradiance on " + solver->Stats().device + ", " +
+                 std::to_string(solver->Stats().iterations) + " iterations, channel " +
+                 ChannelName(channel);
     }
     render::Mesh mesh;
     bool heat = !o.compare.empty();
@@ -349,17 +398,17 @@ int main(int argc, char** argv) {
     auto* bake = app.add_subcommand("bake",
                                     "Light a glTF scene in-process and write per-vertex "
                                     "irradiance (.json, or .glb/.gltf with COLOR_0)");
-    std::string scenePath, outPath, device = "auto", scheme = "symmetric",
+    std::string scenePath, outPath, device = "auto", scheme = "adaptive",
                                     linkOracle = "conservative", channel = "indirect";
     SolverSettings settings;
-    int iterations = 8;
+    IterationOptions iterations;
     bool quiet = false;
     bake->add_option("scene", scenePath, "glTF 2.0 scene (.gltf or .glb)")->required();
     bake->add_option("-o,--output", outPath, "output file: .json, .glb or .gltf")->required();
     bake->add_option("--solver", settings.solver, "solver (antiradiance)")->capture_default_str();
     bake->add_option("--bins", settings.bins, "direction bins, 32..1024, a multiple of 4")
         ->capture_default_str();
-    bake->add_option("--iterations", iterations, "solver iterations")->capture_default_str();
+    iterations.Add(bake);
     bake->add_option("--element-size", settings.elementSize,
                      "longest element edge after refinement, metres (default: scene diameter/40)");
     bake->add_option("--scheme", scheme,
@@ -444,7 +493,7 @@ int main(int argc, char** argv) {
         "and/or PNG (tone-mapped)");
     RenderOptions ro;
     SolverSettings renderSettings;
-    int renderIterations = 8;
+    IterationOptions renderIterations;
     std::string renderSolverDevice = "auto", renderChannel = "total";
     render->add_option("scene", ro.scene, "glTF 2.0 scene (.gltf or .glb)")->required();
     render->add_option("-o,--output", ro.outputs, "image file(s): .exr and/or .png")->required();
@@ -475,8 +524,7 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     render->add_option("--bins", renderSettings.bins, "direction bins (solver)")
         ->capture_default_str();
-    render->add_option("--iterations", renderIterations, "solver iterations")
-        ->capture_default_str();
+    renderIterations.Add(render);
     render->add_option("--element-size", renderSettings.elementSize,
                        "metres; 0 = scene diameter / 40");
     render->add_option("--device", renderSolverDevice, "solver device: auto, gpu, lavapipe, cpu")

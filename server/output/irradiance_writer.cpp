@@ -38,6 +38,8 @@ nlohmann::json StatsToJson(const SolverStats& s) {
     j["link_build_seconds"] = s.linkBuildSeconds;
     j["setup_seconds"] = s.setupSeconds;
     j["ms_per_iteration"] = s.MsPerIteration();
+    j["passes_run"] = s.gathers;
+    j["ms_per_pass"] = s.gathers ? s.msTotal / s.gathers : 0.0;
     if (s.lights > 0) {
         j["punctual_lights"] = s.lights;
         j["shadow_views"] = s.shadowViews;

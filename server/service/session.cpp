@@ -438,16 +438,7 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
         note += (note.empty() ? "" : "; ") + std::string("stopped: the solution ") + divergence +
                 "; the last bounded irradiance is kept";
     std::vector<glm::vec3> surfels = solver_->SurfelIrradiance();
-    double changed = 0.0, total = 0.0;
-    bool comparable = lastSurfels_.size() == surfels.size();
-    for (size_t i = 0; i < surfels.size(); ++i) {
-        total += std::abs(surfels[i].x) + std::abs(surfels[i].y) + std::abs(surfels[i].z);
-        if (comparable) {
-            glm::vec3 d = surfels[i] - lastSurfels_[i];
-            changed += std::abs(d.x) + std::abs(d.y) + std::abs(d.z);
-        }
-    }
-    double change = comparable ? (total > 0.0 ? changed / total : 0.0) : 1.0;
+    const double change = RelativeChange(surfels, lastSurfels_);
     auto frame = std::make_shared<FrameData>();
     frame->scene = name_;
     frame->layout = layout_;

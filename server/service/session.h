@@ -52,7 +52,7 @@ using penumbra::Channel;
 
 struct SessionSettings {
     SolverSettings solver;
-    int iterationsPerFrame = 4;
+    int iterationsPerFrame = 1;  // bounces (Solver::Iterate) per streamed frame
     // The scene counts as converged (and the worker idles) when a frame changes the
     // irradiance by less than this fraction: Σ|ΔE| / Σ|E| over all surfels.
     double convergedChange = 1e-3;

@@ -1,6 +1,9 @@
 // Solver factory and the shared helpers of the solver interface.
 #include "solver/solver.h"
 
+#include <cmath>
+#include <cstdio>
+
 #include "base/check.h"
 #include "solver/antiradiance/antiradiance_solver.h"
 
@@ -97,6 +100,41 @@ std::vector<glm::vec3> PrimitiveIrradiance(const Surfels& surfels,
     // a slightly negative sum; irradiance cannot be negative.
     for (auto& e : out) e = glm::max(e, glm::vec3(0.0f));
     return out;
+}
+
+double RelativeChange(const std::vector<glm::vec3>& now, const std::vector<glm::vec3>& before) {
+    if (now.size() != before.size()) return 1.0;
+    double changed = 0.0, total = 0.0;
+    for (size_t i = 0; i < now.size(); ++i)
+        for (int c = 0; c < 3; ++c) {
+            total += std::abs(now[i][c]);
+            changed += std::abs(now[i][c] - before[i][c]);
+        }
+    return total > 0.0 ? changed / total : 0.0;
+}
+
+Convergence IterateUntilConverged(Solver& solver, double tolerance, int maxIterations,
+                                  const ProgressFn& progress) {
+    Convergence c;
+    std::vector<glm::vec3> last = solver.SurfelIrradiance(Channel::kTotal);
+    while (c.iterations < maxIterations) {
+        solver.Iterate(1);
+        if (!solver.Stats().divergence.empty()) break;
+        ++c.iterations;
+        std::vector<glm::vec3> now = solver.SurfelIrradiance(Channel::kTotal);
+        c.change = RelativeChange(now, last);
+        last = std::move(now);
+        if (progress) {
+            char stage[64];
+            std::snprintf(stage, sizeof stage, "iterating, change %.2g", c.change);
+            progress(stage, static_cast<double>(c.iterations) / maxIterations);
+        }
+        if (c.change < tolerance) {
+            c.converged = true;
+            break;
+        }
+    }
+    return c;
 }
 
 }  // namespace penumbra

@@ -40,10 +40,9 @@ struct SolverSettings {
     std::string solver = "antiradiance";
     int bins = 128;
     float elementSize = 0.0f;  // metres; 0 picks kDefaultElementFraction × scene diameter
-    // Still the paper's symmetric scheme by default: the adaptive one settles every scene
-    // the symmetric one does and the rows of boxes it diverges on, but not yet rows of books
-    // (docs/STATUS.md, issue 18); the default moves when it does.
-    Scheme scheme = Scheme::kSymmetric;
+    // Adaptive by default: the paper's symmetric scheme diverges on rows and stacks of
+    // occluders (docs/SOLVER.md "Stability"); where it converges, both reach one fixed point.
+    Scheme scheme = Scheme::kAdaptive;
     int antiradianceSteps = 3;  // asymmetric: antiradiance steps after each radiance step
     // Adaptive: antiradiance steps end when no leaf's irradiance moved by more than
     // `antiradianceTolerance` × the largest leaf irradiance in the last step, or after
@@ -95,7 +94,8 @@ struct SolverStats {
     size_t nodes = 0;     // hierarchy nodes, leaves and clusters
     size_t links = 0;
     int bins = 0;
-    int iterations = 0;  // done so far
+    int iterations = 0;  // done so far (Solver::Iterate)
+    int gathers = 0;     // global + local passes they took (docs/SOLVER.md "Stability")
     float elementSize = 0.0f;
     double linkBuildSeconds = 0.0;
     double setupSeconds = 0.0;  // scene → device-resident tables, links included
@@ -146,9 +146,9 @@ inline constexpr float kDivergenceMargin = 2.0f;
 class Solver {
   public:
     virtual ~Solver() = default;
-    // Runs `n` more iterations (one global + local pass each; the scheme says which
-    // operators each pass applies). Does nothing once the solution has diverged
-    // (Stats().divergence).
+    // Runs `n` more iterations: n more bounces of light, each ending in a solution that
+    // SurfelIrradiance reports (how many passes an iteration takes is the solver's own:
+    // Stats().gathers). Does nothing once the solution has diverged (Stats().divergence).
     virtual void Iterate(int n) = 0;
     // Irradiance per surfel in lux: `indirect` (all light arriving from surfaces),
     // `direct` (punctual lights, shadowed) or `total`.
@@ -202,6 +202,21 @@ Channel ParseChannel(const std::string& name);                // "indirect" | "d
 BackOcclusion ParseBackOcclusion(const std::string& name);    // "auto" | "on" | "off"
 TablePrecision ParseTablePrecision(const std::string& name);  // "auto" | "fp32" | "fp16"
 const char* ChannelName(Channel channel);
+
+// How much a solution moved: Σ|now − before| / Σ|now| over surfels and channels; 1 when
+// the two are not comparable (other sizes), 0 when `now` is all zeros.
+double RelativeChange(const std::vector<glm::vec3>& now, const std::vector<glm::vec3>& before);
+
+// Iterating until the answer stops moving (bake, render; the service decides per frame):
+// iterations until one changes the surfels' irradiance (every channel) by less than
+// `tolerance` (RelativeChange), at most `maxIterations`, or until the solution diverged.
+struct Convergence {
+    int iterations = 0;
+    double change = 1.0;     // of the last iteration
+    bool converged = false;  // change < tolerance
+};
+Convergence IterateUntilConverged(Solver& solver, double tolerance, int maxIterations,
+                                  const ProgressFn& progress = {});
 
 // Per-vertex irradiance for primitive `p` in its input vertex order, clamped at zero.
 std::vector<glm::vec3> PrimitiveIrradiance(const Surfels& surfels,

@@ -10,11 +10,11 @@ namespace {
 
 using testing::ExpectConverges;
 
-// Kept small for CI (about a minute each on two cores): the deepest row and random boxes,
-// with validation on.
+// Kept small for CI (one scene, 500 iterations, about 2,500 passes): the deepest row of
+// boxes, where the unbounded and the symmetric iterations diverge, with validation on. The
+// bounds of the local pass (shaders/local.comp, Blocked) are what keeps it finite.
 TEST(Stability, ClutterScenesConvergeOnLavapipe) {
-    ExpectConverges("box-row-10-2cm", scenes::BoxRow(10, 0.02f).Build(), DeviceChoice::kLavapipe);
-    ExpectConverges("random-boxes-1", scenes::RandomBoxes(40, 1).Build(), DeviceChoice::kLavapipe);
+    ExpectConverges("box-row-15-5mm", scenes::BoxRow(15, 0.005f).Build(), DeviceChoice::kLavapipe);
 }
 
 }  // namespace

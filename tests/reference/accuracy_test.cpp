@@ -60,18 +60,21 @@ Scene CornellWithPointLight() {
     return scene;
 }
 
-// Measured 9.7% (128 bins, 0.1 m elements, 8 iterations; reference 1024 samples, itself
-// ≈ 1.7% noisy). The ceiling light spans about one bin from most of the room, so direct
-// light is quantised to bin centres (±10–20% vertex to vertex, no overall bias: each wall's
-// total is within 6%); the worst vertices are where walls meet the ceiling.
+// Measured 8.8% (128 bins, 0.1 m elements, 8 iterations of the adaptive scheme; 9.7% with
+// the symmetric one before issue 18; reference 1024 samples, itself ≈ 1.7% noisy). The ceiling
+// light spans about one bin from most of the room, so direct light is quantised to bin centres
+// (±10–20% vertex to vertex, no overall bias: each wall's total is within 6%); the worst vertices
+// are where walls meet the ceiling.
 TEST(Accuracy, CornellBoxCoarse) { EXPECT_LT(SolverRmse("cornell-box.gltf", 0.1f, 1024), 0.13); }
 
-// Measured 16.1%: the penumbra of the blocker is resolved at the bin and element scale
-// (0.1 m), so the shadow's edge moves and the umbra is shallower than the reference's.
+// Measured 12.4% (16.1% before issue 18): the penumbra of the blocker is resolved at the bin and
+// element scale (0.1 m), so the shadow's edge moves and the umbra is shallower than the
+// reference's.
 TEST(Accuracy, BlockerCoarse) { EXPECT_LT(SolverRmse("blocker.gltf", 0.1f, 1024), 0.20); }
 
-// Measured 13.7%: elements (0.1 m) as thick as the partitions let light leak into the far
-// corridors, where the reference is nearly black; the lit corridor is within a few per cent.
+// Measured 13.2% (13.7% before issue 18): elements (0.1 m) as thick as the partitions let light
+// leak into the far corridors, where the reference is nearly black; the lit corridor is within a
+// few per cent.
 TEST(Accuracy, MazeCoarse) { EXPECT_LT(SolverRmse("maze.gltf", 0.1f, 1024), 0.18); }
 
 // Direct light of a point light: the closed form behind shadow rays (reference) against
@@ -85,24 +88,25 @@ TEST(Accuracy, CornellPointLightDirect) {
         0.04);
 }
 
-// Its bounces (`indirect`): measured 9.3% (reference 1024 samples); like the emissive box,
-// the first bounce is quantised to bin directions.
+// Its bounces (`indirect`): measured 8.6% (9.3% before issue 18) (reference 1024 samples); like the
+// emissive box, the first bounce is quantised to bin directions.
 TEST(Accuracy, CornellPointLightIndirect) {
     EXPECT_LT(SceneRmse(CornellWithPointLight(), "cornell + point light", 0.1f, 1024), 0.12);
 }
 
 // The Cornell box with its panel and a constant white sky coming in through its open front
 // (the walls are one-sided quads: they occlude the sky from both sides; the blocks stand on
-// the floor and keep the front-side rule). Measured 10.4% (reference 1024 samples): about
-// the panel alone (9.7%); the sky's edge at the opening is blurred over a bin.
+// the floor and keep the front-side rule). Measured 8.1% (10.4% before issue 18; reference
+// 1024 samples): about the panel alone (8.8%); the sky's edge at the opening is blurred over a bin.
 TEST(Accuracy, CornellBoxUnderASky) {
     Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
     scene.environment = ConstantEnvironment(glm::vec3(1.0f));
     EXPECT_LT(SceneRmse(scene, "cornell + sky", 0.1f, 1024), 0.13);
 }
 
-// The maze under a sky that enters only through its opening. Measured 15.6%: as without the
-// sky, 0.1 m elements are as thick as the partitions, so light leaks into the far corridors.
+// The maze under a sky that enters only through its opening. Measured 13.4% (15.6% before issue
+// 18): as without the sky, 0.1 m elements are as thick as the partitions, so light leaks into the
+// far corridors.
 TEST(Accuracy, MazeUnderASky) {
     Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/maze.gltf");
     scene.environment = ConstantEnvironment(glm::vec3(0.5f, 0.6f, 1.0f));
@@ -111,9 +115,9 @@ TEST(Accuracy, MazeUnderASky) {
 
 // The glossy box (issue 5): a spot on a glossy metal cube, the room lit by what the cube and
 // a gold column reflect. `indirect` (every bounce, the spot's direct light excluded).
-// Measured 26.0% (18.2% at 512 bins). Each surface's mean is within 8% of the reference's;
-// the error is where the light lands: the cube's lobe is carried by 128 bins (about 18°
-// apart), so its reflection reaches the walls as bin-shaped patches instead of a smooth
+// Measured 24.1% (26.0% before issue 18; 18.2% at 512 bins then). Each surface's mean is within 8%
+// of the reference's; the error is where the light lands: the cube's lobe is carried by 128 bins
+// (about 18° apart), so its reflection reaches the walls as bin-shaped patches instead of a smooth
 // highlight (docs/ACCURACY.md).
 TEST(Accuracy, GlossyBoxCoarse) { EXPECT_LT(SolverRmse("glossy-box.gltf", 0.1f, 1024), 0.30); }
 

@@ -34,25 +34,26 @@ inline double Change(const std::vector<glm::vec3>& a, const std::vector<glm::vec
     return den > 0 ? num / den : 0.0;
 }
 
-// 500 passes: |E| of every surfel within the furnace bound after every pass, and passes
-// 400 → 500 change the answer by less than 0.1%.
+// 500 iterations: |E| of every surfel within the furnace bound after every iteration, and
+// iterations 400 → 500 change the answer by less than 0.1%.
 inline void ExpectConverges(const std::string& name, const Scene& scene, DeviceChoice device) {
     SCOPED_TRACE(name);
     const float bound = scenes::FurnaceBound(scene);
     auto solver = CreateSolver(scene, ClutterSettings(device));
     std::vector<glm::vec3> at400;
     float largest = 0.0f;
-    for (int pass = 1; pass <= 500; ++pass) {
+    for (int iteration = 1; iteration <= 500; ++iteration) {
         solver->Iterate(1);
-        ASSERT_EQ(solver->Stats().divergence, "") << "pass " << pass;
+        ASSERT_EQ(solver->Stats().divergence, "") << "iteration " << iteration;
         const std::vector<glm::vec3> e = solver->SurfelIrradiance();
         for (const glm::vec3& v : e)
             largest = std::max({largest, std::abs(v.x), std::abs(v.y), std::abs(v.z)});
-        ASSERT_LE(largest, bound) << "pass " << pass << ": a surfel past the furnace bound";
-        if (pass == 400) at400 = e;
+        ASSERT_LE(largest, bound) << "iteration " << iteration
+                                  << ": a surfel past the furnace bound";
+        if (iteration == 400) at400 = e;
     }
     const double change = Change(solver->SurfelIrradiance(), at400);
-    EXPECT_LT(change, 1e-3) << "passes 400 → 500 still change the answer";
+    EXPECT_LT(change, 1e-3) << "iterations 400 → 500 still change the answer";
     const SolverStats s = solver->Stats();
     EXPECT_EQ(s.antiradianceCapHits, 0u);
     if (auto* ar = dynamic_cast<AntiradianceSolver*>(solver.get())) {
@@ -61,8 +62,9 @@ inline void ExpectConverges(const std::string& name, const Scene& scene, DeviceC
     }
     std::printf(
         "  %-26s %s: max |E| %.3g of bound %.3g, change 400→500 %.2g, %d bounces, "
-        "%d antiradiance steps in the last\n",
-        name.c_str(), s.device.c_str(), largest, bound, change, s.bounces, s.lastAntiradianceSteps);
+        "%d passes, %d antiradiance steps in the last bounce\n",
+        name.c_str(), s.device.c_str(), largest, bound, change, s.bounces, s.gathers,
+        s.lastAntiradianceSteps);
 }
 
 }  // namespace penumbra::testing

@@ -136,23 +136,28 @@ void AntiradianceSolver::Iterate(int n) {
     if (n < 0) throw Error("iteration count must not be negative");
     auto start = std::chrono::steady_clock::now();
     for (int i = 0; i < n && divergence_.empty(); ++i) {
-        const LocalMode mode = schedule_.Next();
-        if (cpu_)
-            cpu_->Iterate(mode);
-        else
-            gpu_->Iterate(mode);
-        ++iterations_;
-        // Every pass's irradiance is read (on a Vulkan device 12 bytes a leaf after a pass
-        // that was waited for anyway): the adaptive schedule goes by it, and the guard.
-        // Settled solutions are held to the bound, the transients in between only to being
-        // finite.
-        std::vector<float> e = LeafIrradiance();
-        const bool settled = schedule_.Finished(e);
-        const float bound = settled ? bound_ : std::numeric_limits<float>::infinity();
-        if (std::string why = Divergence(e, bound); !why.empty())
-            divergence_ = "diverged at iteration " + std::to_string(iterations_) + ": " + why;
-        else if (settled)
-            settled_ = std::move(e);
+        // One iteration: passes until the schedule settles (one pass under the symmetric
+        // scheme; a radiance step and its antiradiance steps under the others).
+        for (bool settled = false; !settled && divergence_.empty();) {
+            const LocalMode mode = schedule_.Next();
+            if (cpu_)
+                cpu_->Iterate(mode);
+            else
+                gpu_->Iterate(mode);
+            // Every pass's irradiance is read (on a Vulkan device 12 bytes a leaf after a
+            // pass that was waited for anyway): the adaptive schedule goes by it, and the
+            // guard. Settled solutions are held to the bound, the transients in between
+            // only to being finite.
+            std::vector<float> e = LeafIrradiance();
+            settled = schedule_.Finished(e);
+            const float bound = settled ? bound_ : std::numeric_limits<float>::infinity();
+            if (std::string why = Divergence(e, bound); !why.empty())
+                divergence_ = "diverged at iteration " + std::to_string(iterations_ + 1) +
+                              " (pass " + std::to_string(schedule_.passes) + "): " + why;
+            else if (settled)
+                settled_ = std::move(e);
+        }
+        if (divergence_.empty()) ++iterations_;
         if (progress_) progress_("iterating", static_cast<double>(i + 1) / n);
     }
     msTotal_ +=
@@ -309,6 +314,7 @@ SolverStats AntiradianceSolver::Stats() const {
     if (!model_.links.dynamic.empty()) s.linkUpdate = DeviceLinkUpdate() ? "device" : "host";
     s.msLinkUpdateDevice = gpu_ ? gpu_->LinkUpdateMs() : 0.0;
     s.motionDeclined = model_.motionDeclined;
+    s.gathers = schedule_.passes;
     s.bounces = schedule_.bounces;
     s.lastAntiradianceSteps = schedule_.lastSteps;
     s.antiradianceCapHits = schedule_.capHits;

@@ -169,6 +169,16 @@ inline float LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf,
     else
         for (int b = 0; b < bins; ++b) through[b] = area * std::min(cosine[b], 0.0f);
 
+    // Physical bounds the discrete antiradiance can break (docs/SOLVER.md "Stability"):
+    // antiradiance sent on carries the light a leaf blocks, which is never negative, so it
+    // reads each bin's L_in at zero or above; and the irradiance E is never negative. With
+    // them an antiradiance step is an order-reversing map between 0 and the unoccluded
+    // incidence, bounded however deep the stack, where unbounded Jacobi steps on a stack of
+    // d occluders swing through transients of binomial size and diverge in float. E keeps
+    // the bins' signed sum: over-cancelling bins offset leaking ones in it.
+    Rgba blocked[Directions::kMaxBins];
+    const Rgba zero{};
+    for (int k = 0; k < bins; ++k) blocked[k] = lin[k] > zero ? lin[k] : zero;
     Rgba e{}, e1{};  // front light, two sums to halve the chain of additions
     int b = 0;
     for (; b + 1 < bins; b += 2) {
@@ -177,6 +187,7 @@ inline float LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf,
     }
     if (b < bins) e += incoming[b] * lin[b];
     e = (e + e1) * (m.dirs.BinSolidAngle() * leaf.cosNormIn);
+    e = e > zero ? e : zero;
     irradiance[0] = e[0];
     irradiance[1] = e[1];
     irradiance[2] = e[2];
@@ -196,7 +207,7 @@ inline float LocalLeaf(const AntiradianceModel& m, const LeafAttributes& leaf,
         else
             std::fill(spec, spec + bins, Rgba{});  // only back bins are written
     }
-    auto exitant = [&](int b) { return outgoing[b] * front + through[b] * lin[b]; };
+    auto exitant = [&](int b) { return outgoing[b] * front + through[b] * blocked[b]; };
     if (glossy)
         for (int b = 0; b < bins; ++b) spec[b] = outgoing[b] * spec[b];
     auto exitantGlossy = [&](int b) { return exitant(b) + spec[b]; };

@@ -19,7 +19,9 @@ bool PassSchedule::Finished(const std::vector<float>& irradiance) {
     const LocalMode mode = Next();
     ++passes;
     if (mode & kReflect) ++bounces;
-    if (!NeedsIrradiance()) return true;
+    // Symmetric: every pass is a bounce. Asymmetric: a bounce ends with its last
+    // antiradiance step, where the next pass is a radiance step.
+    if (!NeedsIrradiance()) return ModeOfIteration(settings_, passes) & kReflect;
     if (!wasAntiradiance) {
         // A radiance step: its irradiance is the baseline of the first antiradiance step.
         last_ = irradiance;

@@ -36,7 +36,8 @@ class PassSchedule {
     // adaptive scheme's antiradiance has converged for the current radiance. In between,
     // while antiradiance steps carry light through a stack, E goes through transients far
     // from the answer (up to half the furnace bound on a row of 15 boxes 5 mm apart).
-    // The symmetric and asymmetric schemes are settled after every pass.
+    // The symmetric scheme is settled after every pass, the asymmetric one after the last
+    // antiradiance step of each bounce.
     bool Finished(const std::vector<float>& irradiance);
 
     int passes = 0;
