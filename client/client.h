@@ -88,7 +88,7 @@ struct LoadOptions {
     std::string name;          // session name for an upload
     std::string solver = "antiradiance";
     int bins = 128;
-    int iterationsPerFrame = 4;
+    int iterationsPerFrame = 1;
     float elementSize = 0.0f;  // 0: automatic
     std::string device;        // "" = server default
     bool reload = false;
