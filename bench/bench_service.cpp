@@ -2,7 +2,8 @@
 // clients. Per scene and device it measures streamed frames per second with 1, 4 and 16
 // subscribers, the protocol + server overhead over the solver's own time, and the
 // edit-to-frame latency (client sends an edit, client receives the frame that includes
-// it), p50 and p99, for light edits and for moves. Prints a table and writes
+// it), p50 and p99, for light edits and for moves; beside the frame rates, the relative RMSE
+// of the last streamed frame against `penumbra reference`. Prints a table and writes
 // bench/results/service.json.
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -18,6 +19,7 @@
 #include "bench_util.h"
 #include "client/client.h"
 #include "net/server.h"
+#include "scene/gltf_loader.h"
 #include "service/service.h"
 
 namespace penumbra {
@@ -98,7 +100,22 @@ struct Case {
     std::string light, mover;
 };
 
-nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int edits, int moves) {
+// A streamed frame as `compare` reads it.
+IrradianceFile FrameToFile(const client::Frame& f) {
+    IrradianceFile file;
+    file.solver = "antiradiance";
+    file.channel = "indirect";
+    for (const auto& p : f.primitives) {
+        IrradianceRecord r{p.node, p.mesh, p.primitive, {}};
+        for (size_t i = 0; i + 2 < p.rgb.size(); i += 3)
+            r.irradiance.emplace_back(p.rgb[i], p.rgb[i + 1], p.rgb[i + 2]);
+        file.primitives.push_back(std::move(r));
+    }
+    return file;
+}
+
+nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int edits, int moves,
+                       const IrradianceFile* truth) {
     client::Client editor(srv.url, "bench-editor");
     client::LoadOptions o;
     o.path = c.path;
@@ -167,6 +184,18 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
                                       {"overhead_vs_solver", overhead},
                                       {"cost_vs_one_subscriber", cost}});
         for (auto& cl : clients) cl->Close();
+    }
+    // Accuracy beside the frame rate (issue 18): the frame streamed at the end of the
+    // streaming windows (several seconds of bounces) against `penumbra reference`.
+    if (truth) {
+        client::Frame f = editor.Get(client::Channel::kIndirect, client::Format::kFloat32);
+        const double rmse = Compare(FrameToFile(f), *truth).overall.relRmse;
+        std::printf(
+            "  rel. RMSE of the last frame (%llu iterations%s) against the reference: "
+            "%.1f%%\n",
+            (unsigned long long)f.iterations, f.converged ? ", converged" : "", 100.0 * rmse);
+        out["rel_rmse"] = rmse;
+        out["rmse_frame_iterations"] = f.iterations;
     }
 
     // Latency: one watcher; the editor alternates the light's intensity (or moves a block)
@@ -249,7 +278,7 @@ int main(int argc, char** argv) {
     CLI::App app{"penumbra-bench-service: streaming fps, overhead and edit latency"};
     std::string outDir = "bench/results", devices = "lavapipe,cpu", scenes = "cornell,office";
     double seconds = 4.0;
-    int edits = 30, moves = 5;
+    int edits = 30, moves = 5, samples = 1024;
     app.add_option("--out", outDir, "results folder")->capture_default_str();
     app.add_option("--devices", devices, "comma list of lavapipe, cpu, gpu")->capture_default_str();
     app.add_option("--scenes", scenes, "comma list of cornell, office")->capture_default_str();
@@ -257,6 +286,8 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--edits", edits, "light edits timed")->capture_default_str();
     app.add_option("--moves", moves, "moves timed")->capture_default_str();
+    app.add_option("--samples", samples, "reference paths per vertex for the RMSE (0: none)")
+        ->capture_default_str();
     CLI11_PARSE(app, argc, argv);
 
     auto has = [](const std::string& list, const std::string& x) {
@@ -296,7 +327,13 @@ int main(int argc, char** argv) {
                         break;
                     }
             }
-            report["cases"].push_back(RunCase(srv, c, seconds, edits, c.mover.empty() ? 0 : moves));
+            std::unique_ptr<IrradianceFile> truth;
+            if (samples > 0)
+                truth = std::make_unique<IrradianceFile>(bench::Reference(
+                    LoadGltf((fs::path(PENUMBRA_SOURCE_DIR) / "scenes" / c.path).string()),
+                    samples));
+            report["cases"].push_back(
+                RunCase(srv, c, seconds, edits, c.mover.empty() ? 0 : moves, truth.get()));
         }
     } catch (const std::exception& e) {
         std::fprintf(stderr, "penumbra-bench-service: %s\n", e.what());
