@@ -4,7 +4,6 @@
 // bounce.
 #include "reference/path_tracer.h"
 
-#include <embree3/rtcore.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
@@ -19,6 +18,8 @@
 #include <string>
 
 #include "base/check.h"
+#include "base/pcg.h"
+#include "gather/ray_scene.h"
 
 namespace penumbra {
 namespace {
@@ -27,28 +28,7 @@ constexpr float kPi = std::numbers::pi_v<float>;
 // Vertices are estimated this far (× the scene's diameter) inside their own surface.
 constexpr float kVertexInset = 1e-3f;
 
-// PCG32 (O'Neill 2014): small state, good statistics, one stream per vertex.
-class Rng {
-  public:
-    Rng(uint64_t seed, uint64_t stream) : inc_((stream << 1u) | 1u) {
-        Next();
-        state_ += seed;
-        Next();
-    }
-    uint32_t Next() {
-        uint64_t old = state_;
-        state_ = old * 6364136223846793005ULL + inc_;
-        uint32_t xorshifted = static_cast<uint32_t>(((old >> 18u) ^ old) >> 27u);
-        uint32_t rot = static_cast<uint32_t>(old >> 59u);
-        return (xorshifted >> rot) | (xorshifted << ((-rot) & 31));
-    }
-    // Uniform in [0, 1).
-    float Uniform() { return static_cast<float>(Next() >> 8) * (1.0f / 16777216.0f); }
-
-  private:
-    uint64_t state_ = 0;
-    uint64_t inc_;
-};
+using Rng = Pcg32;  // one stream per vertex
 
 // An orthonormal frame around unit `n` (Duff et al. 2017).
 void Frame(const glm::vec3& n, glm::vec3& t, glm::vec3& b) {
@@ -118,27 +98,10 @@ struct Bsdf {
     }
 };
 
-struct Triangle {
-    glm::vec3 p0, e1, e2;  // p0 + u·e1 + v·e2
-    glm::vec3 normal;      // unit, on the side the vertex normals point to
-    float area;
-    uint32_t material;
-};
-
 class Tracer {
   public:
-    Tracer(const Scene& scene, const ReferenceSettings& s) : scene_(scene), s_(s) {
-        device_ = rtcNewDevice(nullptr);
-        if (!device_) throw Error("Embree: cannot create a device");
-        rtcSetDeviceErrorFunction(device_, &Tracer::OnError, this);
-        rtcScene_ = rtcNewScene(device_);
-        eps_ = 1e-4f * std::max(scene.Diameter(), 1e-6f);
-        Build();
-    }
-    ~Tracer() {
-        if (rtcScene_) rtcReleaseScene(rtcScene_);
-        if (device_) rtcReleaseDevice(device_);
-    }
+    Tracer(const Scene& scene, const ReferenceSettings& s)
+        : scene_(scene), s_(s), rays_(scene), tris_(rays_.Triangles()), eps_(rays_.Epsilon()) {}
 
     // One sample of the irradiance at `x` over the hemisphere of `n`: an emitter point and
     // a cosine-sampled path, combined by multiple importance sampling (Veach 1997, power
@@ -182,74 +145,6 @@ class Tracer {
     }
 
   private:
-    static void OnError(void* self, RTCError code, const char* what) {
-        auto* t = static_cast<Tracer*>(self);
-        if (t->error_.empty())
-            t->error_ = "Embree error " + std::to_string(int(code)) + ": " + (what ? what : "");
-    }
-    void CheckError() const {
-        if (!error_.empty()) throw Error(error_);
-    }
-
-    void Build() {
-        for (const auto& prim : scene_.primitives) {
-            for (size_t i = 0; i + 2 < prim.indices.size(); i += 3) {
-                uint32_t a = prim.indices[i], b = prim.indices[i + 1], c = prim.indices[i + 2];
-                Triangle t;
-                t.p0 = prim.positions[a];
-                t.e1 = prim.positions[b] - t.p0;
-                t.e2 = prim.positions[c] - t.p0;
-                glm::vec3 cr = glm::cross(t.e1, t.e2);
-                float len = glm::length(cr);
-                t.area = 0.5f * len;
-                t.normal = len > 0.0f ? cr / len : glm::vec3(0.0f, 0.0f, 1.0f);
-                glm::vec3 vn = prim.normals[a] + prim.normals[b] + prim.normals[c];
-                if (glm::dot(vn, t.normal) < 0.0f) t.normal = -t.normal;
-                t.material = prim.material;
-                tris_.push_back(t);
-            }
-        }
-        // Emitters, chosen in proportion to their power (area × summed radiance).
-        double total = 0.0;
-        for (uint32_t i = 0; i < tris_.size(); ++i) {
-            const glm::vec3& le = scene_.materials[tris_[i].material].emission;
-            double power = double(tris_[i].area) * (le.x + le.y + le.z);
-            if (power <= 0.0) continue;
-            total += power;
-            emitters_.push_back(i);
-            cdf_.push_back(total);
-        }
-        for (auto& c : cdf_) c /= total;
-        areaPdf_.assign(tris_.size(), 0.0f);
-        for (uint32_t k = 0; k < emitters_.size(); ++k)
-            areaPdf_[emitters_[k]] =
-                float(cdf_[k] - (k ? cdf_[k - 1] : 0.0)) / tris_[emitters_[k]].area;
-
-        RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-        auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                              RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                              3 * tris_.size()));
-        auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(
-            geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(uint32_t), tris_.size()));
-        CheckError();
-        for (size_t i = 0; i < tris_.size(); ++i) {
-            const Triangle& t = tris_[i];
-            const glm::vec3 p[3] = {t.p0, t.p0 + t.e1, t.p0 + t.e2};
-            for (int k = 0; k < 3; ++k) {
-                v[9 * i + 3 * k] = p[k].x;
-                v[9 * i + 3 * k + 1] = p[k].y;
-                v[9 * i + 3 * k + 2] = p[k].z;
-                idx[3 * i + k] = static_cast<uint32_t>(3 * i + k);
-            }
-        }
-        rtcCommitGeometry(geom);
-        rtcAttachGeometry(rtcScene_, geom);
-        rtcReleaseGeometry(geom);
-        rtcSetSceneBuildQuality(rtcScene_, RTC_BUILD_QUALITY_HIGH);
-        rtcCommitScene(rtcScene_);
-        CheckError();
-    }
-
     static float PowerHeuristic(float a, float b) { return a * a / (a * a + b * b); }
 
     // Direct irradiance at `x` (normal `n`) from one emitter point: L_e cosθ_x cosθ_y / d²
@@ -257,13 +152,9 @@ class Tracer {
     // `bsdf`, the radiance it reflects (times f, weighted against sampling the BRDF).
     glm::vec3 NextEvent(const glm::vec3& x, const glm::vec3& n, const Bsdf* bsdf, Rng& rng,
                         uint64_t& rays) const {
-        if (emitters_.empty()) return glm::vec3(0.0f);
-        float u = rng.Uniform();
-        size_t k =
-            std::min<size_t>(std::lower_bound(cdf_.begin(), cdf_.end(), double(u)) - cdf_.begin(),
-                             emitters_.size() - 1);
-        const uint32_t ti = emitters_[k];
-        const Triangle& t = tris_[ti];
+        if (rays_.Emitters().empty()) return glm::vec3(0.0f);
+        const uint32_t ti = rays_.Emitters()[rays_.PickEmitter(rng.Uniform())];
+        const RayTriangle& t = tris_[ti];
         float a = rng.Uniform(), b = rng.Uniform();
         if (a + b > 1.0f) a = 1.0f - a, b = 1.0f - b;
         glm::vec3 y = t.p0 + a * t.e1 + b * t.e2;
@@ -276,7 +167,7 @@ class Tracer {
         glm::vec3 from = x + eps_ * n, to = y + eps_ * t.normal;
         ++rays;
         if (Occluded(from, to - from)) return glm::vec3(0.0f);
-        float pdfArea = areaPdf_[ti];
+        float pdfArea = rays_.AreaPdf(ti);
         float weight = PowerHeuristic(pdfArea * dist2 / cy, bsdf ? bsdf->Pdf(w) : cx / kPi);
         glm::vec3 le = scene_.materials[t.material].emission;
         if (bsdf) le *= bsdf->Eval(w);
@@ -290,34 +181,30 @@ class Tracer {
         glm::vec3 radiance(0.0f), throughput(1.0f);
         float pdfDir = glm::dot(n, dir) / kPi;  // the pdf `dir` was drawn with
         for (int depth = 0; depth <= s_.maxDepth; ++depth) {
-            RTCRayHit rh;
-            Ray(rh.ray, x + eps_ * n, dir, std::numeric_limits<float>::infinity());
-            rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-            RTCIntersectContext ctx;
-            rtcInitIntersectContext(&ctx);
-            rtcIntersect1(rtcScene_, &ctx, &rh);
+            const RayHit hit =
+                rays_.Intersect(x + eps_ * n, dir, std::numeric_limits<float>::infinity());
             ++rays;
-            if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
+            if (!hit.hit) {
                 // Escaped: the environment's radiance from that direction (no next-event
                 // estimate for the sky, so no MIS weight either).
                 if (sky_) radiance += throughput * scene_.environment.Radiance(dir);
                 break;
             }
-            const uint32_t ti = rh.hit.primID;
-            const Triangle& t = tris_[ti];
+            const uint32_t ti = hit.triangle;
+            const RayTriangle& t = tris_[ti];
             float cy = -glm::dot(t.normal, dir);
             if (cy <= 0.0f) break;  // a back side: opaque and black
             const Material& mat = scene_.materials[t.material];
-            if (areaPdf_[ti] > 0.0f) {
-                float dist = rh.ray.tfar;
-                float pdfLight = areaPdf_[ti] * dist * dist / cy;
+            if (rays_.AreaPdf(ti) > 0.0f) {
+                float dist = hit.t;
+                float pdfLight = rays_.AreaPdf(ti) * dist * dist / cy;
                 float weight = PowerHeuristic(pdfDir, pdfLight);
                 radiance += throughput * weight * mat.emission;
             }
             if (depth == s_.maxDepth) break;
             const Bsdf bsdf(mat, t.normal, -dir);
             if (bsdf.Black()) break;
-            x = t.p0 + rh.hit.u * t.e1 + rh.hit.v * t.e2;
+            x = t.p0 + hit.u * t.e1 + hit.v * t.e2;
             n = t.normal;
             // Reflected: next-event estimates of emitters and punctual lights, then one
             // direction drawn from the BRDF carries the rest (throughput f·cos/pdf).
@@ -337,37 +224,16 @@ class Tracer {
         return radiance;
     }
 
-    static void Ray(RTCRay& r, const glm::vec3& o, const glm::vec3& d, float tfar) {
-        r.org_x = o.x, r.org_y = o.y, r.org_z = o.z;
-        r.dir_x = d.x, r.dir_y = d.y, r.dir_z = d.z;
-        r.tnear = 0.0f;
-        r.tfar = tfar;
-        r.time = 0.0f;
-        r.mask = ~0u;
-        r.id = 0;
-        r.flags = 0;
-    }
-
     bool Occluded(const glm::vec3& from, const glm::vec3& span) const {
-        RTCRay r;
-        Ray(r, from, span, 1.0f - 1e-4f);
-        RTCIntersectContext ctx;
-        rtcInitIntersectContext(&ctx);
-        rtcOccluded1(rtcScene_, &ctx, &r);
-        return r.tfar < 0.0f;
+        return rays_.Occluded(from, span);
     }
 
     const Scene& scene_;
     const ReferenceSettings& s_;
-    RTCDevice device_ = nullptr;
-    RTCScene rtcScene_ = nullptr;
-    std::string error_;
+    RayScene rays_;
+    const std::vector<RayTriangle>& tris_;
     float eps_;
     bool sky_ = scene_.environment.Active();
-    std::vector<Triangle> tris_;
-    std::vector<uint32_t> emitters_;
-    std::vector<double> cdf_;
-    std::vector<float> areaPdf_;  // per triangle: P(chosen) / area; 0 for non-emitters
 };
 
 }  // namespace

@@ -1,0 +1,76 @@
+// The scene's triangles in an Embree BVH, for everything that traces rays against the input
+// geometry: the reference path tracer (reference/path_tracer.cpp) and the gather stage's
+// emitter direct light (gather/emitter_direct.h). Also the emitting triangles with a
+// power-proportional choice, for light sampling.
+#pragma once
+
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <string>
+#include <vector>
+
+#include "scene/scene.h"
+
+struct RTCDeviceTy;
+struct RTCSceneTy;
+
+namespace penumbra {
+
+struct RayTriangle {
+    glm::vec3 p0, e1, e2;  // p0 + u·e1 + v·e2
+    glm::vec3 normal;      // unit, on the side the vertex normals point to (its front)
+    float area = 0.0f;
+    uint32_t material = 0;
+};
+
+struct RayHit {
+    bool hit = false;
+    uint32_t triangle = 0;  // index into RayScene::Triangles()
+    float t = 0.0f, u = 0.0f, v = 0.0f;
+};
+
+class RayScene {
+  public:
+    // Builds the BVH over every triangle of `scene` (which must outlive this object).
+    // Throws penumbra::Error on an Embree failure.
+    explicit RayScene(const Scene& scene);
+    ~RayScene();
+    RayScene(const RayScene&) = delete;
+    RayScene& operator=(const RayScene&) = delete;
+
+    // Whether anything lies on the segment from `from` to `from + span` (its last 10⁻⁴
+    // excluded, so that a ray aimed at a surface point is not stopped by that surface).
+    bool Occluded(const glm::vec3& from, const glm::vec3& span) const;
+    // The nearest triangle along origin + t·dir, t in (0, tfar).
+    RayHit Intersect(const glm::vec3& origin, const glm::vec3& dir, float tfar) const;
+
+    const Scene& GetScene() const { return scene_; }
+    const std::vector<RayTriangle>& Triangles() const { return tris_; }
+    // Emitting triangles (emission > 0), chosen in proportion to their power (area × summed
+    // radiance): `emitters[k]` with the cumulative probability `cdf[k]`.
+    const std::vector<uint32_t>& Emitters() const { return emitters_; }
+    const std::vector<double>& EmitterCdf() const { return cdf_; }
+    // The emitter k a uniform number u in [0, 1) picks.
+    size_t PickEmitter(float u) const;
+    // Per triangle: P(chosen) / area, the area density of a point drawn by PickEmitter and
+    // then uniformly on the triangle; 0 for triangles that do not emit.
+    float AreaPdf(uint32_t triangle) const { return areaPdf_[triangle]; }
+    // Offset that lifts ray origins off their surface: 10⁻⁴ × the scene's diameter.
+    float Epsilon() const { return eps_; }
+
+  private:
+    void Build();
+    void CheckError() const;
+
+    const Scene& scene_;
+    RTCDeviceTy* device_ = nullptr;
+    RTCSceneTy* rtcScene_ = nullptr;
+    std::string error_;
+    float eps_ = 0.0f;
+    std::vector<RayTriangle> tris_;
+    std::vector<uint32_t> emitters_;
+    std::vector<double> cdf_;
+    std::vector<float> areaPdf_;
+};
+
+}  // namespace penumbra
