@@ -7,6 +7,7 @@
 #include "base/check.h"
 #include "base/progress.h"
 #include "cmd/service_cli.h"
+#include "gather/first_shot.h"
 #include "output/compare.h"
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
@@ -124,9 +125,12 @@ struct IterationOptions {
 
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
          const IterationOptions& iterations, const std::string& device, const std::string& scheme,
-         const std::string& channelName, const EnvironmentOptions& environment, bool quiet) {
+         const std::string& channelName, const EnvironmentOptions& environment, int emitterRays,
+         bool quiet) {
     Channel channel = ParseChannel(channelName);
     CheckOutputPath(outPath);
+    if (emitterRays < 0 || emitterRays > 65536)
+        throw Error("--emitter-direct must be between 0 (off) and 65536 rays");
     settings.device = ParseDevice(device);
     settings.scheme = ParseScheme(scheme);
     iterations.Check();
@@ -135,8 +139,14 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     progress.Update("loading " + scenePath, 0.0);
     Scene scene = LoadGltf(scenePath);
     environment.Apply(scene);
-    auto solver = CreateSolver(
+    std::unique_ptr<Solver> solver = CreateSolver(
         scene, settings, [&](const std::string& stage, double f) { progress.Update(stage, f); });
+    if (emitterRays > 0) {
+        progress.Update("emitter direct light", 0.0);
+        EmitterDirectSettings shot;
+        shot.rays = emitterRays;
+        solver = std::make_unique<EmitterFirstShot>(std::move(solver), scene, shot);
+    }
     iterations.Run(*solver, scenePath, progress, quiet);
     progress.Done();
     // A diverged solution is not written: no file is better than a wrong one.
@@ -458,6 +468,12 @@ int main(int argc, char** argv) {
                      "service uses 1; 0: no limit)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
+    int emitterRays = 0;
+    bake->add_option("--emitter-direct", emitterRays,
+                     "shadow rays per surfel for the emitters' direct light, traced and handed "
+                     "to the solver as its first shot (the gather stage, issue 19; not for "
+                     "scenes with glossy materials yet); 0: the solver carries the emission")
+        ->capture_default_str();
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
 
@@ -562,7 +578,7 @@ int main(int argc, char** argv) {
             settings.backOcclusion = ParseBackOcclusion(backOcclusion);
             settings.tables = ParseTablePrecision(tables);
             return Bake(scenePath, outPath, settings, iterations, device, scheme, channel, bakeEnv,
-                        quiet);
+                        emitterRays, quiet);
         }
         if (reference->parsed()) {
             refSettings.channel = ParseChannel(refChannel);

@@ -68,6 +68,8 @@ nlohmann::json StatsToJson(const SolverStats& s) {
     j["antiradiance_cap_hits"] = s.antiradianceCapHits;
     if (std::isfinite(s.irradianceBound)) j["irradiance_bound"] = s.irradianceBound;
     if (!s.divergence.empty()) j["divergence"] = s.divergence;
+    if (s.emitterRays > 0)
+        j["emitter_direct"] = {{"rays", s.emitterRays}, {"ms", s.msEmitterDirect}};
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

@@ -134,6 +134,11 @@ struct SolverStats {
     // the solver stops iterating (Iterate does nothing more).
     float irradianceBound = 0.0f;
     std::string divergence;
+    // The gather stage's first shot (gather/first_shot.h): shadow rays a surfel for the
+    // emitters' direct light (0: the solver carries the emission itself), and the last
+    // computation's milliseconds.
+    int emitterRays = 0;
+    double msEmitterDirect = 0.0;
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };
@@ -181,6 +186,16 @@ class Solver {
     // (the others start from their emission). Rows from a solver with other bins or another
     // surfel count are refused with penumbra::Error.
     virtual std::vector<float> SurfelExitant() { return {}; }
+    // The first shot from outside (the gather stage, gather/emitter_direct.h): per surfel, the
+    // irradiance arriving straight from emitting surfaces, computed with explicit visibility.
+    // The solver reflects it like the punctual lights' direct light, reports it in the
+    // `indirect` channel, and stops carrying its emitters' own emission, so it carries only
+    // bounces. Empty: back to carrying the emission itself. Throws penumbra::Error when the
+    // solver cannot take it.
+    virtual void SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) {
+        (void)perSurfel;
+        throw Error("this solver takes no emitter direct light from outside");
+    }
     virtual void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) {
         (void)rows, (void)keep;
     }

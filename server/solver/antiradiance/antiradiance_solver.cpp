@@ -30,6 +30,7 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
     ValidateEnvironment(scene.environment);
     model_ = BuildAntiradianceModel(scene, settings, progress);
     environment_ = scene.environment;
+    materials_ = scene.materials;
     if (device == DeviceChoice::kCpu) {
         // fp16 where the CPU converts in hardware, unless asked otherwise (kFp16 on a CPU
         // without F16C throws).
@@ -170,10 +171,13 @@ std::vector<glm::vec3> AntiradianceSolver::SurfelIrradiance(Channel channel) {
         leaf = settled_.empty() ? std::vector<float>(model_.leaves.size() * 3, 0.0f) : settled_;
     std::vector<glm::vec3> out(model_.surfels.size(), glm::vec3(0.0f));
     for (size_t i = 0; i < model_.leaves.size(); ++i) {
+        // leafDirect holds the punctual lights' E_d plus, with SetEmitterDirect, the
+        // emitters' first shot, which belongs to `indirect`.
+        const glm::vec3 emitter = emitterDirect_.empty() ? glm::vec3(0.0f) : emitterDirect_[i];
         glm::vec3 e(0.0f);
         if (channel != Channel::kDirect)
-            e = glm::vec3(leaf[i * 3], leaf[i * 3 + 1], leaf[i * 3 + 2]);
-        if (channel != Channel::kIndirect) e += glm::vec3(model_.leafDirect[i]);
+            e = glm::vec3(leaf[i * 3], leaf[i * 3 + 1], leaf[i * 3 + 2]) + emitter;
+        if (channel != Channel::kIndirect) e += glm::vec3(model_.leafDirect[i]) - emitter;
         out[model_.leaves[i].surfel] = e;
     }
     return out;
@@ -183,8 +187,11 @@ void AntiradianceSolver::CopyDirect(const Scene& scene) {
     // The device's E_d is already where its local pass reads it; keep a host copy for the
     // `direct` channel. The CPU back end reads model_.leafDirect itself.
     std::vector<float> e = gpuDirect_ ? gpuDirect_->ReadIrradiance() : direct_->Irradiance();
-    for (size_t i = 0; i < model_.leafDirect.size(); ++i)
+    for (size_t i = 0; i < model_.leafDirect.size(); ++i) {
         model_.leafDirect[i] = glm::vec4(e[i * 4], e[i * 4 + 1], e[i * 4 + 2], 0.0f);
+        if (!emitterDirect_.empty()) model_.leafDirect[i] += glm::vec4(emitterDirect_[i], 0.0f);
+    }
+    if (gpu_ && !emitterDirect_.empty()) gpu_->UploadDirect();
     // Glossy leaves reflect each light along its own mirror direction: per-light shares.
     lightPlaces_ = scene.lights;
     perLight_ = gpuDirect_ ? gpuDirect_->ReadPerLight(scene.lights.size()) : direct_->PerLight();
@@ -226,6 +233,7 @@ void AntiradianceSolver::UpdateLights(const Scene& scene) {
 
 void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
     PENUMBRA_CHECK_EQ(scene.primitives.size(), model_.surfels.firstSurfel.size());
+    materials_ = scene.materials;
     // Surfels of primitive p are the contiguous range [firstSurfel[p], firstSurfel[p + 1]).
     for (size_t p = 0; p < scene.primitives.size(); ++p) {
         size_t end = p + 1 < scene.primitives.size() ? model_.surfels.firstSurfel[p + 1]
@@ -236,7 +244,8 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
     for (LeafAttributes& leaf : model_.leaves) {
         const Material& mat = scene.materials[model_.surfels.materials[leaf.surfel]];
         leaf.albedo = mat.albedo;
-        leaf.emission = mat.emission;
+        // With a first shot from outside the emitters' light is not carried here.
+        leaf.emission = emitterDirect_.empty() ? mat.emission : glm::vec3(0.0f);
     }
     // Which leaves are glossy, and their lobes, may have changed with the materials (most
     // edits, a dimmed emitter say, leave them as they are).
@@ -279,6 +288,40 @@ void AntiradianceSolver::WarmStart(const std::vector<float>& rows,
 
 std::vector<std::string> AntiradianceSolver::ValidationMessages() const {
     return gpu_ ? gpu_->ValidationMessages() : std::vector<std::string>{};
+}
+
+void AntiradianceSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) {
+    if (!perSurfel.empty() && perSurfel.size() != model_.surfels.size())
+        throw Error("emitter direct light for " + std::to_string(perSurfel.size()) +
+                    " surfels; the solver has " + std::to_string(model_.surfels.size()));
+    if (!perSurfel.empty() && !model_.glossy.empty())
+        throw Error(
+            "emitter direct light from outside reaches glossy surfaces only through their "
+            "diffuse part; not taken for a scene with glossy materials");
+    // Take the old share out of leafDirect, the new one in.
+    for (size_t i = 0; i < model_.leaves.size(); ++i) {
+        glm::vec3 old = emitterDirect_.empty() ? glm::vec3(0.0f) : emitterDirect_[i];
+        glm::vec3 now = perSurfel.empty() ? glm::vec3(0.0f) : perSurfel[model_.leaves[i].surfel];
+        model_.leafDirect[i] += glm::vec4(now - old, 0.0f);
+    }
+    const bool wasOn = !emitterDirect_.empty();
+    emitterDirect_.clear();
+    if (!perSurfel.empty())
+        for (const LeafAttributes& leaf : model_.leaves)
+            emitterDirect_.push_back(perSurfel[leaf.surfel]);
+    if (wasOn != !emitterDirect_.empty()) {
+        // Emission on or off in the transport: the materials' emission is in the surfels.
+        for (LeafAttributes& leaf : model_.leaves)
+            leaf.emission = emitterDirect_.empty()
+                                ? materials_[model_.surfels.materials[leaf.surfel]].emission
+                                : glm::vec3(0.0f);
+    }
+    if (gpu_) {
+        gpu_->UploadLeaves();
+        gpu_->UploadDirect();
+    }
+    if (cpu_) cpu_->InputsChanged();
+    bound_ = IrradianceBound(model_);
 }
 
 SolverStats AntiradianceSolver::Stats() const {

@@ -30,6 +30,7 @@ class AntiradianceSolver : public Solver {
     std::string GeometryMismatch(const Scene& scene) const override;
     void UpdateGeometry(const Scene& scene) override;
     std::vector<float> SurfelExitant() override;
+    void SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) override;
     void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
 
     const AntiradianceModel& Model() const { return model_; }
@@ -62,6 +63,10 @@ class AntiradianceSolver : public Solver {
     PassSchedule schedule_;
     std::string divergence_;  // SolverStats::divergence
     float bound_ = 0.0f;      // IrradianceBound, redone where the solver's inputs change
+    // SetEmitterDirect: per leaf, the emitters' light (in leafDirect too, which the local
+    // pass reflects); empty while the solver carries the emission itself.
+    std::vector<glm::vec3> emitterDirect_;
+    std::vector<Material> materials_;  // the scene's, as last read (their emission)
     // The leaves' E as the last pass left it (RGB per leaf).
     std::vector<float> LeafIrradiance();
     // The leaves' E when the schedule last settled (PassSchedule::Finished): what
