@@ -141,11 +141,13 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     environment.Apply(scene);
     std::unique_ptr<Solver> solver = CreateSolver(
         scene, settings, [&](const std::string& stage, double f) { progress.Update(stage, f); });
-    if (emitterRays > 0) {
-        progress.Update("emitter direct light", 0.0);
-        EmitterDirectSettings shot;
-        shot.rays = emitterRays;
-        solver = std::make_unique<EmitterFirstShot>(std::move(solver), scene, shot);
+    progress.Update("emitter direct light", 0.0);
+    std::string declined;
+    solver = WithEmitterDirect(std::move(solver), scene, emitterRays, &declined);
+    if (!declined.empty() && declined != "off" && !quiet) {
+        progress.Done();
+        std::fprintf(stderr, "penumbra: note: %s: emitter direct light not traced: %s\n",
+                     scenePath.c_str(), declined.c_str());
     }
     iterations.Run(*solver, scenePath, progress, quiet);
     progress.Done();
@@ -257,6 +259,7 @@ struct RenderOptions {
     std::string size = "800x600";
     std::string camera, cameraName, lighting, compare, mesh = "auto", renderDevice = "auto";
     float errorScale = 0.5f, exposure = 0.0f;
+    int emitterRays = 256;  // bake's --emitter-direct
     bool quiet = false;
 };
 
@@ -281,6 +284,8 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
     Channel channel = ParseChannel(channelName);
     settings.device = ParseDevice(device);
     iterations.Check();
+    if (o.emitterRays < 0 || o.emitterRays > 65536)
+        throw Error("--emitter-direct must be between 0 (off) and 65536 rays");
 
     Progress progress(!o.quiet && StderrIsTerminal());
     progress.Update("loading " + o.scene, 0.0);
@@ -318,6 +323,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
         solver = CreateSolver(scene, settings, [&](const std::string& stage, double f) {
             progress.Update(stage, f);
         });
+        solver = WithEmitterDirect(std::move(solver), scene, o.emitterRays);
         iterations.Run(*solver, o.scene, progress, o.quiet);
         perSurfel = solver->SurfelIrradiance(channel);
         for (size_t p = 0; p < scene.primitives.size(); ++p)
@@ -468,11 +474,11 @@ int main(int argc, char** argv) {
                      "service uses 1; 0: no limit)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
-    int emitterRays = 0;
+    int emitterRays = 256;
     bake->add_option("--emitter-direct", emitterRays,
                      "shadow rays per surfel for the emitters' direct light, traced and handed "
-                     "to the solver as its first shot (the gather stage, issue 19; not for "
-                     "scenes with glossy materials yet); 0: the solver carries the emission")
+                     "to the solver as its first shot (the gather stage; not for scenes with "
+                     "glossy materials yet); 0: the solver carries the emission")
         ->capture_default_str();
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
@@ -541,6 +547,10 @@ int main(int argc, char** argv) {
     render->add_option("--bins", renderSettings.bins, "direction bins (solver)")
         ->capture_default_str();
     renderIterations.Add(render);
+    render
+        ->add_option("--emitter-direct", ro.emitterRays,
+                     "shadow rays per surfel for the emitters' direct light (as bake); 0: off")
+        ->capture_default_str();
     render->add_option("--element-size", renderSettings.elementSize,
                        "metres; 0 = scene diameter / 40");
     render->add_option("--device", renderSolverDevice, "solver device: auto, gpu, lavapipe, cpu")

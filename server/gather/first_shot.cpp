@@ -1,6 +1,7 @@
 // The emitters' direct light as a solver's first shot (first_shot.h).
 #include "gather/first_shot.h"
 
+#include <algorithm>
 #include <chrono>
 
 namespace penumbra {
@@ -48,6 +49,29 @@ SolverStats EmitterFirstShot::Stats() const {
     s.emitterRays = settings_.rays;
     s.msEmitterDirect = msShot_;
     return s;
+}
+
+std::unique_ptr<Solver> WithEmitterDirect(std::unique_ptr<Solver> solver, const Scene& scene,
+                                          int rays, std::string* declined) {
+    std::string why;
+    const bool glossy = std::any_of(scene.materials.begin(), scene.materials.end(),
+                                    [](const Material& m) { return m.Glossy(); });
+    const bool emitters = std::any_of(
+        scene.materials.begin(), scene.materials.end(),
+        [](const Material& m) { return glm::any(glm::greaterThan(m.emission, glm::vec3(0.0f))); });
+    if (rays <= 0)
+        why = "off";
+    else if (!emitters)
+        why = "the scene has no emitting surfaces";
+    else if (glossy)
+        why =
+            "not yet for scenes with glossy materials (their lobes would miss it); the solver "
+            "carries the emission";
+    if (declined) *declined = why;
+    if (!why.empty()) return solver;
+    EmitterDirectSettings settings;
+    settings.rays = rays;
+    return std::make_unique<EmitterFirstShot>(std::move(solver), scene, settings);
 }
 
 }  // namespace penumbra

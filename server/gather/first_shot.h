@@ -46,4 +46,11 @@ class EmitterFirstShot : public Solver {
     double msShot_ = 0.0;
 };
 
+// `solver` with the emitters' direct light as its first shot (`rays` shadow rays a surfel),
+// where it can take it: not with rays 0, not for a scene without emitters, not yet for a
+// scene with glossy materials (their lobes would miss the shot). Otherwise `solver` as it
+// is, and `declined` (when given) says why.
+std::unique_ptr<Solver> WithEmitterDirect(std::unique_ptr<Solver> solver, const Scene& scene,
+                                          int rays, std::string* declined = nullptr);
+
 }  // namespace penumbra

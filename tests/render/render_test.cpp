@@ -39,10 +39,12 @@ TEST(Render, WritesExrAndPngOfTheStatedSize) {
             if (image.At(x, y).y > brightest) brightest = image.At(x, y).y, brightestY = y;
     EXPECT_LT(brightestY, 16) << "the light panel is at the top of the picture";
     // Red wall on the left, green on the right (as in the published view).
-    // The aspect is 3:2 and the fov vertical: the box spans about x 16…80.
-    glm::vec3 left = image.At(20, 32), right = image.At(76, 32);
+    // The aspect is 3:2 and the fov vertical: at mid-height the red wall spans about x 18…34,
+    // the green one x 66…78. The light is warm (17, 12, 4 nits), so the green wall's G/R is
+    // about 2 (0.45 · 12 against 0.14 · 17 and its bounces), not more.
+    glm::vec3 left = image.At(24, 32), right = image.At(70, 32);
     EXPECT_GT(left.x, 2.0f * left.y);
-    EXPECT_GT(right.y, 2.0f * right.x);
+    EXPECT_GT(right.y, 1.5f * right.x);
 
     int w = 0, h = 0, n = 0;
     ASSERT_TRUE(stbi_info(png.c_str(), &w, &h, &n)) << "not a PNG";
