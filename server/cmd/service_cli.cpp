@@ -208,6 +208,11 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
         ->add_option("--converged-change", s.loadOptions.convergedChange,
                      "idle once a frame changes irradiance by less (0: stream forever)")
         ->capture_default_str();
+    s.load
+        ->add_option("--emitter-direct", s.loadOptions.emitterRays,
+                     "shadow rays per surfel for the emitters' direct light, the solver's first "
+                     "shot (as bake's; an emissive edit or a move re-traces it); 0: off")
+        ->capture_default_str();
     s.load->add_option("--environment", s.loadOptions.environment,
                        "equirectangular OpenEXR sky under the server's scene root");
     s.load->add_option("--environment-color", s.skyColor, "a constant sky: r,g,b nits")

@@ -412,6 +412,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 req.settings.convergedChange = l->converged_change();
                 if (req.settings.convergedChange == 0.0)
                     req.settings.maxFramesPerEdit = std::numeric_limits<int>::max();
+                if (l->emitter_rays() < 0 || l->emitter_rays() > 65536)
+                    throw ServiceError(ErrorKind::kInvalidArgument,
+                                       "emitter_rays must be 0 (off) … 65536");
+                req.settings.emitterRays = l->emitter_rays();
                 if (!Str(l->link_oracle()).empty()) {
                     try {
                         req.settings.solver.linkOracle = ParseLinkOracle(Str(l->link_oracle()));

@@ -10,6 +10,7 @@
 #include <glm/gtx/quaternion.hpp>
 
 #include "base/check.h"
+#include "gather/first_shot.h"
 #include "hierarchy/directions.h"
 #include "output/irradiance_writer.h"
 
@@ -98,8 +99,11 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     : name_(std::move(name)), settings_(std::move(settings)) {
     if (settings_.iterationsPerFrame < 1 || settings_.iterationsPerFrame > 64)
         throw Error("iterations per frame must be between 1 and 64");
+    if (settings_.emitterRays < 0 || settings_.emitterRays > 65536)
+        throw Error("emitter rays must be between 0 (off) and 65536");
     auto start = Clock::now();
-    solver_ = CreateSolver(scene, settings_.solver, progress);
+    solver_ = WithEmitterDirect(CreateSolver(scene, settings_.solver, progress), scene,
+                                settings_.emitterRays);
     buildSeconds_ = MsSince(start) / 1000.0;
     solverStatsRaw_ = solver_->Stats();
     motionDeclined_ = !solverStatsRaw_.motionDeclined.empty();
@@ -418,7 +422,7 @@ nlohmann::json Session::StatsJson() const {
 std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool motionLinks) const {
     SolverSettings settings = settings_.solver;
     settings.motionLinks = settings.motionLinks && motionLinks;
-    return CreateSolver(scene, settings);
+    return WithEmitterDirect(CreateSolver(scene, settings), scene, settings_.emitterRays);
 }
 
 void Session::ProduceFrame(int iterations, std::string note, bool interruptible) {
