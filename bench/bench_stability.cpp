@@ -75,16 +75,8 @@ int main(int argc, char** argv) {
         if (!wanted.empty() && std::find(wanted.begin(), wanted.end(), name) == wanted.end())
             continue;
         const Scene scene = entry.builder.Build();
-        IrradianceFile truth;
-        if (samples > 0) {
-            ReferenceSettings rs;
-            rs.samples = samples;
-            ReferenceResult ref = RenderReference(scene, rs);
-            IrradianceResult res;
-            res.solver = "reference";
-            res.primitives = ref.irradiance;
-            truth = ToIrradianceFile(scene, res);
-        }
+        const IrradianceFile truth =
+            samples > 0 ? bench::Reference(scene, samples) : IrradianceFile{};
         for (const std::string& device : Split(devices)) {
             SolverSettings settings;
             settings.device = ParseDevice(device);

@@ -129,8 +129,7 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
          bool quiet) {
     Channel channel = ParseChannel(channelName);
     CheckOutputPath(outPath);
-    if (emitterRays < 0 || emitterRays > 65536)
-        throw Error("--emitter-direct must be between 0 (off) and 65536 rays");
+    CheckEmitterRays(emitterRays);
     settings.device = ParseDevice(device);
     settings.scheme = ParseScheme(scheme);
     iterations.Check();
@@ -284,8 +283,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
     Channel channel = ParseChannel(channelName);
     settings.device = ParseDevice(device);
     iterations.Check();
-    if (o.emitterRays < 0 || o.emitterRays > 65536)
-        throw Error("--emitter-direct must be between 0 (off) and 65536 rays");
+    CheckEmitterRays(o.emitterRays);
 
     Progress progress(!o.quiet && StderrIsTerminal());
     progress.Update("loading " + o.scene, 0.0);

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <chrono>
 
+#include "base/check.h"
+
 namespace penumbra {
 
 EmitterFirstShot::EmitterFirstShot(std::unique_ptr<Solver> inner, const Scene& scene,
@@ -27,7 +29,10 @@ void EmitterFirstShot::UpdateMaterials(const Scene& scene) {
         emissionChanged = scene.materials[m].emission != scene_.materials[m].emission;
     for (size_t p = 0; !emissionChanged && p < scene.primitives.size(); ++p)
         emissionChanged = scene.primitives[p].material != scene_.primitives[p].material;
-    scene_ = scene;
+    // Only what a material edit changes (no vertex arrays copied on an edit).
+    scene_.materials = scene.materials;
+    for (size_t p = 0; p < scene.primitives.size() && p < scene_.primitives.size(); ++p)
+        scene_.primitives[p].material = scene.primitives[p].material;
     inner_->UpdateMaterials(scene);
     if (emissionChanged) Shoot();
 }
@@ -51,8 +56,15 @@ SolverStats EmitterFirstShot::Stats() const {
     return s;
 }
 
+void CheckEmitterRays(int rays) {
+    if (rays < 0 || rays > kMaxEmitterRays)
+        throw Error("emitter direct light takes 0 (off) to " + std::to_string(kMaxEmitterRays) +
+                    " rays a surfel, not " + std::to_string(rays));
+}
+
 std::unique_ptr<Solver> WithEmitterDirect(std::unique_ptr<Solver> solver, const Scene& scene,
                                           int rays, std::string* declined) {
+    CheckEmitterRays(rays);
     std::string why;
     const bool glossy = std::any_of(scene.materials.begin(), scene.materials.end(),
                                     [](const Material& m) { return m.Glossy(); });

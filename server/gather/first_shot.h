@@ -46,6 +46,11 @@ class EmitterFirstShot : public Solver {
     double msShot_ = 0.0;
 };
 
+// The most shadow rays a surfel the first shot takes; CheckEmitterRays throws
+// penumbra::Error for a count outside 0 (off) … kMaxEmitterRays.
+inline constexpr int kMaxEmitterRays = 65536;
+void CheckEmitterRays(int rays);
+
 // `solver` with the emitters' direct light as its first shot (`rays` shadow rays a surfel),
 // where it can take it: not with rays 0, not for a scene without emitters, not yet for a
 // scene with glossy materials (their lobes would miss the shot). Otherwise `solver` as it

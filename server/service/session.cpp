@@ -99,11 +99,9 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     : name_(std::move(name)), settings_(std::move(settings)) {
     if (settings_.iterationsPerFrame < 1 || settings_.iterationsPerFrame > 64)
         throw Error("iterations per frame must be between 1 and 64");
-    if (settings_.emitterRays < 0 || settings_.emitterRays > 65536)
-        throw Error("emitter rays must be between 0 (off) and 65536");
+    CheckEmitterRays(settings_.emitterRays);
     auto start = Clock::now();
-    solver_ = WithEmitterDirect(CreateSolver(scene, settings_.solver, progress), scene,
-                                settings_.emitterRays);
+    solver_ = BuildSolver(scene, true, progress);
     buildSeconds_ = MsSince(start) / 1000.0;
     solverStatsRaw_ = solver_->Stats();
     motionDeclined_ = !solverStatsRaw_.motionDeclined.empty();
@@ -419,10 +417,11 @@ nlohmann::json Session::StatsJson() const {
     return j;
 }
 
-std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool motionLinks) const {
+std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool motionLinks,
+                                             const ProgressFn& progress) const {
     SolverSettings settings = settings_.solver;
     settings.motionLinks = settings.motionLinks && motionLinks;
-    return WithEmitterDirect(CreateSolver(scene, settings), scene, settings_.emitterRays);
+    return WithEmitterDirect(CreateSolver(scene, settings, progress), scene, settings_.emitterRays);
 }
 
 void Session::ProduceFrame(int iterations, std::string note, bool interruptible) {

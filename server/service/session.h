@@ -195,8 +195,11 @@ class Session {
     // `lock` held (released around the solver update); returns false, applying nothing, when
     // an edit needs a link rebuild or one is running. A failed update is put in `note`.
     bool ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note);
-    // `motionLinks` false: the usual links even if the settings ask for motion links.
-    std::unique_ptr<Solver> BuildSolver(const Scene& scene, bool motionLinks) const;
+    // The session's solver for `scene`: motion links where the settings ask for them and
+    // `motionLinks` allows (false: the usual links), the emitters' first shot where the
+    // settings ask for it.
+    std::unique_ptr<Solver> BuildSolver(const Scene& scene, bool motionLinks,
+                                        const ProgressFn& progress = {}) const;
     // Starts `rebuilt` (built for `next`) from the current solver's solution on the surfels
     // that did not move; returns what it did, for the frame note.
     std::string WarmStart(Solver& rebuilt, const Scene& next);

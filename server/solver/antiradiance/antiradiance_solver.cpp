@@ -310,7 +310,7 @@ void AntiradianceSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfe
         for (const LeafAttributes& leaf : model_.leaves)
             emitterDirect_.push_back(perSurfel[leaf.surfel]);
     if (wasOn != !emitterDirect_.empty()) {
-        // Emission on or off in the transport: the materials' emission is in the surfels.
+        // Emission off in the transport, or back on from the materials as last read.
         for (LeafAttributes& leaf : model_.leaves)
             leaf.emission = emitterDirect_.empty()
                                 ? materials_[model_.surfels.materials[leaf.surfel]].emission
