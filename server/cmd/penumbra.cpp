@@ -7,7 +7,7 @@
 #include "base/check.h"
 #include "base/progress.h"
 #include "cmd/service_cli.h"
-#include "gather/first_shot.h"
+#include "gather/gather_stage.h"
 #include "output/compare.h"
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
@@ -63,6 +63,52 @@ struct EnvironmentOptions {
         scene.environment.intensity = intensity;
         scene.environment.rotation = glm::radians(rotationDegrees);
         ValidateEnvironment(scene.environment);
+    }
+};
+
+// The gather stage's options (gather/gather_stage.h), the same for bake and render.
+struct GatherOptions {
+    std::string gather = "on";
+    int gatherRays = 256;
+    int directRays = 256;
+
+    void Add(CLI::App* app) {
+        app->add_option("--gather", gather,
+                        "on|off: the final gather at each output vertex (rays against the "
+                        "solver's answer); off: the solver's own irradiance, faster and "
+                        "coarser")
+            ->capture_default_str();
+        app->add_option("--gather-rays", gatherRays, "final gather rays per output vertex")
+            ->capture_default_str();
+        app->add_option("--direct-rays,--emitter-direct", directRays,
+                        "shadow rays per surfel for the emitters' direct light, handed to the "
+                        "solver as its first shot; 0: the solver carries the emission")
+            ->capture_default_str();
+    }
+
+    GatherSettings Settings() const {
+        if (gather != "on" && gather != "off")
+            throw Error("--gather must be on or off, not '" + gather + "'");
+        GatherSettings s;
+        s.gatherRays = gather == "on" ? gatherRays : 0;
+        s.emitterRays = directRays;
+        CheckGatherRays(gatherRays, "--gather-rays");
+        CheckGatherRays(directRays, "--direct-rays");
+        return s;
+    }
+
+    // `solver` behind the gather stage; each part declined is a note on stderr.
+    std::unique_ptr<Solver> Wrap(std::unique_ptr<Solver> solver, const Scene& scene,
+                                 const std::string& scenePath, GatherSettings s, bool quiet,
+                                 Progress& progress) const {
+        progress.Update("gather: tracing", 0.0);
+        std::vector<std::string> notes;
+        solver = WithGather(std::move(solver), scene, s, &notes);
+        if (!quiet && !notes.empty()) progress.Done();
+        for (const std::string& n : notes)
+            if (!quiet)
+                std::fprintf(stderr, "penumbra: note: %s: %s\n", scenePath.c_str(), n.c_str());
+        return solver;
     }
 };
 
@@ -125,11 +171,11 @@ struct IterationOptions {
 
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
          const IterationOptions& iterations, const std::string& device, const std::string& scheme,
-         const std::string& channelName, const EnvironmentOptions& environment, int emitterRays,
-         bool quiet) {
+         const std::string& channelName, const EnvironmentOptions& environment,
+         const GatherOptions& gather, bool quiet) {
     Channel channel = ParseChannel(channelName);
     CheckOutputPath(outPath);
-    CheckEmitterRays(emitterRays);
+    const GatherSettings gatherSettings = gather.Settings();
     settings.device = ParseDevice(device);
     settings.scheme = ParseScheme(scheme);
     iterations.Check();
@@ -140,14 +186,7 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     environment.Apply(scene);
     std::unique_ptr<Solver> solver = CreateSolver(
         scene, settings, [&](const std::string& stage, double f) { progress.Update(stage, f); });
-    progress.Update("emitter direct light", 0.0);
-    std::string declined;
-    solver = WithEmitterDirect(std::move(solver), scene, emitterRays, &declined);
-    if (!declined.empty() && declined != "off" && !quiet) {
-        progress.Done();
-        std::fprintf(stderr, "penumbra: note: %s: emitter direct light not traced: %s\n",
-                     scenePath.c_str(), declined.c_str());
-    }
+    solver = gather.Wrap(std::move(solver), scene, scenePath, gatherSettings, quiet, progress);
     iterations.Run(*solver, scenePath, progress, quiet);
     progress.Done();
     // A diverged solution is not written: no file is better than a wrong one.
@@ -258,7 +297,7 @@ struct RenderOptions {
     std::string size = "800x600";
     std::string camera, cameraName, lighting, compare, mesh = "auto", renderDevice = "auto";
     float errorScale = 0.5f, exposure = 0.0f;
-    int emitterRays = 256;  // bake's --emitter-direct
+    GatherOptions gather;
     bool quiet = false;
 };
 
@@ -283,7 +322,9 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
     Channel channel = ParseChannel(channelName);
     settings.device = ParseDevice(device);
     iterations.Check();
-    CheckEmitterRays(o.emitterRays);
+    GatherSettings gatherSettings = o.gather.Settings();
+    // Shading the refined mesh reads every surfel.
+    gatherSettings.allSurfels = !fromFile && o.mesh != "input";
 
     Progress progress(!o.quiet && StderrIsTerminal());
     progress.Update("loading " + o.scene, 0.0);
@@ -321,7 +362,8 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
         solver = CreateSolver(scene, settings, [&](const std::string& stage, double f) {
             progress.Update(stage, f);
         });
-        solver = WithEmitterDirect(std::move(solver), scene, o.emitterRays);
+        solver =
+            o.gather.Wrap(std::move(solver), scene, o.scene, gatherSettings, o.quiet, progress);
         iterations.Run(*solver, o.scene, progress, o.quiet);
         perSurfel = solver->SurfelIrradiance(channel);
         for (size_t p = 0; p < scene.primitives.size(); ++p)
@@ -472,12 +514,8 @@ int main(int argc, char** argv) {
                      "service uses 1; 0: no limit)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
-    int emitterRays = 256;
-    bake->add_option("--emitter-direct", emitterRays,
-                     "shadow rays per surfel for the emitters' direct light, traced and handed "
-                     "to the solver as its first shot (the gather stage; not for scenes with "
-                     "glossy materials yet); 0: the solver carries the emission")
-        ->capture_default_str();
+    GatherOptions bakeGather;
+    bakeGather.Add(bake);
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
     bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
 
@@ -545,10 +583,7 @@ int main(int argc, char** argv) {
     render->add_option("--bins", renderSettings.bins, "direction bins (solver)")
         ->capture_default_str();
     renderIterations.Add(render);
-    render
-        ->add_option("--emitter-direct", ro.emitterRays,
-                     "shadow rays per surfel for the emitters' direct light (as bake); 0: off")
-        ->capture_default_str();
+    ro.gather.Add(render);
     render->add_option("--element-size", renderSettings.elementSize,
                        "metres; 0 = scene diameter / 40");
     render->add_option("--device", renderSolverDevice, "solver device: auto, gpu, lavapipe, cpu")
@@ -586,7 +621,7 @@ int main(int argc, char** argv) {
             settings.backOcclusion = ParseBackOcclusion(backOcclusion);
             settings.tables = ParseTablePrecision(tables);
             return Bake(scenePath, outPath, settings, iterations, device, scheme, channel, bakeEnv,
-                        emitterRays, quiet);
+                        bakeGather, quiet);
         }
         if (reference->parsed()) {
             refSettings.channel = ParseChannel(refChannel);

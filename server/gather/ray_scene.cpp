@@ -31,12 +31,45 @@ void InitRay(RTCRay& r, const glm::vec3& o, const glm::vec3& d, float tfar) {
 }  // namespace
 
 RayScene::RayScene(const Scene& scene) : scene_(scene) {
-    device_ = rtcNewDevice(nullptr);
-    if (!device_) throw Error("Embree: cannot create a device");
-    rtcSetDeviceErrorFunction(device_, &OnError, &error_);
-    rtcScene_ = rtcNewScene(device_);
-    eps_ = 1e-4f * std::max(scene.Diameter(), 1e-6f);
+    for (const auto& prim : scene_.primitives)
+        for (size_t i = 0; i + 2 < prim.indices.size(); i += 3) {
+            uint32_t a = prim.indices[i], b = prim.indices[i + 1], c = prim.indices[i + 2];
+            AddTriangle(prim.positions[a], prim.positions[b], prim.positions[c],
+                        prim.normals[a] + prim.normals[b] + prim.normals[c], prim.material);
+        }
     Build();
+}
+
+RayScene::RayScene(const Scene& scene, const Surfels& surfels) : scene_(scene) {
+    if (surfels.firstSurfel.size() != scene.primitives.size())
+        throw Error("RayScene: the surfels were refined from another scene");
+    const auto& t = surfels.refinedTriangles;
+    size_t p = 0;  // the primitive of the triangles' surfels (surfels run primitive by primitive)
+    for (size_t i = 0; i + 2 < t.size(); i += 3) {
+        const uint32_t a = t[i], b = t[i + 1], c = t[i + 2];
+        while (p + 1 < surfels.firstSurfel.size() && a >= surfels.firstSurfel[p + 1]) ++p;
+        while (p > 0 && a < surfels.firstSurfel[p]) --p;
+        AddTriangle(surfels.positions[a], surfels.positions[b], surfels.positions[c],
+                    surfels.normals[a] + surfels.normals[b] + surfels.normals[c],
+                    scene.primitives[p].material);
+        corners_.emplace_back(a, b, c);
+    }
+    Build();
+}
+
+void RayScene::AddTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
+                           const glm::vec3& normalSum, uint32_t material) {
+    RayTriangle t;
+    t.p0 = a;
+    t.e1 = b - a;
+    t.e2 = c - a;
+    glm::vec3 cr = glm::cross(t.e1, t.e2);
+    float len = glm::length(cr);
+    t.area = 0.5f * len;
+    t.normal = len > 0.0f ? cr / len : glm::vec3(0.0f, 0.0f, 1.0f);
+    if (glm::dot(normalSum, t.normal) < 0.0f) t.normal = -t.normal;
+    t.material = material;
+    tris_.push_back(t);
 }
 
 RayScene::~RayScene() {
@@ -49,23 +82,11 @@ void RayScene::CheckError() const {
 }
 
 void RayScene::Build() {
-    for (const auto& prim : scene_.primitives) {
-        for (size_t i = 0; i + 2 < prim.indices.size(); i += 3) {
-            uint32_t a = prim.indices[i], b = prim.indices[i + 1], c = prim.indices[i + 2];
-            RayTriangle t;
-            t.p0 = prim.positions[a];
-            t.e1 = prim.positions[b] - t.p0;
-            t.e2 = prim.positions[c] - t.p0;
-            glm::vec3 cr = glm::cross(t.e1, t.e2);
-            float len = glm::length(cr);
-            t.area = 0.5f * len;
-            t.normal = len > 0.0f ? cr / len : glm::vec3(0.0f, 0.0f, 1.0f);
-            glm::vec3 vn = prim.normals[a] + prim.normals[b] + prim.normals[c];
-            if (glm::dot(vn, t.normal) < 0.0f) t.normal = -t.normal;
-            t.material = prim.material;
-            tris_.push_back(t);
-        }
-    }
+    device_ = rtcNewDevice(nullptr);
+    if (!device_) throw Error("Embree: cannot create a device");
+    rtcSetDeviceErrorFunction(device_, &OnError, &error_);
+    rtcScene_ = rtcNewScene(device_);
+    eps_ = 1e-4f * std::max(scene_.Diameter(), 1e-6f);
     // Emitters, chosen in proportion to their power (area × summed radiance).
     double total = 0.0;
     for (uint32_t i = 0; i < tris_.size(); ++i) {
@@ -136,6 +157,33 @@ RayHit RayScene::Intersect(const glm::vec3& origin, const glm::vec3& dir, float 
     hit.u = rh.hit.u;
     hit.v = rh.hit.v;
     return hit;
+}
+
+std::vector<std::vector<glm::vec3>> VertexEstimatePoints(const Scene& scene) {
+    std::vector<std::vector<glm::vec3>> points;
+    const float inset = kVertexInset * scene.Diameter();
+    for (const Primitive& prim : scene.primitives) {
+        const size_t n = prim.positions.size();
+        std::vector<glm::vec3> towards(n, glm::vec3(0.0f));
+        for (size_t t = 0; t + 2 < prim.indices.size(); t += 3) {
+            glm::vec3 c = (prim.positions[prim.indices[t]] + prim.positions[prim.indices[t + 1]] +
+                           prim.positions[prim.indices[t + 2]]) /
+                          3.0f;
+            for (int k = 0; k < 3; ++k) {
+                uint32_t v = prim.indices[t + k];
+                glm::vec3 d = c - prim.positions[v];
+                float len = glm::length(d);
+                if (len > 0.0f) towards[v] += d / len;
+            }
+        }
+        std::vector<glm::vec3>& pts = points.emplace_back(prim.positions);
+        for (size_t i = 0; i < n; ++i) {
+            glm::vec3 d = towards[i] - glm::dot(towards[i], prim.normals[i]) * prim.normals[i];
+            float len = glm::length(d);
+            if (len > 1e-6f) pts[i] += std::min(1.0f, len) * inset * (d / len);
+        }
+    }
+    return points;
 }
 
 }  // namespace penumbra

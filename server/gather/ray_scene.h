@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "scene/scene.h"
+#include "scene/surfels.h"
 
 struct RTCDeviceTy;
 struct RTCSceneTy;
@@ -34,6 +35,10 @@ class RayScene {
     // Builds the BVH over every triangle of `scene` (which must outlive this object).
     // Throws penumbra::Error on an Embree failure.
     explicit RayScene(const Scene& scene);
+    // Over the refined mesh instead (Surfels::refinedTriangles, the same surfaces): a hit
+    // names the three surfels around it (Corners), so that what a solver knows per surfel can
+    // be interpolated there. Triangle materials are those of the primitives in `scene`.
+    RayScene(const Scene& scene, const Surfels& surfels);
     ~RayScene();
     RayScene(const RayScene&) = delete;
     RayScene& operator=(const RayScene&) = delete;
@@ -46,6 +51,8 @@ class RayScene {
 
     const Scene& GetScene() const { return scene_; }
     const std::vector<RayTriangle>& Triangles() const { return tris_; }
+    // Built over a refined mesh: the surfels at triangle t's p0, p0 + e1 and p0 + e2.
+    const glm::uvec3& Corners(uint32_t t) const { return corners_[t]; }
     // Emitting triangles (emission > 0), chosen in proportion to their power (area × summed
     // radiance): `emitters[k]` with the cumulative probability `cdf[k]`.
     const std::vector<uint32_t>& Emitters() const { return emitters_; }
@@ -59,6 +66,8 @@ class RayScene {
     float Epsilon() const { return eps_; }
 
   private:
+    void AddTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
+                     const glm::vec3& normalSum, uint32_t material);
     void Build();
     void CheckError() const;
 
@@ -68,9 +77,18 @@ class RayScene {
     std::string error_;
     float eps_ = 0.0f;
     std::vector<RayTriangle> tris_;
+    std::vector<glm::uvec3> corners_;  // refined mesh only
     std::vector<uint32_t> emitters_;
     std::vector<double> cdf_;
     std::vector<float> areaPdf_;
 };
+
+// Where per-vertex irradiance is estimated by everything that traces rays (the reference,
+// the gather stage), per primitive in its input vertex order: each vertex moved
+// kVertexInset × the scene's diameter into its own surface, towards the centroids of its
+// triangles, in its tangent plane. A vertex on an edge where another wall meets it would
+// otherwise see that wall's back side, and one where two objects touch would be inside both.
+inline constexpr float kVertexInset = 1e-3f;
+std::vector<std::vector<glm::vec3>> VertexEstimatePoints(const Scene& scene);
 
 }  // namespace penumbra

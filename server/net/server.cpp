@@ -7,7 +7,7 @@
 #include <limits>
 
 #include "base/check.h"
-#include "gather/first_shot.h"
+#include "gather/gather_stage.h"
 
 namespace penumbra::net {
 
@@ -413,10 +413,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 req.settings.convergedChange = l->converged_change();
                 if (req.settings.convergedChange == 0.0)
                     req.settings.maxFramesPerEdit = std::numeric_limits<int>::max();
-                if (l->emitter_rays() < 0 || l->emitter_rays() > kMaxEmitterRays)
+                if (l->emitter_rays() < 0 || l->emitter_rays() > kMaxGatherRays)
                     throw ServiceError(
                         ErrorKind::kInvalidArgument,
-                        "emitter_rays must be 0 (off) … " + std::to_string(kMaxEmitterRays));
+                        "emitter_rays must be 0 (off) … " + std::to_string(kMaxGatherRays));
                 req.settings.emitterRays = l->emitter_rays();
                 if (!Str(l->link_oracle()).empty()) {
                     try {

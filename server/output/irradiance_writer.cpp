@@ -70,6 +70,11 @@ nlohmann::json StatsToJson(const SolverStats& s) {
     if (!s.divergence.empty()) j["divergence"] = s.divergence;
     if (s.emitterRays > 0)
         j["emitter_direct"] = {{"rays", s.emitterRays}, {"ms", s.msEmitterDirect}};
+    if (s.gatherRays > 0)
+        j["final_gather"] = {{"rays", s.gatherRays},
+                             {"targets", s.gatherTargets},
+                             {"ms_trace", s.msGatherTrace},
+                             {"ms_evaluate", s.msGatherEvaluate}};
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

@@ -25,8 +25,6 @@ namespace penumbra {
 namespace {
 
 constexpr float kPi = std::numbers::pi_v<float>;
-// Vertices are estimated this far (× the scene's diameter) inside their own surface.
-constexpr float kVertexInset = 1e-3f;
 
 using Rng = Pcg32;  // one stream per vertex
 
@@ -254,34 +252,12 @@ ReferenceResult RenderReference(const Scene& scene, const ReferenceSettings& set
     // Every input vertex, as (primitive, index), numbered for the random streams.
     std::vector<std::pair<uint32_t, uint32_t>> vertices;
     ReferenceResult result;
-    std::vector<std::vector<glm::vec3>> points;
-    const float inset = kVertexInset * scene.Diameter();
+    const std::vector<std::vector<glm::vec3>> points = VertexEstimatePoints(scene);
     for (uint32_t p = 0; p < scene.primitives.size(); ++p) {
-        const Primitive& prim = scene.primitives[p];
-        size_t n = prim.positions.size();
+        size_t n = scene.primitives[p].positions.size();
         result.irradiance.emplace_back(n, glm::vec3(0.0f));
         result.standardError.emplace_back(n, glm::vec3(0.0f));
         for (uint32_t i = 0; i < n; ++i) vertices.emplace_back(p, i);
-        // Estimate just inside the primitive's own surface: a vertex on an edge where
-        // another wall meets it would otherwise see that wall's back side.
-        std::vector<glm::vec3> towards(n, glm::vec3(0.0f));
-        for (size_t t = 0; t + 2 < prim.indices.size(); t += 3) {
-            glm::vec3 c = (prim.positions[prim.indices[t]] + prim.positions[prim.indices[t + 1]] +
-                           prim.positions[prim.indices[t + 2]]) /
-                          3.0f;
-            for (int k = 0; k < 3; ++k) {
-                uint32_t v = prim.indices[t + k];
-                glm::vec3 d = c - prim.positions[v];
-                float len = glm::length(d);
-                if (len > 0.0f) towards[v] += d / len;
-            }
-        }
-        std::vector<glm::vec3>& pts = points.emplace_back(prim.positions);
-        for (uint32_t i = 0; i < n; ++i) {
-            glm::vec3 d = towards[i] - glm::dot(towards[i], prim.normals[i]) * prim.normals[i];
-            float len = glm::length(d);
-            if (len > 1e-6f) pts[i] += std::min(1.0f, len) * inset * (d / len);
-        }
     }
 
     tbb::enumerable_thread_specific<uint64_t> rays(0);

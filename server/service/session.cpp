@@ -10,7 +10,7 @@
 #include <glm/gtx/quaternion.hpp>
 
 #include "base/check.h"
-#include "gather/first_shot.h"
+#include "gather/gather_stage.h"
 #include "hierarchy/directions.h"
 #include "output/irradiance_writer.h"
 
@@ -99,7 +99,8 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     : name_(std::move(name)), settings_(std::move(settings)) {
     if (settings_.iterationsPerFrame < 1 || settings_.iterationsPerFrame > 64)
         throw Error("iterations per frame must be between 1 and 64");
-    CheckEmitterRays(settings_.emitterRays);
+    CheckGatherRays(settings_.emitterRays, "emitter_rays");
+    CheckGatherRays(settings_.gatherRays, "gather_rays");
     auto start = Clock::now();
     solver_ = BuildSolver(scene, true, progress);
     buildSeconds_ = MsSince(start) / 1000.0;
@@ -421,7 +422,10 @@ std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool motionLink
                                              const ProgressFn& progress) const {
     SolverSettings settings = settings_.solver;
     settings.motionLinks = settings.motionLinks && motionLinks;
-    return WithEmitterDirect(CreateSolver(scene, settings, progress), scene, settings_.emitterRays);
+    GatherSettings gather;
+    gather.emitterRays = settings_.emitterRays;
+    gather.gatherRays = settings_.gatherRays;
+    return WithGather(CreateSolver(scene, settings, progress), scene, gather);
 }
 
 void Session::ProduceFrame(int iterations, std::string note, bool interruptible) {

@@ -53,11 +53,13 @@ using penumbra::Channel;
 struct SessionSettings {
     SolverSettings solver;
     int iterationsPerFrame = 1;  // bounces (Solver::Iterate) per streamed frame
-    // Shadow rays per surfel for the emitters' direct light, the solver's first shot
-    // (gather/first_shot.h); 0: the solver carries the emission itself. Off by default in
-    // the service until its edits re-evaluate cached rays (an emissive edit or a move
+    // The gather stage (gather/gather_stage.h): shadow rays per surfel for the emitters'
+    // direct light, the solver's first shot (0: the solver carries the emission itself), and
+    // final gather rays per input vertex (0: the solver's own answer). Off by default in the
+    // service until a move re-traces only the rays it touches (an emissive edit or a move
     // re-traces every surfel: 0.5 s on the office).
     int emitterRays = 0;
+    int gatherRays = 0;
     // The scene counts as converged (and the worker idles) when a frame changes the
     // irradiance by less than this fraction: Σ|ΔE| / Σ|E| over all surfels.
     double convergedChange = 1e-3;

@@ -134,11 +134,17 @@ struct SolverStats {
     // the solver stops iterating (Iterate does nothing more).
     float irradianceBound = 0.0f;
     std::string divergence;
-    // The gather stage's first shot (gather/first_shot.h): shadow rays a surfel for the
+    // The gather stage's first shot (gather/gather_stage.h): shadow rays a surfel for the
     // emitters' direct light (0: the solver carries the emission itself), and the last
     // computation's milliseconds.
     int emitterRays = 0;
     double msEmitterDirect = 0.0;
+    // Its final gather (0 rays: none): rays a surfel, the surfels gathered at, the last
+    // tracing of their hits and the last evaluation of those hits, in milliseconds.
+    int gatherRays = 0;
+    size_t gatherTargets = 0;
+    double msGatherTrace = 0.0;
+    double msGatherEvaluate = 0.0;
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };
@@ -186,7 +192,7 @@ class Solver {
     // (the others start from their emission). Rows from a solver with other bins or another
     // surfel count are refused with penumbra::Error.
     virtual std::vector<float> SurfelExitant() { return {}; }
-    // The first shot from outside (the gather stage, gather/emitter_direct.h): per surfel, the
+    // The first shot from outside (the gather stage, gather/gather_stage.h): per surfel, the
     // irradiance arriving straight from emitting surfaces, computed with explicit visibility.
     // The solver reflects it like the punctual lights' direct light, reports it in the
     // `indirect` channel, and stops carrying its emitters' own emission, so it carries only

@@ -1,7 +1,7 @@
-// The emitters' direct light as a solver's first shot (gather/first_shot.h): the answer gets
+// The emitters' direct light as a solver's first shot (gather/gather_stage.h): the answer gets
 // closer to the reference where the bins blurred the direct light, edits of an emitter give
 // what a fresh solve gives, and the Vulkan back end agrees with the CPU one.
-#include "gather/first_shot.h"
+#include "gather/gather_stage.h"
 
 #include <gtest/gtest.h>
 
@@ -29,6 +29,13 @@ IrradianceFile Truth(const Scene& scene, int samples) {
     return ToIrradianceFile(scene, r);
 }
 
+// The first shot alone (no final gather).
+GatherSettings ShotOnly() {
+    GatherSettings g;
+    g.gatherRays = 0;
+    return g;
+}
+
 SolverSettings Cpu() {
     SolverSettings s;
     s.device = DeviceChoice::kCpu;
@@ -43,7 +50,7 @@ TEST(FirstShot, BlockerShadowGetsCloserToTheReference) {
     const IrradianceFile truth = Truth(scene, 1024);
     auto alone = CreateSolver(scene, Cpu());
     IterateUntilConverged(*alone, 1e-3, 200);
-    EmitterFirstShot shot(CreateSolver(scene, Cpu()), scene, {});
+    GatherStage shot(CreateSolver(scene, Cpu()), scene, ShotOnly());
     IterateUntilConverged(shot, 1e-3, 200);
     const double a = Rmse(scene, *alone, truth), b = Rmse(scene, shot, truth);
     std::printf("blocker: solver alone %.2f%%, with the first shot %.2f%%\n", 100 * a, 100 * b);
@@ -54,12 +61,12 @@ TEST(FirstShot, BlockerShadowGetsCloserToTheReference) {
 // Dimming the emitter (a material edit) reshoots: the answer equals a fresh solve's.
 TEST(FirstShot, EmitterEditMatchesAFreshSolve) {
     Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
-    EmitterFirstShot shot(CreateSolver(scene, Cpu()), scene, {});
+    GatherStage shot(CreateSolver(scene, Cpu()), scene, ShotOnly());
     shot.Iterate(5);
     for (Material& m : scene.materials) m.emission *= 0.5f;
     shot.UpdateMaterials(scene);
     IterateUntilConverged(shot, 1e-4, 300);
-    EmitterFirstShot fresh(CreateSolver(scene, Cpu()), scene, {});
+    GatherStage fresh(CreateSolver(scene, Cpu()), scene, ShotOnly());
     IterateUntilConverged(fresh, 1e-4, 300);
     EXPECT_LT(testing::RelativeRms(shot.SurfelIrradiance(Channel::kIndirect),
                                    fresh.SurfelIrradiance(Channel::kIndirect)),
@@ -73,11 +80,11 @@ TEST(FirstShot, LavapipeMatchesTheCpu) {
     s.bins = 64;
     s.elementSize = 0.2f;
     s.tables = TablePrecision::kFp32;
-    EmitterFirstShot cpu(CreateSolver(scene, s), scene, {});
+    GatherStage cpu(CreateSolver(scene, s), scene, ShotOnly());
     s.device = DeviceChoice::kLavapipe;
     s.tables = TablePrecision::kAuto;
     s.validation = true;
-    EmitterFirstShot gpu(CreateSolver(scene, s), scene, {});
+    GatherStage gpu(CreateSolver(scene, s), scene, ShotOnly());
     cpu.Iterate(6);
     gpu.Iterate(6);
     EXPECT_LT(testing::RelativeRms(gpu.SurfelIrradiance(Channel::kTotal),

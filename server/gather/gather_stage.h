@@ -1,0 +1,104 @@
+// The gather stage (issue 19, DESIGN.md): solver-neutral, between any solver and the output.
+//
+// 1. The first shot: the emitters' direct light with explicit visibility (emitter_direct.h)
+//    at the solver's surfels, handed to it (Solver::SetEmitterDirect), so the solver carries
+//    only bounces.
+// 2. The final gather: at each output surfel, cosine-distributed rays (a fixed pattern per
+//    surfel, so frames do not flicker); each ray that meets a surface reads the light that
+//    surface reflects, L = ρ/π · E with E the solver's irradiance interpolated on the refined
+//    mesh (first shot and punctual lights included); each ray that escapes reads the
+//    environment. E(x) = π/N Σ L over the N rays, plus the first shot at x. The solver's
+//    bin-scale blur and its leaks are integrated over the hemisphere instead of read
+//    directly (two-pass radiosity's final gather).
+//
+// A Solver wrapping another: edits pass through; the hits are traced once and cached, so a
+// light, material or sky edit re-evaluates them; a move, or an emitter edit, traces again.
+#pragma once
+
+#include <memory>
+
+#include "gather/emitter_direct.h"
+#include "solver/solver.h"
+
+namespace penumbra {
+
+struct GatherSettings {
+    int emitterRays = 256;  // first shot: shadow rays a surfel; 0: the solver carries emission
+    int gatherRays = 256;   // final gather: rays an output surfel; 0: the solver's own answer
+    // Gather at every surfel (a render of the refined mesh) or only at the input vertices
+    // (what bake and the service write).
+    bool allSurfels = false;
+    uint64_t seed = 1;
+};
+
+// The most rays a surfel either part takes; CheckGatherRays throws penumbra::Error for a
+// count outside 0 (off) … kMaxGatherRays, naming `what` (the option).
+inline constexpr int kMaxGatherRays = 65536;
+void CheckGatherRays(int rays, const std::string& what);
+
+class GatherStage : public Solver {
+  public:
+    // Traces the first shot and the gather's hits for `inner`, built from `scene`. Throws
+    // penumbra::Error when the inner solver cannot take the shot (Solver::SetEmitterDirect).
+    GatherStage(std::unique_ptr<Solver> inner, const Scene& scene, const GatherSettings& settings);
+
+    void Iterate(int n) override;
+    // With the final gather: `indirect` = first shot + gathered light at the output surfels,
+    // `direct` = the solver's (punctual lights); the other surfels keep the solver's values.
+    std::vector<glm::vec3> SurfelIrradiance(Channel channel) override;
+    const Surfels& GetSurfels() const override { return inner_->GetSurfels(); }
+    void UpdateMaterials(const Scene& scene) override;
+    void UpdateLights(const Scene& scene) override;
+    SolverStats Stats() const override;
+    std::string GeometryMismatch(const Scene& scene) const override {
+        return inner_->GeometryMismatch(scene);
+    }
+    void UpdateGeometry(const Scene& scene) override;
+    std::vector<float> SurfelExitant() override { return inner_->SurfelExitant(); }
+    void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
+    Solver& Inner() { return *inner_; }
+
+  private:
+    // A gather ray's first hit: refined triangle and barycentrics (u, v in 1/65535), or none.
+    struct Hit {
+        uint32_t triangle;
+        uint16_t u, v;
+    };
+    static constexpr uint32_t kEscaped = 0xffffffffu;  // read the environment
+    static constexpr uint32_t kBlack = 0xfffffffeu;    // a back side: opaque and black
+
+    void Place();  // points_: the input vertices' estimate points, the others' positions
+    void Shoot();  // the emitters' light at the surfels, to the inner solver
+    void Trace();  // the gather rays' hits at the targets
+    void Sky();    // the environment light of the escaped rays
+    glm::vec3 Direction(size_t target, int ray) const;
+    void Evaluate();  // gathered_ from the inner solver's irradiance and the cached hits
+
+    std::unique_ptr<Solver> inner_;
+    Scene scene_;  // as last edited: the ray scene's materials and environment
+    GatherSettings settings_;
+    std::unique_ptr<RayScene> rays_;
+    // Per surfel, where its light is estimated: an input vertex at its estimate point
+    // (VertexEstimatePoints, where the reference estimates it too), others where they are.
+    std::vector<glm::vec3> points_;
+    std::vector<glm::vec3> shot_;               // first shot per surfel (empty: off)
+    std::vector<uint32_t> targets_;             // surfels gathered at
+    std::vector<glm::vec2> rotation_;           // per target: its rotation of the ray pattern
+    std::vector<Hit> hits_;                     // targets × gatherRays
+    std::vector<glm::vec3> sky_;                // per target: π/N Σ over escaped rays of L_env
+    bool fresh_ = false;                        // gathered_ holds the current answer
+    std::vector<glm::vec3> indirect_, direct_;  // per surfel, after Evaluate
+    double msShot_ = 0.0, msTrace_ = 0.0, msEvaluate_ = 0.0;
+};
+
+// `solver` behind the gather stage, where it can take it. The first shot is declined with
+// rays 0, for a scene without emitters, and for a scene with glossy materials (their lobes
+// would miss it); the final gather with rays 0 and for glossy scenes (the light a glossy
+// surface sends towards a ray depends on the ray's direction, which the gather does not read
+// yet). `notes` (when given) gets a line for each part declined. Both declined: `solver` as
+// it is.
+std::unique_ptr<Solver> WithGather(std::unique_ptr<Solver> solver, const Scene& scene,
+                                   const GatherSettings& settings,
+                                   std::vector<std::string>* notes = nullptr);
+
+}  // namespace penumbra
