@@ -291,7 +291,7 @@ SceneInfo Client::Load(const LoadOptions& o) {
         o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload,
         o.linkOracle.empty() ? nullptr : o.linkOracle.c_str(), o.oracle, o.convergedChange,
         o.environment.empty() ? nullptr : o.environment.c_str(), sky ? &*sky : nullptr,
-        o.environmentIntensity, o.environmentRotation, o.emitterRays));
+        o.environmentIntensity, o.environmentRotation, o.emitterRays, o.gatherRays));
     return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo));
 }
 

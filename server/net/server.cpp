@@ -413,11 +413,14 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 req.settings.convergedChange = l->converged_change();
                 if (req.settings.convergedChange == 0.0)
                     req.settings.maxFramesPerEdit = std::numeric_limits<int>::max();
-                if (l->emitter_rays() < 0 || l->emitter_rays() > kMaxGatherRays)
-                    throw ServiceError(
-                        ErrorKind::kInvalidArgument,
-                        "emitter_rays must be 0 (off) … " + std::to_string(kMaxGatherRays));
+                for (auto [value, field] : {std::pair(l->emitter_rays(), "emitter_rays"),
+                                            std::pair(l->gather_rays(), "gather_rays")})
+                    if (value < 0 || value > kMaxGatherRays)
+                        throw ServiceError(ErrorKind::kInvalidArgument,
+                                           std::string(field) + " must be 0 (off) … " +
+                                               std::to_string(kMaxGatherRays));
                 req.settings.emitterRays = l->emitter_rays();
+                req.settings.gatherRays = l->gather_rays();
                 if (!Str(l->link_oracle()).empty()) {
                     try {
                         req.settings.solver.linkOracle = ParseLinkOracle(Str(l->link_oracle()));

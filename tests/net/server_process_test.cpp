@@ -514,6 +514,12 @@ TEST(ServerProcess, BadRequestsGetClearErrorsAndTheConnectionStays) {
     EXPECT_EQ(ErrorCodeOf([&] { c.Load(outside); }), int(fb::ErrorCode::OutsideRoot));
     outside.path = "no-such.gltf";
     EXPECT_EQ(ErrorCodeOf([&] { c.Load(outside); }), int(fb::ErrorCode::NotFound));
+    client::LoadOptions rays = Cornell();
+    rays.gatherRays = -1;
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(rays); }), int(fb::ErrorCode::InvalidArgument));
+    rays.gatherRays = 0;
+    rays.emitterRays = 1 << 20;
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(rays); }), int(fb::ErrorCode::InvalidArgument));
     c.Load(Cornell());
     std::array<float, 16> nan{};
     nan.fill(std::nanf(""));
