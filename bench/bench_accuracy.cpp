@@ -1,8 +1,11 @@
-// Accuracy sweep (issue 3): the antiradiance solver against the Embree reference on the
-// bundled scenes at several bin counts, iteration counts and element sizes, with the time
-// each took; the reference's own noise, rays per second and time to 1% standard error; and
-// the time the path tracer needs to reach the solver's error. Prints Markdown tables (the
-// ones in docs/ACCURACY.md) and writes bench/results/accuracy.{md,json}.
+// Accuracy report (issues 3 and 19): per bundled scene, the gather stage's parts against the
+// Embree reference — the solver alone, with the emitters' direct light as its first shot,
+// with the final gather — each with its time from load to answer; the white furnace with
+// blockers (exact answer) the same way; then the antiradiance solver alone at several bin
+// counts, iteration counts and element sizes; the reference's own noise, rays per second
+// and time to 1% standard error; and the time the path tracer needs to reach the solver's
+// error. Prints Markdown tables (the ones in docs/ACCURACY.md) and writes
+// bench/results/accuracy.{md,json}.
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
@@ -13,10 +16,12 @@
 #include <sstream>
 
 #include "base/check.h"
+#include "gather/gather_stage.h"
 #include "output/compare.h"
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
+#include "scene/scene_builder.h"
 #include "solver/solver.h"
 
 namespace {
@@ -92,6 +97,144 @@ Run Solve(const Scene& scene, const IrradianceFile& truth, int bins, int iterati
             seconds, st.MsPerIteration(), st.elements, st.links};
 }
 
+// One part of the gather stage switched on after another, at the solver's defaults (the
+// element size given; 0: the scene's default), iterated until converged (as bake does).
+struct Stage {
+    const char* name;
+    int emitterRays, gatherRays;
+};
+constexpr Stage kStages[] = {{"solver alone", 0, 0},
+                             {"+ emitter direct (first shot)", 256, 0},
+                             {"+ final gather", 256, 256}};
+
+struct StageRun {
+    std::vector<std::vector<glm::vec3>> perVertex;
+    double seconds = 0, gatherMs = 0;
+    std::string declined;
+    int iterations = 0;
+};
+
+StageRun RunStage(const Scene& scene, float elementSize, const Stage& stage) {
+    SolverSettings s;
+    s.elementSize = elementSize;
+    s.device = DeviceChoice::kCpu;
+    auto t = Clock::now();
+    GatherSettings g;
+    g.emitterRays = stage.emitterRays;
+    g.gatherRays = stage.gatherRays;
+    std::vector<std::string> notes;
+    auto solver = WithGather(CreateSolver(scene, s), scene, g, &notes);
+    StageRun run;
+    run.iterations = IterateUntilConverged(*solver, 1e-3, 500).iterations;
+    IrradianceResult r = CollectIrradiance(scene, *solver);
+    run.seconds = Seconds(t);
+    run.perVertex = r.primitives;
+    const SolverStats st = solver->Stats();
+    run.gatherMs = st.msEmitterDirect + st.msGatherTrace + st.msGatherEvaluate;
+    for (const std::string& n : notes) run.declined += (run.declined.empty() ? "" : "; ") + n;
+    return run;
+}
+
+// The largest irradiance `ours` gives where the truth is dark (below 1% of its brightest
+// vertex), as a fraction of that brightest vertex: how deep the umbrae are.
+double DarkVertices(const std::vector<std::vector<glm::vec3>>& ours,
+                    const std::vector<std::vector<glm::vec3>>& truth) {
+    auto mean = [](glm::vec3 v) { return (v.x + v.y + v.z) / 3.0f; };
+    double peak = 0, worst = 0;
+    for (const auto& p : truth)
+        for (const glm::vec3& v : p) peak = std::max(peak, double(mean(v)));
+    for (size_t p = 0; p < truth.size(); ++p)
+        for (size_t i = 0; i < truth[p].size(); ++i)
+            if (mean(truth[p][i]) < 0.01 * peak)
+                worst = std::max(worst, double(mean(ours[p][i])));
+    return peak > 0 ? worst / peak : 0.0;
+}
+
+// The white furnace with blockers (tests/gather/gather_stage_test.cpp): every surface emits
+// 1 nit and reflects 0.5, so E = 2π at every vertex.
+Scene FurnaceScene() {
+    SceneBuilder b;
+    uint32_t m = b.AddMaterial("furnace", glm::vec3(0.5f), glm::vec3(1.0f));
+    const glm::vec3 inside(0.5f);
+    b.AddQuad("floor", m, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside, 3);
+    b.AddQuad("ceiling", m, {0, 1, 0}, {1, 1, 0}, {1, 1, 1}, {0, 1, 1}, inside, 3);
+    b.AddQuad("w0", m, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, inside, 3);
+    b.AddQuad("w1", m, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}, inside, 3);
+    b.AddQuad("w2", m, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 3);
+    b.AddQuad("w3", m, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside, 3);
+    b.AddBox("blocker_a", m, {0.3f, 0.4f, 0.35f}, {0.2f, 0.3f, 0.25f});
+    b.AddBox("blocker_b", m, {0.7f, 0.6f, 0.6f}, {0.25f, 0.1f, 0.3f}, 30.0f);
+    return b.Build();
+}
+
+// The gather stage's table for one scene (against `truth`) into `md` and `js`.
+void GatherTable(const Scene& scene, const IrradianceFile& truth, float elementSize,
+                 std::ostringstream& md, nlohmann::json& js) {
+    char line[512];
+    std::snprintf(line, sizeof line,
+                  "The gather stage, part by part (128 bins, element size %s, until an "
+                  "iteration changes the answer by < 10⁻³, as `bake` does):\n\n",
+                  elementSize > 0 ? (std::to_string(elementSize).substr(0, 4) + " m").c_str()
+                                  : "the scene's default");
+    md << line;
+    md << "| stage | rel. RMSE | mean rel. | darkest-vertex excess | iterations | gather ms | "
+          "seconds (load to answer) |\n|---|---|---|---|---|---|---|\n";
+    std::vector<std::vector<glm::vec3>> truthVertices;
+    for (const auto& p : truth.primitives) truthVertices.push_back(p.irradiance);
+    for (const Stage& stage : kStages) {
+        StageRun r = RunStage(scene, elementSize, stage);
+        IrradianceResult res;
+        res.primitives = r.perVertex;
+        const Comparison c = Compare(ToIrradianceFile(scene, res), truth);
+        const double dark = DarkVertices(r.perVertex, truthVertices);
+        std::fprintf(stderr, "  %s: RMSE %.4f in %.2f s%s%s\n", stage.name, c.overall.relRmse,
+                     r.seconds, r.declined.empty() ? "" : " — ", r.declined.c_str());
+        std::snprintf(line, sizeof line, "| %s%s | %.1f%% | %.1f%% | %.1f%% | %d | %.0f | %.2f |\n",
+                      stage.name, r.declined.empty() ? "" : " (declined)", 100 * c.overall.relRmse,
+                      100 * c.overall.meanRel, 100 * dark, r.iterations, r.gatherMs, r.seconds);
+        md << line;
+        js["gather_stage"].push_back({{"stage", stage.name},
+                                      {"rel_rmse", c.overall.relRmse},
+                                      {"mean_rel", c.overall.meanRel},
+                                      {"dark_excess", dark},
+                                      {"iterations", r.iterations},
+                                      {"gather_ms", r.gatherMs},
+                                      {"seconds", r.seconds},
+                                      {"declined", r.declined}});
+        if (!r.declined.empty()) md << "\n" << r.declined << "\n\n";
+    }
+    md << "\nDarkest-vertex excess: the most a vertex gets where the truth is below 1% of "
+          "its brightest vertex, as a share of that brightest vertex (how deep the umbrae "
+          "are).\n\n";
+}
+
+// The white furnace: the worst vertex's distance from 2π per stage.
+void FurnaceTable(std::ostringstream& md, nlohmann::json& report) {
+    const Scene scene = FurnaceScene();
+    const double expected = 2.0 * 3.14159265358979;
+    md << "### white furnace with blockers\n\nEvery surface emits 1 nit and reflects 0.5: "
+          "E = 2π at every vertex, exactly. 128 bins, 0.1 m elements.\n\n"
+          "| stage | worst vertex | mean | seconds |\n|---|---|---|---|\n";
+    for (const Stage& stage : kStages) {
+        StageRun r = RunStage(scene, 0.1f, stage);
+        double worst = 0, sum = 0;
+        size_t n = 0;
+        for (const auto& p : r.perVertex)
+            for (const glm::vec3& v : p) {
+                double e = std::abs((v.x + v.y + v.z) / 3.0 - expected) / expected;
+                worst = std::max(worst, e), sum += e, ++n;
+            }
+        char line[256];
+        std::snprintf(line, sizeof line, "| %s | %.2f%% | %.2f%% | %.2f |\n", stage.name,
+                      100 * worst, 100 * sum / n, r.seconds);
+        md << line;
+        std::fprintf(stderr, "  furnace, %s: worst %.4f\n", stage.name, worst);
+        report["furnace"].push_back(
+            {{"stage", stage.name}, {"worst", worst}, {"mean", sum / n}, {"seconds", r.seconds}});
+    }
+    md << "\n";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -107,12 +250,17 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--name", resultName, "results are written to OUT/NAME.md and OUT/NAME.json")
         ->capture_default_str();
+    bool gatherOnly = false, furnace = true;
+    app.add_flag("--gather-only", gatherOnly,
+                 "only the gather stage's table per scene (no solver sweep, no path tracer)");
+    app.add_option("--furnace", furnace, "the white furnace's table too")->capture_default_str();
     CLI11_PARSE(app, argc, argv);
 
     try {
         std::ostringstream md;
         nlohmann::json report;
         report["truth_samples"] = truthSamples;
+        if (furnace) FurnaceTable(md, report);
         for (const std::string& name : scenes) {
             std::fprintf(stderr, "%s: reference at %d samples...\n", name.c_str(), truthSamples);
             Scene scene = LoadGltf(sceneDir + "/" + name + ".gltf");
@@ -148,6 +296,11 @@ int main(int argc, char** argv) {
             js["reference"]["samples_for_1pct"] = n1;
             js["reference"]["seconds_for_1pct"] = t1;
             const Sweep sweep = SweepFor(name);
+            GatherTable(scene, truth, name == "office" ? 0.0f : 0.1f, md, js);
+            if (gatherOnly) {
+                report["scenes"][name] = js;
+                continue;
+            }
             const bool paper = sweep.linkOracle == LinkOracle::kPaper;
             if (paper) {
                 std::snprintf(line, sizeof line,

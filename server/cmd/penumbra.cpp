@@ -130,8 +130,8 @@ struct IterationOptions {
     void Add(CLI::App* command) {
         command
             ->add_option("--iterations", iterations,
-                         "solver iterations (bounces of light); 0: until an iteration changes "
-                         "the answer by less than --tolerance")
+                         "solver iterations (bounces of light); 0: until two iterations in a "
+                         "row change the answer by less than --tolerance each")
             ->capture_default_str();
         command
             ->add_option("--tolerance", tolerance,

@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 
@@ -30,78 +31,139 @@ int CosineRays(const EmitterDirectSettings& s) { return s.rays >= 2 ? s.rays / 2
 }  // namespace
 
 float EmitterHitWeight(const RayScene& rays, const EmitterDirectSettings& settings,
-                       const glm::vec3& n, const glm::vec3& w, uint32_t triangle, float t) {
+                       const glm::vec3& n, const glm::vec3& w, uint32_t triangle, float t,
+                       int cosineRays) {
     const float pdfArea = rays.AreaPdf(triangle);
     if (!(pdfArea > 0.0f)) return 0.0f;
     const float cx = glm::dot(n, w), cy = -glm::dot(rays.Triangles()[triangle].normal, w);
     if (cx <= 0.0f || cy <= 0.0f) return 0.0f;
-    const int own = CosineRays(settings), nl = settings.rays - own;
-    const int nb = own + settings.extraCosineRays;
+    const int nl = settings.rays - CosineRays(settings);
+    const int nb = cosineRays >= 0 ? cosineRays : CosineRays(settings) + settings.extraCosineRays;
     return Power(nb, cx / kPi, nl, pdfArea * t * t / cy) * kPi / nb;
 }
 
 std::vector<glm::vec3> EmitterIrradiance(const RayScene& rays, const std::vector<glm::vec3>& points,
                                          const std::vector<glm::vec3>& normals,
                                          const EmitterDirectSettings& settings) {
+    return EmitterDirect(settings).Trace(rays, points, normals);
+}
+
+EmitterDirect::EmitterDirect(const EmitterDirectSettings& settings) : settings_(settings) {
     if (settings.rays < 1) throw Error("emitter direct light needs at least one ray a point");
-    if (points.size() != normals.size())
-        throw Error("emitter direct light: " + std::to_string(points.size()) + " points and " +
+    cosineRays_ = CosineRays(settings);
+    lightRays_ = settings.rays - cosineRays_;
+    words_ = (lightRays_ + 63) / 64;
+}
+
+std::vector<glm::vec3> EmitterDirect::Trace(const RayScene& rays,
+                                            const std::vector<glm::vec3>& points,
+                                            const std::vector<glm::vec3>& normals,
+                                            const std::vector<int>& extraCosine) {
+    if (points.size() != normals.size() || (!extraCosine.empty() && extraCosine.size() != points.size()))
+        throw Error("emitter direct light: " + std::to_string(points.size()) + " points, " +
                     std::to_string(normals.size()) + " normals");
+    extra_ = extraCosine.empty() ? std::vector<int>(points.size(), settings_.extraCosineRays)
+                                 : extraCosine;
+    blocked_.assign(points.size() * words_, 0);
+    cosineT_.assign(points.size() * cosineRays_, std::numeric_limits<float>::infinity());
+    cosineTri_.assign(points.size() * cosineRays_, ~0u);
     std::vector<glm::vec3> out(points.size(), glm::vec3(0.0f));
     if (rays.Emitters().empty()) return out;
-    const int own = CosineRays(settings), nl = settings.rays - own;
-    const int nb = own + settings.extraCosineRays;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 16), [&](const auto& range) {
+        size_t traced = 0;
+        for (size_t i = range.begin(); i != range.end(); ++i)
+            out[i] = Shoot(rays, i, points[i], normals[i], nullptr, traced);
+    });
+    return out;
+}
+
+std::vector<glm::vec3> EmitterDirect::Retrace(const RayScene& rays,
+                                              const std::vector<glm::vec3>& points,
+                                              const std::vector<glm::vec3>& normals,
+                                              const std::vector<uint8_t>& moved,
+                                              const std::vector<Bounds>& boxes, size_t* traced) {
+    PENUMBRA_CHECK_EQ(points.size(), extra_.size());
+    PENUMBRA_CHECK_EQ(moved.size(), points.size());
+    std::vector<glm::vec3> out(points.size(), glm::vec3(0.0f));
+    std::atomic<size_t> total{0};
+    if (!rays.Emitters().empty())
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 16), [&](const auto& range) {
+            size_t n = 0;
+            for (size_t i = range.begin(); i != range.end(); ++i)
+                out[i] = Shoot(rays, i, points[i], normals[i], moved[i] ? nullptr : &boxes, n);
+            total += n;
+        });
+    if (traced) *traced = total;
+    return out;
+}
+
+glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& x,
+                               const glm::vec3& nx, const std::vector<Bounds>* boxes,
+                               size_t& traced) {
     const auto& tris = rays.Triangles();
     const auto& materials = rays.GetScene().materials;
     const float eps = rays.Epsilon();
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 16), [&](const auto& range) {
-        for (size_t i = range.begin(); i != range.end(); ++i) {
-            Pcg32 rng(settings.seed, i);
-            // This point's rotations of the R2 sequence (Cranley–Patterson): emitter points,
-            // hemisphere directions.
-            glm::vec2 sl, sb;
-            sl.x = rng.Uniform(), sl.y = rng.Uniform();
-            sb.x = rng.Uniform(), sb.y = rng.Uniform();
-            const glm::vec3 x = points[i], nx = normals[i];
-            const glm::vec3 from = x + eps * nx;
-            glm::vec3 sum(0.0f);
-            for (int r = 0; r < nl; ++r) {
-                // Emitter by power, from the r-th of nl strata of [0, 1): each emitter takes a
-                // run of consecutive r, so its points below are consecutive R2 points.
-                const float ut = (static_cast<float>(r) + rng.Uniform()) / nl;
-                const uint32_t ti = rays.Emitters()[rays.PickEmitter(ut)];
-                const RayTriangle& t = tris[ti];
-                // A point on it: the r-th R2 point, folded into the triangle.
-                glm::vec2 ab = R2Point(sl, r);
-                if (ab.x + ab.y > 1.0f) ab = glm::vec2(1.0f) - ab;
-                const glm::vec3 y = t.p0 + ab.x * t.e1 + ab.y * t.e2;
-                const glm::vec3 d = y - x;
-                const float dist2 = glm::dot(d, d);
-                if (!(dist2 > 0.0f)) continue;
-                const glm::vec3 w = d / std::sqrt(dist2);
-                const float cx = glm::dot(nx, w), cy = -glm::dot(t.normal, w);
-                if (cx <= 0.0f || cy <= 0.0f) continue;
-                const glm::vec3 to = y + eps * t.normal;
-                if (rays.Occluded(from, to - from)) continue;
-                const float pdfArea = rays.AreaPdf(ti);
-                const float weight = Power(nl, pdfArea * dist2 / cy, nb, cx / kPi);
-                sum += materials[t.material].emission * (weight * cx * cy / (dist2 * pdfArea * nl));
-            }
-            for (int r = 0; r < own; ++r) {
-                const glm::vec3 w = CosineDirection(nx, R2Point(sb, r));
-                const RayHit hit = rays.Intersect(from, w, std::numeric_limits<float>::infinity());
-                if (!hit.hit || rays.AreaPdf(hit.triangle) <= 0.0f) continue;
-                const RayTriangle& t = tris[hit.triangle];
-                const float cx = glm::dot(nx, w), cy = -glm::dot(t.normal, w);
-                if (cx <= 0.0f || cy <= 0.0f) continue;
-                const float pdfLight = rays.AreaPdf(hit.triangle) * hit.t * hit.t / cy;
-                const float weight = Power(nb, cx / kPi, nl, pdfLight);
-                sum += materials[t.material].emission * (weight * kPi / nb);
-            }
-            out[i] = sum;
+    const int nl = lightRays_, own = cosineRays_, nb = own + extra_[i];
+    auto meets = [&](const glm::vec3& o, const glm::vec3& d, float tmax) {
+        if (!boxes) return true;
+        for (const Bounds& b : *boxes)
+            if (b.Meets(o, d, tmax)) return true;
+        return false;
+    };
+    Pcg32 rng(settings_.seed, i);
+    // This point's rotations of the R2 sequence (Cranley–Patterson): emitter points,
+    // hemisphere directions.
+    glm::vec2 sl, sb;
+    sl.x = rng.Uniform(), sl.y = rng.Uniform();
+    sb.x = rng.Uniform(), sb.y = rng.Uniform();
+    const glm::vec3 from = x + eps * nx;
+    uint64_t* bits = blocked_.data() + i * words_;
+    glm::vec3 sum(0.0f);
+    for (int r = 0; r < nl; ++r) {
+        // Emitter by power, from the r-th of nl strata of [0, 1): each emitter takes a run of
+        // consecutive r, so its points below are consecutive R2 points.
+        const float ut = (static_cast<float>(r) + rng.Uniform()) / nl;
+        const uint32_t ti = rays.Emitters()[rays.PickEmitter(ut)];
+        const RayTriangle& t = tris[ti];
+        // A point on it: the r-th R2 point, folded into the triangle.
+        glm::vec2 ab = R2Point(sl, r);
+        if (ab.x + ab.y > 1.0f) ab = glm::vec2(1.0f) - ab;
+        const glm::vec3 y = t.p0 + ab.x * t.e1 + ab.y * t.e2;
+        const glm::vec3 d = y - x;
+        const float dist2 = glm::dot(d, d);
+        if (!(dist2 > 0.0f)) continue;
+        const glm::vec3 w = d / std::sqrt(dist2);
+        const float cx = glm::dot(nx, w), cy = -glm::dot(t.normal, w);
+        if (cx <= 0.0f || cy <= 0.0f) continue;
+        const glm::vec3 span = y + eps * t.normal - from;
+        const uint64_t bit = uint64_t(1) << (r % 64);
+        if (meets(from, span, 1.0f)) {
+            ++traced;
+            if (rays.Occluded(from, span))
+                bits[r / 64] |= bit;
+            else
+                bits[r / 64] &= ~bit;
         }
-    });
-    return out;
+        if (bits[r / 64] & bit) continue;
+        const float pdfArea = rays.AreaPdf(ti);
+        const float weight = Power(nl, pdfArea * dist2 / cy, nb, cx / kPi);
+        sum += materials[t.material].emission * (weight * cx * cy / (dist2 * pdfArea * nl));
+    }
+    for (int r = 0; r < own; ++r) {
+        const glm::vec3 w = CosineDirection(nx, R2Point(sb, r));
+        float& dist = cosineT_[i * own + r];
+        uint32_t& tri = cosineTri_[i * own + r];
+        if (meets(from, w, dist)) {
+            ++traced;
+            const RayHit hit = rays.Intersect(from, w, std::numeric_limits<float>::infinity());
+            dist = hit.hit ? hit.t : std::numeric_limits<float>::infinity();
+            tri = hit.hit ? hit.triangle : ~0u;
+        }
+        if (tri == ~0u) continue;
+        sum += materials[tris[tri].material].emission *
+               EmitterHitWeight(rays, settings_, nx, w, tri, dist, nb);
+    }
+    return sum;
 }
 
 }  // namespace penumbra

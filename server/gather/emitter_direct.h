@@ -32,11 +32,48 @@ std::vector<glm::vec3> EmitterIrradiance(const RayScene& rays, const std::vector
                                          const std::vector<glm::vec3>& normals,
                                          const EmitterDirectSettings& settings = {});
 
+// EmitterIrradiance at a fixed set of points with every ray's outcome kept (a bit per shadow
+// ray, the first hit of each cosine ray: 8 bytes a cosine ray), so that after a move only the
+// rays that pass near what moved are traced again.
+class EmitterDirect {
+  public:
+    explicit EmitterDirect(const EmitterDirectSettings& settings);
+    // Traces every point. `extraCosine` (empty: none) gives per point the cosine rays traced
+    // elsewhere whose emitter hits the caller adds (EmitterDirectSettings::extraCosineRays).
+    std::vector<glm::vec3> Trace(const RayScene& rays, const std::vector<glm::vec3>& points,
+                                 const std::vector<glm::vec3>& normals,
+                                 const std::vector<int>& extraCosine = {});
+    // After a move (`rays` built on the moved scene, the points and normals as in Trace, the
+    // moved ones at their new places): the points marked in `moved` are traced again; of the
+    // others, each ray whose segment meets one of `boxes` (where the moved surfaces were and
+    // are). The emitters must not have moved (trace them all again then). Returns E; `traced`
+    // (when given) gets the number of rays traced.
+    std::vector<glm::vec3> Retrace(const RayScene& rays, const std::vector<glm::vec3>& points,
+                                   const std::vector<glm::vec3>& normals,
+                                   const std::vector<uint8_t>& moved,
+                                   const std::vector<Bounds>& boxes, size_t* traced = nullptr);
+
+  private:
+    // Point i's E, its rays traced where `boxes` is null or they meet one of them, their
+    // kept outcomes read otherwise.
+    glm::vec3 Shoot(const RayScene& rays, size_t i, const glm::vec3& x, const glm::vec3& n,
+                    const std::vector<Bounds>* boxes, size_t& traced);
+
+    EmitterDirectSettings settings_;
+    int lightRays_ = 0, cosineRays_ = 0, words_ = 0;
+    std::vector<int> extra_;
+    std::vector<uint64_t> blocked_;     // points × words_: bit r, light ray r was blocked
+    std::vector<float> cosineT_;        // points × cosine rays: the first hit's distance (∞: none)
+    std::vector<uint32_t> cosineTri_;   // and its triangle
+};
+
 // The share of E that a cosine-distributed ray from a point with normal n, meeting emitting
 // triangle `triangle`'s front at distance t in direction w, adds to EmitterIrradiance with
 // `settings` (extraCosineRays counting this ray's kind): weight × L_e, zero for a triangle
 // that does not emit or is met from behind.
+// `cosineRays` ≥ 0: that many cosine rays at this point in all instead of the settings'.
 float EmitterHitWeight(const RayScene& rays, const EmitterDirectSettings& settings,
-                       const glm::vec3& n, const glm::vec3& w, uint32_t triangle, float t);
+                       const glm::vec3& n, const glm::vec3& w, uint32_t triangle, float t,
+                       int cosineRays = -1);
 
 }  // namespace penumbra

@@ -4,8 +4,10 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include "base/check.h"
 #include "base/pcg.h"
@@ -70,34 +72,25 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
     Shoot();
 }
 
-void GatherStage::Shoot() {
+void GatherStage::Shoot(const Moved* moved) {
     if (settings_.emitterRays <= 0) return;
     auto start = std::chrono::steady_clock::now();
     const Surfels& s = inner_->GetSurfels();
-    EmitterDirectSettings es;
-    es.rays = settings_.emitterRays;
-    es.seed = settings_.seed;
-    if (targets_.empty()) {
-        shot_ = EmitterIrradiance(*rays_, points_, s.normals, es);
-    } else {
+    if (!moved || !shooter_) {
+        EmitterDirectSettings es;
+        es.rays = settings_.emitterRays;
+        es.seed = settings_.seed;
+        shooter_ = std::make_unique<EmitterDirect>(es);
         // At the targets the gather's rays join the shot's own cosine rays (emitterHits_).
-        std::vector<uint8_t> isTarget(s.size(), 0);
-        for (uint32_t i : targets_) isTarget[i] = 1;
-        std::vector<glm::vec3> p[2], n[2];
-        for (uint32_t i = 0; i < s.size(); ++i) {
-            p[isTarget[i]].push_back(points_[i]);
-            n[isTarget[i]].push_back(s.normals[i]);
-        }
-        const std::vector<glm::vec3> others = EmitterIrradiance(*rays_, p[0], n[0], es);
-        es.extraCosineRays = settings_.gatherRays;
-        es.seed = settings_.seed ^ kGatherStream;
-        const std::vector<glm::vec3> at = EmitterIrradiance(*rays_, p[1], n[1], es);
-        shot_.assign(s.size(), glm::vec3(0.0f));
-        size_t k[2] = {0, 0};
-        for (uint32_t i = 0; i < s.size(); ++i)
-            shot_[i] = isTarget[i] ? at[k[1]++] : others[k[0]++];
-        for (size_t t = 0; t < targets_.size(); ++t) shot_[targets_[t]] += emitterHits_[t];
+        std::vector<int> extra(s.size(), 0);
+        for (uint32_t i : targets_) extra[i] = settings_.gatherRays;
+        shot_ = shooter_->Trace(*rays_, points_, s.normals, extra);
+    } else {
+        size_t traced = 0;
+        shot_ = shooter_->Retrace(*rays_, points_, s.normals, moved->surfels, moved->boxes, &traced);
+        raysRetraced_ += traced;
     }
+    for (size_t t = 0; t < targets_.size(); ++t) shot_[targets_[t]] += emitterHits_[t];
     inner_->SetEmitterDirect(shot_);
     fresh_ = false;
     msShot_ = Ms(start);
@@ -132,54 +125,97 @@ glm::vec3 GatherStage::SecondDirection(size_t target, int ray, uint32_t tri, int
     return CosineDirection(rays_->Triangles()[tri].normal, R2Point(rot, j));
 }
 
-void GatherStage::Trace() {
+float GatherStage::Distance(const glm::vec3& origin, const Hit& h) const {
+    if (h.triangle == kEscaped) return std::numeric_limits<float>::infinity();
+    const RayTriangle& t = rays_->Triangles()[h.triangle & kIndex];
+    const float u = h.u * (1.0f / 65535.0f), v = h.v * (1.0f / 65535.0f);
+    return glm::length(t.p0 + u * t.e1 + v * t.e2 - origin);
+}
+
+void GatherStage::Trace(const Moved* moved) {
     auto start = std::chrono::steady_clock::now();
     const int n = settings_.gatherRays, m = SecondRays();
     const float shortHit = kShortHit * inner_->Stats().elementSize;
-    hits_.assign(targets_.size() * n, Hit{kEscaped, 0, 0});
     const auto& tris = rays_->Triangles();
+    const Surfels& surfels = inner_->GetSurfels();
     const float inf = std::numeric_limits<float>::infinity();
     auto quantise = [](float x) {
         return static_cast<uint16_t>(std::lround(std::clamp(x, 0.0f, 1.0f) * 65535.0f));
     };
-    // The hit of one ray: a front side's triangle and barycentrics, or escaped or black.
-    auto trace = [&](const glm::vec3& o, const glm::vec3& d, RayHit& h) {
-        h = rays_->Intersect(o, d, inf);
+    // The hit of one ray and its distance.
+    auto trace = [&](const glm::vec3& o, const glm::vec3& d, float& t) {
+        const RayHit h = rays_->Intersect(o, d, inf);
+        t = h.hit ? h.t : inf;
         if (!h.hit) return Hit{kEscaped, 0, 0};
-        if (glm::dot(tris[h.triangle].normal, d) >= 0.0f) return Hit{kBlack, 0, 0};
-        return Hit{h.triangle, quantise(h.u), quantise(h.v)};
+        const uint32_t back = glm::dot(tris[h.triangle].normal, d) >= 0.0f ? kBack : 0u;
+        return Hit{h.triangle | back, quantise(h.u), quantise(h.v)};
     };
+    // After a move: whether a cached hit still holds (its ray starts on a surface that did not
+    // move, ends on one that did not, and passes by where the moved ones were and are).
+    auto holds = [&](const glm::vec3& o, const glm::vec3& d, const Hit& h, float& t) {
+        if (h.triangle != kEscaped) {
+            const glm::uvec3& c = rays_->Corners(h.triangle & kIndex);
+            if (moved->surfels[c.x] || moved->surfels[c.y] || moved->surfels[c.z]) return false;
+        }
+        t = Distance(o, h);
+        for (const Bounds& b : moved->boxes)
+            if (b.Meets(o, d, t)) return false;
+        return true;
+    };
+    const std::vector<Hit> oldHits = moved ? hits_ : std::vector<Hit>();
+    const std::vector<Hit> oldSecond = moved ? second_ : std::vector<Hit>();
+    const std::vector<uint32_t> oldStart = moved ? secondStart_ : std::vector<uint32_t>();
+    hits_.resize(targets_.size() * n);
     std::vector<std::vector<Hit>> second(targets_.size());
-    emitterHits_.assign(targets_.size(), glm::vec3(0.0f));
-    EmitterDirectSettings es;  // the first shot's, for the weights of emitter hits
-    es.rays = std::max(settings_.emitterRays, 1);
-    es.extraCosineRays = n;
-    const auto& materials = scene_.materials;
+    std::atomic<size_t> traced{0};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
+        size_t count = 0;
         for (size_t t = range.begin(); t != range.end(); ++t) {
             const uint32_t i = targets_[t];
-            const glm::vec3 o = points_[i] + rays_->Epsilon() * inner_->GetSurfels().normals[i];
+            const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
+            const bool all = !moved || moved->surfels[i];
+            size_t old = moved ? oldStart[t] : 0;  // its old secondaries
             for (int r = 0; r < n; ++r) {
-                RayHit h;
-                Hit& out = hits_[t * n + r];
                 const glm::vec3 d = Direction(t, r);
-                out = trace(o, d, h);
-                if (out.triangle >= kBlack) continue;
-                if (settings_.emitterRays > 0 && rays_->AreaPdf(h.triangle) > 0.0f)
-                    emitterHits_[t] += materials[tris[h.triangle].material].emission *
-                                       EmitterHitWeight(*rays_, es, inner_->GetSurfels().normals[i],
-                                                        d, h.triangle, h.t);
-                if (!(h.t < shortHit)) continue;
-                const RayTriangle& tri = tris[h.triangle];
-                const glm::vec3 y =
-                    tri.p0 + h.u * tri.e1 + h.v * tri.e2 + rays_->Epsilon() * tri.normal;
-                for (int j = 0; j < m; ++j) {
-                    RayHit h2;
-                    second[t].push_back(trace(y, SecondDirection(t, r, h.triangle, j), h2));
+                Hit& hit = hits_[t * n + r];
+                float dist = inf;
+                bool keep = false;
+                if (!all) {
+                    const Hit before = oldHits[t * n + r];
+                    keep = holds(o, d, before, dist);
+                    hit = before;
                 }
-                out.triangle |= kShort;
+                const bool wasShort =
+                    !all && Front(oldHits[t * n + r]) && (oldHits[t * n + r].triangle & kShort);
+                if (!keep) {
+                    hit = trace(o, d, dist);
+                    ++count;
+                }
+                const bool isShort = Front(hit) && dist < shortHit;
+                if (isShort) hit.triangle |= kShort;
+                if (!isShort) {
+                    if (wasShort) old += m;
+                    continue;
+                }
+                // Its secondary gather: the cached one where the hit held, each ray checked.
+                const uint32_t tri = hit.triangle & kIndex;
+                const RayTriangle& tr = tris[tri];
+                const float u = hit.u * (1.0f / 65535.0f), v = hit.v * (1.0f / 65535.0f);
+                const glm::vec3 y = tr.p0 + u * tr.e1 + v * tr.e2 + rays_->Epsilon() * tr.normal;
+                for (int j = 0; j < m; ++j) {
+                    const glm::vec3 d2 = SecondDirection(t, r, tri, j);
+                    float t2 = inf;
+                    if (keep && wasShort && holds(y, d2, oldSecond[old + j], t2)) {
+                        second[t].push_back(oldSecond[old + j]);
+                    } else {
+                        second[t].push_back(trace(y, d2, t2));
+                        ++count;
+                    }
+                }
+                if (wasShort) old += m;
             }
         }
+        traced += count;
     });
     secondStart_.assign(targets_.size() + 1, 0);
     for (size_t t = 0; t < targets_.size(); ++t)
@@ -187,6 +223,30 @@ void GatherStage::Trace() {
     second_.clear();
     second_.reserve(secondStart_.back());
     for (auto& v : second) second_.insert(second_.end(), v.begin(), v.end());
+
+    // The emitters the gather rays meet, weighted against the first shot's rays.
+    emitterHits_.assign(targets_.size(), glm::vec3(0.0f));
+    if (settings_.emitterRays > 0 && !rays_->Emitters().empty()) {
+        EmitterDirectSettings es;  // the first shot's, for the weights of emitter hits
+        es.rays = settings_.emitterRays;
+        es.extraCosineRays = n;
+        const auto& materials = scene_.materials;
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
+            for (size_t t = range.begin(); t != range.end(); ++t) {
+                const uint32_t i = targets_[t];
+                const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
+                for (int r = 0; r < n; ++r) {
+                    const Hit& h = hits_[t * n + r];
+                    if (!Front(h) || !(rays_->AreaPdf(h.triangle & kIndex) > 0.0f)) continue;
+                    const uint32_t tri = h.triangle & kIndex;
+                    emitterHits_[t] += materials[tris[tri].material].emission *
+                                       EmitterHitWeight(*rays_, es, surfels.normals[i],
+                                                        Direction(t, r), tri, Distance(o, h));
+                }
+            }
+        });
+    }
+    raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
     msTrace_ = Ms(start);
 }
@@ -203,12 +263,12 @@ void GatherStage::Sky() {
             for (int r = 0; r < n; ++r) {
                 const Hit& h = hits_[t * n + r];
                 if (h.triangle == kEscaped) sum += scene_.environment.Radiance(Direction(t, r));
-                if (h.triangle >= kBlack || !(h.triangle & kShort)) continue;
+                if (!Front(h) || !(h.triangle & kShort)) continue;
                 glm::vec3 second(0.0f);
                 for (int j = 0; j < m; ++j)
                     if (second_[k * m + j].triangle == kEscaped)
                         second += scene_.environment.Radiance(
-                            SecondDirection(t, r, h.triangle & ~kShort, j));
+                            SecondDirection(t, r, h.triangle & kIndex, j));
                 secondSky_[k++] = second * (kPi / m);
             }
             sky_[t] = sum * (kPi / n);
@@ -234,7 +294,7 @@ void GatherStage::Evaluate() {
     }
     // Values per surfel interpolated at a hit.
     auto at = [&](const std::vector<glm::vec3>& f, const Hit& h) {
-        const glm::uvec3& c = rays_->Corners(h.triangle & ~kShort);
+        const glm::uvec3& c = rays_->Corners(h.triangle & kIndex);
         const float u = h.u * (1.0f / 65535.0f), v = h.v * (1.0f / 65535.0f);
         return (1.0f - u - v) * f[c.x] + u * f[c.y] + v * f[c.z];
     };
@@ -247,7 +307,7 @@ void GatherStage::Evaluate() {
             size_t k = secondStart_[t] / m;
             for (int r = 0; r < n; ++r) {
                 const Hit& h = hits_[t * n + r];
-                if (h.triangle >= kBlack) continue;
+                if (!Front(h)) continue;
                 if (!(h.triangle & kShort)) {
                     sum += at(radiance, h);
                     continue;
@@ -259,10 +319,10 @@ void GatherStage::Evaluate() {
                 glm::vec3 second(0.0f);
                 for (int j = 0; j < m; ++j) {
                     const Hit& h2 = second_[k * m + j];
-                    if (h2.triangle < kBlack) second += at(radiance, h2);
+                    if (Front(h2)) second += at(radiance, h2);
                 }
                 e += second * (kPi / m);
-                const Material& mat = scene_.materials[tris[h.triangle & ~kShort].material];
+                const Material& mat = scene_.materials[tris[h.triangle & kIndex].material];
                 sum += mat.albedo / kPi * e + (shot_.empty() ? mat.emission : glm::vec3(0.0f));
                 ++k;
             }
@@ -326,15 +386,41 @@ void GatherStage::UpdateLights(const Scene& scene) {
 }
 
 void GatherStage::UpdateGeometry(const Scene& scene) {
+    const std::vector<glm::vec3> before = inner_->GetSurfels().positions;
+    const std::vector<glm::vec3> normalsBefore = inner_->GetSurfels().normals;
     inner_->UpdateGeometry(scene);
     scene_ = scene;
-    rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
+    const Surfels& s = inner_->GetSurfels();
+    // What moved, and where it was and is: only the rays near it are traced again.
+    Moved moved;
+    moved.surfels.assign(s.size(), 0);
+    Bounds was, is;
+    bool emitterMoved = false;
+    size_t p = 0;
+    for (size_t i = 0; i < s.size(); ++i) {
+        while (p + 1 < s.firstSurfel.size() && i >= s.firstSurfel[p + 1]) ++p;
+        if (before[i] == s.positions[i] && normalsBefore[i] == s.normals[i]) continue;
+        moved.surfels[i] = 1;
+        was.Add(before[i]);
+        is.Add(s.positions[i]);
+        emitterMoved = emitterMoved ||
+                       glm::any(glm::greaterThan(
+                           scene_.materials[scene_.primitives[p].material].emission, glm::vec3(0.0f)));
+    }
+    // Rays that graze a moved surface's old place still count: the boxes are padded.
+    const glm::vec3 pad(4.0f * rays_->Epsilon());
+    for (Bounds* b : {&was, &is})
+        if (!b->Empty()) moved.boxes.push_back({b->lo - pad, b->hi + pad});
+    rays_ = std::make_unique<RayScene>(scene_, s);
     Place();
+    raysRetraced_ = 0;
+    // A moved emitter moves the points the shadow rays aim at: everything is traced again.
+    const Moved* partial = emitterMoved ? nullptr : &moved;
     if (!targets_.empty()) {
-        Trace();
+        Trace(partial);
         Sky();
     }
-    Shoot();
+    Shoot(partial);
     fresh_ = false;
 }
 
@@ -351,6 +437,7 @@ SolverStats GatherStage::Stats() const {
     s.gatherTargets = targets_.size();
     s.msGatherTrace = msTrace_;
     s.msGatherEvaluate = msEvaluate_;
+    s.gatherRaysRetraced = raysRetraced_;
     return s;
 }
 

@@ -18,6 +18,7 @@
 #include <memory>
 
 #include "gather/emitter_direct.h"
+#include "gather/ray_scene.h"
 #include "solver/solver.h"
 
 namespace penumbra {
@@ -59,27 +60,41 @@ class GatherStage : public Solver {
     Solver& Inner() { return *inner_; }
 
   private:
-    // A gather ray's first hit: refined triangle and barycentrics (u, v in 1/65535), or none.
+    // A gather ray's first hit: refined triangle (low 30 bits) and barycentrics (u, v in
+    // 1/65535), or kEscaped.
     struct Hit {
         uint32_t triangle;
         uint16_t u, v;
     };
     static constexpr uint32_t kEscaped = 0xffffffffu;  // read the environment
-    static constexpr uint32_t kBlack = 0xfffffffeu;    // a back side: opaque and black
-    // Set on a hit closer than half the solver's element size: its light is gathered again there
-    // (a secondary gather), the solver's answer being least trustworthy across its own
+    // Set on a hit on a back side: opaque and black (as in the reference).
+    static constexpr uint32_t kBack = 0x40000000u;
+    // Set on a hit closer than half the solver's element size: its light is gathered again
+    // there (a secondary gather), the solver's answer being least trustworthy across its own
     // elements near a junction or a contact.
     static constexpr uint32_t kShort = 0x80000000u;
+    static constexpr uint32_t kIndex = 0x3fffffffu;
+    static bool Front(const Hit& h) { return h.triangle != kEscaped && !(h.triangle & kBack); }
+
+    // What a move changed, for the rays cached before it (UpdateGeometry).
+    struct Moved {
+        std::vector<uint8_t> surfels;  // per surfel: it moved (or turned)
+        std::vector<Bounds> boxes;     // where the moved surfaces were and are
+    };
 
     void Place();  // points_: the input vertices' estimate points, the others' positions
-    void Shoot();  // the emitters' light at the surfels, to the inner solver
-    void Trace();  // the gather rays' hits at the targets (then Shoot: it reads emitterHits_)
-    void Sky();    // the environment light of the escaped rays
+    void Shoot(const Moved* moved = nullptr);  // the emitters' light at the surfels
+    // The gather rays' hits at the targets: all of them, or after a move those that it can
+    // have changed; then emitterHits_ (Shoot reads them).
+    void Trace(const Moved* moved = nullptr);
+    void Sky();  // the environment light of the escaped rays
     glm::vec3 Direction(size_t target, int ray) const;
     // Secondary ray j from the short hit of target t's ray r, on triangle `tri`.
     glm::vec3 SecondDirection(size_t target, int ray, uint32_t tri, int j) const;
     // Rays a secondary gather: 8 at 256 (16 gave the same answers, for 1.6× the tracing).
     int SecondRays() const { return std::max(4, settings_.gatherRays / 32); }
+    // Where a cached hit lies along its ray (∞ when it escaped).
+    float Distance(const glm::vec3& origin, const Hit& h) const;
     void Evaluate();  // gathered_ from the inner solver's irradiance and the cached hits
 
     std::unique_ptr<Solver> inner_;
@@ -89,7 +104,8 @@ class GatherStage : public Solver {
     // Per surfel, where its light is estimated: an input vertex at its estimate point
     // (VertexEstimatePoints, where the reference estimates it too), others where they are.
     std::vector<glm::vec3> points_;
-    std::vector<glm::vec3> shot_;  // first shot per surfel (empty: off)
+    std::unique_ptr<EmitterDirect> shooter_;  // the first shot's rays (null: off)
+    std::vector<glm::vec3> shot_;             // first shot per surfel (empty: off)
     // Per target: the emitters its gather rays meet, weighted against the first shot's
     // shadow rays (EmitterHitWeight), which at the targets counts the gather rays in.
     std::vector<glm::vec3> emitterHits_;
@@ -106,6 +122,7 @@ class GatherStage : public Solver {
     bool fresh_ = false;                        // gathered_ holds the current answer
     std::vector<glm::vec3> indirect_, direct_;  // per surfel, after Evaluate
     double msShot_ = 0.0, msTrace_ = 0.0, msEvaluate_ = 0.0;
+    size_t raysRetraced_ = 0;  // by the last move, both parts
 };
 
 // `solver` behind the gather stage, where it can take it. The first shot is declined with

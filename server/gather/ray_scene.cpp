@@ -127,6 +127,24 @@ void RayScene::Build() {
     CheckError();
 }
 
+bool Bounds::Meets(const glm::vec3& origin, const glm::vec3& dir, float tmax) const {
+    if (Empty()) return false;
+    float t0 = 0.0f, t1 = tmax;
+    for (int a = 0; a < 3; ++a) {
+        if (dir[a] == 0.0f) {
+            if (origin[a] < lo[a] || origin[a] > hi[a]) return false;
+            continue;
+        }
+        const float inv = 1.0f / dir[a];
+        float near = (lo[a] - origin[a]) * inv, far = (hi[a] - origin[a]) * inv;
+        if (near > far) std::swap(near, far);
+        t0 = std::max(t0, near);
+        t1 = std::min(t1, far);
+        if (t0 > t1) return false;
+    }
+    return true;
+}
+
 size_t RayScene::PickEmitter(float u) const {
     PENUMBRA_CHECK(!emitters_.empty());
     size_t k = std::lower_bound(cdf_.begin(), cdf_.end(), double(u)) - cdf_.begin();

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <glm/glm.hpp>
 #include <string>
 #include <vector>
@@ -22,6 +23,16 @@ struct RayTriangle {
     glm::vec3 normal;      // unit, on the side the vertex normals point to (its front)
     float area = 0.0f;
     uint32_t material = 0;
+};
+
+// An axis-aligned box, for asking which cached rays a move can have changed.
+struct Bounds {
+    glm::vec3 lo{std::numeric_limits<float>::infinity()};
+    glm::vec3 hi{-std::numeric_limits<float>::infinity()};
+    void Add(const glm::vec3& p) { lo = glm::min(lo, p), hi = glm::max(hi, p); }
+    bool Empty() const { return lo.x > hi.x; }
+    // Whether origin + t·dir meets the box for some t in [0, tmax] (slab test).
+    bool Meets(const glm::vec3& origin, const glm::vec3& dir, float tmax) const;
 };
 
 struct RayHit {

@@ -74,7 +74,8 @@ nlohmann::json StatsToJson(const SolverStats& s) {
         j["final_gather"] = {{"rays", s.gatherRays},
                              {"targets", s.gatherTargets},
                              {"ms_trace", s.msGatherTrace},
-                             {"ms_evaluate", s.msGatherEvaluate}};
+                             {"ms_evaluate", s.msGatherEvaluate},
+                             {"rays_retraced_by_last_move", s.gatherRaysRetraced}};
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

@@ -117,6 +117,11 @@ Convergence IterateUntilConverged(Solver& solver, double tolerance, int maxItera
                                   const ProgressFn& progress) {
     Convergence c;
     std::vector<glm::vec3> last = solver.SurfelIrradiance(Channel::kTotal);
+    // Two quiet iterations in a row: a solver may take an iteration to pass light on (the
+    // antiradiance solver reflects the punctual lights' direct light into its exitant tables
+    // in the local pass after its first gather, so a scene lit only by punctual lights does
+    // not change in the first iteration at all).
+    int quiet = 0;
     while (c.iterations < maxIterations) {
         solver.Iterate(1);
         if (!solver.Stats().divergence.empty()) break;
@@ -129,7 +134,8 @@ Convergence IterateUntilConverged(Solver& solver, double tolerance, int maxItera
             std::snprintf(stage, sizeof stage, "iterating, change %.2g", c.change);
             progress(stage, static_cast<double>(c.iterations) / maxIterations);
         }
-        if (c.change < tolerance) {
+        quiet = c.change < tolerance ? quiet + 1 : 0;
+        if (quiet >= 2) {
             c.converged = true;
             break;
         }

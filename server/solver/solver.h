@@ -145,6 +145,7 @@ struct SolverStats {
     size_t gatherTargets = 0;
     double msGatherTrace = 0.0;
     double msGatherEvaluate = 0.0;
+    size_t gatherRaysRetraced = 0;  // rays the last move traced again (both parts)
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };
@@ -229,8 +230,8 @@ const char* ChannelName(Channel channel);
 double RelativeChange(const std::vector<glm::vec3>& now, const std::vector<glm::vec3>& before);
 
 // Iterating until the answer stops moving (bake, render; the service decides per frame):
-// iterations until one changes the surfels' irradiance (every channel) by less than
-// `tolerance` (RelativeChange), at most `maxIterations`, or until the solution diverged.
+// iterations until two in a row change the surfels' irradiance (every channel) by less than
+// `tolerance` each (RelativeChange), at most `maxIterations`, or until the solution diverged.
 struct Convergence {
     int iterations = 0;
     double change = 1.0;     // of the last iteration

@@ -216,6 +216,16 @@ TEST(FinalGather, EditsMatchAFreshGather) {
                     100 * moved, 100 * apart);
         EXPECT_GT(moved, 0.02) << name;
         EXPECT_LT(apart, 2e-3) << name;
+        if (name == "move") {
+            // Only the rays near the box were traced again: fewer than a third of them.
+            const SolverStats st = stage.Stats();
+            const size_t all = st.gatherTargets * st.gatherRays +
+                               stage.GetSurfels().size() * st.emitterRays;
+            std::printf("the move traced %zu of at least %zu rays again\n", st.gatherRaysRetraced,
+                        all);
+            EXPECT_GT(st.gatherRaysRetraced, 0u);
+            EXPECT_LT(st.gatherRaysRetraced, all / 3);
+        }
     }
 }
 

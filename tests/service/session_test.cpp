@@ -332,7 +332,12 @@ TEST(Session, PunctualLightEdits) {
     lamp.position = glm::vec3(0, 0.8f, 0);
     lamp.intensity = 4.0f;
     b.AddLight(lamp);
-    Session session("lit", b.Build(), Settings());
+    // One bounce a frame (the service's default): the first iteration after a light edit
+    // moves only the direct light, the bounces follow a frame later; the session must not
+    // call that quiet frame converged.
+    SessionSettings settings = Settings();
+    settings.iterationsPerFrame = 1;
+    Session session("lit", b.Build(), settings);
     FramePtr before = WaitFor(session, 0);
     ASSERT_TRUE(before);
     ASSERT_EQ(before->direct.size(), 2u);
