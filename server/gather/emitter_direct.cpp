@@ -59,11 +59,14 @@ std::vector<glm::vec3> EmitterDirect::Trace(const RayScene& rays,
                                             const std::vector<glm::vec3>& points,
                                             const std::vector<glm::vec3>& normals,
                                             const std::vector<int>& extraCosine) {
-    if (points.size() != normals.size() || (!extraCosine.empty() && extraCosine.size() != points.size()))
+    if (points.size() != normals.size() ||
+        (!extraCosine.empty() && extraCosine.size() != points.size()))
         throw Error("emitter direct light: " + std::to_string(points.size()) + " points, " +
                     std::to_string(normals.size()) + " normals");
     extra_ = extraCosine.empty() ? std::vector<int>(points.size(), settings_.extraCosineRays)
                                  : extraCosine;
+    slots_ = rays.EmitterPrimitives().size() <= kMaxSlots ? rays.EmitterPrimitives().size() : 0;
+    coef_.assign(points.size() * slots_, 0.0f);
     blocked_.assign(points.size() * words_, 0);
     cosineT_.assign(points.size() * cosineRays_, std::numeric_limits<float>::infinity());
     cosineTri_.assign(points.size() * cosineRays_, ~0u);
@@ -97,13 +100,34 @@ std::vector<glm::vec3> EmitterDirect::Retrace(const RayScene& rays,
     return out;
 }
 
+bool EmitterDirect::Reevaluate(const RayScene& rays, std::vector<glm::vec3>& out) const {
+    if (slots_ == 0 || rays.EmitterPrimitives().size() != slots_) return false;
+    std::vector<glm::vec3> le(slots_);
+    for (size_t k = 0; k < slots_; ++k) {
+        const Scene& scene = rays.GetScene();
+        le[k] = scene.materials[scene.primitives[rays.EmitterPrimitives()[k]].material].emission;
+    }
+    out.assign(extra_.size(), glm::vec3(0.0f));
+    for (size_t i = 0; i < out.size(); ++i)
+        for (size_t k = 0; k < slots_; ++k) out[i] += le[k] * coef_[i * slots_ + k];
+    return true;
+}
+
 glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& x,
                                const glm::vec3& nx, const std::vector<Bounds>* boxes,
                                size_t& traced) {
     const auto& tris = rays.Triangles();
-    const auto& materials = rays.GetScene().materials;
     const float eps = rays.Epsilon();
     const int nl = lightRays_, own = cosineRays_, nb = own + extra_[i];
+    // Each contribution is L_e of its triangle times a coefficient, kept per emitting
+    // primitive (Reevaluate).
+    float* coef = slots_ ? coef_.data() + i * slots_ : nullptr;
+    if (coef) std::fill(coef, coef + slots_, 0.0f);
+    glm::vec3 sum(0.0f);
+    auto add = [&](uint32_t tri, float c) {
+        sum += rays.MaterialOf(tri).emission * c;
+        if (coef) coef[rays.EmitterSlot(tris[tri].primitive)] += c;
+    };
     auto meets = [&](const glm::vec3& o, const glm::vec3& d, float tmax) {
         if (!boxes) return true;
         for (const Bounds& b : *boxes)
@@ -118,7 +142,6 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
     sb.x = rng.Uniform(), sb.y = rng.Uniform();
     const glm::vec3 from = x + eps * nx;
     uint64_t* bits = blocked_.data() + i * words_;
-    glm::vec3 sum(0.0f);
     for (int r = 0; r < nl; ++r) {
         // Emitter by power, from the r-th of nl strata of [0, 1): each emitter takes a run of
         // consecutive r, so its points below are consecutive R2 points.
@@ -147,7 +170,7 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
         if (bits[r / 64] & bit) continue;
         const float pdfArea = rays.AreaPdf(ti);
         const float weight = Power(nl, pdfArea * dist2 / cy, nb, cx / kPi);
-        sum += materials[t.material].emission * (weight * cx * cy / (dist2 * pdfArea * nl));
+        add(ti, weight * cx * cy / (dist2 * pdfArea * nl));
     }
     for (int r = 0; r < own; ++r) {
         const glm::vec3 w = CosineDirection(nx, R2Point(sb, r));
@@ -159,9 +182,8 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
             dist = hit.hit ? hit.t : std::numeric_limits<float>::infinity();
             tri = hit.hit ? hit.triangle : ~0u;
         }
-        if (tri == ~0u) continue;
-        sum += materials[tris[tri].material].emission *
-               EmitterHitWeight(rays, settings_, nx, w, tri, dist, nb);
+        if (tri == ~0u || !(rays.AreaPdf(tri) > 0.0f)) continue;
+        add(tri, EmitterHitWeight(rays, settings_, nx, w, tri, dist, nb));
     }
     return sum;
 }

@@ -53,6 +53,13 @@ class EmitterDirect {
                                    const std::vector<uint8_t>& moved,
                                    const std::vector<Bounds>& boxes, size_t* traced = nullptr);
 
+    // E again with the emission the scene has now, from the kept coefficients (a scalar per
+    // point and emitting primitive, RayScene::EmitterSlot), without tracing: valid while the
+    // emitting primitives are those `rays` was built with. False when none are kept (more
+    // than kMaxSlots emitting primitives).
+    static constexpr size_t kMaxSlots = 64;
+    bool Reevaluate(const RayScene& rays, std::vector<glm::vec3>& out) const;
+
   private:
     // Point i's E, its rays traced where `boxes` is null or they meet one of them, their
     // kept outcomes read otherwise.
@@ -62,9 +69,11 @@ class EmitterDirect {
     EmitterDirectSettings settings_;
     int lightRays_ = 0, cosineRays_ = 0, words_ = 0;
     std::vector<int> extra_;
-    std::vector<uint64_t> blocked_;     // points × words_: bit r, light ray r was blocked
-    std::vector<float> cosineT_;        // points × cosine rays: the first hit's distance (∞: none)
-    std::vector<uint32_t> cosineTri_;   // and its triangle
+    std::vector<uint64_t> blocked_;  // points × words_: bit r, light ray r was blocked
+    std::vector<float> cosineT_;     // points × cosine rays: the first hit's distance (∞: none)
+    std::vector<uint32_t> cosineTri_;  // and its triangle
+    size_t slots_ = 0;                 // emitting primitives kept (0: none kept)
+    std::vector<float> coef_;          // points × slots_
 };
 
 // The share of E that a cosine-distributed ray from a point with normal n, meeting emitting

@@ -76,6 +76,7 @@ void GatherStage::Shoot(const Moved* moved) {
     if (settings_.emitterRays <= 0) return;
     auto start = std::chrono::steady_clock::now();
     const Surfels& s = inner_->GetSurfels();
+    ++traces_;
     if (!moved || !shooter_) {
         EmitterDirectSettings es;
         es.rays = settings_.emitterRays;
@@ -87,7 +88,8 @@ void GatherStage::Shoot(const Moved* moved) {
         shot_ = shooter_->Trace(*rays_, points_, s.normals, extra);
     } else {
         size_t traced = 0;
-        shot_ = shooter_->Retrace(*rays_, points_, s.normals, moved->surfels, moved->boxes, &traced);
+        shot_ =
+            shooter_->Retrace(*rays_, points_, s.normals, moved->surfels, moved->boxes, &traced);
         raysRetraced_ += traced;
     }
     for (size_t t = 0; t < targets_.size(); ++t) shot_[targets_[t]] += emitterHits_[t];
@@ -134,6 +136,7 @@ float GatherStage::Distance(const glm::vec3& origin, const Hit& h) const {
 
 void GatherStage::Trace(const Moved* moved) {
     auto start = std::chrono::steady_clock::now();
+    ++traces_;
     const int n = settings_.gatherRays, m = SecondRays();
     const float shortHit = kShortHit * inner_->Stats().elementSize;
     const auto& tris = rays_->Triangles();
@@ -224,27 +227,32 @@ void GatherStage::Trace(const Moved* moved) {
     second_.reserve(secondStart_.back());
     for (auto& v : second) second_.insert(second_.end(), v.begin(), v.end());
 
-    // The emitters the gather rays meet, weighted against the first shot's rays.
+    // The emitters the gather rays meet, weighted against the first shot's rays, as a
+    // coefficient per emitting primitive.
+    const size_t slots = rays_->EmitterPrimitives().size();
     emitterHits_.assign(targets_.size(), glm::vec3(0.0f));
-    if (settings_.emitterRays > 0 && !rays_->Emitters().empty()) {
+    emitterCoef_.assign(slots <= EmitterDirect::kMaxSlots ? targets_.size() * slots : 0, 0.0f);
+    if (settings_.emitterRays > 0 && slots > 0) {
         EmitterDirectSettings es;  // the first shot's, for the weights of emitter hits
         es.rays = settings_.emitterRays;
         es.extraCosineRays = n;
-        const auto& materials = scene_.materials;
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
-            for (size_t t = range.begin(); t != range.end(); ++t) {
-                const uint32_t i = targets_[t];
-                const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
-                for (int r = 0; r < n; ++r) {
-                    const Hit& h = hits_[t * n + r];
-                    if (!Front(h) || !(rays_->AreaPdf(h.triangle & kIndex) > 0.0f)) continue;
-                    const uint32_t tri = h.triangle & kIndex;
-                    emitterHits_[t] += materials[tris[tri].material].emission *
-                                       EmitterHitWeight(*rays_, es, surfels.normals[i],
-                                                        Direction(t, r), tri, Distance(o, h));
+        tbb::parallel_for(
+            tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
+                for (size_t t = range.begin(); t != range.end(); ++t) {
+                    const uint32_t i = targets_[t];
+                    const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
+                    for (int r = 0; r < n; ++r) {
+                        const Hit& h = hits_[t * n + r];
+                        if (!Front(h) || !(rays_->AreaPdf(h.triangle & kIndex) > 0.0f)) continue;
+                        const uint32_t tri = h.triangle & kIndex;
+                        const float c = EmitterHitWeight(*rays_, es, surfels.normals[i],
+                                                         Direction(t, r), tri, Distance(o, h));
+                        emitterHits_[t] += rays_->MaterialOf(tri).emission * c;
+                        if (!emitterCoef_.empty())
+                            emitterCoef_[t * slots + rays_->EmitterSlot(tris[tri].primitive)] += c;
+                    }
                 }
-            }
-        });
+            });
     }
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
@@ -299,7 +307,6 @@ void GatherStage::Evaluate() {
         return (1.0f - u - v) * f[c.x] + u * f[c.y] + v * f[c.z];
     };
     const int n = settings_.gatherRays, m = SecondRays();
-    const auto& tris = rays_->Triangles();
     std::vector<glm::vec3> gathered(targets_.size());
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
         for (size_t t = range.begin(); t != range.end(); ++t) {
@@ -322,7 +329,7 @@ void GatherStage::Evaluate() {
                     if (Front(h2)) second += at(radiance, h2);
                 }
                 e += second * (kPi / m);
-                const Material& mat = scene_.materials[tris[h.triangle & kIndex].material];
+                const Material& mat = rays_->MaterialOf(h.triangle & kIndex);
                 sum += mat.albedo / kPi * e + (shot_.empty() ? mat.emission : glm::vec3(0.0f));
                 ++k;
             }
@@ -353,27 +360,50 @@ std::vector<glm::vec3> GatherStage::SurfelIrradiance(Channel channel) {
 }
 
 void GatherStage::UpdateMaterials(const Scene& scene) {
-    bool emissionChanged = scene.materials.size() != scene_.materials.size();
-    for (size_t m = 0; !emissionChanged && m < scene.materials.size(); ++m)
-        emissionChanged = scene.materials[m].emission != scene_.materials[m].emission;
-    bool assignments = false;
-    for (size_t p = 0; p < scene.primitives.size() && p < scene_.primitives.size(); ++p)
-        assignments = assignments || scene.primitives[p].material != scene_.primitives[p].material;
-    // Only what a material edit changes (no vertex arrays copied on an edit).
+    // Per primitive: whether its emission changed, and whether it emits where it did not
+    // when the rays were traced (the emitters' sampling does not know it: trace again).
+    bool emissionChanged = false, newEmitter = false;
+    for (size_t p = 0; p < scene.primitives.size() && p < scene_.primitives.size(); ++p) {
+        const glm::vec3& was = scene_.materials[scene_.primitives[p].material].emission;
+        const glm::vec3& now = scene.materials[scene.primitives[p].material].emission;
+        emissionChanged = emissionChanged || was != now;
+        newEmitter = newEmitter || (glm::any(glm::greaterThan(now, glm::vec3(0.0f))) &&
+                                    rays_->EmitterSlot(static_cast<uint32_t>(p)) < 0);
+    }
+    // Only what a material edit changes (no vertex arrays copied on an edit). The ray scene
+    // reads materials through the primitives (RayScene::MaterialOf), so it stays valid.
     scene_.materials = scene.materials;
     for (size_t p = 0; p < scene.primitives.size() && p < scene_.primitives.size(); ++p)
         scene_.primitives[p].material = scene.primitives[p].material;
     inner_->UpdateMaterials(scene);
-    // The ray scene keeps each triangle's material and the emitters' power: rebuilt when
-    // either changed (the same triangles, so the cached hits stay valid).
-    if (emissionChanged || assignments)
-        rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
-    if (emissionChanged) {
-        // The gather rays' emitter hits are weighted by the emitters' power: traced again.
-        if (!targets_.empty()) Trace();
-        Shoot();
-    }
     fresh_ = false;
+    if (!emissionChanged || settings_.emitterRays <= 0) return;
+    // The first shot and the gather's emitter hits are linear in each emitting primitive's
+    // emission: re-weighted from their coefficients, unless an emitter is new.
+    auto start = std::chrono::steady_clock::now();
+    const size_t slots = rays_->EmitterPrimitives().size();
+    if (!newEmitter && shooter_ && shooter_->Reevaluate(*rays_, shot_) &&
+        (targets_.empty() || emitterCoef_.size() == targets_.size() * slots)) {
+        std::vector<glm::vec3> le(slots);
+        for (size_t k = 0; k < slots; ++k)
+            le[k] = scene_.materials[scene_.primitives[rays_->EmitterPrimitives()[k]].material]
+                        .emission;
+        for (size_t t = 0; t < targets_.size(); ++t) {
+            emitterHits_[t] = glm::vec3(0.0f);
+            for (size_t k = 0; k < slots; ++k)
+                emitterHits_[t] += le[k] * emitterCoef_[t * slots + k];
+            shot_[targets_[t]] += emitterHits_[t];
+        }
+        inner_->SetEmitterDirect(shot_);
+        msShot_ = Ms(start);
+        return;
+    }
+    rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
+    if (!targets_.empty()) {
+        Trace();
+        Sky();
+    }
+    Shoot();
 }
 
 void GatherStage::UpdateLights(const Scene& scene) {
@@ -403,9 +433,9 @@ void GatherStage::UpdateGeometry(const Scene& scene) {
         moved.surfels[i] = 1;
         was.Add(before[i]);
         is.Add(s.positions[i]);
-        emitterMoved = emitterMoved ||
-                       glm::any(glm::greaterThan(
-                           scene_.materials[scene_.primitives[p].material].emission, glm::vec3(0.0f)));
+        emitterMoved = emitterMoved || glm::any(glm::greaterThan(
+                                           scene_.materials[scene_.primitives[p].material].emission,
+                                           glm::vec3(0.0f)));
     }
     // Rays that graze a moved surface's old place still count: the boxes are padded.
     const glm::vec3 pad(4.0f * rays_->Epsilon());
@@ -438,6 +468,7 @@ SolverStats GatherStage::Stats() const {
     s.msGatherTrace = msTrace_;
     s.msGatherEvaluate = msEvaluate_;
     s.gatherRaysRetraced = raysRetraced_;
+    s.gatherTraces = traces_;
     return s;
 }
 

@@ -109,6 +109,9 @@ class GatherStage : public Solver {
     // Per target: the emitters its gather rays meet, weighted against the first shot's
     // shadow rays (EmitterHitWeight), which at the targets counts the gather rays in.
     std::vector<glm::vec3> emitterHits_;
+    // The same as a coefficient per target and emitting primitive (RayScene::EmitterSlot),
+    // so that an emissive edit re-weights them without tracing (empty: not kept).
+    std::vector<float> emitterCoef_;
     std::vector<uint32_t> targets_;    // surfels gathered at
     std::vector<glm::vec2> rotation_;  // per target: its rotation of the ray pattern
     std::vector<Hit> hits_;            // targets × gatherRays
@@ -123,6 +126,7 @@ class GatherStage : public Solver {
     std::vector<glm::vec3> indirect_, direct_;  // per surfel, after Evaluate
     double msShot_ = 0.0, msTrace_ = 0.0, msEvaluate_ = 0.0;
     size_t raysRetraced_ = 0;  // by the last move, both parts
+    size_t traces_ = 0;        // tracings of either part, whole or after a move
 };
 
 // `solver` behind the gather stage, where it can take it. The first shot is declined with

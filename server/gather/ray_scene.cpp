@@ -31,12 +31,14 @@ void InitRay(RTCRay& r, const glm::vec3& o, const glm::vec3& d, float tfar) {
 }  // namespace
 
 RayScene::RayScene(const Scene& scene) : scene_(scene) {
-    for (const auto& prim : scene_.primitives)
+    for (uint32_t p = 0; p < scene_.primitives.size(); ++p) {
+        const Primitive& prim = scene_.primitives[p];
         for (size_t i = 0; i + 2 < prim.indices.size(); i += 3) {
             uint32_t a = prim.indices[i], b = prim.indices[i + 1], c = prim.indices[i + 2];
             AddTriangle(prim.positions[a], prim.positions[b], prim.positions[c],
-                        prim.normals[a] + prim.normals[b] + prim.normals[c], prim.material);
+                        prim.normals[a] + prim.normals[b] + prim.normals[c], p);
         }
+    }
     Build();
 }
 
@@ -51,14 +53,14 @@ RayScene::RayScene(const Scene& scene, const Surfels& surfels) : scene_(scene) {
         while (p > 0 && a < surfels.firstSurfel[p]) --p;
         AddTriangle(surfels.positions[a], surfels.positions[b], surfels.positions[c],
                     surfels.normals[a] + surfels.normals[b] + surfels.normals[c],
-                    scene.primitives[p].material);
+                    static_cast<uint32_t>(p));
         corners_.emplace_back(a, b, c);
     }
     Build();
 }
 
 void RayScene::AddTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
-                           const glm::vec3& normalSum, uint32_t material) {
+                           const glm::vec3& normalSum, uint32_t primitive) {
     RayTriangle t;
     t.p0 = a;
     t.e1 = b - a;
@@ -68,7 +70,8 @@ void RayScene::AddTriangle(const glm::vec3& a, const glm::vec3& b, const glm::ve
     t.area = 0.5f * len;
     t.normal = len > 0.0f ? cr / len : glm::vec3(0.0f, 0.0f, 1.0f);
     if (glm::dot(normalSum, t.normal) < 0.0f) t.normal = -t.normal;
-    t.material = material;
+    t.primitive = primitive;
+    t.material = scene_.primitives[primitive].material;
     tris_.push_back(t);
 }
 
@@ -98,6 +101,13 @@ void RayScene::Build() {
         cdf_.push_back(total);
     }
     for (auto& c : cdf_) c /= total;
+    emitterSlot_.assign(scene_.primitives.size(), -1);
+    for (uint32_t e : emitters_) {
+        const uint32_t p = tris_[e].primitive;
+        if (emitterSlot_[p] >= 0) continue;
+        emitterSlot_[p] = static_cast<int>(emitterPrimitives_.size());
+        emitterPrimitives_.push_back(p);
+    }
     areaPdf_.assign(tris_.size(), 0.0f);
     for (uint32_t k = 0; k < emitters_.size(); ++k)
         areaPdf_[emitters_[k]] =

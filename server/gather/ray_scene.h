@@ -5,8 +5,8 @@
 #pragma once
 
 #include <cstdint>
-#include <limits>
 #include <glm/glm.hpp>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -22,7 +22,8 @@ struct RayTriangle {
     glm::vec3 p0, e1, e2;  // p0 + u·e1 + v·e2
     glm::vec3 normal;      // unit, on the side the vertex normals point to (its front)
     float area = 0.0f;
-    uint32_t material = 0;
+    uint32_t material = 0;   // the primitive's material when the BVH was built
+    uint32_t primitive = 0;  // index into Scene::primitives
 };
 
 // An axis-aligned box, for asking which cached rays a move can have changed.
@@ -68,17 +69,28 @@ class RayScene {
     // radiance): `emitters[k]` with the cumulative probability `cdf[k]`.
     const std::vector<uint32_t>& Emitters() const { return emitters_; }
     const std::vector<double>& EmitterCdf() const { return cdf_; }
+    // The primitives with an emitting triangle when the BVH was built, each with a slot
+    // 0 … EmitterPrimitives().size() − 1 (EmitterSlot: −1 for the others). Light sampled
+    // from them is linear in their current emission, so that what depends on the emitters
+    // can keep a coefficient per slot.
+    const std::vector<uint32_t>& EmitterPrimitives() const { return emitterPrimitives_; }
+    int EmitterSlot(uint32_t primitive) const { return emitterSlot_[primitive]; }
     // The emitter k a uniform number u in [0, 1) picks.
     size_t PickEmitter(float u) const;
     // Per triangle: P(chosen) / area, the area density of a point drawn by PickEmitter and
     // then uniformly on the triangle; 0 for triangles that do not emit.
     float AreaPdf(uint32_t triangle) const { return areaPdf_[triangle]; }
+    // Triangle t's material and emission as the scene says now (a material edit may have
+    // reassigned its primitive's material since the BVH was built).
+    const Material& MaterialOf(uint32_t t) const {
+        return scene_.materials[scene_.primitives[tris_[t].primitive].material];
+    }
     // Offset that lifts ray origins off their surface: 10⁻⁴ × the scene's diameter.
     float Epsilon() const { return eps_; }
 
   private:
     void AddTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
-                     const glm::vec3& normalSum, uint32_t material);
+                     const glm::vec3& normalSum, uint32_t primitive);
     void Build();
     void CheckError() const;
 
@@ -92,6 +104,8 @@ class RayScene {
     std::vector<uint32_t> emitters_;
     std::vector<double> cdf_;
     std::vector<float> areaPdf_;
+    std::vector<uint32_t> emitterPrimitives_;
+    std::vector<int> emitterSlot_;
 };
 
 // Where per-vertex irradiance is estimated by everything that traces rays (the reference,

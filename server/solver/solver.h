@@ -146,6 +146,7 @@ struct SolverStats {
     double msGatherTrace = 0.0;
     double msGatherEvaluate = 0.0;
     size_t gatherRaysRetraced = 0;  // rays the last move traced again (both parts)
+    size_t gatherTraces = 0;        // tracings of either part so far (edits that traced)
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };
