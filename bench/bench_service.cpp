@@ -115,7 +115,7 @@ IrradianceFile FrameToFile(const client::Frame& f) {
 }
 
 nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int edits, int moves,
-                       const IrradianceFile* truth) {
+                       const IrradianceFile* truth, int gatherRays, int directRays) {
     client::Client editor(srv.url, "bench-editor");
     client::LoadOptions o;
     o.path = c.path;
@@ -125,6 +125,8 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
     o.oracle = c.oracleValue;
     o.convergedChange = 0.0f;  // stream continuously: every frame is a frame to deliver
     o.reload = true;
+    o.gatherRays = gatherRays;
+    o.emitterRays = directRays;
     auto start = Clock::now();
     client::SceneInfo info = editor.Load(o);
     double loadS = Ms(Clock::now() - start) / 1000.0;
@@ -134,6 +136,8 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
     nlohmann::json out;
     out["scene"] = c.name;
     out["device"] = info.device;
+    out["gather_rays"] = gatherRays;
+    out["direct_rays"] = directRays;
     out["elements"] = info.elements;
     out["links"] = info.links;
     out["subscribers"] = nlohmann::json::array();
@@ -278,7 +282,8 @@ int main(int argc, char** argv) {
     CLI::App app{"penumbra-bench-service: streaming fps, overhead and edit latency"};
     std::string outDir = "bench/results", devices = "lavapipe,cpu", scenes = "cornell,office";
     double seconds = 4.0;
-    int edits = 30, moves = 5, samples = 1024;
+    int edits = 30, moves = 5, samples = 1024, gatherRays = 0, directRays = 0;
+    std::string name = "service";
     app.add_option("--out", outDir, "results folder")->capture_default_str();
     app.add_option("--devices", devices, "comma list of lavapipe, cpu, gpu")->capture_default_str();
     app.add_option("--scenes", scenes, "comma list of cornell, office")->capture_default_str();
@@ -288,6 +293,13 @@ int main(int argc, char** argv) {
     app.add_option("--moves", moves, "moves timed")->capture_default_str();
     app.add_option("--samples", samples, "reference paths per vertex for the RMSE (0: none)")
         ->capture_default_str();
+    app.add_option("--gather-rays", gatherRays,
+                   "LoadScene gather_rays: the final gather (0: off, the service's default)")
+        ->capture_default_str();
+    app.add_option("--direct-rays", directRays,
+                   "LoadScene emitter_rays: the first shot (0: off, the service's default)")
+        ->capture_default_str();
+    app.add_option("--name", name, "results go to OUT/NAME.json")->capture_default_str();
     CLI11_PARSE(app, argc, argv);
 
     auto has = [](const std::string& list, const std::string& x) {
@@ -333,14 +345,15 @@ int main(int argc, char** argv) {
                     LoadGltf((fs::path(PENUMBRA_SOURCE_DIR) / "scenes" / c.path).string()),
                     samples));
             report["cases"].push_back(
-                RunCase(srv, c, seconds, edits, c.mover.empty() ? 0 : moves, truth.get()));
+                RunCase(srv, c, seconds, edits, c.mover.empty() ? 0 : moves, truth.get(),
+                        gatherRays, directRays));
         }
     } catch (const std::exception& e) {
         std::fprintf(stderr, "penumbra-bench-service: %s\n", e.what());
         return 1;
     }
     fs::create_directories(outDir);
-    std::ofstream(fs::path(outDir) / "service.json") << report.dump(2) << "\n";
-    std::printf("wrote %s/service.json\n", outDir.c_str());
+    std::ofstream(fs::path(outDir) / (name + ".json")) << report.dump(2) << "\n";
+    std::printf("wrote %s/%s.json\n", outDir.c_str(), name.c_str());
     return 0;
 }
