@@ -155,14 +155,25 @@ void GatherStage::Trace(const Moved* moved) {
     };
     // After a move: whether a cached hit still holds (its ray starts on a surface that did not
     // move, ends on one that did not, and passes by where the moved ones were and are).
-    auto holds = [&](const glm::vec3& o, const glm::vec3& d, const Hit& h, float& t) {
-        if (h.triangle != kEscaped) {
-            const glm::uvec3& c = rays_->Corners(h.triangle & kIndex);
-            if (moved->surfels[c.x] || moved->surfels[c.y] || moved->surfels[c.z]) return false;
+    // The segment is the one to the hit point (no direction needed, which costs more to
+    // make again than the test), or the ray to infinity when it escaped.
+    auto holds = [&](const glm::vec3& o, const auto& direction, const Hit& h, float& t) {
+        if (h.triangle == kEscaped) {
+            t = inf;
+            const glm::vec3 d = direction();
+            for (const Bounds& b : moved->boxes)
+                if (b.Meets(o, d, inf)) return false;
+            return true;
         }
-        t = Distance(o, h);
+        const uint32_t tri = h.triangle & kIndex;
+        const glm::uvec3& c = rays_->Corners(tri);
+        if (moved->surfels[c.x] || moved->surfels[c.y] || moved->surfels[c.z]) return false;
+        const RayTriangle& tr = tris[tri];
+        const glm::vec3 span =
+            tr.p0 + (h.u * (1.0f / 65535.0f)) * tr.e1 + (h.v * (1.0f / 65535.0f)) * tr.e2 - o;
+        t = glm::length(span);
         for (const Bounds& b : moved->boxes)
-            if (b.Meets(o, d, t)) return false;
+            if (b.Meets(o, span, 1.0f)) return false;
         return true;
     };
     const std::vector<Hit> oldHits = moved ? hits_ : std::vector<Hit>();
@@ -179,7 +190,7 @@ void GatherStage::Trace(const Moved* moved) {
             const bool all = !moved || moved->surfels[i];
             size_t old = moved ? oldStart[t] : 0;  // its old secondaries
             for (int r = 0; r < n; ++r) {
-                const glm::vec3 d = Direction(t, r);
+                auto d = [&] { return Direction(t, r); };
                 Hit& hit = hits_[t * n + r];
                 float dist = inf;
                 bool keep = false;
@@ -191,7 +202,7 @@ void GatherStage::Trace(const Moved* moved) {
                 const bool wasShort =
                     !all && Front(oldHits[t * n + r]) && (oldHits[t * n + r].triangle & kShort);
                 if (!keep) {
-                    hit = trace(o, d, dist);
+                    hit = trace(o, d(), dist);
                     ++count;
                 }
                 const bool isShort = Front(hit) && dist < shortHit;
@@ -206,12 +217,12 @@ void GatherStage::Trace(const Moved* moved) {
                 const float u = hit.u * (1.0f / 65535.0f), v = hit.v * (1.0f / 65535.0f);
                 const glm::vec3 y = tr.p0 + u * tr.e1 + v * tr.e2 + rays_->Epsilon() * tr.normal;
                 for (int j = 0; j < m; ++j) {
-                    const glm::vec3 d2 = SecondDirection(t, r, tri, j);
+                    auto d2 = [&] { return SecondDirection(t, r, tri, j); };
                     float t2 = inf;
                     if (keep && wasShort && holds(y, d2, oldSecond[old + j], t2)) {
                         second[t].push_back(oldSecond[old + j]);
                     } else {
-                        second[t].push_back(trace(y, d2, t2));
+                        second[t].push_back(trace(y, d2(), t2));
                         ++count;
                     }
                 }
