@@ -11,8 +11,9 @@
 //    bin-scale blur and its leaks are integrated over the hemisphere instead of read
 //    directly (two-pass radiosity's final gather).
 //
-// A Solver wrapping another: edits pass through; the hits are traced once and cached, so a
-// light, material or sky edit re-evaluates them; a move, or an emitter edit, traces again.
+// A Solver wrapping another: edits pass through; the rays are traced once and their outcomes
+// cached, so a light, material or sky edit re-reads them, an emissive edit re-weights them,
+// and a move traces again only the rays that pass near what moved.
 #pragma once
 
 #include <memory>
@@ -82,7 +83,8 @@ class GatherStage : public Solver {
         std::vector<Bounds> boxes;     // where the moved surfaces were and are
     };
 
-    void Place();  // points_: the input vertices' estimate points, the others' positions
+    // points_: the input vertices' estimate points, the others just inside their surface.
+    void Place();
     void Shoot(const Moved* moved = nullptr);  // the emitters' light at the surfels
     // The gather rays' hits at the targets: all of them, or after a move those that it can
     // have changed; then emitterHits_ (Shoot reads them).
@@ -95,7 +97,7 @@ class GatherStage : public Solver {
     int SecondRays() const { return std::max(4, settings_.gatherRays / 32); }
     // Where a cached hit lies along its ray (∞ when it escaped).
     float Distance(const glm::vec3& origin, const Hit& h) const;
-    void Evaluate();  // gathered_ from the inner solver's irradiance and the cached hits
+    void Evaluate();  // indirect_, direct_ from the inner solver's answer and the cached hits
 
     std::unique_ptr<Solver> inner_;
     Scene scene_;  // as last edited: the ray scene's materials and environment
@@ -122,7 +124,7 @@ class GatherStage : public Solver {
     std::vector<Hit> second_;
     std::vector<uint32_t> secondStart_;
     std::vector<glm::vec3> secondSky_;
-    bool fresh_ = false;                        // gathered_ holds the current answer
+    bool fresh_ = false;                        // indirect_, direct_ hold the current answer
     std::vector<glm::vec3> indirect_, direct_;  // per surfel, after Evaluate
     double msShot_ = 0.0, msTrace_ = 0.0, msEvaluate_ = 0.0;
     size_t raysRetraced_ = 0;  // by the last move, both parts
