@@ -480,6 +480,7 @@ SolverStats GatherStage::Stats() const {
     s.msGatherEvaluate = msEvaluate_;
     s.gatherRaysRetraced = raysRetraced_;
     s.gatherTraces = traces_;
+    s.gatherDevice = "cpu (Embree)";
     return s;
 }
 

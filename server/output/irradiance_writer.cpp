@@ -69,13 +69,15 @@ nlohmann::json StatsToJson(const SolverStats& s) {
     if (std::isfinite(s.irradianceBound)) j["irradiance_bound"] = s.irradianceBound;
     if (!s.divergence.empty()) j["divergence"] = s.divergence;
     if (s.emitterRays > 0)
-        j["emitter_direct"] = {{"rays", s.emitterRays}, {"ms", s.msEmitterDirect}};
+        j["emitter_direct"] = {
+            {"rays", s.emitterRays}, {"ms", s.msEmitterDirect}, {"device", s.gatherDevice}};
     if (s.gatherRays > 0)
         j["final_gather"] = {{"rays", s.gatherRays},
                              {"targets", s.gatherTargets},
                              {"ms_trace", s.msGatherTrace},
                              {"ms_evaluate", s.msGatherEvaluate},
-                             {"rays_retraced_by_last_move", s.gatherRaysRetraced}};
+                             {"rays_retraced_by_last_move", s.gatherRaysRetraced},
+                             {"device", s.gatherDevice}};
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

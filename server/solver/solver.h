@@ -147,6 +147,9 @@ struct SolverStats {
     double msGatherEvaluate = 0.0;
     size_t gatherRaysRetraced = 0;  // rays the last move traced again (both parts)
     size_t gatherTraces = 0;        // tracings of either part so far (edits that traced)
+    // Where the gather stage traces: the CPU (Embree) on every solver device for now (no
+    // Vulkan ray-query path yet); empty without a gather stage.
+    std::string gatherDevice;
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };

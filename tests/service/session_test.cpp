@@ -515,6 +515,8 @@ TEST(Session, FinalGatherFollowsMaterialEdits) {
     const nlohmann::json stats = session.StatsJson();
     ASSERT_TRUE(stats["solver"].contains("final_gather")) << stats.dump();
     EXPECT_EQ(stats["solver"]["final_gather"]["rays"], 256);
+    // No Vulkan ray-query path yet: the stats say where the rays went.
+    EXPECT_EQ(stats["solver"]["final_gather"]["device"], "cpu (Embree)");
 
     MaterialEdit grey;
     grey.material = "grey";
