@@ -145,8 +145,7 @@ double DarkVertices(const std::vector<std::vector<glm::vec3>>& ours,
         for (const glm::vec3& v : p) peak = std::max(peak, double(mean(v)));
     for (size_t p = 0; p < truth.size(); ++p)
         for (size_t i = 0; i < truth[p].size(); ++i)
-            if (mean(truth[p][i]) < 0.01 * peak)
-                worst = std::max(worst, double(mean(ours[p][i])));
+            if (mean(truth[p][i]) < 0.01 * peak) worst = std::max(worst, double(mean(ours[p][i])));
     return peak > 0 ? worst / peak : 0.0;
 }
 

@@ -344,9 +344,8 @@ int main(int argc, char** argv) {
                 truth = std::make_unique<IrradianceFile>(bench::Reference(
                     LoadGltf((fs::path(PENUMBRA_SOURCE_DIR) / "scenes" / c.path).string()),
                     samples));
-            report["cases"].push_back(
-                RunCase(srv, c, seconds, edits, c.mover.empty() ? 0 : moves, truth.get(),
-                        gatherRays, directRays));
+            report["cases"].push_back(RunCase(srv, c, seconds, edits, c.mover.empty() ? 0 : moves,
+                                              truth.get(), gatherRays, directRays));
         }
     } catch (const std::exception& e) {
         std::fprintf(stderr, "penumbra-bench-service: %s\n", e.what());

@@ -41,6 +41,17 @@ inline SolverSettings CpuSettings(int bins, float elementSize) {
     return s;
 }
 
+// Per-vertex irradiance of every primitive in `channel`, one array (what bake and the
+// service output).
+inline std::vector<glm::vec3> AllVertices(Solver& solver, const Scene& scene, Channel channel) {
+    std::vector<glm::vec3> surfels = solver.SurfelIrradiance(channel), out;
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        auto v = PrimitiveIrradiance(solver.GetSurfels(), surfels, scene, p);
+        out.insert(out.end(), v.begin(), v.end());
+    }
+    return out;
+}
+
 inline float Mean(glm::vec3 v) { return (v.x + v.y + v.z) / 3.0f; }
 
 // √(Σ|a−b|²) / √(Σ|b|²) over two equally long arrays (NaN when b is all zero).

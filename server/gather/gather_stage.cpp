@@ -111,8 +111,13 @@ void GatherStage::Place() {
         if (len > 0.0f) points_[i] += std::min(len, step) * (d / len);
     }
     const auto inset = VertexEstimatePoints(scene_);
-    for (size_t p = 0; p < inset.size(); ++p)
+    surfelPrimitive_.assign(s.size(), 0);
+    for (size_t p = 0; p < inset.size(); ++p) {
         std::copy(inset[p].begin(), inset[p].end(), points_.begin() + s.firstSurfel[p]);
+        const size_t end = p + 1 < s.firstSurfel.size() ? s.firstSurfel[p + 1] : s.size();
+        std::fill(surfelPrimitive_.begin() + s.firstSurfel[p], surfelPrimitive_.begin() + end,
+                  static_cast<uint32_t>(p));
+    }
 }
 
 glm::vec3 GatherStage::Direction(size_t target, int ray) const {
@@ -127,11 +132,14 @@ glm::vec3 GatherStage::SecondDirection(size_t target, int ray, uint32_t tri, int
     return CosineDirection(rays_->Triangles()[tri].normal, R2Point(rot, j));
 }
 
+glm::vec3 GatherStage::HitPoint(const Hit& h) const {
+    const RayTriangle& t = rays_->Triangles()[h.triangle & kIndex];
+    return t.p0 + (h.u * (1.0f / 65535.0f)) * t.e1 + (h.v * (1.0f / 65535.0f)) * t.e2;
+}
+
 float GatherStage::Distance(const glm::vec3& origin, const Hit& h) const {
     if (h.triangle == kEscaped) return std::numeric_limits<float>::infinity();
-    const RayTriangle& t = rays_->Triangles()[h.triangle & kIndex];
-    const float u = h.u * (1.0f / 65535.0f), v = h.v * (1.0f / 65535.0f);
-    return glm::length(t.p0 + u * t.e1 + v * t.e2 - origin);
+    return glm::length(HitPoint(h) - origin);
 }
 
 void GatherStage::Trace(const Moved* moved) {
@@ -168,9 +176,7 @@ void GatherStage::Trace(const Moved* moved) {
         const uint32_t tri = h.triangle & kIndex;
         const glm::uvec3& c = rays_->Corners(tri);
         if (moved->surfels[c.x] || moved->surfels[c.y] || moved->surfels[c.z]) return false;
-        const RayTriangle& tr = tris[tri];
-        const glm::vec3 span =
-            tr.p0 + (h.u * (1.0f / 65535.0f)) * tr.e1 + (h.v * (1.0f / 65535.0f)) * tr.e2 - o;
+        const glm::vec3 span = HitPoint(h) - o;
         t = glm::length(span);
         for (const Bounds& b : moved->boxes)
             if (b.Meets(o, span, 1.0f)) return false;
@@ -213,9 +219,7 @@ void GatherStage::Trace(const Moved* moved) {
                 }
                 // Its secondary gather: the cached one where the hit held, each ray checked.
                 const uint32_t tri = hit.triangle & kIndex;
-                const RayTriangle& tr = tris[tri];
-                const float u = hit.u * (1.0f / 65535.0f), v = hit.v * (1.0f / 65535.0f);
-                const glm::vec3 y = tr.p0 + u * tr.e1 + v * tr.e2 + rays_->Epsilon() * tr.normal;
+                const glm::vec3 y = HitPoint(hit) + rays_->Epsilon() * tris[tri].normal;
                 for (int j = 0; j < m; ++j) {
                     auto d2 = [&] { return SecondDirection(t, r, tri, j); };
                     float t2 = inf;
@@ -304,10 +308,8 @@ void GatherStage::Evaluate() {
     // The radiance each surfel reflects (and emits, where the solver carries the emission):
     // L = ρ/π · E over the surfel's whole irradiance.
     std::vector<glm::vec3> radiance(s.size());
-    size_t p = 0;
     for (uint32_t i = 0; i < s.size(); ++i) {
-        while (p + 1 < s.firstSurfel.size() && i >= s.firstSurfel[p + 1]) ++p;
-        const Material& m = scene_.materials[scene_.primitives[p].material];
+        const Material& m = scene_.materials[scene_.primitives[surfelPrimitive_[i]].material];
         radiance[i] = m.albedo / kPi * (indirect_[i] + direct_[i]);
         if (shot_.empty()) radiance[i] += m.emission;
     }
@@ -437,16 +439,14 @@ void GatherStage::UpdateGeometry(const Scene& scene) {
     moved.surfels.assign(s.size(), 0);
     Bounds was, is;
     bool emitterMoved = false;
-    size_t p = 0;
     for (size_t i = 0; i < s.size(); ++i) {
-        while (p + 1 < s.firstSurfel.size() && i >= s.firstSurfel[p + 1]) ++p;
         if (before[i] == s.positions[i] && normalsBefore[i] == s.normals[i]) continue;
         moved.surfels[i] = 1;
         was.Add(before[i]);
         is.Add(s.positions[i]);
-        emitterMoved = emitterMoved || glm::any(glm::greaterThan(
-                                           scene_.materials[scene_.primitives[p].material].emission,
-                                           glm::vec3(0.0f)));
+        const uint32_t m = scene_.primitives[surfelPrimitive_[i]].material;
+        emitterMoved = emitterMoved ||
+                       glm::any(glm::greaterThan(scene_.materials[m].emission, glm::vec3(0.0f)));
     }
     // Rays that graze a moved surface's old place still count: the boxes are padded.
     const glm::vec3 pad(4.0f * rays_->Epsilon());

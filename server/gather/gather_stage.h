@@ -95,7 +95,9 @@ class GatherStage : public Solver {
     glm::vec3 SecondDirection(size_t target, int ray, uint32_t tri, int j) const;
     // Rays a secondary gather: 8 at 256 (16 gave the same answers, for 1.6× the tracing).
     int SecondRays() const { return std::max(4, settings_.gatherRays / 32); }
-    // Where a cached hit lies along its ray (∞ when it escaped).
+    // A cached hit's point (front or back side; not for kEscaped), and how far along its ray
+    // it lies (∞ when it escaped).
+    glm::vec3 HitPoint(const Hit& h) const;
     float Distance(const glm::vec3& origin, const Hit& h) const;
     void Evaluate();  // indirect_, direct_ from the inner solver's answer and the cached hits
 
@@ -106,6 +108,7 @@ class GatherStage : public Solver {
     // Per surfel, where its light is estimated: an input vertex at its estimate point
     // (VertexEstimatePoints, where the reference estimates it too), others where they are.
     std::vector<glm::vec3> points_;
+    std::vector<uint32_t> surfelPrimitive_;   // per surfel: its primitive
     std::unique_ptr<EmitterDirect> shooter_;  // the first shot's rays (null: off)
     std::vector<glm::vec3> shot_;             // first shot per surfel (empty: off)
     // Per target: the emitters its gather rays meet, weighted against the first shot's

@@ -96,16 +96,6 @@ TEST(FirstShot, LavapipeMatchesTheCpu) {
               1e-3);
 }
 
-// Per-vertex irradiance of every primitive, one array (the output the gather serves).
-std::vector<glm::vec3> AllVertices(Solver& solver, const Scene& scene, Channel channel) {
-    std::vector<glm::vec3> surfels = solver.SurfelIrradiance(channel), out;
-    for (size_t p = 0; p < scene.primitives.size(); ++p) {
-        auto v = PrimitiveIrradiance(solver.GetSurfels(), surfels, scene, p);
-        out.insert(out.end(), v.begin(), v.end());
-    }
-    return out;
-}
-
 // The white furnace with blockers (tests/solver/antiradiance_test.cpp): every surface emits
 // Le and reflects ρ, so E = π Le/(1 − ρ) at every vertex. At coarse settings the solver
 // alone is a few per cent off near junctions; the gather reads its answer only through the
@@ -135,16 +125,16 @@ TEST(FinalGather, WhiteFurnaceWithinOnePercentAtEveryVertex) {
     };
     auto alone = CreateSolver(scene, testing::CpuSettings(128, 0.1f));
     IterateUntilConverged(*alone, 1e-4, 300);
-    const double a = worst(AllVertices(*alone, scene, Channel::kTotal));
+    const double a = worst(testing::AllVertices(*alone, scene, Channel::kTotal));
     // The emission at the hits (no first shot), and with the first shot.
     GatherSettings g;
     g.emitterRays = 0;
     GatherStage hits(CreateSolver(scene, testing::CpuSettings(128, 0.1f)), scene, g);
     IterateUntilConverged(hits, 1e-4, 300);
-    const double h = worst(AllVertices(hits, scene, Channel::kTotal));
+    const double h = worst(testing::AllVertices(hits, scene, Channel::kTotal));
     GatherStage shot(CreateSolver(scene, testing::CpuSettings(128, 0.1f)), scene, {});
     IterateUntilConverged(shot, 1e-4, 300);
-    const double s = worst(AllVertices(shot, scene, Channel::kTotal));
+    const double s = worst(testing::AllVertices(shot, scene, Channel::kTotal));
     std::printf(
         "furnace, worst vertex: solver alone %.2f%%, gathered %.2f%%, with the first "
         "shot %.2f%%\n",
@@ -196,7 +186,7 @@ TEST(FinalGather, EditsMatchAFreshGather) {
          }},
     };
     for (const auto& [name, edit] : edits) {
-        const std::vector<glm::vec3> before = AllVertices(stage, scene, Channel::kTotal);
+        const std::vector<glm::vec3> before = testing::AllVertices(stage, scene, Channel::kTotal);
         const size_t traces = stage.Stats().gatherTraces;
         edit(scene);
         if (name == "light" || name == "sky") {
@@ -210,9 +200,10 @@ TEST(FinalGather, EditsMatchAFreshGather) {
         IterateUntilConverged(stage, 1e-4, 300);
         GatherStage fresh(CreateSolver(scene, settings), scene, {});
         IterateUntilConverged(fresh, 1e-4, 300);
-        const std::vector<glm::vec3> now = AllVertices(stage, scene, Channel::kTotal);
+        const std::vector<glm::vec3> now = testing::AllVertices(stage, scene, Channel::kTotal);
         const double moved = testing::RelativeRms(now, before);
-        const double apart = testing::RelativeRms(now, AllVertices(fresh, scene, Channel::kTotal));
+        const double apart =
+            testing::RelativeRms(now, testing::AllVertices(fresh, scene, Channel::kTotal));
         std::printf("%-8s changed the answer by %.2f%%; edited vs fresh %.4f%%\n", name.c_str(),
                     100 * moved, 100 * apart);
         EXPECT_GT(moved, 0.02) << name;

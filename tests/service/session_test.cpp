@@ -456,6 +456,13 @@ TEST(Session, DivergedSolutionStopsAndKeepsTheLastBoundedFrame) {
 namespace penumbra::service {
 namespace {
 
+// Per-primitive arrays (a frame's, the reference's) as one array.
+std::vector<glm::vec3> Flat(const std::vector<std::vector<glm::vec3>>& perPrimitive) {
+    std::vector<glm::vec3> out;
+    for (const auto& p : perPrimitive) out.insert(out.end(), p.begin(), p.end());
+    return out;
+}
+
 // The emitters' direct light as the solver's first shot in a session (LoadScene
 // `emitter_rays`): the converged frame is the path tracer's answer within a few per cent
 // (measured 2.4%; the solver alone at these settings 17.8%: its bins blur the blocker's
@@ -470,13 +477,8 @@ TEST(Session, EmitterFirstShotIsTracedAndFollowsEmitterEdits) {
     ASSERT_TRUE(f);
     ReferenceSettings rs;
     rs.samples = 1024;
-    const ReferenceResult ref = RenderReference(scene, rs);
-    std::vector<glm::vec3> mine, truth;
-    for (size_t p = 0; p < scene.primitives.size(); ++p) {
-        mine.insert(mine.end(), f->irradiance[p].begin(), f->irradiance[p].end());
-        truth.insert(truth.end(), ref.irradiance[p].begin(), ref.irradiance[p].end());
-    }
-    const double rms = testing::RelativeRms(mine, truth);
+    const double rms =
+        testing::RelativeRms(Flat(f->irradiance), Flat(RenderReference(scene, rs).irradiance));
     std::printf("blocker, session with the first shot: %.2f%% from the reference\n", 100 * rms);
     EXPECT_LT(rms, 0.05);
 
@@ -503,13 +505,8 @@ TEST(Session, FinalGatherFollowsMaterialEdits) {
     ASSERT_TRUE(f);
     ReferenceSettings rs;
     rs.samples = 1024;
-    auto flat = [&](const std::vector<std::vector<glm::vec3>>& perPrimitive) {
-        std::vector<glm::vec3> out;
-        for (const auto& p : perPrimitive) out.insert(out.end(), p.begin(), p.end());
-        return out;
-    };
     const double rms =
-        testing::RelativeRms(flat(f->irradiance), flat(RenderReference(scene, rs).irradiance));
+        testing::RelativeRms(Flat(f->irradiance), Flat(RenderReference(scene, rs).irradiance));
     std::printf("blocker, session with the final gather: %.2f%% from the reference\n", 100 * rms);
     EXPECT_LT(rms, 0.03);
     const nlohmann::json stats = session.StatsJson();
@@ -528,8 +525,8 @@ TEST(Session, FinalGatherFollowsMaterialEdits) {
     Session fresh("blocker-edited", scene, settings);
     FramePtr want = WaitFor(fresh, 0);
     ASSERT_TRUE(want);
-    const double apart = testing::RelativeRms(flat(edited->irradiance), flat(want->irradiance));
-    const double moved = testing::RelativeRms(flat(edited->irradiance), flat(f->irradiance));
+    const double apart = testing::RelativeRms(Flat(edited->irradiance), Flat(want->irradiance));
+    const double moved = testing::RelativeRms(Flat(edited->irradiance), Flat(f->irradiance));
     std::printf("material edit moved the frame by %.2f%%; edited vs fresh %.3f%%\n", 100 * moved,
                 100 * apart);
     EXPECT_GT(moved, 0.02);

@@ -29,16 +29,6 @@ glm::mat4 Moved(const Scene& scene, const std::string& node, glm::vec3 shift, fl
            glm::rotate(glm::mat4(1.0f), glm::radians(degrees), glm::vec3(0, 1, 0));
 }
 
-// Per-vertex irradiance of every primitive, one array.
-std::vector<glm::vec3> AllVertices(Solver& solver, const Scene& scene, Channel channel) {
-    std::vector<glm::vec3> surfels = solver.SurfelIrradiance(channel), out;
-    for (size_t p = 0; p < scene.primitives.size(); ++p) {
-        auto v = PrimitiveIrradiance(solver.GetSurfels(), surfels, scene, p);
-        out.insert(out.end(), v.begin(), v.end());
-    }
-    return out;
-}
-
 TEST(MotionLinks, GroupsKeepSubtreesOfTheirOwn) {
     Scene scene = LoadGltf(kScenes + "cornell-box.gltf");
     AntiradianceModel m = BuildAntiradianceModel(scene, MotionSettings(64, 0.1f), {});
@@ -142,7 +132,7 @@ TEST(MotionLinks, MoveMatchesAFreshBakeOfTheMovedScene) {
     const SolverSettings settings = MotionSettings(64, 0.1f);
     AntiradianceSolver solver(scene, settings, {});
     solver.Iterate(12);
-    const std::vector<glm::vec3> before = AllVertices(solver, scene, Channel::kIndirect);
+    const std::vector<glm::vec3> before = testing::AllVertices(solver, scene, Channel::kIndirect);
     SetNodeTransform(scene, FindNode(scene, "tall_block"),
                      Moved(scene, "tall_block", {-0.08f, 0, -0.06f}, 20.0f));
     SetNodeTransform(scene, FindNode(scene, "short_block"),
@@ -150,7 +140,7 @@ TEST(MotionLinks, MoveMatchesAFreshBakeOfTheMovedScene) {
     ASSERT_EQ(solver.GeometryMismatch(scene), "");
     solver.UpdateGeometry(scene);
     solver.Iterate(20);
-    const std::vector<glm::vec3> moved = AllVertices(solver, scene, Channel::kIndirect);
+    const std::vector<glm::vec3> moved = testing::AllVertices(solver, scene, Channel::kIndirect);
 
     AntiradianceSolver fresh(scene, settings, {});
     fresh.Iterate(32);
@@ -158,11 +148,11 @@ TEST(MotionLinks, MoveMatchesAFreshBakeOfTheMovedScene) {
     auto plain = CreateSolver(scene, plainSettings);
     plain->Iterate(32);
     const double vsFresh =
-        testing::RelativeRms(moved, AllVertices(fresh, scene, Channel::kIndirect));
+        testing::RelativeRms(moved, testing::AllVertices(fresh, scene, Channel::kIndirect));
     const double vsPlain =
-        testing::RelativeRms(moved, AllVertices(*plain, scene, Channel::kIndirect));
+        testing::RelativeRms(moved, testing::AllVertices(*plain, scene, Channel::kIndirect));
     const double vsBefore =
-        testing::RelativeRms(before, AllVertices(fresh, scene, Channel::kIndirect));
+        testing::RelativeRms(before, testing::AllVertices(fresh, scene, Channel::kIndirect));
     std::printf(
         "moved in place vs fresh (motion links) %.4f, vs plain bake %.4f; unmoved vs "
         "fresh %.4f\n",
@@ -187,10 +177,11 @@ TEST(MotionLinks, MovedGlossyCubeUnderASpotMatchesAFreshBake) {
     solver.Iterate(60);
     AntiradianceSolver fresh(scene, settings, {});
     fresh.Iterate(66);
-    const double direct = testing::RelativeRms(AllVertices(solver, scene, Channel::kDirect),
-                                               AllVertices(fresh, scene, Channel::kDirect));
-    const double total = testing::RelativeRms(AllVertices(solver, scene, Channel::kTotal),
-                                              AllVertices(fresh, scene, Channel::kTotal));
+    const double direct =
+        testing::RelativeRms(testing::AllVertices(solver, scene, Channel::kDirect),
+                             testing::AllVertices(fresh, scene, Channel::kDirect));
+    const double total = testing::RelativeRms(testing::AllVertices(solver, scene, Channel::kTotal),
+                                              testing::AllVertices(fresh, scene, Channel::kTotal));
     std::printf("glossy box, cube moved: direct %.2e, total %.4f vs a fresh bake\n", direct, total);
     EXPECT_LT(direct, 1e-3);  // same shadow maps, same receivers
     EXPECT_LT(total, 0.02);
