@@ -89,13 +89,62 @@ std::vector<glm::vec3> EmitterDirect::Retrace(const RayScene& rays,
     PENUMBRA_CHECK_EQ(moved.size(), points.size());
     std::vector<glm::vec3> out(points.size(), glm::vec3(0.0f));
     std::atomic<size_t> total{0};
-    if (!rays.Emitters().empty())
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 16), [&](const auto& range) {
-            size_t n = 0;
-            for (size_t i = range.begin(); i != range.end(); ++i)
-                out[i] = Shoot(rays, i, points[i], normals[i], moved[i] ? nullptr : &boxes, n);
-            total += n;
-        });
+    if (rays.Emitters().empty()) {
+        if (traced) *traced = 0;
+        return out;
+    }
+    // With coefficients kept, a point whose rays cannot pass through a box keeps its E
+    // (read from them) without making its rays again: its light rays when no box lies
+    // between it and an emitting primitive, its cosine rays when no box lies above its
+    // tangent plane. A point with a ray whose outcome changed sums its rays again.
+    const bool kept = slots_ > 0 && rays.EmitterPrimitives().size() == slots_;
+    std::vector<Ball> emitters, cutters;
+    std::vector<Bounds> cut;  // the boxes that are not empty, a ball each in cutters
+    for (const Bounds& b : boxes)
+        if (!b.Empty()) cut.push_back(b), cutters.emplace_back(b);
+    std::vector<glm::vec3> le(slots_);
+    if (kept) {
+        std::vector<Bounds> extent(slots_);
+        for (uint32_t t : rays.Emitters()) {
+            const RayTriangle& tri = rays.Triangles()[t];
+            Bounds& b = extent[rays.EmitterSlot(tri.primitive)];
+            for (const glm::vec3& p : {tri.p0, tri.p0 + tri.e1, tri.p0 + tri.e2}) b.Add(p);
+        }
+        for (const Bounds& b : extent) emitters.emplace_back(b);
+        const Scene& scene = rays.GetScene();
+        for (size_t k = 0; k < slots_; ++k)
+            le[k] =
+                scene.materials[scene.primitives[rays.EmitterPrimitives()[k]].material].emission;
+    }
+    const std::vector<Bounds> none;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 16), [&](const auto& range) {
+        size_t n = 0;
+        std::vector<BallCone> cones;
+        for (size_t i = range.begin(); i != range.end(); ++i) {
+            const glm::vec3& x = points[i];
+            if (moved[i] || !kept) {
+                out[i] = Shoot(rays, i, x, normals[i], moved[i] ? nullptr : &boxes, n);
+                continue;
+            }
+            uint64_t slots = 0;
+            bool cosine = false;
+            for (const Ball& c : cutters) {
+                cosine = cosine || glm::dot(normals[i], c.centre - x) > -c.radius;
+                for (size_t k = 0; k < slots_; ++k)
+                    if (CanCut(x, c, emitters[k])) slots |= uint64_t(1) << k;
+            }
+            cones.clear();
+            for (const Ball& c : cutters) cones.emplace_back(x + rays.Epsilon() * normals[i], c);
+            if ((slots != 0 || (cosine && cosineRays_ > 0)) &&
+                Recheck(rays, i, x, normals[i], cut, cones, slots, cosine, moved, n)) {
+                out[i] = Shoot(rays, i, x, normals[i], &none, n);
+                continue;
+            }
+            const float* coef = coef_.data() + i * slots_;
+            for (size_t k = 0; k < slots_; ++k) out[i] += le[k] * coef[k];
+        }
+        total += n;
+    });
     if (traced) *traced = total;
     return out;
 }
@@ -110,6 +159,24 @@ bool EmitterDirect::Reevaluate(const RayScene& rays, std::vector<glm::vec3>& out
     out.assign(extra_.size(), glm::vec3(0.0f));
     for (size_t i = 0; i < out.size(); ++i)
         for (size_t k = 0; k < slots_; ++k) out[i] += le[k] * coef_[i * slots_ + k];
+    return true;
+}
+
+bool EmitterDirect::LightRay(const RayScene& rays, uint32_t ti, int r, const glm::vec2& sl,
+                             const glm::vec3& x, const glm::vec3& nx, Sample& out) const {
+    const RayTriangle& t = rays.Triangles()[ti];
+    // A point on it: the r-th R2 point, folded into the triangle.
+    glm::vec2 ab = R2Point(sl, r);
+    if (ab.x + ab.y > 1.0f) ab = glm::vec2(1.0f) - ab;
+    const glm::vec3 y = t.p0 + ab.x * t.e1 + ab.y * t.e2;
+    const glm::vec3 d = y - x;
+    out.dist2 = glm::dot(d, d);
+    if (!(out.dist2 > 0.0f)) return false;
+    const glm::vec3 w = d / std::sqrt(out.dist2);
+    out.cx = glm::dot(nx, w), out.cy = -glm::dot(t.normal, w);
+    if (out.cx <= 0.0f || out.cy <= 0.0f) return false;
+    const float eps = rays.Epsilon();
+    out.span = y + eps * t.normal - (x + eps * nx);
     return true;
 }
 
@@ -147,30 +214,20 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
         // consecutive r, so its points below are consecutive R2 points.
         const float ut = (static_cast<float>(r) + rng.Uniform()) / nl;
         const uint32_t ti = rays.Emitters()[rays.PickEmitter(ut)];
-        const RayTriangle& t = tris[ti];
-        // A point on it: the r-th R2 point, folded into the triangle.
-        glm::vec2 ab = R2Point(sl, r);
-        if (ab.x + ab.y > 1.0f) ab = glm::vec2(1.0f) - ab;
-        const glm::vec3 y = t.p0 + ab.x * t.e1 + ab.y * t.e2;
-        const glm::vec3 d = y - x;
-        const float dist2 = glm::dot(d, d);
-        if (!(dist2 > 0.0f)) continue;
-        const glm::vec3 w = d / std::sqrt(dist2);
-        const float cx = glm::dot(nx, w), cy = -glm::dot(t.normal, w);
-        if (cx <= 0.0f || cy <= 0.0f) continue;
-        const glm::vec3 span = y + eps * t.normal - from;
+        Sample s;
+        if (!LightRay(rays, ti, r, sl, x, nx, s)) continue;
         const uint64_t bit = uint64_t(1) << (r % 64);
-        if (meets(from, span, 1.0f)) {
+        if (meets(from, s.span, 1.0f)) {
             ++traced;
-            if (rays.Occluded(from, span))
+            if (rays.Occluded(from, s.span))
                 bits[r / 64] |= bit;
             else
                 bits[r / 64] &= ~bit;
         }
         if (bits[r / 64] & bit) continue;
         const float pdfArea = rays.AreaPdf(ti);
-        const float weight = Power(nl, pdfArea * dist2 / cy, nb, cx / kPi);
-        add(ti, weight * cx * cy / (dist2 * pdfArea * nl));
+        const float weight = Power(nl, pdfArea * s.dist2 / s.cy, nb, s.cx / kPi);
+        add(ti, weight * s.cx * s.cy / (s.dist2 * pdfArea * nl));
     }
     for (int r = 0; r < own; ++r) {
         const glm::vec3 w = CosineDirection(nx, R2Point(sb, r));
@@ -186,6 +243,69 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
         add(tri, EmitterHitWeight(rays, settings_, nx, w, tri, dist, nb));
     }
     return sum;
+}
+
+bool EmitterDirect::Recheck(const RayScene& rays, size_t i, const glm::vec3& x, const glm::vec3& nx,
+                            const std::vector<Bounds>& boxes, const std::vector<BallCone>& cones,
+                            uint64_t slots, bool cosine, const std::vector<uint8_t>& moved,
+                            size_t& traced) {
+    const auto& tris = rays.Triangles();
+    const int nl = lightRays_, own = cosineRays_;
+    const float inf = std::numeric_limits<float>::infinity();
+    auto meets = [&](const glm::vec3& o, const glm::vec3& d, float tmax) {
+        const bool endless = tmax == inf;
+        const glm::vec3 span = endless ? d : d * tmax;
+        for (size_t k = 0; k < boxes.size(); ++k)
+            if (cones[k].MayMeet(span, endless) && boxes[k].Meets(o, d, tmax)) return true;
+        return false;
+    };
+    auto emits = [&](uint32_t tri) { return tri != ~0u && rays.AreaPdf(tri) > 0.0f; };
+    bool changed = false;
+    // The same draws as Shoot's, in the same order.
+    Pcg32 rng(settings_.seed, i);
+    glm::vec2 sl, sb;
+    sl.x = rng.Uniform(), sl.y = rng.Uniform();
+    sb.x = rng.Uniform(), sb.y = rng.Uniform();
+    const glm::vec3 from = x + rays.Epsilon() * nx;
+    uint64_t* bits = blocked_.data() + i * words_;
+    for (int r = 0; r < nl; ++r) {
+        const float ut = (static_cast<float>(r) + rng.Uniform()) / nl;
+        if (slots == 0) break;
+        const uint32_t ti = rays.Emitters()[rays.PickEmitter(ut)];
+        if (!(slots >> rays.EmitterSlot(tris[ti].primitive) & 1)) continue;
+        Sample s;
+        if (!LightRay(rays, ti, r, sl, x, nx, s) || !meets(from, s.span, 1.0f)) continue;
+        ++traced;
+        const uint64_t bit = uint64_t(1) << (r % 64);
+        const bool blocked = rays.Occluded(from, s.span);
+        if (blocked == ((bits[r / 64] & bit) != 0)) continue;
+        bits[r / 64] ^= bit;
+        changed = true;
+    }
+    // A cosine ray adds only where it first meets an emitter. Of those that did not, only
+    // one that met a surface that moved can meet an emitter now (the emitters stayed, what
+    // moved does not emit); one that met a surface that stayed, or nothing, adds nothing
+    // whatever moved in front of it, and keeps its outcome.
+    auto onMoved = [&](uint32_t t) {
+        if (t == ~0u || !rays.HasCorners()) return t != ~0u;
+        const glm::uvec3& c = rays.Corners(t);
+        return moved[c.x] || moved[c.y] || moved[c.z];
+    };
+    for (int r = 0; cosine && r < own; ++r) {
+        float& dist = cosineT_[i * own + r];
+        uint32_t& tri = cosineTri_[i * own + r];
+        const bool stale = onMoved(tri);
+        if (!stale && !emits(tri)) continue;
+        const glm::vec3 w = CosineDirection(nx, R2Point(sb, r));
+        if (!stale && !meets(from, w, dist)) continue;
+        ++traced;
+        const RayHit hit = rays.Intersect(from, w, std::numeric_limits<float>::infinity());
+        const uint32_t now = hit.hit ? hit.triangle : ~0u;
+        changed = changed || (now != tri && (emits(now) || emits(tri)));
+        dist = hit.hit ? hit.t : std::numeric_limits<float>::infinity();
+        tri = now;
+    }
+    return changed;
 }
 
 }  // namespace penumbra

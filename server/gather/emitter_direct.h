@@ -61,10 +61,28 @@ class EmitterDirect {
     bool Reevaluate(const RayScene& rays, std::vector<glm::vec3>& out) const;
 
   private:
+    // A light ray: the segment from the point (lifted off its surface) to the point on the
+    // emitting triangle, its squared length and the cosines at both ends.
+    struct Sample {
+        glm::vec3 span;
+        float dist2, cx, cy;
+    };
+    // Light ray r of a point x with normal nx (rotation `sl` of its R2 sequence) to emitting
+    // triangle `ti`; false where it adds nothing (either side faces away).
+    bool LightRay(const RayScene& rays, uint32_t ti, int r, const glm::vec2& sl, const glm::vec3& x,
+                  const glm::vec3& nx, Sample& out) const;
     // Point i's E, its rays traced where `boxes` is null or they meet one of them, their
     // kept outcomes read otherwise.
     glm::vec3 Shoot(const RayScene& rays, size_t i, const glm::vec3& x, const glm::vec3& n,
                     const std::vector<Bounds>* boxes, size_t& traced);
+    // Traces again point i's rays that meet one of `boxes` (`cones`: a BallCone around each
+    // from the point): its light rays to the emitting primitives whose slots are set in
+    // `slots`, its cosine rays if `cosine` (those whose outcome can change what the point
+    // receives: a first hit on an emitter, or on a surface that moved: `moved` per surfel);
+    // keeps the new outcomes. True when one of them changed what the point receives.
+    bool Recheck(const RayScene& rays, size_t i, const glm::vec3& x, const glm::vec3& n,
+                 const std::vector<Bounds>& boxes, const std::vector<BallCone>& cones,
+                 uint64_t slots, bool cosine, const std::vector<uint8_t>& moved, size_t& traced);
 
     EmitterDirectSettings settings_;
     int lightRays_ = 0, cosineRays_ = 0, words_ = 0;

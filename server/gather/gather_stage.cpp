@@ -7,6 +7,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "base/check.h"
@@ -125,11 +126,15 @@ glm::vec3 GatherStage::Direction(size_t target, int ray) const {
                            R2Point(rotation_[target], ray));
 }
 
-glm::vec3 GatherStage::SecondDirection(size_t target, int ray, uint32_t tri, int j) const {
+glm::vec2 GatherStage::SecondRotation(size_t target, int ray) const {
     Pcg32 rng(settings_.seed, kSecondStream + target * settings_.gatherRays + ray);
     glm::vec2 rot;
     rot.x = rng.Uniform(), rot.y = rng.Uniform();
-    return CosineDirection(rays_->Triangles()[tri].normal, R2Point(rot, j));
+    return rot;
+}
+
+glm::vec3 GatherStage::SecondDirection(size_t target, int ray, uint32_t tri, int j) const {
+    return CosineDirection(rays_->Triangles()[tri].normal, R2Point(SecondRotation(target, ray), j));
 }
 
 glm::vec3 GatherStage::HitPoint(const Hit& h) const {
@@ -162,91 +167,170 @@ void GatherStage::Trace(const Moved* moved) {
         return Hit{h.triangle | back, quantise(h.u), quantise(h.v)};
     };
     // After a move: whether a cached hit still holds (its ray starts on a surface that did not
-    // move, ends on one that did not, and passes by where the moved ones were and are).
-    // The segment is the one to the hit point (no direction needed, which costs more to
-    // make again than the test), or the ray to infinity when it escaped.
-    auto holds = [&](const glm::vec3& o, const auto& direction, const Hit& h, float& t) {
+    // move, ends on one that did not, and passes by where the moved ones were and are). The
+    // segment is the one to the hit point (no direction needed, which costs more to make
+    // again than the test), or the ray to infinity when it escaped; `cones` (one per box,
+    // from the ray's origin) turn most segments away before the slab test.
+    auto holds = [&](const glm::vec3& o, const std::vector<BallCone>& cones, const auto& direction,
+                     const Hit& h) {
+        const std::vector<Bounds>& boxes = moved->boxes;
         if (h.triangle == kEscaped) {
-            t = inf;
             const glm::vec3 d = direction();
-            for (const Bounds& b : moved->boxes)
-                if (b.Meets(o, d, inf)) return false;
+            for (size_t k = 0; k < boxes.size(); ++k)
+                if (cones[k].MayMeet(d, true) && boxes[k].Meets(o, d, inf)) return false;
             return true;
         }
         const uint32_t tri = h.triangle & kIndex;
         const glm::uvec3& c = rays_->Corners(tri);
         if (moved->surfels[c.x] || moved->surfels[c.y] || moved->surfels[c.z]) return false;
         const glm::vec3 span = HitPoint(h) - o;
-        t = glm::length(span);
-        for (const Bounds& b : moved->boxes)
-            if (b.Meets(o, span, 1.0f)) return false;
+        for (size_t k = 0; k < boxes.size(); ++k)
+            if (cones[k].MayMeet(span) && boxes[k].Meets(o, span, 1.0f)) return false;
         return true;
     };
-    const std::vector<Hit> oldHits = moved ? hits_ : std::vector<Hit>();
-    const std::vector<Hit> oldSecond = moved ? second_ : std::vector<Hit>();
-    const std::vector<uint32_t> oldStart = moved ? secondStart_ : std::vector<uint32_t>();
-    hits_.resize(targets_.size() * n);
-    std::vector<std::vector<Hit>> second(targets_.size());
+    // The cones from o towards the boxes (`grow`: each box's ball grown by that much), and
+    // which points of a cosine pattern about `normal` can fall in one (CosineCone); false
+    // when none can: no ray from o meets a box.
+    auto conesAt = [&](const glm::vec3& o, const glm::vec3& normal, float grow,
+                       std::vector<BallCone>& cones, std::vector<CosineCone>& pattern) {
+        cones.clear(), pattern.clear();
+        bool any = false;
+        for (const Bounds& b : moved->boxes) {
+            Ball ball(b);
+            ball.radius += grow;
+            cones.emplace_back(o, ball);
+            const BallCone& c = cones.back();
+            pattern.push_back(c.Inside() ? CosineCone()
+                                         : CosineCone(normal, c.Axis(), c.SinHalf()));
+            any = any || !pattern.back().Empty();
+        }
+        return any;
+    };
+    auto mayMeet = [](const std::vector<CosineCone>& pattern, const glm::vec2& u) {
+        for (const CosineCone& c : pattern)
+            if (c.MayContain(u)) return true;
+        return false;
+    };
+    hits_.resize(targets_.size() * n);  // in place: a target's hits are read, then written
+    second_.resize(targets_.size());
+    // Per target: a gather ray was traced again (its emitter hits are weighed again).
+    std::vector<uint8_t> touched(targets_.size(), moved ? 0 : 1);
     std::atomic<size_t> traced{0};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
         size_t count = 0;
+        std::vector<BallCone> cones, wide, secondCones;
+        std::vector<CosineCone> pattern, secondPattern;
+        // Per normal met at this target's short hits, its secondaries' pattern.
+        std::vector<std::pair<glm::vec3, std::vector<CosineCone>>> patterns;
+        std::vector<uint8_t> kept(n), was(n);
+        std::vector<Hit> relaid;
         for (size_t t = range.begin(); t != range.end(); ++t) {
             const uint32_t i = targets_[t];
             const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
             const bool all = !moved || moved->surfels[i];
-            size_t old = moved ? oldStart[t] : 0;  // its old secondaries
+            // Nothing moved in front of it: every hit holds, its secondaries are checked.
+            const bool clear = !all && !conesAt(o, surfels.normals[i], 0.0f, cones, pattern);
+            bool same = !all;  // its short hits are the rays they were
             for (int r = 0; r < n; ++r) {
-                auto d = [&] { return Direction(t, r); };
                 Hit& hit = hits_[t * n + r];
+                const Hit before = all ? Hit{kEscaped, 0, 0} : hit;
+                was[r] = Front(before) && (before.triangle & kShort);
+                kept[r] = !all && (clear || !mayMeet(pattern, R2Point(rotation_[t], r)) ||
+                                   holds(
+                                       o, cones, [&] { return Direction(t, r); }, before));
+                if (kept[r]) continue;
                 float dist = inf;
-                bool keep = false;
-                if (!all) {
-                    const Hit before = oldHits[t * n + r];
-                    keep = holds(o, d, before, dist);
-                    hit = before;
-                }
-                const bool wasShort =
-                    !all && Front(oldHits[t * n + r]) && (oldHits[t * n + r].triangle & kShort);
-                if (!keep) {
-                    hit = trace(o, d(), dist);
-                    ++count;
-                }
+                hit = trace(o, Direction(t, r), dist);
+                ++count;
+                touched[t] = 1;
                 const bool isShort = Front(hit) && dist < shortHit;
                 if (isShort) hit.triangle |= kShort;
-                if (!isShort) {
-                    if (wasShort) old += m;
-                    continue;
-                }
-                // Its secondary gather: the cached one where the hit held, each ray checked.
+                same = same && isShort == static_cast<bool>(was[r]);
+            }
+            // A secondary ray from a short hit y (within shortHit of o) that meets a ball runs
+            // in a direction inside o's cone towards that ball grown by shortHit (the parallel
+            // ray from o passes within shortHit of where it does): the pattern about y's normal
+            // is made once per normal the target's short hits have, from o.
+            patterns.clear();
+            auto patternFor = [&](const glm::vec3& normal) -> const std::vector<CosineCone>& {
+                // Bit for bit: a −0 in the normal turns the pattern's basis (CosineDirection).
+                for (const auto& [nm, p] : patterns)
+                    if (std::memcmp(&nm, &normal, sizeof(glm::vec3)) == 0) return p;
+                if (wide.empty()) conesAt(o, normal, shortHit + rays_->Epsilon(), wide, pattern);
+                patterns.emplace_back(normal, std::vector<CosineCone>());
+                for (const BallCone& c : wide)
+                    patterns.back().second.push_back(
+                        c.Inside() ? CosineCone() : CosineCone(normal, c.Axis(), c.SinHalf()));
+                return patterns.back().second;
+            };
+            wide.clear();
+            // Ray r's secondary gather into `out`: the cached one (`old`, null where the hit
+            // did not hold) where each ray holds, traced again where not (out may be old).
+            auto gatherAgain = [&](int r, const Hit* old, Hit* out) {
+                const Hit& hit = hits_[t * n + r];
                 const uint32_t tri = hit.triangle & kIndex;
-                const glm::vec3 y = HitPoint(hit) + rays_->Epsilon() * tris[tri].normal;
+                const glm::vec3& normal = tris[tri].normal;
+                const glm::vec3 y = HitPoint(hit) + rays_->Epsilon() * normal;
+                const glm::vec2 rot = SecondRotation(t, r);
+                const std::vector<CosineCone>* filter = old ? &patternFor(normal) : nullptr;
+                bool near = false;  // secondCones made at y
                 for (int j = 0; j < m; ++j) {
-                    auto d2 = [&] { return SecondDirection(t, r, tri, j); };
-                    float t2 = inf;
-                    if (keep && wasShort && holds(y, d2, oldSecond[old + j], t2)) {
-                        second[t].push_back(oldSecond[old + j]);
+                    const glm::vec2 u = R2Point(rot, j);
+                    auto d2 = [&] { return CosineDirection(normal, u); };
+                    bool holding = old && !mayMeet(*filter, u);
+                    if (old && !holding) {
+                        if (!near) conesAt(y, normal, 0.0f, secondCones, secondPattern);
+                        near = true;
+                        holding = holds(y, secondCones, d2, old[j]);
+                    }
+                    if (holding) {
+                        out[j] = old[j];
                     } else {
-                        second[t].push_back(trace(y, d2(), t2));
+                        float t2 = inf;
+                        out[j] = trace(y, d2(), t2);
                         ++count;
                     }
                 }
-                if (wasShort) old += m;
+            };
+            auto isShort = [&](int r) {
+                return Front(hits_[t * n + r]) && (hits_[t * n + r].triangle & kShort);
+            };
+            // Its secondaries: in place where its short hits are the same rays as before.
+            std::vector<Hit>& block = second_[t];
+            if (same) {
+                Hit* at = block.data();
+                for (int r = 0; r < n; ++r)
+                    if (isShort(r)) {
+                        gatherAgain(r, kept[r] ? at : nullptr, at);
+                        at += m;
+                    }
+                continue;
             }
+            relaid.clear();
+            size_t old = 0;  // its old secondaries (none when all are traced)
+            for (int r = 0; r < n; ++r) {
+                if (isShort(r)) {
+                    relaid.resize(relaid.size() + m);
+                    gatherAgain(r, kept[r] ? block.data() + old : nullptr,
+                                relaid.data() + relaid.size() - m);
+                }
+                if (was[r]) old += m;
+            }
+            block.assign(relaid.begin(), relaid.end());
         }
         traced += count;
     });
     secondStart_.assign(targets_.size() + 1, 0);
     for (size_t t = 0; t < targets_.size(); ++t)
-        secondStart_[t + 1] = secondStart_[t] + static_cast<uint32_t>(second[t].size());
-    second_.clear();
-    second_.reserve(secondStart_.back());
-    for (auto& v : second) second_.insert(second_.end(), v.begin(), v.end());
+        secondStart_[t + 1] = secondStart_[t] + static_cast<uint32_t>(second_[t].size() / m);
 
     // The emitters the gather rays meet, weighted against the first shot's rays, as a
-    // coefficient per emitting primitive.
+    // coefficient per emitting primitive: again at the targets with a ray traced again.
     const size_t slots = rays_->EmitterPrimitives().size();
-    emitterHits_.assign(targets_.size(), glm::vec3(0.0f));
-    emitterCoef_.assign(slots <= EmitterDirect::kMaxSlots ? targets_.size() * slots : 0, 0.0f);
+    if (!moved) {
+        emitterHits_.assign(targets_.size(), glm::vec3(0.0f));
+        emitterCoef_.assign(slots <= EmitterDirect::kMaxSlots ? targets_.size() * slots : 0, 0.0f);
+    }
     if (settings_.emitterRays > 0 && slots > 0) {
         EmitterDirectSettings es;  // the first shot's, for the weights of emitter hits
         es.rays = settings_.emitterRays;
@@ -254,8 +338,12 @@ void GatherStage::Trace(const Moved* moved) {
         tbb::parallel_for(
             tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
                 for (size_t t = range.begin(); t != range.end(); ++t) {
+                    if (!touched[t]) continue;
                     const uint32_t i = targets_[t];
                     const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
+                    emitterHits_[t] = glm::vec3(0.0f);
+                    float* coef = emitterCoef_.empty() ? nullptr : &emitterCoef_[t * slots];
+                    if (coef) std::fill(coef, coef + slots, 0.0f);
                     for (int r = 0; r < n; ++r) {
                         const Hit& h = hits_[t * n + r];
                         if (!Front(h) || !(rays_->AreaPdf(h.triangle & kIndex) > 0.0f)) continue;
@@ -263,8 +351,7 @@ void GatherStage::Trace(const Moved* moved) {
                         const float c = EmitterHitWeight(*rays_, es, surfels.normals[i],
                                                          Direction(t, r), tri, Distance(o, h));
                         emitterHits_[t] += rays_->MaterialOf(tri).emission * c;
-                        if (!emitterCoef_.empty())
-                            emitterCoef_[t * slots + rays_->EmitterSlot(tris[tri].primitive)] += c;
+                        if (coef) coef[rays_->EmitterSlot(tris[tri].primitive)] += c;
                     }
                 }
             });
@@ -277,22 +364,22 @@ void GatherStage::Trace(const Moved* moved) {
 void GatherStage::Sky() {
     const int n = settings_.gatherRays, m = SecondRays();
     sky_.assign(targets_.size(), glm::vec3(0.0f));
-    secondSky_.assign(second_.size() / m, glm::vec3(0.0f));
+    secondSky_.assign(secondStart_.back(), glm::vec3(0.0f));
     if (!scene_.environment.Active()) return;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
         for (size_t t = range.begin(); t != range.end(); ++t) {
             glm::vec3 sum(0.0f);
-            size_t k = secondStart_[t] / m;  // this target's first short hit
+            size_t k = 0;  // this target's short hits so far
             for (int r = 0; r < n; ++r) {
                 const Hit& h = hits_[t * n + r];
                 if (h.triangle == kEscaped) sum += scene_.environment.Radiance(Direction(t, r));
                 if (!Front(h) || !(h.triangle & kShort)) continue;
                 glm::vec3 second(0.0f);
                 for (int j = 0; j < m; ++j)
-                    if (second_[k * m + j].triangle == kEscaped)
+                    if (second_[t][k * m + j].triangle == kEscaped)
                         second += scene_.environment.Radiance(
                             SecondDirection(t, r, h.triangle & kIndex, j));
-                secondSky_[k++] = second * (kPi / m);
+                secondSky_[secondStart_[t] + k++] = second * (kPi / m);
             }
             sky_[t] = sum * (kPi / n);
         }
@@ -324,7 +411,7 @@ void GatherStage::Evaluate() {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
         for (size_t t = range.begin(); t != range.end(); ++t) {
             glm::vec3 sum(0.0f);
-            size_t k = secondStart_[t] / m;
+            size_t k = 0;  // this target's short hits so far
             for (int r = 0; r < n; ++r) {
                 const Hit& h = hits_[t * n + r];
                 if (!Front(h)) continue;
@@ -334,11 +421,11 @@ void GatherStage::Evaluate() {
                 }
                 // A short hit: its irradiance gathered again, E = first shot + punctual lights
                 // (interpolated) + π/M Σ L over its secondary rays.
-                glm::vec3 e = at(direct_, h) + secondSky_[k];
+                glm::vec3 e = at(direct_, h) + secondSky_[secondStart_[t] + k];
                 if (!shot_.empty()) e += at(shot_, h);
                 glm::vec3 second(0.0f);
                 for (int j = 0; j < m; ++j) {
-                    const Hit& h2 = second_[k * m + j];
+                    const Hit& h2 = second_[t][k * m + j];
                     if (Front(h2)) second += at(radiance, h2);
                 }
                 e += second * (kPi / m);

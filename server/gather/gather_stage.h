@@ -91,7 +91,9 @@ class GatherStage : public Solver {
     void Trace(const Moved* moved = nullptr);
     void Sky();  // the environment light of the escaped rays
     glm::vec3 Direction(size_t target, int ray) const;
-    // Secondary ray j from the short hit of target t's ray r, on triangle `tri`.
+    // Secondary ray j from the short hit of target t's ray r, on triangle `tri`: point j of
+    // the R2 sequence rotated by SecondRotation(t, r), cosine-distributed.
+    glm::vec2 SecondRotation(size_t target, int ray) const;
     glm::vec3 SecondDirection(size_t target, int ray, uint32_t tri, int j) const;
     // Rays a secondary gather: 8 at 256 (16 gave the same answers, for 1.6× the tracing).
     int SecondRays() const { return std::max(4, settings_.gatherRays / 32); }
@@ -121,10 +123,9 @@ class GatherStage : public Solver {
     std::vector<glm::vec2> rotation_;  // per target: its rotation of the ray pattern
     std::vector<Hit> hits_;            // targets × gatherRays
     std::vector<glm::vec3> sky_;       // per target: π/N Σ over escaped rays of L_env
-    // Secondary gathers: SecondRays() hits per short hit, target after target in ray order
-    // (target t's from secondStart_[t]), and per short hit π/M Σ over its escaped rays of
-    // L_env.
-    std::vector<Hit> second_;
+    // Secondary gathers: per target SecondRays() hits per short hit in ray order; per short
+    // hit π/M Σ over its escaped rays of L_env (target t's from secondStart_[t]).
+    std::vector<std::vector<Hit>> second_;
     std::vector<uint32_t> secondStart_;
     std::vector<glm::vec3> secondSky_;
     bool fresh_ = false;                        // indirect_, direct_ hold the current answer

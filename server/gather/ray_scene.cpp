@@ -4,6 +4,7 @@
 #include <embree3/rtcore.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include "base/check.h"
@@ -153,6 +154,28 @@ bool Bounds::Meets(const glm::vec3& origin, const glm::vec3& dir, float tmax) co
         if (t0 > t1) return false;
     }
     return true;
+}
+
+bool CanCut(const glm::vec3& x, const Ball& by, const Ball& to) {
+    const glm::vec3 va = by.centre - x, vb = to.centre - x;
+    const float da = glm::length(va), db = glm::length(vb);
+    if (da <= by.radius || db <= to.radius) return true;
+    if (da - by.radius > db + to.radius) return false;
+    const float sa = by.radius / da, sb = to.radius / db;
+    // The angle between the axes at most the sum of the half-angles (the sum below π).
+    const float cosAxes = glm::dot(va, vb) / (da * db);
+    return cosAxes >= std::sqrt(1.0f - sa * sa) * std::sqrt(1.0f - sb * sb) - sa * sb;
+}
+
+BallCone::BallCone(const glm::vec3& origin, const Ball& ball) {
+    const glm::vec3 v = ball.centre - origin;
+    const float d = glm::length(v);
+    if (d <= ball.radius) return;
+    inside_ = false;
+    axis_ = v / d;
+    const float s = ball.radius / d;
+    cos2_ = 1.0f - s * s;
+    near2_ = (d - ball.radius) * (d - ball.radius);
 }
 
 size_t RayScene::PickEmitter(float u) const {

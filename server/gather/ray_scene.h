@@ -4,6 +4,7 @@
 // power-proportional choice, for light sampling.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <glm/glm.hpp>
 #include <limits>
@@ -36,6 +37,44 @@ struct Bounds {
     bool Meets(const glm::vec3& origin, const glm::vec3& dir, float tmax) const;
 };
 
+// A ball around a box, for cheap tests of which rays a box can cut off.
+struct Ball {
+    glm::vec3 centre;
+    float radius;
+    explicit Ball(const Bounds& b)
+        : centre(0.5f * (b.lo + b.hi)), radius(0.5f * glm::length(b.hi - b.lo)) {}
+};
+
+// Whether some segment from x to a point in ball `to` can pass through ball `by`: the cones
+// from x around both balls overlap, and `by` does not lie wholly beyond `to`.
+bool CanCut(const glm::vec3& x, const Ball& by, const Ball& to);
+
+// The cone of directions from a point towards a ball: a segment from the point that leaves
+// the cone, or ends before the ball begins, misses the ball. A few multiplications a
+// segment, against the slab test's three divisions a box.
+class BallCone {
+  public:
+    BallCone(const glm::vec3& origin, const Ball& ball);
+    // Whether the segment origin → origin + span (a ray along span when `endless`) can meet
+    // the ball.
+    bool MayMeet(const glm::vec3& span, bool endless = false) const {
+        if (inside_) return true;
+        const float a = glm::dot(span, axis_), len2 = glm::dot(span, span);
+        return a > 0.0f && a * a >= len2 * cos2_ && (endless || len2 >= near2_);
+    }
+
+    // The cone: whether the origin lies in the ball (then every direction), its unit axis and
+    // the sine of its half-angle.
+    bool Inside() const { return inside_; }
+    const glm::vec3& Axis() const { return axis_; }
+    float SinHalf() const { return std::sqrt(1.0f - cos2_); }
+
+  private:
+    bool inside_ = true;
+    glm::vec3 axis_{0.0f};
+    float cos2_ = 0.0f, near2_ = 0.0f;
+};
+
 struct RayHit {
     bool hit = false;
     uint32_t triangle = 0;  // index into RayScene::Triangles()
@@ -65,6 +104,7 @@ class RayScene {
     const std::vector<RayTriangle>& Triangles() const { return tris_; }
     // Built over a refined mesh: the surfels at triangle t's p0, p0 + e1 and p0 + e2.
     const glm::uvec3& Corners(uint32_t t) const { return corners_[t]; }
+    bool HasCorners() const { return !corners_.empty(); }  // built over the refined mesh
     // Emitting triangles (emission > 0), chosen in proportion to their power (area × summed
     // radiance): `emitters[k]` with the cumulative probability `cdf[k]`.
     const std::vector<uint32_t>& Emitters() const { return emitters_; }

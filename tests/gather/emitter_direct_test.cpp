@@ -7,10 +7,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
+#include <memory>
 #include <numbers>
 
 #include "base/check.h"
 #include "scene/scene_builder.h"
+#include "scene/surfels.h"
 
 namespace penumbra {
 namespace {
@@ -101,6 +104,62 @@ TEST(EmitterDirect, SameSeedSameAnswerAndNoEmitterNoLight) {
     const Scene unlit = dark.Build();
     RayScene none(unlit);
     EXPECT_EQ(EmitterIrradiance(none, {{0, 1, 0}}, {{0, -1, 0}})[0], glm::vec3(0.0f));
+}
+
+// After each of a run of moves (a box into the emitter's light, under it, away, back) the
+// kept outcomes, traced again only near what moved, give what a fresh trace gives: the
+// shadow rays the box cuts or frees, the cosine rays that met it or meet it now.
+TEST(EmitterDirect, RetraceAfterMovesMatchesAFreshTrace) {
+    SceneBuilder b;
+    const uint32_t grey = b.AddMaterial("grey", glm::vec3(0.5f));
+    const uint32_t light = b.AddMaterial("light", glm::vec3(0.0f), glm::vec3(4.0f));
+    b.AddQuad("floor", grey, {-1, 0, -1}, {1, 0, -1}, {1, 0, 1}, {-1, 0, 1}, {0, 1, 0});
+    b.AddQuad("wall", grey, {-1, 0, -1}, {-1, 1, -1}, {-1, 1, 1}, {-1, 0, 1}, {1, 0, 0});
+    b.AddQuad("emitter", light, {-0.3f, 1, -0.3f}, {0.3f, 1, -0.3f}, {0.3f, 1, 0.3f},
+              {-0.3f, 1, 0.3f}, {0, 0, 0});
+    b.AddBox("box", grey, {0.7f, 0.15f, 0.0f}, {0.2f, 0.3f, 0.2f});
+    b.SetDynamic("box", {0.7f, 0.15f, 0.0f});
+    Scene scene = b.Build();
+    const int box = FindNode(scene, "box");
+    const glm::mat4 home = scene.nodes[box].local;
+    EmitterDirectSettings settings;
+    settings.rays = 64;
+    Surfels surfels = RefineScene(scene, 0.1f);
+    auto rays = std::make_unique<RayScene>(scene, surfels);
+    EmitterDirect kept(settings);
+    kept.Trace(*rays, surfels.positions, surfels.normals);
+    size_t tracedInAll = 0;
+    for (const glm::vec3 to : {glm::vec3(-0.7f, 0.3f, 0.0f), glm::vec3(-0.7f, 0.6f, 0.1f),
+                               glm::vec3(0.2f, 0.0f, 0.9f), glm::vec3(0.0f)}) {
+        SetNodeTransform(scene, box, glm::translate(glm::mat4(1.0f), to) * home);
+        Surfels now = RefineScene(scene, 0.1f);
+        ASSERT_EQ(now.size(), surfels.size());
+        std::vector<uint8_t> moved(now.size(), 0);
+        Bounds was, is;
+        for (size_t i = 0; i < now.size(); ++i)
+            if (now.positions[i] != surfels.positions[i]) {
+                moved[i] = 1;
+                was.Add(surfels.positions[i]);
+                is.Add(now.positions[i]);
+            }
+        surfels = std::move(now);
+        rays = std::make_unique<RayScene>(scene, surfels);
+        size_t traced = 0;
+        const auto again =
+            kept.Retrace(*rays, surfels.positions, surfels.normals, moved, {was, is}, &traced);
+        const auto fresh = EmitterDirect(settings).Trace(*rays, surfels.positions, surfels.normals);
+        float top = 0.0f, apart = 0.0f;
+        for (size_t i = 0; i < fresh.size(); ++i) {
+            top = std::max(top, fresh[i].x);
+            apart = std::max(apart, glm::length(again[i] - fresh[i]));
+        }
+        EXPECT_GT(top, 1.0f);
+        EXPECT_LT(apart, 1e-5f * top) << "box at " << to.x << ", " << to.y << ", " << to.z;
+        EXPECT_GT(traced, 0u);
+        tracedInAll += traced;
+    }
+    // Far fewer rays than four fresh traces.
+    EXPECT_LT(tracedInAll, surfels.size() * settings.rays);
 }
 
 TEST(EmitterDirect, RefusesBadArguments) {
