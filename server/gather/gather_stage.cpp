@@ -539,7 +539,7 @@ void GatherStage::UpdateGeometry(const Scene& scene) {
     const glm::vec3 pad(4.0f * rays_->Epsilon());
     for (Bounds* b : {&was, &is})
         if (!b->Empty()) moved.boxes.push_back({b->lo - pad, b->hi + pad});
-    rays_ = std::make_unique<RayScene>(scene_, s);
+    rays_->Update(s);
     Place();
     raysRetraced_ = 0;
     // A moved emitter moves the points the shadow rays aim at: everything is traced again.

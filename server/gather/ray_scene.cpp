@@ -60,6 +60,40 @@ RayScene::RayScene(const Scene& scene, const Surfels& surfels) : scene_(scene) {
     Build();
 }
 
+void RayScene::Update(const Surfels& surfels) {
+    if (corners_.empty() || surfels.refinedTriangles.size() != 3 * corners_.size())
+        throw Error("RayScene: Update needs the refined mesh it was built over");
+    const std::vector<RayTriangle> before = std::move(tris_);
+    tris_.clear();
+    for (size_t i = 0; i < corners_.size(); ++i) {
+        const glm::uvec3& c = corners_[i];
+        AddTriangle(surfels.positions[c.x], surfels.positions[c.y], surfels.positions[c.z],
+                    surfels.normals[c.x] + surfels.normals[c.y] + surfels.normals[c.z],
+                    before[i].primitive);
+    }
+    emitters_.clear(), cdf_.clear(), emitterPrimitives_.clear();
+    eps_ = 1e-4f * std::max(scene_.Diameter(), 1e-6f);
+    Sample();
+    RTCGeometry geom = rtcGetGeometry(rtcScene_, 0);
+    auto* v = static_cast<float*>(rtcGetGeometryBufferData(geom, RTC_BUFFER_TYPE_VERTEX, 0));
+    for (size_t i = 0; i < tris_.size(); ++i) {
+        const RayTriangle& t = tris_[i];
+        const glm::vec3 p[3] = {t.p0, t.p0 + t.e1, t.p0 + t.e2};
+        for (int k = 0; k < 3; ++k) {
+            v[9 * i + 3 * k] = p[k].x;
+            v[9 * i + 3 * k + 1] = p[k].y;
+            v[9 * i + 3 * k + 2] = p[k].z;
+        }
+    }
+    rtcUpdateGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0);
+    // A move's rebuild at medium quality: 4 ms against 16 ms on the office's refined mesh
+    // (34K triangles), for the few rays a move traces again.
+    rtcSetSceneBuildQuality(rtcScene_, RTC_BUILD_QUALITY_MEDIUM);
+    rtcCommitGeometry(geom);
+    rtcCommitScene(rtcScene_);
+    CheckError();
+}
+
 void RayScene::AddTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                            const glm::vec3& normalSum, uint32_t primitive) {
     RayTriangle t;
@@ -91,6 +125,11 @@ void RayScene::Build() {
     rtcSetDeviceErrorFunction(device_, &OnError, &error_);
     rtcScene_ = rtcNewScene(device_);
     eps_ = 1e-4f * std::max(scene_.Diameter(), 1e-6f);
+    Sample();
+    BuildBvh();
+}
+
+void RayScene::Sample() {
     // Emitters, chosen in proportion to their power (area × summed radiance).
     double total = 0.0;
     for (uint32_t i = 0; i < tris_.size(); ++i) {
@@ -113,7 +152,9 @@ void RayScene::Build() {
     for (uint32_t k = 0; k < emitters_.size(); ++k)
         areaPdf_[emitters_[k]] =
             float(cdf_[k] - (k ? cdf_[k - 1] : 0.0)) / tris_[emitters_[k]].area;
+}
 
+void RayScene::BuildBvh() {
     RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
     auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
         geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 3 * tris_.size()));

@@ -90,6 +90,10 @@ class RayScene {
     // names the three surfels around it (Corners), so that what a solver knows per surfel can
     // be interpolated there. Triangle materials are those of the primitives in `scene`.
     RayScene(const Scene& scene, const Surfels& surfels);
+    // Built over a refined mesh: its surfels moved (the same refinement, `scene` as edited):
+    // the triangles, emitters and BVH made again on the same Embree device. Throws
+    // penumbra::Error for a RayScene not built over a refined mesh or another refinement.
+    void Update(const Surfels& surfels);
     ~RayScene();
     RayScene(const RayScene&) = delete;
     RayScene& operator=(const RayScene&) = delete;
@@ -131,7 +135,9 @@ class RayScene {
   private:
     void AddTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                      const glm::vec3& normalSum, uint32_t primitive);
-    void Build();
+    void Build();     // Sample, then BuildBvh
+    void Sample();    // the emitters' choice from tris_
+    void BuildBvh();  // Embree's BVH over tris_
     void CheckError() const;
 
     const Scene& scene_;

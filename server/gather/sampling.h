@@ -95,11 +95,13 @@ class CosineCone {
         if (all_) return true;
         if (empty_) return false;
         constexpr float kPi = 3.14159265358979f;
+        // The concentric map's radius is the larger of |a|, |b|: the ring first, no division.
+        const float ring = std::max(std::abs(2.0f * u.x - 1.0f), std::abs(2.0f * u.y - 1.0f));
+        if (ring < rLo_ || ring > rHi_) return false;
+        if (wholeTurn_) return true;
         float r, phi;
         Concentric(u, r, phi);
-        if (r < 0.0f) r = -r, phi += kPi;
-        if (r < rLo_ || r > rHi_) return false;
-        if (wholeTurn_) return true;
+        if (r < 0.0f) phi += kPi;
         // phi in [−π/4, 7π/4], phi_ in [−π, π]: the difference into [−π, π].
         float d = phi - phi_;
         if (d > kPi) d -= 2.0f * kPi;

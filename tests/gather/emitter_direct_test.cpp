@@ -143,11 +143,13 @@ TEST(EmitterDirect, RetraceAfterMovesMatchesAFreshTrace) {
                 is.Add(now.positions[i]);
             }
         surfels = std::move(now);
-        rays = std::make_unique<RayScene>(scene, surfels);
+        rays->Update(surfels);
         size_t traced = 0;
         const auto again =
             kept.Retrace(*rays, surfels.positions, surfels.normals, moved, {was, is}, &traced);
-        const auto fresh = EmitterDirect(settings).Trace(*rays, surfels.positions, surfels.normals);
+        const RayScene freshRays(scene, surfels);
+        const auto fresh =
+            EmitterDirect(settings).Trace(freshRays, surfels.positions, surfels.normals);
         float top = 0.0f, apart = 0.0f;
         for (size_t i = 0; i < fresh.size(); ++i) {
             top = std::max(top, fresh[i].x);
