@@ -58,6 +58,7 @@ class GatherStage : public Solver {
     void UpdateGeometry(const Scene& scene) override;
     std::vector<float> SurfelExitant() override { return inner_->SurfelExitant(); }
     void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
+    void SetInterrupt(const std::atomic<bool>* flag) override { inner_->SetInterrupt(flag); }
     Solver& Inner() { return *inner_; }
 
   private:

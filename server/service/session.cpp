@@ -107,11 +107,18 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     solverStatsRaw_ = solver_->Stats();
     motionDeclined_ = !solverStatsRaw_.motionDeclined.empty();
     for (const auto& n : scene.nodes)
-        for (uint32_t pi : n.primitives)
-            if (glm::any(glm::greaterThan(scene.materials[scene.primitives[pi].material].emission,
-                                          glm::vec3(0.0f))) &&
-                std::find(lightNodes_.begin(), lightNodes_.end(), n.name) == lightNodes_.end())
+        for (uint32_t pi : n.primitives) {
+            if (!glm::any(glm::greaterThan(scene.materials[scene.primitives[pi].material].emission,
+                                           glm::vec3(0.0f))))
+                continue;
+            auto it = std::find(lightNodes_.begin(), lightNodes_.end(), n.name);
+            if (it == lightNodes_.end()) {
                 lightNodes_.push_back(n.name);
+                lightPrimitives_.emplace_back();
+                it = lightNodes_.end() - 1;
+            }
+            lightPrimitives_[it - lightNodes_.begin()].push_back(pi);
+        }
     auto layout = std::make_shared<std::vector<PrimitiveKey>>();
     for (const auto& p : scene.primitives) layout->push_back({p.node, p.mesh, p.primitive});
     layout_ = layout;
@@ -200,10 +207,21 @@ uint64_t Session::Submit(const LightEdit& edit) {
                            "light colour must be three finite numbers ≥ 0");
     int node = FindNode(validated_, edit.light);
     LightEdit e = edit;
+    // The node's primitives that emitted when the scene was loaded: a lamp's housing stays
+    // dark when its bulb is dimmed or brightened (and a bulb turned off can be turned on).
+    const std::vector<uint32_t> emitting =
+        lightPrimitives_[std::find(lightNodes_.begin(), lightNodes_.end(), edit.light) -
+                         lightNodes_.begin()];
     // Emission = colour × intensity, where the current emission E splits into intensity
     // max(E) and colour E / max(E); an absent part keeps its current value.
-    auto apply = [node, e](Scene& s) {
-        for (uint32_t m : OwnMaterials(s, node)) {
+    auto apply = [node, e, emitting](Scene& s) {
+        OwnMaterials(s, node);
+        std::vector<uint32_t> materials;
+        for (uint32_t pi : emitting)
+            if (std::find(materials.begin(), materials.end(), s.primitives[pi].material) ==
+                materials.end())
+                materials.push_back(s.primitives[pi].material);
+        for (uint32_t m : materials) {
             glm::vec3& emission = s.materials[m].emission;
             float peak = std::max(emission.x, std::max(emission.y, emission.z));
             glm::vec3 color = peak > 0.0f ? emission / peak : glm::vec3(1.0f);
@@ -431,13 +449,21 @@ std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool motionLink
 void Session::ProduceFrame(int iterations, std::string note, bool interruptible) {
     // Worker thread only, without mutex_: solver_ and applied_ belong to the worker.
     auto start = Clock::now();
+    // An edit that comes in while this frame iterates cuts the bounce under way after its
+    // current pass (Solver::SetInterrupt), is applied, and this frame goes out at once with
+    // it: an edit waits for a pass, not for a bounce. The solver takes the bounce up again in
+    // the next frame. A move that needs its links rebuilt waits for the frame boundary.
+    bool edited = iterations == 0;  // this frame shows an edit that no iteration followed yet
+    if (interruptible) solver_->SetInterrupt(&editWaiting_);
     for (int i = 0; i < iterations; ++i) {
         solver_->Iterate(1);
-        if (i + 1 < iterations && interruptible && editWaiting_.load(std::memory_order_relaxed)) {
+        if (interruptible && editWaiting_.load(std::memory_order_relaxed)) {
             std::unique_lock lock(mutex_);
-            if (!ApplyEditsInPlace(lock, note)) break;  // a move: at the frame boundary
+            edited = ApplyEditsInPlace(lock, note);
+            break;
         }
     }
+    solver_->SetInterrupt(nullptr);
     // A diverged solver stops and keeps its last bounded irradiance (SurfelIrradiance):
     // this frame carries that and says why; no more frames are iterated.
     const std::string divergence = solver_->Stats().divergence;
@@ -478,8 +504,9 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
             latencyReported_ = true;
         }
         ++framesSinceEdit_;
-        converged_ = divergence.empty() && (change < settings_.convergedChange ||
-                                            framesSinceEdit_ >= settings_.maxFramesPerEdit);
+        converged_ =
+            divergence.empty() && !edited &&
+            (change < settings_.convergedChange || framesSinceEdit_ >= settings_.maxFramesPerEdit);
         if (!divergence.empty() && diverged_.empty()) {
             diverged_ = divergence;
             lastError_ = "the solution " + divergence + "; iteration stopped";
@@ -683,7 +710,8 @@ void Session::Run() {
         // ProduceFrame); with a move among them, at this frame boundary, by rebuilding the
         // links on a thread. While links are being rebuilt later edits wait, so frames name
         // their edits in order.
-        if (!rebuild_ && !pending_.empty() && !ApplyEditsInPlace(lock, note)) {
+        bool edited = false;  // edits applied here: the next frame goes out without iterating
+        if (!rebuild_ && !pending_.empty() && !(edited = ApplyEditsInPlace(lock, note))) {
             Scene next = applied_;
             std::string what;
             for (auto& p : pending_) {
@@ -743,7 +771,7 @@ void Session::Run() {
             else
                 promise.set_value(frames_);
         } else if (!converged_ && diverged_.empty()) {
-            produce(settings_.iterationsPerFrame, true);
+            produce(edited ? 0 : settings_.iterationsPerFrame, true);
         }
     }
 }

@@ -188,10 +188,12 @@ class Session {
                    bool lights = false);
     uint64_t SubmitPunctual(int light, const LightEdit& edit);
     void Run();
-    // `interruptible`: edits that arrive during the frame are taken after the current
-    // iteration: those that can apply at once (materials, lights, sky) join this frame, which
-    // goes on to its end; a move ends the frame there (its links rebuild from the boundary).
-    // An edit thus waits at most the rest of one frame, never a whole extra frame.
+    // `iterations` bounces, then the frame (0: the frame of an edit just applied, at once).
+    // `interruptible`: an edit that arrives during the frame cuts the bounce under way after
+    // the current pass (Solver::SetInterrupt); edits that apply in place (materials, lights,
+    // sky, moves inside their bounds) are applied and the frame goes out at once with them;
+    // a move that rebuilds links ends the frame there (the rebuild starts at the boundary).
+    // An edit thus waits for one pass, not for the rest of a bounce.
     void ProduceFrame(int iterations, std::string note, bool interruptible);
     // Applies the pending edits to the solver when none of them moves geometry. Called with
     // `lock` held (released around the solver update); returns false, applying nothing, when
@@ -238,7 +240,8 @@ class Session {
     std::deque<std::chrono::steady_clock::time_point> recentFrames_;  // for fps
     std::vector<double> passTotals_;                                  // ms, as of last frame
     std::shared_ptr<const std::vector<PrimitiveKey>> layout_;
-    std::vector<std::string> lightNodes_;  // nodes that emitted light when loaded
+    std::vector<std::string> lightNodes_;                 // nodes that emitted light when loaded
+    std::vector<std::vector<uint32_t>> lightPrimitives_;  // per light node: its emitting ones
     SolverStats solverStatsRaw_;
     std::string lastError_;
     // The solver's SolverStats::divergence once it stopped: no more iterations until a rebuild

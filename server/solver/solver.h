@@ -2,6 +2,7 @@
 // settings, iterate, read per-surfel irradiance, report stats.
 #pragma once
 
+#include <atomic>
 #include <functional>
 #include <glm/glm.hpp>
 #include <memory>
@@ -210,6 +211,13 @@ class Solver {
     virtual void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) {
         (void)rows, (void)keep;
     }
+    // While `flag` (null: none) reads true, Iterate returns after the pass under way instead
+    // of finishing its iteration; the next Iterate takes the iteration up where it stopped
+    // (an edit applied in between reaches the passes still to come). SurfelIrradiance keeps
+    // reporting the last finished iteration. The service points it at "an edit is waiting",
+    // so that an edit need not wait for a whole bounce. A solver whose iterations cannot be
+    // cut ignores it.
+    virtual void SetInterrupt(const std::atomic<bool>* flag) { (void)flag; }
 };
 
 using ProgressFn = std::function<void(const std::string& stage, double fraction)>;

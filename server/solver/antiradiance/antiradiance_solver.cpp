@@ -53,7 +53,7 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
         lights_ = static_cast<int>(scene.lights.size());
         MakeDirect(scene);
     }
-    bound_ = IrradianceBound(model_);
+    bound_ = IrradianceBound(model_, &reflectance_);
     setupSeconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
@@ -136,10 +136,16 @@ std::vector<float> AntiradianceSolver::LeafIrradiance() {
 void AntiradianceSolver::Iterate(int n) {
     if (n < 0) throw Error("iteration count must not be negative");
     auto start = std::chrono::steady_clock::now();
-    for (int i = 0; i < n && divergence_.empty(); ++i) {
+    bool cut = false;  // SetInterrupt's flag stopped the iteration under way
+    for (int i = 0; i < n && divergence_.empty() && !cut; ++i) {
         // One iteration: passes until the schedule settles (one pass under the symmetric
-        // scheme; a radiance step and its antiradiance steps under the others).
+        // scheme; a radiance step and its antiradiance steps under the others). The schedule
+        // keeps its place across calls, so a cut iteration goes on where it stopped.
         for (bool settled = false; !settled && divergence_.empty();) {
+            if (interrupt_ && interrupt_->load(std::memory_order_relaxed)) {
+                cut = true;
+                break;
+            }
             const LocalMode mode = schedule_.Next();
             if (cpu_)
                 cpu_->Iterate(mode);
@@ -151,13 +157,15 @@ void AntiradianceSolver::Iterate(int n) {
             // only to being finite.
             std::vector<float> e = LeafIrradiance();
             settled = schedule_.Finished(e);
-            const float bound = settled ? bound_ : std::numeric_limits<float>::infinity();
+            const float bound =
+                settled ? bound_ + carried_ : std::numeric_limits<float>::infinity();
             if (std::string why = Divergence(e, bound); !why.empty())
                 divergence_ = "diverged at iteration " + std::to_string(iterations_ + 1) +
                               " (pass " + std::to_string(schedule_.passes) + "): " + why;
             else if (settled)
-                settled_ = std::move(e);
+                settled_ = std::move(e), carried_ *= reflectance_;
         }
+        if (cut) break;
         if (divergence_.empty()) ++iterations_;
         if (progress_) progress_("iterating", static_cast<double>(i + 1) / n);
     }
@@ -197,7 +205,15 @@ void AntiradianceSolver::CopyDirect(const Scene& scene) {
     perLight_ = gpuDirect_ ? gpuDirect_->ReadPerLight(scene.lights.size()) : direct_->PerLight();
     if (ReflectDirect() && gpu_) gpu_->UploadGlossyDirect();
     if (cpu_) cpu_->InputsChanged();
-    bound_ = IrradianceBound(model_);
+    Rebound();
+}
+
+void AntiradianceSolver::Rebound() {
+    // The state the edit found is bounded by the old bound (plus what it carried); the
+    // iteration continues from it, its excess over the new answer dying away by the largest
+    // reflectance each bounce (Iterate): a light dimmed or turned off is not a divergence.
+    carried_ = std::max(carried_, bound_);
+    bound_ = IrradianceBound(model_, &reflectance_);
 }
 
 bool AntiradianceSolver::ReflectDirect() {
@@ -215,7 +231,7 @@ void AntiradianceSolver::UpdateLights(const Scene& scene) {
         model_.environment = direct::EnvironmentBins(env, model_.dirs);
         if (gpu_) gpu_->UploadEnvironment();  // the CPU back end reads model_.environment
         if (cpu_) cpu_->InputsChanged();
-        bound_ = IrradianceBound(model_);
+        Rebound();
         environment_ = env;
     }
     if (!direct_ && !gpuDirect_) {
@@ -256,7 +272,7 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
     }
     if (gpu_) gpu_->UploadLeaves();  // the CPU back end reads model_.leaves directly
     if (cpu_) cpu_->InputsChanged();
-    bound_ = IrradianceBound(model_);
+    Rebound();
 }
 
 std::vector<float> AntiradianceSolver::SurfelExitant() {
@@ -321,7 +337,7 @@ void AntiradianceSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfe
         gpu_->UploadDirect();
     }
     if (cpu_) cpu_->InputsChanged();
-    bound_ = IrradianceBound(model_);
+    Rebound();
 }
 
 SolverStats AntiradianceSolver::Stats() const {

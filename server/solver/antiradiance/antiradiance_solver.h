@@ -32,6 +32,8 @@ class AntiradianceSolver : public Solver {
     std::vector<float> SurfelExitant() override;
     void SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) override;
     void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
+    // Checked after each pass of an unsettled bounce: the schedule keeps its place.
+    void SetInterrupt(const std::atomic<bool>* flag) override { interrupt_ = flag; }
 
     const AntiradianceModel& Model() const { return model_; }
     // Vulkan validation messages so far (settings.validation; none on the CPU back end).
@@ -61,8 +63,13 @@ class AntiradianceSolver : public Solver {
     std::string deviceName_;
     int iterations_ = 0;
     PassSchedule schedule_;
-    std::string divergence_;  // SolverStats::divergence
-    float bound_ = 0.0f;      // IrradianceBound, redone where the solver's inputs change
+    std::string divergence_;    // SolverStats::divergence
+    float bound_ = 0.0f;        // IrradianceBound, redone where the solver's inputs change
+    float reflectance_ = 0.0f;  // the largest reflectance (IrradianceBound)
+    // After an edit, the old state's bound, times the reflectance per bounce since: what the
+    // iteration may still carry over from before the edit (the guard allows bound_ + it).
+    float carried_ = 0.0f;
+    void Rebound();  // bound_ for the inputs as they are now, carried_ from the old one
     // SetEmitterDirect: per leaf, the emitters' light (in leafDirect too, which the local
     // pass reflects); empty while the solver carries the emission itself.
     std::vector<glm::vec3> emitterDirect_;
@@ -75,6 +82,7 @@ class AntiradianceSolver : public Solver {
     std::vector<float> settled_;
     double msTotal_ = 0.0;
     double setupSeconds_ = 0.0;
+    const std::atomic<bool>* interrupt_ = nullptr;  // SetInterrupt
     // Moves taken by UpdateGeometry, their links recomputed in all, the last one's time.
     size_t geometryUpdates_ = 0, linksUpdated_ = 0;
     double msGeometry_ = 0.0;

@@ -49,7 +49,7 @@ bool PassSchedule::Finished(const std::vector<float>& irradiance) {
     return false;
 }
 
-float IrradianceBound(const AntiradianceModel& m) {
+float IrradianceBound(const AntiradianceModel& m, float* reflectanceOut) {
     auto maxOf = [](const auto& v) { return std::max({v.x, v.y, v.z}); };
     constexpr float kPi = std::numbers::pi_v<float>;
     float emission = 0.0f, diffuse = 0.0f, glossy = 0.0f, direct = 0.0f, lobeDirect = 0.0f;
@@ -69,6 +69,7 @@ float IrradianceBound(const AntiradianceModel& m) {
     float sky = 0.0f;
     for (const glm::vec3& e : m.environment) sky = std::max(sky, maxOf(e));
     const float reflectance = diffuse + glossy;
+    if (reflectanceOut) *reflectanceOut = reflectance;
     if (reflectance >= 1.0f) return std::numeric_limits<float>::infinity();
     const float source = emission + diffuse * direct / kPi + lobeDirect;
     const float radiance = std::max(source / (1.0f - reflectance), source + reflectance * sky);

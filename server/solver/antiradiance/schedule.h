@@ -57,7 +57,8 @@ class PassSchedule {
 // leaves (emission, diffuse and glossy reflectance, direct light E_d, lobe-reflected direct
 // light G), or L_e + (ρ + F0) L_sky + ρ E_d / π + F0 G under a brighter sky, and E ≤
 // π max(B, L_sky). Infinite when a reflectance reaches 1.
-float IrradianceBound(const AntiradianceModel& model);
+// `reflectance` (when given) gets the largest diffuse plus glossy reflectance.
+float IrradianceBound(const AntiradianceModel& model, float* reflectance = nullptr);
 
 // Why the leaves' irradiance (RGB per leaf) is no longer a bounded solution: a value that
 // is not finite, or |E| past kDivergenceMargin × `bound`; empty while it is.
