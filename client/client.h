@@ -95,8 +95,8 @@ struct LoadOptions {
     std::string linkOracle;  // "" (server default: conservative) | "paper" | "area"
     float oracle = 1.0f;
     float convergedChange = 1e-3f;  // 0: frames stream continuously, never idle
-    int emitterRays = 0;            // shadow rays per surfel for the emitters' direct light; 0: off
-    int gatherRays = 0;             // final gather rays per input vertex; 0: off
+    int emitterRays = 256;          // shadow rays per surfel for the emitters' direct light; 0: off
+    int gatherRays = 256;           // final gather rays per input vertex; 0: off
     // The sky: an equirectangular EXR under the server's scene root, or a constant colour.
     std::string environment;
     std::optional<std::array<float, 3>> environmentColor;

@@ -211,13 +211,12 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.load
         ->add_option("--emitter-direct", s.loadOptions.emitterRays,
                      "shadow rays per surfel for the emitters' direct light, the solver's first "
-                     "shot (as bake's; an emissive edit or a move re-traces it); 0: off")
+                     "shot (as bake's --direct-rays); 0: off")
         ->capture_default_str();
     s.load
         ->add_option("--gather-rays", s.loadOptions.gatherRays,
-                     "final gather rays per input vertex (as bake's --gather-rays; light, "
-                     "material and sky edits re-evaluate cached hits, an emissive edit or a move "
-                     "re-traces them); 0: off")
+                     "final gather rays per input vertex (as bake's --gather-rays: cached hits, "
+                     "re-read after edits, traced again near what moved); 0: off")
         ->capture_default_str();
     s.load->add_option("--environment", s.loadOptions.environment,
                        "equirectangular OpenEXR sky under the server's scene root");

@@ -477,7 +477,21 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
         scene_.primitives[p].material = scene.primitives[p].material;
     inner_->UpdateMaterials(scene);
     fresh_ = false;
-    if (!emissionChanged || settings_.emitterRays <= 0) return;
+    // A material turned glossy: neither part can serve the scene any more (WithGather
+    // declines such scenes); the solver's own answer from here on, carrying its emission.
+    if ((!targets_.empty() || !shot_.empty()) &&
+        std::any_of(scene.materials.begin(), scene.materials.end(),
+                    [](const Material& m) { return m.Glossy(); })) {
+        if (!shot_.empty()) inner_->SetEmitterDirect({});
+        shot_.clear(), targets_.clear(), hits_.clear(), second_.clear();
+        shooter_.reset();
+        settings_.emitterRays = settings_.gatherRays = 0;
+        off_ =
+            "a material turned glossy (the gather stage does not serve glossy scenes yet); "
+            "the solver's own answer from here on";
+        return;
+    }
+    if (!emissionChanged || settings_.emitterRays <= 0 || shot_.empty()) return;
     // The first shot and the gather's emitter hits are linear in each emitting primitive's
     // emission: re-weighted from their coefficients, unless an emitter is new.
     auto start = std::chrono::steady_clock::now();
@@ -568,6 +582,7 @@ SolverStats GatherStage::Stats() const {
     s.gatherRaysRetraced = raysRetraced_;
     s.gatherTraces = traces_;
     s.gatherDevice = "cpu (Embree)";
+    s.gatherOff = off_;
     return s;
 }
 

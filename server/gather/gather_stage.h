@@ -134,6 +134,7 @@ class GatherStage : public Solver {
     double msShot_ = 0.0, msTrace_ = 0.0, msEvaluate_ = 0.0;
     size_t raysRetraced_ = 0;  // by the last move, both parts
     size_t traces_ = 0;        // tracings of either part, whole or after a move
+    std::string off_;          // SolverStats::gatherOff
 };
 
 // `solver` behind the gather stage, where it can take it. The first shot is declined with

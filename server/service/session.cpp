@@ -102,7 +102,9 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     CheckGatherRays(settings_.emitterRays, "emitter_rays");
     CheckGatherRays(settings_.gatherRays, "gather_rays");
     auto start = Clock::now();
-    solver_ = BuildSolver(scene, true, progress);
+    std::vector<std::string> notes;
+    solver_ = BuildSolver(scene, true, progress, &notes);
+    for (const std::string& n : notes) gatherNote_ += (gatherNote_.empty() ? "" : "; ") + n;
     buildSeconds_ = MsSince(start) / 1000.0;
     solverStatsRaw_ = solver_->Stats();
     motionDeclined_ = !solverStatsRaw_.motionDeclined.empty();
@@ -424,6 +426,7 @@ nlohmann::json Session::StatsJson() const {
     if (!diverged_.empty()) j["diverged"] = diverged_;
     j["iterations_per_frame"] = settings_.iterationsPerFrame;
     j["build_seconds"] = buildSeconds_;
+    if (!gatherNote_.empty()) j["gather_note"] = gatherNote_;
     // Frames in the last second: the rate while the scene changes, 0 while idle.
     auto now = Clock::now();
     size_t recent = 0;
@@ -437,13 +440,14 @@ nlohmann::json Session::StatsJson() const {
 }
 
 std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool motionLinks,
-                                             const ProgressFn& progress) const {
+                                             const ProgressFn& progress,
+                                             std::vector<std::string>* notes) const {
     SolverSettings settings = settings_.solver;
     settings.motionLinks = settings.motionLinks && motionLinks;
     GatherSettings gather;
     gather.emitterRays = settings_.emitterRays;
     gather.gatherRays = settings_.gatherRays;
-    return WithGather(CreateSolver(scene, settings, progress), scene, gather);
+    return WithGather(CreateSolver(scene, settings, progress), scene, gather, notes);
 }
 
 void Session::ProduceFrame(int iterations, std::string note, bool interruptible) {
@@ -643,14 +647,17 @@ bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string&
                    std::to_string(st.linksUpdated) + " so far, this move " +
                    std::to_string(int(st.msGeometry + 0.5)) + " ms)";
         }
+        const bool gathering = solver_->Stats().gatherOff.empty();
         solver_->UpdateMaterials(applied_);
+        if (const std::string off = solver_->Stats().gatherOff; gathering && !off.empty())
+            done += (done.empty() ? "" : "; ") + ("gather stage off: " + off);
         if (lights) solver_->UpdateLights(applied_);  // one shadow pass
     } catch (const std::exception& e) {
         failure = std::string(moves ? "update failed: " : "light update failed: ") + e.what();
     }
     lock.lock();
     if (!done.empty()) {
-        ++linkUpdates_;
+        if (moves) ++linkUpdates_;
         note += (note.empty() ? "" : "; ") + done;
     }
     if (!failure.empty()) {
@@ -674,6 +681,7 @@ void Session::Run() {
         });
         if (stop_) return;
         std::string note;
+        if (!gatherNoteSent_) note = gatherNote_, gatherNoteSent_ = true;  // the first frame
 
         // A finished link rebuild swaps in at this frame boundary.
         if (rebuild_ && rebuild_->done) {

@@ -55,11 +55,11 @@ struct SessionSettings {
     int iterationsPerFrame = 1;  // bounces (Solver::Iterate) per streamed frame
     // The gather stage (gather/gather_stage.h): shadow rays per surfel for the emitters'
     // direct light, the solver's first shot (0: the solver carries the emission itself), and
-    // final gather rays per input vertex (0: the solver's own answer). Off by default in the
-    // service until a move re-traces only the rays it touches (an emissive edit or a move
-    // re-traces every surfel: 0.5 s on the office).
-    int emitterRays = 0;
-    int gatherRays = 0;
+    // final gather rays per input vertex (0: the solver's own answer). On by default, as in
+    // bake: light, material and sky edits re-read cached rays, a move re-traces the rays
+    // near what moved.
+    int emitterRays = 256;
+    int gatherRays = 256;
     // The scene counts as converged (and the worker idles) when a frame changes the
     // irradiance by less than this fraction: Σ|ΔE| / Σ|E| over all surfels.
     double convergedChange = 1e-3;
@@ -200,10 +200,12 @@ class Session {
     // an edit needs a link rebuild or one is running. A failed update is put in `note`.
     bool ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note);
     // The session's solver for `scene`: motion links where the settings ask for them and
-    // `motionLinks` allows (false: the usual links), the emitters' first shot where the
-    // settings ask for it.
+    // `motionLinks` allows (false: the usual links), behind the gather stage where the
+    // settings ask for it and the scene allows (`notes`, when given, gets why a part of it
+    // was declined: WithGather).
     std::unique_ptr<Solver> BuildSolver(const Scene& scene, bool motionLinks,
-                                        const ProgressFn& progress = {}) const;
+                                        const ProgressFn& progress = {},
+                                        std::vector<std::string>* notes = nullptr) const;
     // Starts `rebuilt` (built for `next`) from the current solver's solution on the surfels
     // that did not move; returns what it did, for the frame note.
     std::string WarmStart(Solver& rebuilt, const Scene& next);
@@ -240,6 +242,10 @@ class Session {
     std::deque<std::chrono::steady_clock::time_point> recentFrames_;  // for fps
     std::vector<double> passTotals_;                                  // ms, as of last frame
     std::shared_ptr<const std::vector<PrimitiveKey>> layout_;
+    // Why the gather stage (or part of it) is off for this scene, said in the first frame's
+    // note and in stats (`gather_note`); empty when it runs as asked.
+    std::string gatherNote_;
+    bool gatherNoteSent_ = false;
     std::vector<std::string> lightNodes_;                 // nodes that emitted light when loaded
     std::vector<std::vector<uint32_t>> lightPrimitives_;  // per light node: its emitting ones
     SolverStats solverStatsRaw_;

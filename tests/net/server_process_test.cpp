@@ -16,6 +16,7 @@
 #include <thread>
 
 #include "client/client.h"
+#include "gather/gather_stage.h"
 #include "output/irradiance_writer.h"
 #include "protocol/frame.h"
 #include "scene/gltf_loader.h"
@@ -358,7 +359,7 @@ TEST(ServerProcess, EnvironmentAtLoad) {
     s.bins = 64;
     s.elementSize = 0.06f;
     s.device = DeviceChoice::kCpu;
-    auto solver = CreateSolver(scene, s);
+    auto solver = WithGather(CreateSolver(scene, s), scene, {});  // as the server: gather on
     solver->Iterate(lit.iterations);
     std::vector<glm::vec3> want =
         PrimitiveIrradiance(solver->GetSurfels(), solver->SurfelIrradiance(), scene, 0);
@@ -396,7 +397,7 @@ TEST(ServerProcess, SkyChangedInALoadedSession) {
         s.bins = 64;
         s.elementSize = 0.06f;
         s.device = DeviceChoice::kCpu;
-        auto solver = CreateSolver(scene, s);
+        auto solver = WithGather(CreateSolver(scene, s), scene, {});  // as the server
         solver->Iterate(40);
         return PrimitiveIrradiance(solver->GetSurfels(), solver->SurfelIrradiance(), scene, 0);
     };

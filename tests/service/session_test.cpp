@@ -7,6 +7,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "clutter_scenes.h"
+#include "gather/gather_stage.h"
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
 #include "test_util.h"
@@ -24,6 +25,14 @@ SessionSettings Settings() {
     s.iterationsPerFrame = 4;
     s.convergedChange = 1e-4;
     return s;
+}
+
+// What a session builds for `settings` (the gather stage on by default), built fresh.
+std::unique_ptr<Solver> Fresh(const Scene& scene, const SessionSettings& settings) {
+    GatherSettings gather;
+    gather.emitterRays = settings.emitterRays;
+    gather.gatherRays = settings.gatherRays;
+    return WithGather(CreateSolver(scene, settings.solver), scene, gather);
 }
 
 LightEdit Dim(const std::string& light, float intensity) {
@@ -81,7 +90,7 @@ TEST(Session, MoveConvergesToAFreshBakeOfTheMovedScene) {
     EXPECT_NE(notes.find("warm start for"), std::string::npos) << notes;
 
     SetNodeTransform(scene, node, moved);
-    auto fresh = CreateSolver(scene, Settings().solver);
+    auto fresh = Fresh(scene, Settings());
     fresh->Iterate(int(f->iterations));
     // Same scene, same settings, same iteration count: the rebuilt session (warm-started from
     // the old solution on the surfels that did not move) has converged to what a fresh bake
@@ -119,7 +128,7 @@ TEST(Session, MoveInsideItsBoundsUpdatesLinksInPlace) {
     EXPECT_EQ(session.StatsJson()["link_updates"], 1);
 
     SetNodeTransform(scene, node, moved);
-    auto fresh = CreateSolver(scene, settings.solver);
+    auto fresh = Fresh(scene, settings);
     fresh->Iterate(int(f->iterations));
     auto floor = PrimitiveIrradiance(fresh->GetSurfels(), fresh->SurfelIrradiance(), scene, 0);
     ASSERT_EQ(floor.size(), f->irradiance[0].size());
@@ -136,6 +145,7 @@ TEST(Session, WarmStartAfterAMoveBeatsAColdStart) {
     Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
     SessionSettings settings = Settings();
     settings.iterationsPerFrame = 2;
+    settings.emitterRays = settings.gatherRays = 0;  // the solver's own warm start
     Session session("cornell", scene, settings);
     WaitFor(session, 0);
     int node = FindNode(scene, "tall_block");
@@ -244,17 +254,22 @@ TEST(Session, EditsAreValidatedOnSubmission) {
 }
 
 // Making a material glossy in a running session (roughness and metallic): the glossy data
-// is rebuilt between frames and the session converges to a fresh bake of the edited scene.
+// is rebuilt between frames, the gather stage (which does not serve glossy scenes yet)
+// steps aside and says so, and the session converges to a fresh bake of the edited scene.
 TEST(Session, MaterialTurnedGlossyConvergesToAFreshBake) {
     Scene scene = LoadGltf(kBlocker);
     Session session("blocker", scene, Settings());
     WaitFor(session, 0);
+    ASSERT_GT(session.SolverStatistics().gatherRays, 0);
     uint64_t edit = session.Submit(MaterialEdit{"grey", glm::vec3(0.8f), std::nullopt, 0.3f, 1.0f});
-    FramePtr f = WaitFor(session, edit);
+    std::string notes;
+    FramePtr f = WaitFor(session, edit, &notes);
     ASSERT_TRUE(f);
+    EXPECT_NE(notes.find("gather stage off: a material turned glossy"), std::string::npos) << notes;
+    EXPECT_EQ(session.SolverStatistics().gatherRays, 0);
     for (Material& m : scene.materials)
         if (m.name == "grey") m = PbrMaterial("grey", glm::vec3(0.8f), 1.0f, 0.3f);
-    auto fresh = CreateSolver(scene, Settings().solver);
+    auto fresh = Fresh(scene, Settings());  // declines the gather: glossy
     fresh->Iterate(40);
     auto floor = PrimitiveIrradiance(fresh->GetSurfels(), fresh->SurfelIrradiance(), scene, 0);
     ASSERT_EQ(floor.size(), f->irradiance[0].size());
