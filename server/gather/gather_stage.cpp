@@ -270,9 +270,14 @@ void GatherStage::Trace(const Moved* moved) {
                 const Hit& hit = hits_[t * n + r];
                 const uint32_t tri = hit.triangle & kIndex;
                 const glm::vec3& normal = tris[tri].normal;
+                const std::vector<CosineCone>* filter = old ? &patternFor(normal) : nullptr;
+                if (filter && std::all_of(filter->begin(), filter->end(),
+                                          [](const CosineCone& c) { return c.Empty(); })) {
+                    if (out != old) std::copy(old, old + m, out);  // none can meet a box
+                    return;
+                }
                 const glm::vec3 y = HitPoint(hit) + rays_->Epsilon() * normal;
                 const glm::vec2 rot = SecondRotation(t, r);
-                const std::vector<CosineCone>* filter = old ? &patternFor(normal) : nullptr;
                 bool near = false;  // secondCones made at y
                 for (int j = 0; j < m; ++j) {
                     const glm::vec2 u = R2Point(rot, j);

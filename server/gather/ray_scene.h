@@ -135,9 +135,10 @@ class RayScene {
   private:
     void AddTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                      const glm::vec3& normalSum, uint32_t primitive);
-    void Build();     // Sample, then BuildBvh
-    void Sample();    // the emitters' choice from tris_
-    void BuildBvh();  // Embree's BVH over tris_
+    void Build();                        // Sample, then BuildBvh
+    void Sample();                       // the emitters' choice from tris_
+    void BuildBvh();                     // Embree's BVH over tris_
+    void WriteVertices(float* v) const;  // tris_' corners, 9 floats a triangle
     void CheckError() const;
 
     const Scene& scene_;
