@@ -41,15 +41,28 @@ bench-stability: build
 accuracy: build
 	$(BUILD)/bench/penumbra-bench-accuracy --out bench/results
 
-# The README's pictures: the Cornell box lit by the solver, and its error against the
-# path-traced reference as a heat map.
+# The README's pictures: the Cornell box and the office lit by the solver alone and with the
+# gather stage (bake's defaults, shaded per input vertex), the path-traced reference, and
+# each answer's error against it as a heat map.
+OFFICE_CAMERA = 0.6,2.2,0.6,8,0.6,6,75
 images: build
 	@mkdir -p docs/images
-	$(BUILD)/penumbra render scenes/cornell-box.gltf -o docs/images/cornell-box.png --size 512x512 --bins 256 --element-size 0.02 --iterations 12
-	$(BUILD)/penumbra bake scenes/cornell-box.gltf -o $(BUILD)/cornell-solver.json --bins 256 --element-size 0.02 --iterations 12 -q
 	$(BUILD)/penumbra reference scenes/cornell-box.gltf -o $(BUILD)/cornell-reference.json --samples 4096 -q
+	$(BUILD)/penumbra bake scenes/cornell-box.gltf -o $(BUILD)/cornell-alone.json --gather off --direct-rays 0 -q
+	$(BUILD)/penumbra bake scenes/cornell-box.gltf -o $(BUILD)/cornell-gather.json -q
 	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-reference.json -o docs/images/cornell-box-reference.png --size 512x512
-	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-solver.json --compare $(BUILD)/cornell-reference.json -o docs/images/cornell-box-error.png --size 512x512 --error-scale 0.5
+	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-alone.json -o docs/images/cornell-box-alone.png --size 512x512
+	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-gather.json -o docs/images/cornell-box.png --size 512x512
+	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-alone.json --compare $(BUILD)/cornell-reference.json -o docs/images/cornell-box-alone-error.png --size 512x512 --error-scale 0.5
+	$(BUILD)/penumbra render scenes/cornell-box.gltf --lighting $(BUILD)/cornell-gather.json --compare $(BUILD)/cornell-reference.json -o docs/images/cornell-box-error.png --size 512x512 --error-scale 0.5
+	$(BUILD)/penumbra reference scenes/office.gltf -o $(BUILD)/office-reference.json --samples 4096 -q
+	$(BUILD)/penumbra bake scenes/office.gltf -o $(BUILD)/office-alone.json --gather off --direct-rays 0 -q
+	$(BUILD)/penumbra bake scenes/office.gltf -o $(BUILD)/office-gather.json -q
+	$(BUILD)/penumbra render scenes/office.gltf --camera $(OFFICE_CAMERA) --lighting $(BUILD)/office-reference.json -o docs/images/office-reference.png --size 640x400
+	$(BUILD)/penumbra render scenes/office.gltf --camera $(OFFICE_CAMERA) --lighting $(BUILD)/office-alone.json -o docs/images/office-alone.png --size 640x400
+	$(BUILD)/penumbra render scenes/office.gltf --camera $(OFFICE_CAMERA) --lighting $(BUILD)/office-gather.json -o docs/images/office.png --size 640x400
+	$(BUILD)/penumbra render scenes/office.gltf --camera $(OFFICE_CAMERA) --lighting $(BUILD)/office-alone.json --compare $(BUILD)/office-reference.json -o docs/images/office-alone-error.png --size 640x400 --error-scale 0.5
+	$(BUILD)/penumbra render scenes/office.gltf --camera $(OFFICE_CAMERA) --lighting $(BUILD)/office-gather.json --compare $(BUILD)/office-reference.json -o docs/images/office-error.png --size 640x400 --error-scale 0.5
 	$(BUILD)/penumbra render scenes/glossy-box.gltf -o docs/images/glossy-box.png --size 512x384 --channel total --bins 256 --element-size 0.08 --iterations 8
 	$(BUILD)/penumbra reference scenes/glossy-box.gltf -o $(BUILD)/glossy-reference.json --channel total --samples 4096 -q
 	$(BUILD)/penumbra render scenes/glossy-box.gltf --lighting $(BUILD)/glossy-reference.json -o docs/images/glossy-box-reference.png --size 512x384
