@@ -209,10 +209,12 @@ void AntiradianceSolver::CopyDirect(const Scene& scene) {
 }
 
 void AntiradianceSolver::Rebound() {
-    // The state the edit found is bounded by the old bound (plus what it carried); the
-    // iteration continues from it, its excess over the new answer dying away by the largest
+    // The iteration continues from the state the edit found (its largest settled E, which
+    // the old bound held), its excess over the new answer dying away by the largest
     // reflectance each bounce (Iterate): a light dimmed or turned off is not a divergence.
-    carried_ = std::max(carried_, bound_);
+    float state = 0.0f;
+    for (float e : settled_) state = std::max(state, std::abs(e));
+    carried_ = std::max(carried_, state);
     bound_ = IrradianceBound(model_, &reflectance_);
 }
 
