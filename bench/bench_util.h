@@ -52,12 +52,7 @@ inline IrradianceFile Reference(const Scene& scene, int samples,
     ReferenceSettings rs;
     rs.samples = samples;
     rs.channel = channel;
-    ReferenceResult ref = RenderReference(scene, rs);
-    IrradianceResult res;
-    res.solver = "reference";
-    res.channel = ChannelName(channel);
-    res.primitives = ref.irradiance;
-    return ToIrradianceFile(scene, res);
+    return ReferenceFile(scene, rs);
 }
 
 // Accuracy beside speed (issue 18): the solver iterated on until an iteration changes the

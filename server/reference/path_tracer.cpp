@@ -309,4 +309,12 @@ ReferenceResult RenderReference(const Scene& scene, const ReferenceSettings& set
     return result;
 }
 
+IrradianceFile ReferenceFile(const Scene& scene, const ReferenceSettings& settings) {
+    IrradianceResult result;
+    result.solver = "reference";
+    result.channel = ChannelName(settings.channel);
+    result.primitives = RenderReference(scene, settings).irradiance;
+    return ToIrradianceFile(scene, result);
+}
+
 }  // namespace penumbra

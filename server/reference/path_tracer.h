@@ -7,6 +7,7 @@
 #include <glm/glm.hpp>
 #include <vector>
 
+#include "output/irradiance_writer.h"
 #include "scene/scene.h"
 #include "solver/solver.h"
 
@@ -56,5 +57,8 @@ struct ReferenceResult {
 // fixed seed whatever the thread count: each vertex has its own random stream. Throws
 // penumbra::Error on an Embree failure or invalid settings.
 ReferenceResult RenderReference(const Scene& scene, const ReferenceSettings& settings);
+
+// RenderReference's answer as `compare` reads it (solver "reference", the settings' channel).
+IrradianceFile ReferenceFile(const Scene& scene, const ReferenceSettings& settings);
 
 }  // namespace penumbra

@@ -27,10 +27,7 @@ double Rmse(const Scene& scene, Solver& solver, const IrradianceFile& truth) {
 IrradianceFile Truth(const Scene& scene, int samples) {
     ReferenceSettings rs;
     rs.samples = samples;
-    IrradianceResult r;
-    r.solver = "reference";
-    r.primitives = RenderReference(scene, rs).irradiance;
-    return ToIrradianceFile(scene, r);
+    return ReferenceFile(scene, rs);
 }
 
 // The first shot alone (no final gather).

@@ -27,12 +27,7 @@ double SceneRmse(const Scene& scene, const std::string& label, float elementSize
     ReferenceSettings rs;
     rs.samples = samples;
     rs.channel = channel;
-    ReferenceResult ref = RenderReference(scene, rs);
-    IrradianceResult truth;
-    truth.solver = "reference";
-    truth.primitives = ref.irradiance;
-
-    Comparison c = Compare(ToIrradianceFile(scene, solved), ToIrradianceFile(scene, truth));
+    Comparison c = Compare(ToIrradianceFile(scene, solved), ReferenceFile(scene, rs));
     std::printf("%s (%s): relative RMSE %.4f, mean relative %.4f over %zu vertices\n",
                 label.c_str(), ChannelName(channel), c.overall.relRmse, c.overall.meanRel,
                 c.overall.vertices);
