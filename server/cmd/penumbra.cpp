@@ -446,9 +446,35 @@ int CompareFiles(const std::string& aPath, const std::string& bPath, bool json, 
 
 }  // namespace
 
+// The subcommand nearest to `word` by edit distance (empty when none is within 2 edits).
+std::string Nearest(const CLI::App& app, const std::string& word) {
+    std::string best;
+    size_t bestCost = 3;
+    for (const CLI::App* sub : app.get_subcommands({})) {
+        const std::string& name = sub->get_name();
+        std::vector<size_t> row(name.size() + 1);
+        for (size_t j = 0; j <= name.size(); ++j) row[j] = j;
+        for (size_t i = 1; i <= word.size(); ++i) {
+            size_t diagonal = row[0];
+            row[0] = i;
+            for (size_t j = 1; j <= name.size(); ++j) {
+                const size_t up = row[j];
+                row[j] = std::min(
+                    {row[j] + 1, row[j - 1] + 1, diagonal + (word[i - 1] == name[j - 1] ? 0 : 1)});
+                diagonal = up;
+            }
+        }
+        if (row[name.size()] < bestCost) bestCost = row[name.size()], best = name;
+    }
+    return best;
+}
+
 int main(int argc, char** argv) {
     CLI::App app{"Penumbra: a headless lighting service (antiradiance global illumination)"};
     app.require_subcommand(1);
+    app.set_version_flag("--version", std::string("penumbra ") + PENUMBRA_VERSION);
+    // Options of the whole program (--connect, --session) may follow the subcommand too.
+    app.fallthrough();
     cli::ServiceCommands service(app);
 
     auto* bake = app.add_subcommand("bake",
@@ -613,7 +639,26 @@ int main(int argc, char** argv) {
                      "relative errors are taken against max(|b|, floor × mean |b|)")
         ->capture_default_str();
 
-    CLI11_PARSE(app, argc, argv);
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        if (e.get_exit_code() == 0) return app.exit(e);  // --help, --version
+        // A usage error: exit status 2, one line, and the command meant where it is a typo.
+        std::string hint;
+        const auto known = [&](const std::string& word) {
+            for (const CLI::App* sub : app.get_subcommands({}))
+                if (sub->get_name() == word) return true;
+            return false;
+        };
+        if (argc > 1 && argv[1][0] != '-' && !known(argv[1])) {
+            const std::string near = Nearest(app, argv[1]);
+            hint = "unknown command '" + std::string(argv[1]) + "'" +
+                   (near.empty() ? "" : "; did you mean '" + near + "'?");
+        }
+        std::fprintf(stderr, "penumbra: %s (penumbra --help lists the commands)\n",
+                     hint.empty() ? e.what() : hint.c_str());
+        return 2;
+    }
     if (service.Parsed()) return service.Run();
     try {
         if (bake->parsed()) {
@@ -632,10 +677,10 @@ int main(int argc, char** argv) {
                           renderEnv);
         if (compare->parsed()) return CompareFiles(cmpA, cmpB, cmpJson, maxRmse, floor);
     } catch (const penumbra::Error& e) {
-        std::fprintf(stderr, "\npenumbra: error: %s\n", e.what());
+        std::fprintf(stderr, "penumbra: error: %s\n", e.what());
         return 1;
     } catch (const std::exception& e) {
-        std::fprintf(stderr, "\npenumbra: internal error: %s\n", e.what());
+        std::fprintf(stderr, "penumbra: internal error: %s\n", e.what());
         return 3;
     }
     return 0;

@@ -181,7 +181,8 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     if (!forScript) {
         app.add_option("--connect", s.connect,
                        "server address for the service commands: tcp://HOST:PORT or "
-                       "unix:///PATH");
+                       "unix:///PATH")
+            ->envname("PENUMBRA_CONNECT");
         app.add_option("--session", s.session,
                        "scene session on the server (default: the newest loaded)");
     }

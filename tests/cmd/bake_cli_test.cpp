@@ -117,6 +117,24 @@ TEST(BakeCli, BadInputGivesExitCodeOneAndAMessage) {
     ProcessResult device = Execute("bake " + kCornell + " -o /tmp/x.json --device tpu");
     EXPECT_EQ(device.exitCode, 1) << device.output;
     EXPECT_NE(device.output.find("unknown device 'tpu'"), std::string::npos) << device.output;
+    EXPECT_NE(device.output.rfind("penumbra: error:", 0), std::string::npos)
+        << "the message is the first line: " << device.output;
+}
+
+// Usage errors exit 2 with one line (a typo'd command gets the nearest one); --version.
+TEST(BakeCli, UsageErrorsExitTwoAndNameTheNearestCommand) {
+    ProcessResult typo = Execute("bak " + kCornell);
+    EXPECT_EQ(typo.exitCode, 2) << typo.output;
+    EXPECT_NE(typo.output.find("unknown command 'bak'; did you mean 'bake'?"), std::string::npos)
+        << typo.output;
+    ProcessResult bins = Execute("bake " + kCornell + " -o /tmp/x.json --bins many");
+    EXPECT_EQ(bins.exitCode, 2) << bins.output;
+    EXPECT_NE(bins.output.find("--bins"), std::string::npos) << bins.output;
+    ProcessResult none = Execute("");
+    EXPECT_EQ(none.exitCode, 2) << none.output;
+    ProcessResult version = Execute("--version");
+    EXPECT_EQ(version.exitCode, 0) << version.output;
+    EXPECT_EQ(version.output.rfind("penumbra ", 0), 0u) << version.output;
 }
 
 }  // namespace
