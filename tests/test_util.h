@@ -165,8 +165,10 @@ struct ProcessResult {
     int exitCode;
     std::string output;  // stdout and stderr together
 };
-inline ProcessResult Execute(const std::string& args) {
-    std::string cmd = std::string(PENUMBRA_BINARY_DIR) + "/penumbra " + args + " 2>&1";
+// Runs the penumbra CLI with `args` (and `env`, "NAME=value ..." before it, when given).
+inline ProcessResult Execute(const std::string& args, const std::string& env = "") {
+    std::string cmd = (env.empty() ? "" : env + " ") + std::string(PENUMBRA_BINARY_DIR) +
+                      "/penumbra " + args + " 2>&1";
     FILE* pipe = popen(cmd.c_str(), "r");
     ProcessResult r{-1, ""};
     std::array<char, 4096> buf;

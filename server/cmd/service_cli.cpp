@@ -156,8 +156,8 @@ struct ServiceCommands::State {
     std::string node;
     std::vector<float> translate, matrix, color, albedo, emission, position, direction, cone;
     float rotateY = 0.0f;
-    float intensity = -1.0f;
-    float range = -1.0f;
+    // Optional, so that a negative value reaches the server and is refused there with why.
+    std::optional<float> intensity, range;
     std::optional<float> roughness, metallic;
     std::string skyPath;
     bool skyOff = false;
@@ -505,7 +505,14 @@ int ServiceCommands::State::Execute(client::Client& c) {
         } else {
             auto i = c.Info(session);
             const client::NodeInfo* n = i.Node(node);
-            if (!n) throw Error("no node '" + node + "' in scene " + i.scene);
+            if (!n) {
+                // As the server says it (Session::Submit): the nodes that can move.
+                std::string movable;
+                for (const auto& m : i.nodes)
+                    if (m.dynamic) movable += (movable.empty() ? "" : ", ") + m.name;
+                throw Error("no node '" + node + "' in scene '" + i.scene +
+                            "'; movable nodes: " + (movable.empty() ? "(none)" : movable));
+            }
             glm::mat4 current;
             for (int k = 0; k < 16; ++k) current[k / 4][k % 4] = n->matrix[k];
             glm::mat4 t(1.0f);
@@ -526,7 +533,12 @@ int ServiceCommands::State::Execute(client::Client& c) {
         if (!color.empty()) col = Triple(color, "--color");
         client::Client::LightChange change;
         change.color = col;
-        if (intensity >= 0.0f) change.intensity = intensity;
+        // SetLight reads a negative intensity or range as "unchanged" (SPEC): refuse it here.
+        if (intensity && !(*intensity >= 0.0f))
+            throw Error("light: --intensity must be a number ≥ 0 (cd, lux or nits)");
+        if (range && !(*range >= 0.0f))
+            throw Error("light: --range must be a number of metres ≥ 0 (0: infinite)");
+        change.intensity = intensity;
         if (!position.empty()) change.position = Triple(position, "--position");
         if (!direction.empty()) change.direction = Triple(direction, "--direction");
         if (!cone.empty()) {
@@ -534,7 +546,7 @@ int ServiceCommands::State::Execute(client::Client& c) {
             change.innerCone = glm::radians(cone[0]);
             change.outerCone = glm::radians(cone[1]);
         }
-        if (range >= 0.0f) change.range = range;
+        change.range = range;
         if (!change.color && !change.intensity && !change.position && !change.direction &&
             !change.innerCone && !change.range)
             throw Error(

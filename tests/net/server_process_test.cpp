@@ -585,6 +585,19 @@ TEST(ServerProcess, CliCommandsAndScriptAgainstTheServer) {
     auto refused = testing::Execute(connect + "move floor --translate 1,0,0");
     EXPECT_EQ(refused.exitCode, 1);
     EXPECT_NE(refused.output.find("static"), std::string::npos) << refused.output;
+    auto typo = testing::Execute(connect + "move tall_blok --translate 1,0,0");
+    EXPECT_EQ(typo.exitCode, 1);
+    EXPECT_NE(typo.output.find("movable nodes: short_block, tall_block"), std::string::npos)
+        << typo.output;
+    auto negative = testing::Execute(connect + "light ceiling_light --intensity -3");
+    EXPECT_EQ(negative.exitCode, 1);
+    EXPECT_NE(negative.output.find("--intensity must be a number ≥ 0"), std::string::npos)
+        << negative.output;
+    // --connect after the command, and from the environment.
+    auto after = testing::Execute("stats --connect " + server.Unix());
+    EXPECT_EQ(after.exitCode, 0) << after.output;
+    auto env = testing::Execute("stats", "PENUMBRA_CONNECT=" + server.Unix());
+    EXPECT_EQ(env.exitCode, 0) << env.output;
     auto gone = testing::Execute("--connect unix:///nonexistent/socket stats");
     EXPECT_EQ(gone.exitCode, 5) << gone.output;
     std::ofstream(dir / "bad.txt") << "move tall_block --translate 1,2\n";
