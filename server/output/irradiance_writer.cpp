@@ -129,6 +129,18 @@ IrradianceFile ToIrradianceFile(const Scene& scene, const IrradianceResult& resu
     return file;
 }
 
+namespace {
+
+// The JSON library's message without its "[json.exception.parse_error.101] " tag.
+std::string JsonWhy(const nlohmann::json::exception& e) {
+    std::string why = e.what();
+    const size_t tag = why.find("] ");
+    if (why.rfind("[json.", 0) == 0 && tag != std::string::npos) why = why.substr(tag + 2);
+    return why;
+}
+
+}  // namespace
+
 IrradianceFile ReadIrradianceJson(const std::string& path) {
     std::ifstream in(path);
     if (!in) throw Error(path + ": cannot open");
@@ -136,7 +148,7 @@ IrradianceFile ReadIrradianceJson(const std::string& path) {
     try {
         j = nlohmann::json::parse(in);
     } catch (const nlohmann::json::exception& e) {
-        throw Error(path + ": not JSON: " + e.what());
+        throw Error(path + ": not JSON: " + JsonWhy(e));
     }
     IrradianceFile file;
     try {
@@ -159,7 +171,7 @@ IrradianceFile ReadIrradianceJson(const std::string& path) {
             file.primitives.push_back(std::move(r));
         }
     } catch (const nlohmann::json::exception& e) {
-        throw Error(path + ": not an irradiance file: " + e.what());
+        throw Error(path + ": not an irradiance file: " + JsonWhy(e));
     }
     return file;
 }

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <functional>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
@@ -308,6 +309,7 @@ bool IsGlbPath(const std::string& path) {
 }
 
 void ReadGltfModel(const std::string& path, tinygltf::Model* model) {
+    if (std::ifstream probe(path); !probe) throw Error(path + ": cannot open (no such file?)");
     tinygltf::TinyGLTF loader;
     std::string err, warn;
     bool ok = IsGlbPath(path) ? loader.LoadBinaryFromFile(model, &err, &warn, path)

@@ -104,7 +104,9 @@ TEST(BakeCli, AutoDevicePicksCpuUnlessARealGpuExists) {
 TEST(BakeCli, BadInputGivesExitCodeOneAndAMessage) {
     ProcessResult missing = Execute("bake /nonexistent.gltf -o /tmp/x.json");
     EXPECT_EQ(missing.exitCode, 1) << missing.output;
-    EXPECT_NE(missing.output.find("/nonexistent.gltf"), std::string::npos) << missing.output;
+    EXPECT_NE(missing.output.find("/nonexistent.gltf: cannot open"), std::string::npos)
+        << missing.output;
+    EXPECT_EQ(missing.output.find("File open error"), std::string::npos) << missing.output;
 
     ProcessResult bins = Execute("bake " + kCornell + " -o /tmp/x.json --bins 5");
     EXPECT_EQ(bins.exitCode, 1) << bins.output;

@@ -92,7 +92,9 @@ TEST(CompareCli, MismatchedFilesFailClearly) {
     std::ofstream(dir / "garbage.json") << "{not json";
     r = Execute("compare " + (dir / "garbage.json").string() + " " + ref);
     EXPECT_EQ(r.exitCode, 1);
-    EXPECT_NE(r.output.find("garbage.json"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("garbage.json: not JSON: parse error at line 1"), std::string::npos)
+        << r.output;
+    EXPECT_EQ(r.output.find("[json.exception"), std::string::npos) << "library tag leaked";
 }
 
 TEST(ReferenceCli, WritesIrradianceWithStandardErrorsAndStats) {
