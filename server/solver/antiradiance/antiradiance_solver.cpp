@@ -209,12 +209,14 @@ void AntiradianceSolver::CopyDirect(const Scene& scene) {
 }
 
 void AntiradianceSolver::Rebound() {
-    // The iteration continues from the state the edit found (its largest settled E, which
-    // the old bound held), its excess over the new answer dying away by the largest
-    // reflectance each bounce (Iterate): a light dimmed or turned off is not a divergence.
+    // The iteration continues from the state the edit found, which the old bound held (a
+    // bounce cut mid-way included: Solver::SetInterrupt), its excess over the new answer
+    // dying away by the largest reflectance each bounce (Iterate): a light dimmed or turned
+    // off is not a divergence. Where the old bound was infinite (a reflectance of 1), the
+    // largest settled E stands for it.
     float state = 0.0f;
     for (float e : settled_) state = std::max(state, std::abs(e));
-    carried_ = std::max(carried_, state);
+    carried_ = std::max({carried_, state, std::isfinite(bound_) ? bound_ : 0.0f});
     bound_ = IrradianceBound(model_, &reflectance_);
 }
 
