@@ -184,6 +184,16 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     progress.Update("loading " + scenePath, 0.0);
     Scene scene = LoadGltf(scenePath);
     environment.Apply(scene);
+    // Nothing lights the scene: the answer is zero everywhere; say so rather than write
+    // zeros in silence (even with -q: it is a warning, not progress).
+    const bool emits = std::any_of(
+        scene.materials.begin(), scene.materials.end(),
+        [](const auto& m) { return glm::any(glm::greaterThan(m.emission, glm::vec3(0.0f))); });
+    if (!emits && scene.lights.empty() && !scene.environment.Active())
+        std::fprintf(stderr,
+                     "penumbra: warning: %s has no light (no emissive material, punctual light "
+                     "or sky): its irradiance is zero everywhere\n",
+                     scenePath.c_str());
     std::unique_ptr<Solver> solver = CreateSolver(
         scene, settings, [&](const std::string& stage, double f) { progress.Update(stage, f); });
     solver = gather.Wrap(std::move(solver), scene, scenePath, gatherSettings, quiet, progress);

@@ -11,6 +11,7 @@
 #include "base/image.h"
 #include "clutter_scenes.h"
 #include "gpu/context.h"
+#include "scene/scene_builder.h"
 #include "test_util.h"
 
 namespace penumbra {
@@ -121,6 +122,23 @@ TEST(BakeCli, BadInputGivesExitCodeOneAndAMessage) {
     EXPECT_NE(device.output.find("unknown device 'tpu'"), std::string::npos) << device.output;
     EXPECT_NE(device.output.rfind("penumbra: error:", 0), std::string::npos)
         << "the message is the first line: " << device.output;
+}
+
+// A scene that nothing lights bakes (to zeros) with a warning that says why, even with -q.
+TEST(BakeCli, AnUnlitSceneGetsAWarning) {
+    auto dir = testing::TempDir("unlit");
+    SceneBuilder b;
+    b.AddQuad("floor", b.AddMaterial("grey", glm::vec3(0.5f)), {-1, 0, -1}, {1, 0, -1}, {1, 0, 1},
+              {-1, 0, 1}, {0, 1, 0});
+    b.WriteGltf((dir / "dark.gltf").string());
+    ProcessResult r = Execute("bake " + (dir / "dark.gltf").string() + " -o " +
+                              (dir / "x.json").string() + " -q");
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("warning: " + (dir / "dark.gltf").string() + " has no light"),
+              std::string::npos)
+        << r.output;
+    ProcessResult lit = Execute("bake " + kCornell + " -o " + (dir / "y.json").string() + " -q");
+    EXPECT_EQ(lit.output.find("warning"), std::string::npos) << lit.output;
 }
 
 // Usage errors exit 2 with one line (a typo'd command gets the nearest one); --version.
