@@ -123,7 +123,7 @@ StageRun RunStage(const Scene& scene, float elementSize, const Stage& stage) {
     g.emitterRays = stage.emitterRays;
     g.gatherRays = stage.gatherRays;
     std::vector<std::string> notes;
-    auto solver = WithGather(CreateSolver(scene, s), scene, g, &notes);
+    auto solver = CreateGatheredSolver(scene, s, g, {}, &notes);  // as bake builds it
     StageRun run;
     run.iterations = IterateUntilConverged(*solver, 1e-3, 500).iterations;
     IrradianceResult r = CollectIrradiance(scene, *solver);
@@ -171,8 +171,9 @@ void GatherTable(const Scene& scene, const IrradianceFile& truth, float elementS
                  std::ostringstream& md, nlohmann::json& js) {
     char line[512];
     std::snprintf(line, sizeof line,
-                  "The gather stage, part by part (128 bins, element size %s, until an "
-                  "iteration changes the answer by < 10⁻³, as `bake` does):\n\n",
+                  "The gather stage, part by part (as `bake` builds it: 128 bins, 64 behind "
+                  "the final gather; element size %s, until an iteration changes the answer "
+                  "by < 10⁻³):\n\n",
                   elementSize > 0 ? (std::to_string(elementSize).substr(0, 4) + " m").c_str()
                                   : "the scene's default");
     md << line;

@@ -87,7 +87,7 @@ struct LoadOptions {
     std::vector<uint8_t> glb;  // or an uploaded binary glTF
     std::string name;          // session name for an upload
     std::string solver = "antiradiance";
-    int bins = 128;
+    int bins = 0;  // 0: the server's default (64 behind the final gather, 128 without)
     int iterationsPerFrame = 1;
     float elementSize = 0.0f;  // 0: automatic
     std::string device;        // "" = server default

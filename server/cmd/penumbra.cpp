@@ -98,12 +98,15 @@ struct GatherOptions {
     }
 
     // `solver` behind the gather stage; each part declined is a note on stderr.
-    std::unique_ptr<Solver> Wrap(std::unique_ptr<Solver> solver, const Scene& scene,
-                                 const std::string& scenePath, GatherSettings s, bool quiet,
-                                 Progress& progress) const {
-        progress.Update("gather: tracing", 0.0);
+    // The solver `settings` names behind the gather stage (CreateGatheredSolver); each part
+    // declined is a note on stderr.
+    std::unique_ptr<Solver> Create(const Scene& scene, const SolverSettings& settings,
+                                   const std::string& scenePath, const GatherSettings& s,
+                                   bool quiet, Progress& progress) const {
         std::vector<std::string> notes;
-        solver = WithGather(std::move(solver), scene, s, &notes);
+        std::unique_ptr<Solver> solver = CreateGatheredSolver(
+            scene, settings, s,
+            [&](const std::string& stage, double f) { progress.Update(stage, f); }, &notes);
         if (!quiet && !notes.empty()) progress.Done();
         for (const std::string& n : notes)
             if (!quiet)
@@ -194,9 +197,8 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
                      "penumbra: warning: %s has no light (no emissive material, punctual light "
                      "or sky): its irradiance is zero everywhere\n",
                      scenePath.c_str());
-    std::unique_ptr<Solver> solver = CreateSolver(
-        scene, settings, [&](const std::string& stage, double f) { progress.Update(stage, f); });
-    solver = gather.Wrap(std::move(solver), scene, scenePath, gatherSettings, quiet, progress);
+    std::unique_ptr<Solver> solver =
+        gather.Create(scene, settings, scenePath, gatherSettings, quiet, progress);
     iterations.Run(*solver, scenePath, progress, quiet);
     progress.Done();
     // A diverged solution is not written: no file is better than a wrong one.
@@ -235,6 +237,15 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
         if (s.glossyElements)
             std::fprintf(stderr, "\n  %zu of %zu elements glossy (%zu lobes)", s.glossyElements,
                          s.elements, s.glossyLobes);
+        if (s.emitterRays)
+            std::fprintf(stderr, "\n  first shot: %d rays a surfel in %.0f ms", s.emitterRays,
+                         s.msEmitterDirect);
+        if (s.gatherRays)
+            std::fprintf(stderr,
+                         "\n  final gather: %d rays at %zu vertices, traced in %.0f ms, "
+                         "evaluated in %.1f ms (%s)",
+                         s.gatherRays, s.gatherTargets, s.msGatherTrace, s.msGatherEvaluate,
+                         s.gatherDevice.c_str());
         std::fprintf(stderr, "\n  wrote %s (channel %s; %s)\n", outPath.c_str(),
                      result.channel.c_str(), kIrradianceUnits);
     }
@@ -369,11 +380,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
         perVertex = render::IrradianceForScene(scene, ReadIrradianceJson(o.lighting));
         source = o.lighting;
     } else {
-        solver = CreateSolver(scene, settings, [&](const std::string& stage, double f) {
-            progress.Update(stage, f);
-        });
-        solver =
-            o.gather.Wrap(std::move(solver), scene, o.scene, gatherSettings, o.quiet, progress);
+        solver = o.gather.Create(scene, settings, o.scene, gatherSettings, o.quiet, progress);
         iterations.Run(*solver, o.scene, progress, o.quiet);
         perSurfel = solver->SurfelIrradiance(channel);
         for (size_t p = 0; p < scene.primitives.size(); ++p)
@@ -498,7 +505,9 @@ int main(int argc, char** argv) {
     bake->add_option("scene", scenePath, "glTF 2.0 scene (.gltf or .glb)")->required();
     bake->add_option("-o,--output", outPath, "output file: .json, .glb or .gltf")->required();
     bake->add_option("--solver", settings.solver, "solver (antiradiance)")->capture_default_str();
-    bake->add_option("--bins", settings.bins, "direction bins, 32..1024, a multiple of 4")
+    bake->add_option("--bins", settings.bins,
+                     "direction bins, 32..1024, a multiple of 4; 0: 64 behind the final "
+                     "gather, 128 without")
         ->capture_default_str();
     iterations.Add(bake);
     bake->add_option("--element-size", settings.elementSize,
@@ -616,7 +625,9 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     render->add_option("--channel", renderChannel, "indirect, direct or total")
         ->capture_default_str();
-    render->add_option("--bins", renderSettings.bins, "direction bins (solver)")
+    render
+        ->add_option("--bins", renderSettings.bins,
+                     "direction bins (solver); 0: 64 behind the final gather, 128 without")
         ->capture_default_str();
     renderIterations.Add(render);
     ro.gather.Add(render);

@@ -192,7 +192,9 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.load->add_flag("--upload", s.upload, "send the local file as a .glb instead of a path");
     s.load->add_option("--solver", s.loadOptions.solver, "solver (antiradiance)")
         ->capture_default_str();
-    s.load->add_option("--bins", s.loadOptions.bins, "direction bins (32…1024)")
+    s.load
+        ->add_option("--bins", s.loadOptions.bins,
+                     "direction bins (32…1024); 0: 64 behind the final gather, 128 without")
         ->capture_default_str();
     s.load
         ->add_option("--iterations-per-frame", s.loadOptions.iterationsPerFrame,

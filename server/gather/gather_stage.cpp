@@ -591,9 +591,8 @@ SolverStats GatherStage::Stats() const {
     return s;
 }
 
-std::unique_ptr<Solver> WithGather(std::unique_ptr<Solver> solver, const Scene& scene,
-                                   const GatherSettings& settings,
-                                   std::vector<std::string>* notes) {
+GatherSettings GatherParts(const Scene& scene, const GatherSettings& settings,
+                           std::vector<std::string>* notes) {
     CheckGatherRays(settings.emitterRays, "the first shot (emitter direct light)");
     CheckGatherRays(settings.gatherRays, "the final gather");
     const bool glossy = std::any_of(scene.materials.begin(), scene.materials.end(),
@@ -620,8 +619,30 @@ std::unique_ptr<Solver> WithGather(std::unique_ptr<Solver> solver, const Scene& 
             "no final gather: not yet for scenes with glossy materials (a glossy surface's "
             "light depends on the direction it is seen from); the solver's own answer");
     }
+    return s;
+}
+
+std::unique_ptr<Solver> WithGather(std::unique_ptr<Solver> solver, const Scene& scene,
+                                   const GatherSettings& settings,
+                                   std::vector<std::string>* notes) {
+    const GatherSettings s = GatherParts(scene, settings, notes);
     if (s.emitterRays == 0 && s.gatherRays == 0) return solver;
     return std::make_unique<GatherStage>(std::move(solver), scene, s);
+}
+
+std::unique_ptr<Solver> CreateGatheredSolver(const Scene& scene, SolverSettings settings,
+                                             const GatherSettings& gather,
+                                             const ProgressFn& progress,
+                                             std::vector<std::string>* notes) {
+    const GatherSettings parts = GatherParts(scene, gather, notes);
+    if (parts.gatherRays > 0) {
+        if (settings.bins == 0) settings.bins = kGatherBins;
+        settings.antiradianceTolerance = std::max(settings.antiradianceTolerance, kGatherSettle);
+    }
+    std::unique_ptr<Solver> solver = CreateSolver(scene, settings, progress);
+    if (parts.emitterRays == 0 && parts.gatherRays == 0) return solver;
+    if (progress) progress("gather: tracing", 0.0);
+    return std::make_unique<GatherStage>(std::move(solver), scene, parts);
 }
 
 }  // namespace penumbra

@@ -137,14 +137,33 @@ class GatherStage : public Solver {
     std::string off_;          // SolverStats::gatherOff
 };
 
-// `solver` behind the gather stage, where it can take it. The first shot is declined with
-// rays 0, for a scene without emitters, and for a scene with glossy materials (their lobes
-// would miss it); the final gather with rays 0 and for glossy scenes (the light a glossy
-// surface sends towards a ray depends on the ray's direction, which the gather does not read
-// yet). `notes` (when given) gets a line for each part declined. Both declined: `solver` as
-// it is.
+// The parts of `settings` that can serve `scene`: the first shot is declined (0 rays) for a
+// scene without emitters and for one with glossy materials (their lobes would miss it); the
+// final gather for glossy scenes (the light a glossy surface sends towards a ray depends on
+// the ray's direction, which the gather does not read yet). `notes` (when given) gets a line
+// for each part declined. Throws penumbra::Error for ray counts out of range.
+GatherSettings GatherParts(const Scene& scene, const GatherSettings& settings,
+                           std::vector<std::string>* notes = nullptr);
+
+// `solver` behind the gather stage, with the parts GatherParts leaves (both declined:
+// `solver` as it is).
 std::unique_ptr<Solver> WithGather(std::unique_ptr<Solver> solver, const Scene& scene,
                                    const GatherSettings& settings,
                                    std::vector<std::string>* notes = nullptr);
+
+// Behind a final gather the solver's answer is read only through the gather's hits, a bounce
+// later and averaged over the hemisphere, so its resolution matters less (docs/SOLVER.md,
+// "Settings behind the gather"): bins left at 0 become kGatherBins instead of
+// kDefaultBins, and the antiradiance settles each bounce to kGatherSettle of the largest
+// irradiance instead of 10⁻⁴.
+inline constexpr int kGatherBins = 64;
+inline constexpr float kGatherSettle = 1e-3f;
+
+// The solver `settings` names, built for what it will feed: with the settings above when
+// GatherParts keeps the final gather, then behind the gather stage (WithGather).
+std::unique_ptr<Solver> CreateGatheredSolver(const Scene& scene, SolverSettings settings,
+                                             const GatherSettings& gather,
+                                             const ProgressFn& progress = {},
+                                             std::vector<std::string>* notes = nullptr);
 
 }  // namespace penumbra

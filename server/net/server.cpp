@@ -393,8 +393,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 if (!solver.empty() && solver != "antiradiance")
                     throw ServiceError(ErrorKind::kUnsupported,
                                        "solver '" + solver + "' is not available (antiradiance)");
-                if (l->bins() < 32 || l->bins() > 1024)
-                    throw ServiceError(ErrorKind::kInvalidArgument, "bins must be 32…1024");
+                if (l->bins() != 0 && (l->bins() < 32 || l->bins() > 1024))
+                    throw ServiceError(ErrorKind::kInvalidArgument,
+                                       "bins must be 32…1024 (or 0: the default)");
                 req.settings.solver.bins = l->bins();
                 if (!(l->element_size() >= 0.0f) || !std::isfinite(l->element_size()))
                     throw ServiceError(ErrorKind::kInvalidArgument,

@@ -447,7 +447,7 @@ std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool motionLink
     GatherSettings gather;
     gather.emitterRays = settings_.emitterRays;
     gather.gatherRays = settings_.gatherRays;
-    return WithGather(CreateSolver(scene, settings, progress), scene, gather, notes);
+    return CreateGatheredSolver(scene, settings, gather, progress, notes);
 }
 
 void Session::ProduceFrame(int iterations, std::string note, bool interruptible) {

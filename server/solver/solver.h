@@ -37,9 +37,14 @@ enum class BackOcclusion { kAuto, kOn, kOff };
 // has F16C. The Vulkan passes use fp32.
 enum class TablePrecision { kAuto, kFp32, kFp16 };
 
+inline constexpr int kDefaultBins = 128;
+
 struct SolverSettings {
     std::string solver = "antiradiance";
-    int bins = 128;
+    // Direction bins, 32…1024, a multiple of 4; 0: the default, kDefaultBins (the gather
+    // stage's CreateGatheredSolver picks kGatherBins behind a final gather). Read Bins().
+    int bins = 0;
+    int Bins() const { return bins > 0 ? bins : kDefaultBins; }
     float elementSize = 0.0f;  // metres; 0 picks kDefaultElementFraction × scene diameter
     // Adaptive by default: the paper's symmetric scheme diverges on rows and stacks of
     // occluders (docs/SOLVER.md "Stability"); where it converges, both reach one fixed point.

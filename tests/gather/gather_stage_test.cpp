@@ -223,5 +223,25 @@ TEST(FinalGather, EditsMatchAFreshGather) {
     }
 }
 
+// Behind a final gather the solver's bins default to kGatherBins; a glossy scene, whose
+// final gather is declined, keeps kDefaultBins and says why; bins given are kept.
+TEST(FinalGather, SolverBehindTheGatherDefaultsToFewerBins) {
+    SolverSettings s = Cpu();
+    s.elementSize = 0.25f;
+    const Scene cornell = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
+    EXPECT_EQ(CreateGatheredSolver(cornell, s, {})->Stats().bins, kGatherBins);
+    EXPECT_EQ(CreateSolver(cornell, s)->Stats().bins, kDefaultBins);
+    GatherSettings off;
+    off.gatherRays = 0;
+    EXPECT_EQ(CreateGatheredSolver(cornell, s, off)->Stats().bins, kDefaultBins);
+    std::vector<std::string> notes;
+    const Scene glossy = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/glossy-box.gltf");
+    EXPECT_EQ(CreateGatheredSolver(glossy, s, {}, {}, &notes)->Stats().bins, kDefaultBins);
+    ASSERT_FALSE(notes.empty());
+    EXPECT_NE(notes.back().find("no final gather"), std::string::npos) << notes.back();
+    s.bins = 96;
+    EXPECT_EQ(CreateGatheredSolver(cornell, s, {})->Stats().bins, 96);
+}
+
 }  // namespace
 }  // namespace penumbra

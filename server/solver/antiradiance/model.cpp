@@ -51,7 +51,7 @@ void AssignMotionGroups(AntiradianceModel& model, const Scene& scene,
 AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSettings& settings,
                                          const ProgressFn& progress) {
     AntiradianceModel model;
-    model.dirs = Directions(settings.bins);
+    model.dirs = Directions(settings.Bins());
     float h = settings.elementSize > 0.0f ? settings.elementSize
                                           : scene.Diameter() * kDefaultElementFraction;
     if (!(h > 0.0f) || !std::isfinite(h))
