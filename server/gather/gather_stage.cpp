@@ -21,6 +21,7 @@ constexpr float kPi = 3.14159265358979f;
 // Streams of the gather's patterns, apart from the first shot's (which uses stream = surfel).
 constexpr uint64_t kGatherStream = 0x9e3779b97f4a7c15ull;
 constexpr uint64_t kSecondStream = 0x5851f42d4c957f2dull;
+constexpr uint64_t kLobeStream = 0x2545f4914f6cdd1dull;
 // A hit closer than this × the solver's element size is gathered again (GatherStage::kShort).
 // Measured (bake at 0.1 m elements against the reference at 4,096 samples; 0, 0.25, 0.5, 1):
 // the Cornell box 2.78, 2.15, 2.14, 2.13%; the office (0.37 m elements) 4.01, 3.90, 3.88,
@@ -51,6 +52,9 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
     CheckGatherRays(settings.emitterRays, "the first shot");
     CheckGatherRays(settings.gatherRays, "the final gather");
     rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
+    glossy_ = std::any_of(scene_.materials.begin(), scene_.materials.end(),
+                          [](const Material& m) { return m.Glossy(); });
+    diameter_ = scene_.Diameter();
     Place();
     const Surfels& s = inner_->GetSurfels();
     if (settings_.gatherRays > 0) {
@@ -68,6 +72,7 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
             rotation_[t].y = rng.Uniform();
         }
         Trace();
+        TraceLobes();
         Sky();
     }
     Shoot();
@@ -94,7 +99,7 @@ void GatherStage::Shoot(const Moved* moved) {
         raysRetraced_ += traced;
     }
     for (size_t t = 0; t < targets_.size(); ++t) shot_[targets_[t]] += emitterHits_[t];
-    inner_->SetEmitterDirect(shot_);
+    if (!glossy_) inner_->SetEmitterDirect(shot_);
     fresh_ = false;
     msShot_ = Ms(start);
 }
@@ -366,11 +371,163 @@ void GatherStage::Trace(const Moved* moved) {
     msTrace_ = Ms(start);
 }
 
+glm::vec3 GatherStage::LobeDirection(size_t target, int ray, const Hit& h, float& cosine) const {
+    const uint32_t tri = h.triangle & kIndex;
+    const glm::vec3& n = rays_->Triangles()[tri].normal;
+    const float exponent = rays_->MaterialOf(tri).phongExponent;
+    // The lobe's axis: the mirror image of the direction back along the ray (wo = −d).
+    const glm::vec3 wo = -Direction(target, ray);
+    const glm::vec3 mirror = 2.0f * glm::dot(n, wo) * n - wo;
+    // Phong lobe sampling, pdf (n + 1)/(2π) cosⁿθ_r.
+    Pcg32 rng(settings_.seed, kLobeStream + target * settings_.gatherRays + ray);
+    const float u1 = rng.Uniform(), u2 = rng.Uniform();
+    const float c = std::pow(u1, 1.0f / (exponent + 1.0f));
+    const float r = std::sqrt(std::max(0.0f, 1.0f - c * c)), phi = 2.0f * kPi * u2;
+    glm::vec3 t, b;
+    Basis(mirror, t, b);
+    const glm::vec3 wi = glm::normalize(r * std::cos(phi) * t + r * std::sin(phi) * b + c * mirror);
+    cosine = glm::dot(n, wi);
+    return wi;
+}
+
+void GatherStage::TraceLobes(const Moved* moved) {
+    if (!glossy_) {
+        lobes_.assign(targets_.size(), {});
+        seen_.assign(targets_.size(), {});
+        return;
+    }
+    auto start = std::chrono::steady_clock::now();
+    const int n = settings_.gatherRays, words = LightWords();
+    const auto& tris = rays_->Triangles();
+    const float inf = std::numeric_limits<float>::infinity();
+    lobes_.resize(targets_.size());
+    seen_.resize(targets_.size());
+    auto cornersMoved = [&](const Hit& h) {
+        const glm::uvec3& c = rays_->Corners(h.triangle & kIndex);
+        return moved->surfels[c.x] || moved->surfels[c.y] || moved->surfels[c.z];
+    };
+    auto meets = [&](const glm::vec3& o, const glm::vec3& span, float tMax) {
+        for (const Bounds& b : moved->boxes)
+            if (b.Meets(o, span, tMax)) return true;
+        return false;
+    };
+    auto quantise = [](float x) {
+        return static_cast<uint16_t>(std::lround(std::clamp(x, 0.0f, 1.0f) * 65535.0f));
+    };
+    std::atomic<size_t> traced{0};
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
+        size_t count = 0;
+        std::vector<LobeHit> lobes;
+        std::vector<uint32_t> seen;
+        for (size_t t = range.begin(); t != range.end(); ++t) {
+            const std::vector<LobeHit>& old = lobes_[t];
+            const std::vector<uint32_t>& oldSeen = seen_[t];
+            lobes.clear(), seen.clear();
+            size_t k = 0;  // the first old entry at or after ray r
+            for (int r = 0; r < n; ++r) {
+                const Hit& h = hits_[t * n + r];
+                while (k < old.size() && old[k].ray < r) ++k;
+                if (!Front(h) || !rays_->MaterialOf(h.triangle & kIndex).Glossy()) continue;
+                const uint32_t tri = h.triangle & kIndex;
+                const glm::vec3 y = HitPoint(h) + rays_->Epsilon() * tris[tri].normal;
+                const bool reuse = moved && k < old.size() && old[k].ray == r &&
+                                   Same(old[k].from, h) && !cornersMoved(h);
+                LobeHit e =
+                    reuse ? old[k]
+                          : LobeHit{
+                                static_cast<uint16_t>(r), h, {kNone, 0, 0}, 0.0f, glm::vec3(0.0f)};
+                // The lobe ray: kept where it passes by what moved.
+                bool again = !reuse;
+                if (reuse && e.hit.triangle == kEscaped) {
+                    float c;
+                    again = meets(y, LobeDirection(t, r, h, c), inf);
+                } else if (reuse && e.hit.triangle != kNone) {
+                    again = cornersMoved(e.hit) || meets(y, HitPoint(e.hit) - y, 1.0f);
+                }
+                if (again) {
+                    float cosine = 0.0f;
+                    const glm::vec3 wi = LobeDirection(t, r, h, cosine);
+                    e.hit = {kNone, 0, 0};
+                    e.weight = 0.0f;
+                    e.sky = glm::vec3(0.0f);
+                    if (cosine > 0.0f) {
+                        const float exponent = rays_->MaterialOf(tri).phongExponent;
+                        e.weight = (exponent + 2.0f) / (exponent + 1.0f) * cosine;
+                        const RayHit hit = rays_->Intersect(y, wi, inf);
+                        ++count;
+                        if (!hit.hit) {
+                            e.hit = {kEscaped, 0, 0};
+                            if (scene_.environment.Active())
+                                e.sky = scene_.environment.Radiance(wi);
+                        } else {
+                            const uint32_t back =
+                                glm::dot(tris[hit.triangle].normal, wi) >= 0.0f ? kBack : 0u;
+                            e.hit = {hit.triangle | back, quantise(hit.u), quantise(hit.v)};
+                        }
+                    }
+                }
+                // The punctual lights it sees: kept where their segments pass by what moved.
+                const size_t at = seen.size();
+                seen.resize(at + words, 0u);
+                for (size_t l = 0; l < scene_.lights.size(); ++l) {
+                    const LightArrival a =
+                        PunctualArrival(scene_.lights[l], y, tris[tri].normal, diameter_);
+                    if (!a.reaches) continue;
+                    if (reuse && !meets(y, a.span, 1.0f)) {
+                        seen[at + l / 32] |= oldSeen[k * words + l / 32] & (1u << (l % 32));
+                        continue;
+                    }
+                    ++count;
+                    if (!rays_->Occluded(y, a.span)) seen[at + l / 32] |= 1u << (l % 32);
+                }
+                lobes.push_back(e);
+            }
+            lobes_[t].assign(lobes.begin(), lobes.end());
+            seen_[t].assign(seen.begin(), seen.end());
+        }
+        traced += count;
+    });
+    raysRetraced_ += moved ? traced.load() : 0;
+    fresh_ = false;
+    msTrace_ += Ms(start);
+}
+
+void GatherStage::SeeLights(const std::vector<uint8_t>& which) {
+    if (!glossy_ || targets_.empty()) return;
+    const int n = settings_.gatherRays, words = LightWords();
+    const auto& tris = rays_->Triangles();
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
+        for (size_t t = range.begin(); t != range.end(); ++t) {
+            std::vector<uint32_t>& seen = seen_[t];
+            if (which.empty())
+                seen.assign(lobes_[t].size() * words, 0u);  // every light (and their count)
+            for (size_t k = 0; k < lobes_[t].size(); ++k) {
+                const Hit& h = hits_[t * n + lobes_[t][k].ray];
+                const uint32_t tri = h.triangle & kIndex;
+                const glm::vec3 y = HitPoint(h) + rays_->Epsilon() * tris[tri].normal;
+                for (size_t l = 0; l < scene_.lights.size(); ++l) {
+                    if (!which.empty() && !which[l]) continue;
+                    uint32_t& word = seen[k * words + l / 32];
+                    word &= ~(1u << (l % 32));
+                    const LightArrival a =
+                        PunctualArrival(scene_.lights[l], y, tris[tri].normal, diameter_);
+                    if (a.reaches && !rays_->Occluded(y, a.span)) word |= 1u << (l % 32);
+                }
+            }
+        }
+    });
+    fresh_ = false;
+}
+
 void GatherStage::Sky() {
     const int n = settings_.gatherRays, m = SecondRays();
     sky_.assign(targets_.size(), glm::vec3(0.0f));
     secondSky_.assign(secondStart_.back(), glm::vec3(0.0f));
-    if (!scene_.environment.Active()) return;
+    if (!scene_.environment.Active()) {
+        for (auto& lobes : lobes_)
+            for (LobeHit& e : lobes) e.sky = glm::vec3(0.0f);
+        return;
+    }
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
         for (size_t t = range.begin(); t != range.end(); ++t) {
             glm::vec3 sum(0.0f);
@@ -387,6 +544,11 @@ void GatherStage::Sky() {
                 secondSky_[secondStart_[t] + k++] = second * (kPi / m);
             }
             sky_[t] = sum * (kPi / n);
+            for (LobeHit& e : lobes_[t]) {
+                if (e.hit.triangle != kEscaped) continue;
+                float cosine;
+                e.sky = scene_.environment.Radiance(LobeDirection(t, e.ray, e.from, cosine));
+            }
         }
     });
     fresh_ = false;
@@ -411,7 +573,20 @@ void GatherStage::Evaluate() {
         const float u = h.u * (1.0f / 65535.0f), v = h.v * (1.0f / 65535.0f);
         return (1.0f - u - v) * f[c.x] + u * f[c.y] + v * f[c.z];
     };
-    const int n = settings_.gatherRays, m = SecondRays();
+    const int n = settings_.gatherRays, m = SecondRays(), words = LightWords();
+    const auto& tris = rays_->Triangles();
+    // What a lobe ray meets sends towards it: emission (no first shot weighs these) and
+    // (ρ + F0)/π · E, a glossy surface's lobe taken as if it spread its light evenly (one
+    // glossy bounce is followed, not two).
+    std::vector<glm::vec3> lobeRadiance;
+    if (glossy_) {
+        lobeRadiance.resize(s.size());
+        for (uint32_t i = 0; i < s.size(); ++i) {
+            const Material& m = scene_.materials[scene_.primitives[surfelPrimitive_[i]].material];
+            const glm::vec3 rho = m.albedo + (m.Glossy() ? m.specular : glm::vec3(0.0f));
+            lobeRadiance[i] = rho / kPi * (indirect_[i] + direct_[i]) + m.emission;
+        }
+    }
     std::vector<glm::vec3> gathered(targets_.size());
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
         for (size_t t = range.begin(); t != range.end(); ++t) {
@@ -437,6 +612,32 @@ void GatherStage::Evaluate() {
                 const Material& mat = rays_->MaterialOf(h.triangle & kIndex);
                 sum += mat.albedo / kPi * e + (shot_.empty() ? mat.emission : glm::vec3(0.0f));
                 ++k;
+            }
+            // Glossy hits: what their lobes reflect towards the target, F0 times the lobe
+            // ray's estimate (the radiance where it lands, the sky where it escapes), plus
+            // the punctual lights y sees through the lobe: F0 (n + 2)/(2π) cosⁿθ_r · E_l(y).
+            const std::vector<LobeHit>& lobes = lobes_[t];
+            for (size_t q = 0; q < lobes.size(); ++q) {
+                const LobeHit& e = lobes[q];
+                const Hit& h = hits_[t * n + e.ray];
+                const uint32_t tri = h.triangle & kIndex;
+                const Material& mat = rays_->MaterialOf(tri);
+                glm::vec3 spec = (Front(e.hit) ? at(lobeRadiance, e.hit) : e.sky) * e.weight;
+                if (!scene_.lights.empty()) {
+                    const glm::vec3& ny = tris[tri].normal;
+                    const glm::vec3 y = HitPoint(h) + rays_->Epsilon() * ny;
+                    const glm::vec3 wo = -Direction(t, e.ray);
+                    const glm::vec3 mirror = 2.0f * glm::dot(ny, wo) * ny - wo;
+                    const float norm = (mat.phongExponent + 2.0f) / (2.0f * kPi);
+                    for (size_t l = 0; l < scene_.lights.size(); ++l) {
+                        if (!(seen_[t][q * words + l / 32] & (1u << (l % 32)))) continue;
+                        const LightArrival a = PunctualArrival(scene_.lights[l], y, ny, diameter_);
+                        const float c = glm::dot(mirror, a.toLight);
+                        if (a.reaches && c > 0.0f)
+                            spec += a.irradiance * (norm * std::pow(c, mat.phongExponent));
+                    }
+                }
+                sum += mat.specular * spec;
             }
             gathered[t] = sum * (kPi / n) + sky_[t];
         }
@@ -475,6 +676,13 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
         newEmitter = newEmitter || (glm::any(glm::greaterThan(now, glm::vec3(0.0f))) &&
                                     rays_->EmitterSlot(static_cast<uint32_t>(p)) < 0);
     }
+    // Whether a lobe changed its shape (exponent), or a material turned glossy or diffuse:
+    // the lobe rays go elsewhere.
+    bool lobesChanged = scene.materials.size() != scene_.materials.size();
+    for (size_t p = 0; p < scene.primitives.size() && p < scene_.primitives.size(); ++p)
+        lobesChanged =
+            lobesChanged || scene.materials[scene.primitives[p].material].phongExponent !=
+                                scene_.materials[scene_.primitives[p].material].phongExponent;
     // Only what a material edit changes (no vertex arrays copied on an edit). The ray scene
     // reads materials through the primitives (RayScene::MaterialOf), so it stays valid.
     scene_.materials = scene.materials;
@@ -482,19 +690,16 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
         scene_.primitives[p].material = scene.primitives[p].material;
     inner_->UpdateMaterials(scene);
     fresh_ = false;
-    // A material turned glossy: neither part can serve the scene any more (WithGather
-    // declines such scenes); the solver's own answer from here on, carrying its emission.
-    if ((!targets_.empty() || !shot_.empty()) &&
-        std::any_of(scene.materials.begin(), scene.materials.end(),
-                    [](const Material& m) { return m.Glossy(); })) {
-        if (!shot_.empty()) inner_->SetEmitterDirect({});
-        shot_.clear(), targets_.clear(), hits_.clear(), second_.clear();
-        shooter_.reset();
-        settings_.emitterRays = settings_.gatherRays = 0;
-        off_ =
-            "a material turned glossy (the gather stage does not serve glossy scenes yet); "
-            "the solver's own answer from here on";
-        return;
+    // A scene that turned glossy takes the first shot back from the solver (its lobes would
+    // miss it), one that turned diffuse hands it over.
+    const bool wasGlossy = glossy_;
+    glossy_ = std::any_of(scene_.materials.begin(), scene_.materials.end(),
+                          [](const Material& m) { return m.Glossy(); });
+    if (glossy_ != wasGlossy && !shot_.empty())
+        inner_->SetEmitterDirect(glossy_ ? std::vector<glm::vec3>() : shot_);
+    if (lobesChanged && !targets_.empty()) {
+        TraceLobes();
+        Sky();
     }
     if (!emissionChanged || settings_.emitterRays <= 0 || shot_.empty()) return;
     // The first shot and the gather's emitter hits are linear in each emitting primitive's
@@ -513,23 +718,40 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
                 emitterHits_[t] += le[k] * emitterCoef_[t * slots + k];
             shot_[targets_[t]] += emitterHits_[t];
         }
-        inner_->SetEmitterDirect(shot_);
+        if (!glossy_) inner_->SetEmitterDirect(shot_);
         msShot_ = Ms(start);
         return;
     }
     rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
     if (!targets_.empty()) {
         Trace();
+        TraceLobes();
         Sky();
     }
     Shoot();
 }
 
+void GatherStage::Relit(const std::vector<PunctualLight>& before) {
+    // The punctual lights that moved or turned: the lobe hits' view of them is traced again
+    // (every light when their count changed). Colour, intensity, cone and range are re-read.
+    const std::vector<PunctualLight>& now = scene_.lights;
+    std::vector<uint8_t> placed(now.size(), 0);
+    bool any = now.size() != before.size();
+    for (size_t l = 0; l < now.size() && l < before.size(); ++l) {
+        placed[l] = now[l].type != before[l].type || now[l].position != before[l].position ||
+                    now[l].direction != before[l].direction;
+        any = any || placed[l];
+    }
+    if (any) SeeLights(now.size() != before.size() ? std::vector<uint8_t>() : placed);
+}
+
 void GatherStage::UpdateLights(const Scene& scene) {
     const bool sky = !SameEnvironment(scene.environment, scene_.environment);
+    const std::vector<PunctualLight> before = scene_.lights;
     scene_.lights = scene.lights;
     scene_.environment = scene.environment;
     inner_->UpdateLights(scene);
+    Relit(before);
     if (sky && !targets_.empty()) Sky();
     fresh_ = false;
 }
@@ -537,6 +759,7 @@ void GatherStage::UpdateLights(const Scene& scene) {
 void GatherStage::UpdateGeometry(const Scene& scene) {
     const std::vector<glm::vec3> before = inner_->GetSurfels().positions;
     const std::vector<glm::vec3> normalsBefore = inner_->GetSurfels().normals;
+    const std::vector<PunctualLight> lightsBefore = scene_.lights;
     inner_->UpdateGeometry(scene);
     scene_ = scene;
     const Surfels& s = inner_->GetSurfels();
@@ -559,12 +782,15 @@ void GatherStage::UpdateGeometry(const Scene& scene) {
     for (Bounds* b : {&was, &is})
         if (!b->Empty()) moved.boxes.push_back({b->lo - pad, b->hi + pad});
     rays_->Update(s);
+    diameter_ = scene_.Diameter();
     Place();
     raysRetraced_ = 0;
     // A moved emitter moves the points the shadow rays aim at: everything is traced again.
     const Moved* partial = emitterMoved ? nullptr : &moved;
     if (!targets_.empty()) {
         Trace(partial);
+        TraceLobes(partial);
+        Relit(lightsBefore);  // lights placed by a moved node
         Sky();
     }
     Shoot(partial);
@@ -587,7 +813,6 @@ SolverStats GatherStage::Stats() const {
     s.gatherRaysRetraced = raysRetraced_;
     s.gatherTraces = traces_;
     s.gatherDevice = "cpu (Embree)";
-    s.gatherOff = off_;
     return s;
 }
 
@@ -608,16 +833,9 @@ GatherSettings GatherParts(const Scene& scene, const GatherSettings& settings,
         s.emitterRays = 0;
         note("no first shot: the scene has no emitting surfaces");
     } else if (s.emitterRays > 0 && glossy) {
-        s.emitterRays = 0;
         note(
-            "no first shot: not yet for scenes with glossy materials (their lobes would miss "
-            "it); the solver carries the emission");
-    }
-    if (s.gatherRays > 0 && glossy) {
-        s.gatherRays = 0;
-        note(
-            "no final gather: not yet for scenes with glossy materials (a glossy surface's "
-            "light depends on the direction it is seen from); the solver's own answer");
+            "the first shot serves the output vertices and the gather, not the solver: with "
+            "glossy materials the solver carries the emission (its lobes reflect it)");
     }
     return s;
 }
@@ -635,7 +853,9 @@ std::unique_ptr<Solver> CreateGatheredSolver(const Scene& scene, SolverSettings 
                                              const ProgressFn& progress,
                                              std::vector<std::string>* notes) {
     const GatherSettings parts = GatherParts(scene, gather, notes);
-    if (parts.gatherRays > 0) {
+    const bool glossy = std::any_of(scene.materials.begin(), scene.materials.end(),
+                                    [](const Material& m) { return m.Glossy(); });
+    if (parts.gatherRays > 0 && !glossy) {
         if (settings.bins == 0) settings.bins = kGatherBins;
         settings.antiradianceTolerance = std::max(settings.antiradianceTolerance, kGatherSettle);
     }

@@ -77,6 +77,22 @@ class GatherStage : public Solver {
     static constexpr uint32_t kShort = 0x80000000u;
     static constexpr uint32_t kIndex = 0x3fffffffu;
     static bool Front(const Hit& h) { return h.triangle != kEscaped && !(h.triangle & kBack); }
+    static bool Same(const Hit& a, const Hit& b) {
+        return a.triangle == b.triangle && a.u == b.u && a.v == b.v;
+    }
+    // A lobe ray below its surface: it carries nothing (not a triangle, not the sky).
+    static constexpr uint32_t kNone = 0xfffffffeu;
+    // Glossy hits: a front hit y on a glossy surface also reflects, through its Phong lobe
+    // (the reference's BRDF, F0 (n + 2)/(2π) cosⁿθ_r), the light arriving at y from around
+    // the mirror image of the ray. Per such hit, one ray from y drawn from the lobe (a fixed
+    // direction per target and ray) and the punctual lights y sees.
+    struct LobeHit {
+        uint16_t ray;   // the gather ray whose hit y this continues
+        Hit from;       // that hit when the lobe ray was traced
+        Hit hit;        // the lobe ray's first hit (kEscaped: the sky; kNone: below y)
+        float weight;   // (n + 2)/(n + 1) · cosθ_i: the estimator's weight over F0
+        glm::vec3 sky;  // the sky's radiance along it, where it escaped
+    };
 
     // What a move changed, for the rays cached before it (UpdateGeometry).
     struct Moved {
@@ -91,6 +107,17 @@ class GatherStage : public Solver {
     // have changed; then emitterHits_ (Shoot reads them).
     void Trace(const Moved* moved = nullptr);
     void Sky();  // the environment light of the escaped rays
+    // The lobe rays of the targets' glossy hits: all of them, or after a move those that it
+    // can have changed (every cached one is checked against the moved boxes).
+    void TraceLobes(const Moved* moved = nullptr);
+    // Which punctual lights the lobe hits see, again for the lights marked in `which` (empty:
+    // every light, after their count changed).
+    void SeeLights(const std::vector<uint8_t>& which);
+    // SeeLights for the punctual lights placed otherwise than in `before` (scene_'s now).
+    void Relit(const std::vector<PunctualLight>& before);
+    // The lobe ray of target t's ray r, which met glossy `h`, and its cosine at h's surface.
+    glm::vec3 LobeDirection(size_t target, int ray, const Hit& h, float& cosine) const;
+    int LightWords() const { return (static_cast<int>(scene_.lights.size()) + 31) / 32; }
     glm::vec3 Direction(size_t target, int ray) const;
     // Secondary ray j from the short hit of target t's ray r, on triangle `tri`: point j of
     // the R2 sequence rotated by SecondRotation(t, r), cosine-distributed.
@@ -126,6 +153,14 @@ class GatherStage : public Solver {
     std::vector<glm::vec3> sky_;       // per target: π/N Σ over escaped rays of L_env
     // Secondary gathers: per target SecondRays() hits per short hit in ray order; per short
     // hit π/M Σ over its escaped rays of L_env (target t's from secondStart_[t]).
+    std::vector<std::vector<LobeHit>> lobes_;  // per target, in ray order
+    // Per target, LightWords() words a lobe hit: bit l where punctual light l reaches its y
+    // unoccluded (where it is turned towards y's surface).
+    std::vector<std::vector<uint32_t>> seen_;
+    // The scene has glossy materials: the first shot serves the targets and the gather but is
+    // not handed to the solver, whose lobes reflect the emission it carries itself.
+    bool glossy_ = false;
+    float diameter_ = 0.0f;  // the scene's: where directional lights' shadow rays end
     std::vector<std::vector<Hit>> second_;
     std::vector<uint32_t> secondStart_;
     std::vector<glm::vec3> secondSky_;
@@ -134,7 +169,6 @@ class GatherStage : public Solver {
     double msShot_ = 0.0, msTrace_ = 0.0, msEvaluate_ = 0.0;
     size_t raysRetraced_ = 0;  // by the last move, both parts
     size_t traces_ = 0;        // tracings of either part, whole or after a move
-    std::string off_;          // SolverStats::gatherOff
 };
 
 // The parts of `settings` that can serve `scene`: the first shot is declined (0 rays) for a

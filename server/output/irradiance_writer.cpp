@@ -78,7 +78,6 @@ nlohmann::json StatsToJson(const SolverStats& s) {
                              {"ms_evaluate", s.msGatherEvaluate},
                              {"rays_retraced_by_last_move", s.gatherRaysRetraced},
                              {"device", s.gatherDevice}};
-    if (!s.gatherOff.empty()) j["gather_off"] = s.gatherOff;
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

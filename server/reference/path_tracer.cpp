@@ -117,27 +117,12 @@ class Tracer {
                              const Bsdf* bsdf = nullptr) const {
         glm::vec3 e(0.0f);
         for (const PunctualLight& light : scene_.lights) {
-            glm::vec3 toLight, span;
-            float scale;
-            if (light.type == LightType::kDirectional) {
-                toLight = -light.direction;
-                span = toLight * (4.0f * std::max(scene_.Diameter(), 1e-3f));
-                scale = 1.0f;
-            } else {
-                span = light.position - x;
-                float d2 = glm::dot(span, span);
-                if (!(d2 > 0.0f)) continue;
-                float d = std::sqrt(d2);
-                toLight = span / d;
-                scale = LightAttenuation(light, -toLight, d) / d2;
-            }
-            float cosine = glm::dot(n, toLight);
-            if (cosine <= 0.0f || scale <= 0.0f) continue;
+            const LightArrival a = PunctualArrival(light, x, n, diameter_);
+            if (!a.reaches || a.scale <= 0.0f) continue;
             ++rays;
             glm::vec3 from = x + eps_ * n;
-            if (Occluded(from, x + span - from)) continue;
-            glm::vec3 f = bsdf ? bsdf->Eval(toLight) : glm::vec3(1.0f);
-            e += f * light.color * (light.intensity * scale * cosine);
+            if (Occluded(from, x + a.span - from)) continue;
+            e += (bsdf ? bsdf->Eval(a.toLight) : glm::vec3(1.0f)) * a.irradiance;
         }
         return e;
     }
@@ -232,6 +217,7 @@ class Tracer {
     const std::vector<RayTriangle>& tris_;
     float eps_;
     bool sky_ = scene_.environment.Active();
+    float diameter_ = scene_.Diameter();  // where directional lights' shadow rays end
 };
 
 }  // namespace

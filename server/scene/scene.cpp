@@ -121,6 +121,27 @@ float LightAttenuation(const PunctualLight& light, const glm::vec3& toPoint, flo
     return a;
 }
 
+LightArrival PunctualArrival(const PunctualLight& light, const glm::vec3& x, const glm::vec3& n,
+                             float sceneDiameter) {
+    LightArrival a;
+    if (light.type == LightType::kDirectional) {
+        a.toLight = -light.direction;
+        a.span = a.toLight * (4.0f * std::max(sceneDiameter, 1e-3f));
+        a.scale = 1.0f;
+    } else {
+        a.span = light.position - x;
+        const float d2 = glm::dot(a.span, a.span);
+        if (!(d2 > 0.0f)) return a;
+        const float d = std::sqrt(d2);
+        a.toLight = a.span / d;
+        a.scale = LightAttenuation(light, -a.toLight, d) / d2;
+    }
+    a.cosine = glm::dot(n, a.toLight);
+    a.reaches = a.cosine > 0.0f;
+    if (a.reaches) a.irradiance = light.color * (light.intensity * a.scale * a.cosine);
+    return a;
+}
+
 void PlaceLight(PunctualLight& light, const glm::mat4& world) {
     light.position = glm::vec3(world[3]);
     glm::vec3 d = glm::mat3(world) * glm::vec3(0.0f, 0.0f, -1.0f);

@@ -99,6 +99,21 @@ struct PunctualLight {
 // extension's recommended falloff). 1 for directional lights.
 float LightAttenuation(const PunctualLight& light, const glm::vec3& toPoint, float d);
 
+// How a punctual light reaches the point x of a surface facing n, without occlusion: the
+// direction to it (unit), the segment a shadow ray covers (from x; a directional light from
+// 4 scene diameters away), `scale` = attenuation / d² (1 for a directional light), the cosine
+// at x and the irradiance color · intensity · scale · cosθ. `reaches`: cosθ > 0 (a
+// directional light, or a point not at the light's place); it depends on where the light is
+// only, not on its intensity, colour, cone or range.
+struct LightArrival {
+    bool reaches = false;
+    glm::vec3 toLight{0.0f}, span{0.0f};
+    float scale = 0.0f, cosine = 0.0f;
+    glm::vec3 irradiance{0.0f};
+};
+LightArrival PunctualArrival(const PunctualLight& light, const glm::vec3& x, const glm::vec3& n,
+                             float sceneDiameter);
+
 // A glTF perspective camera placed by a node: it looks down the node's −Z axis, +Y up.
 struct Camera {
     std::string name;  // the camera's name, else its node's

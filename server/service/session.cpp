@@ -647,10 +647,7 @@ bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string&
                    std::to_string(st.linksUpdated) + " so far, this move " +
                    std::to_string(int(st.msGeometry + 0.5)) + " ms)";
         }
-        const bool gathering = solver_->Stats().gatherOff.empty();
         solver_->UpdateMaterials(applied_);
-        if (const std::string off = solver_->Stats().gatherOff; gathering && !off.empty())
-            done += (done.empty() ? "" : "; ") + ("gather stage off: " + off);
         if (lights) solver_->UpdateLights(applied_);  // one shadow pass
     } catch (const std::exception& e) {
         failure = std::string(moves ? "update failed: " : "light update failed: ") + e.what();

@@ -156,9 +156,6 @@ struct SolverStats {
     // Where the gather stage traces: the CPU (Embree) on every solver device for now (no
     // Vulkan ray-query path yet); empty without a gather stage.
     std::string gatherDevice;
-    // Why the gather stage stopped after an edit (a material turned glossy); empty while it
-    // runs as built.
-    std::string gatherOff;
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
 };
