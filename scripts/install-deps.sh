@@ -18,10 +18,20 @@ for p in "${packages[@]}"; do
         missing+=("$p")
     fi
 done
-[ ${#missing[@]} -eq 0 ] && exit 0
+# Node and npm for the test tools below, unless some install of them is already there.
+command -v node >/dev/null && command -v npm >/dev/null || missing+=(nodejs npm)
+if [ ${#missing[@]} -gt 0 ]; then
+    sudo=""
+    [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    echo "install-deps: installing ${missing[*]}"
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
 
-sudo=""
-[ "$(id -u)" -ne 0 ] && sudo="sudo"
-echo "install-deps: installing ${missing[*]}"
-$sudo apt-get update -qq
-DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+# Test tools from npm (tests/tools/package.json, pinned by its lock file): the Khronos glTF
+# validator.
+tools="$(dirname "$0")/../tests/tools"
+if [ ! -d "$tools/node_modules/gltf-validator" ]; then
+    echo "install-deps: npm ci in tests/tools (gltf-validator)"
+    npm ci --prefix "$tools" --no-audit --no-fund --loglevel=error >/dev/null
+fi

@@ -77,4 +77,16 @@ void WritePng(const std::string& path, int width, int height, const std::vector<
         throw Error(path + ": cannot write PNG");
 }
 
+float Luminance99(const std::vector<glm::vec3>& values) {
+    std::vector<float> lum;
+    for (const glm::vec3& p : values) {
+        const float y = 0.2126f * p.x + 0.7152f * p.y + 0.0722f * p.z;
+        if (y > 0.0f && std::isfinite(y)) lum.push_back(y);
+    }
+    if (lum.empty()) return 0.0f;
+    const size_t k = std::min(lum.size() - 1, size_t(0.99 * double(lum.size())));
+    std::nth_element(lum.begin(), lum.begin() + k, lum.end());
+    return lum[k];
+}
+
 }  // namespace penumbra

@@ -23,6 +23,10 @@ struct Image {
     bool Empty() const { return pixels.empty(); }
 };
 
+// The luminance (Rec. 709) below which 99% of the positive, finite values lie: the scale an
+// automatic exposure maps to 1. 0 when there is none.
+float Luminance99(const std::vector<glm::vec3>& values);
+
 // Largest image side accepted from a file (a 16K equirectangular map is 16384 × 8192).
 inline constexpr int kMaxImageSide = 16384;
 

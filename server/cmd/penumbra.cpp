@@ -25,11 +25,20 @@ bool EndsWith(const std::string& s, const std::string& suffix) {
 }
 
 void WriteResult(const std::string& scenePath, const std::string& outPath, const Scene& scene,
-                 const IrradianceResult& result) {
+                 const IrradianceResult& result, DisplayColor color) {
     if (EndsWith(outPath, ".json"))
         WriteIrradianceJson(outPath, scene, result);
     else
-        WriteIrradianceGltf(scenePath, outPath, scene, result);
+        WriteIrradianceGltf(scenePath, outPath, scene, result, color);
+}
+
+// `--color0` of bake and reference: what glTF out puts in COLOR_0 beside _IRRADIANCE.
+void AddColor0(CLI::App* app, std::string& color0) {
+    app->add_option("--color0", color0,
+                    "glTF out: COLOR_0 for viewers, none or tonemapped (the irradiance scaled so "
+                    "the 99th percentile is 1, clamped to [0, 1]); the values themselves are in "
+                    "_IRRADIANCE")
+        ->capture_default_str();
 }
 
 // `--environment FILE.exr | --environment-color R,G,B`, `--environment-intensity`,
@@ -175,7 +184,7 @@ struct IterationOptions {
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
          const IterationOptions& iterations, const std::string& device, const std::string& scheme,
          const std::string& channelName, const EnvironmentOptions& environment,
-         const GatherOptions& gather, bool quiet) {
+         const GatherOptions& gather, DisplayColor color, bool quiet) {
     Channel channel = ParseChannel(channelName);
     CheckOutputPath(outPath);
     const GatherSettings gatherSettings = gather.Settings();
@@ -209,7 +218,7 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     }
 
     IrradianceResult result = CollectIrradiance(scene, *solver, channel);
-    WriteResult(scenePath, outPath, scene, result);
+    WriteResult(scenePath, outPath, scene, result, color);
 
     if (!quiet) {
         const SolverStats& s = solver->Stats();
@@ -265,7 +274,7 @@ std::string Duration(double seconds) {
 }
 
 int Reference(const std::string& scenePath, const std::string& outPath, ReferenceSettings settings,
-              const EnvironmentOptions& environment, bool quiet) {
+              const EnvironmentOptions& environment, DisplayColor color, bool quiet) {
     CheckOutputPath(outPath);
     Progress progress(!quiet && StderrIsTerminal());
     progress.Update("loading " + scenePath, 0.0);
@@ -300,7 +309,7 @@ int Reference(const std::string& scenePath, const std::string& outPath, Referenc
                     {"vertices", st.vertices}, {"rays", st.rays},
                     {"seconds", st.seconds},   {"rays_per_second", st.RaysPerSecond()},
                     {"rel_stderr", relStderr}, {"max_vertex_rel_stderr", worst}};
-    WriteResult(scenePath, outPath, scene, result);
+    WriteResult(scenePath, outPath, scene, result, color);
     if (!quiet)
         std::fprintf(stderr,
                      "%s: %zu vertices x %d samples in %.2f s (%.3g rays/s, %d threads)\n"
@@ -496,7 +505,7 @@ int main(int argc, char** argv) {
 
     auto* bake = app.add_subcommand("bake",
                                     "Light a glTF scene in-process and write per-vertex "
-                                    "irradiance (.json, or .glb/.gltf with COLOR_0)");
+                                    "irradiance (.json, or .glb/.gltf with _IRRADIANCE)");
     std::string scenePath, outPath, device = "auto", scheme = "adaptive",
                                     linkOracle = "conservative", channel = "indirect";
     SolverSettings settings;
@@ -504,6 +513,8 @@ int main(int argc, char** argv) {
     bool quiet = false;
     bake->add_option("scene", scenePath, "glTF 2.0 scene (.gltf or .glb)")->required();
     bake->add_option("-o,--output", outPath, "output file: .json, .glb or .gltf")->required();
+    std::string bakeColor0 = "tonemapped";
+    AddColor0(bake, bakeColor0);
     bake->add_option("--solver", settings.solver, "solver (antiradiance)")->capture_default_str();
     bake->add_option("--bins", settings.bins,
                      "direction bins, 32..1024, a multiple of 4; 0: 64 behind the final "
@@ -573,6 +584,8 @@ int main(int argc, char** argv) {
     bool refQuiet = false;
     reference->add_option("scene", refScene, "glTF 2.0 scene (.gltf or .glb)")->required();
     reference->add_option("-o,--output", refOut, "output file: .json, .glb or .gltf")->required();
+    std::string refColor0 = "tonemapped";
+    AddColor0(reference, refColor0);
     reference->add_option("--samples", refSettings.samples, "light paths per vertex (>= 2)")
         ->capture_default_str();
     reference
@@ -687,11 +700,12 @@ int main(int argc, char** argv) {
             settings.backOcclusion = ParseBackOcclusion(backOcclusion);
             settings.tables = ParseTablePrecision(tables);
             return Bake(scenePath, outPath, settings, iterations, device, scheme, channel, bakeEnv,
-                        bakeGather, quiet);
+                        bakeGather, ParseDisplayColor(bakeColor0), quiet);
         }
         if (reference->parsed()) {
             refSettings.channel = ParseChannel(refChannel);
-            return Reference(refScene, refOut, refSettings, refEnv, refQuiet);
+            return Reference(refScene, refOut, refSettings, refEnv, ParseDisplayColor(refColor0),
+                             refQuiet);
         }
         if (render->parsed())
             return Render(ro, renderSettings, renderIterations, renderSolverDevice, renderChannel,

@@ -163,7 +163,7 @@ struct ServiceCommands::State {
     bool skyOff = false;
     std::optional<float> skyIntensity, skyTurnDegrees;
 
-    std::string output, gltf;
+    std::string output, gltf, color0 = "tonemapped";
     int stepIterations = 1;
     std::string scriptFile;
     double sleepSeconds = 0.0;
@@ -297,7 +297,12 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.get = app.add_subcommand("get", "Write the current irradiance (.json, or .glb/.gltf)");
     s.get->add_option("-o,--output", s.output, "output: .json, .glb or .gltf")->required();
     s.get->add_option("--gltf", s.gltf,
-                      "the scene's glTF file, needed for .glb/.gltf output (COLOR_0 is added)");
+                      "the scene's glTF file, needed for .glb/.gltf output (_IRRADIANCE is added)");
+    s.get
+        ->add_option("--color0", s.color0,
+                     "glTF out: COLOR_0 for viewers, none or tonemapped (the irradiance scaled so "
+                     "the 99th percentile is 1, clamped to [0, 1])")
+        ->capture_default_str();
     s.get->add_option("--channel", s.channel, "indirect|direct|total")->capture_default_str();
 
     s.step = app.add_subcommand("step", "Run N solver iterations now, as one frame");
@@ -634,7 +639,7 @@ int ServiceCommands::State::Execute(client::Client& c) {
         if (json)
             WriteIrradianceJson(output, scene, result);
         else
-            WriteIrradianceGltf(gltf, output, scene, result);
+            WriteIrradianceGltf(gltf, output, scene, result, ParseDisplayColor(color0));
         if (!quiet)
             std::printf("wrote %s (frame %llu, edit %llu, channel %s)\n", output.c_str(),
                         (unsigned long long)f.frame, (unsigned long long)f.lastEdit,

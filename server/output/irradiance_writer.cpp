@@ -6,10 +6,12 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 
 #include "base/check.h"
+#include "base/image.h"
 #include "scene/gltf_loader.h"
 
 namespace penumbra {
@@ -175,12 +177,18 @@ IrradianceFile ReadIrradianceJson(const std::string& path) {
     return file;
 }
 
+DisplayColor ParseDisplayColor(const std::string& name) {
+    if (name == "none") return DisplayColor::kNone;
+    if (name == "tonemapped") return DisplayColor::kToneMapped;
+    throw Error("--color0 must be none or tonemapped, not '" + name + "'");
+}
+
 void WriteIrradianceGltf(const std::string& input, const std::string& output, const Scene& scene,
-                         const IrradianceResult& result) {
+                         const IrradianceResult& result, DisplayColor color) {
     tinygltf::Model model;
     ReadGltfModel(input, &model);
 
-    // Give every (node, mesh) pair its own mesh so colours cannot collide.
+    // Give every (node, mesh) pair its own mesh so the values cannot collide.
     std::map<int, int> seen;
     std::map<int, int> meshOfNode;
     for (const auto& prim : scene.primitives) {
@@ -196,12 +204,19 @@ void WriteIrradianceGltf(const std::string& input, const std::string& output, co
         }
     }
 
-    // One new buffer holding every COLOR_0 array.
+    // The display colours' exposure: the scene's 99th-percentile irradiance maps to 1.
+    float key = 0.0f;
+    if (color == DisplayColor::kToneMapped) {
+        std::vector<glm::vec3> all;
+        for (const auto& values : result.primitives)
+            all.insert(all.end(), values.begin(), values.end());
+        key = Luminance99(all);
+    }
+    // One new buffer holding every _IRRADIANCE (and COLOR_0) array (WriteGltfModel merges it
+    // with the input's).
     tinygltf::Buffer buffer;
-    int bufferIndex = static_cast<int>(model.buffers.size());
-    for (size_t p = 0; p < scene.primitives.size(); ++p) {
-        const auto& prim = scene.primitives[p];
-        const auto& values = result.primitives[p];
+    const int bufferIndex = static_cast<int>(model.buffers.size());
+    auto add = [&](const std::vector<glm::vec3>& values) {
         glm::vec3 lo(std::numeric_limits<float>::max()), hi(std::numeric_limits<float>::lowest());
         for (const auto& v : values) lo = glm::min(lo, v), hi = glm::max(hi, v);
         tinygltf::BufferView view;
@@ -223,18 +238,27 @@ void WriteIrradianceGltf(const std::string& input, const std::string& output, co
             acc.maxValues = {hi.x, hi.y, hi.z};
         }
         model.accessors.push_back(acc);
-        int mesh = meshOfNode.at(prim.nodeIndex);
-        model.meshes[mesh].primitives[prim.primitive].attributes["COLOR_0"] =
-            static_cast<int>(model.accessors.size()) - 1;
+        return static_cast<int>(model.accessors.size()) - 1;
+    };
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        const auto& prim = scene.primitives[p];
+        const auto& values = result.primitives[p];
+        auto& attributes =
+            model.meshes[meshOfNode.at(prim.nodeIndex)].primitives[prim.primitive].attributes;
+        attributes[kIrradianceAttribute] = add(values);
+        if (color == DisplayColor::kToneMapped) {
+            std::vector<glm::vec3> display(values.size());
+            for (size_t i = 0; i < values.size(); ++i)
+                display[i] = glm::clamp(key > 0.0f ? values[i] / key : glm::vec3(0.0f),
+                                        glm::vec3(0.0f), glm::vec3(1.0f));
+            attributes["COLOR_0"] = add(display);
+        }
     }
     model.buffers.push_back(std::move(buffer));
     model.asset.generator = "penumbra bake";
-
-    bool outBinary = IsGlbPath(output);
-    tinygltf::TinyGLTF io;
-    // embedImages, embedBuffers, prettyPrint, writeBinary
-    if (!io.WriteGltfSceneToFile(&model, output, true, true, !outBinary, outBinary))
-        throw Error(output + ": cannot write glTF");
+    const size_t slash = input.find_last_of('/');
+    WriteGltfModel(std::move(model), output,
+                   slash == std::string::npos ? "." : input.substr(0, slash));
 }
 
 }  // namespace penumbra

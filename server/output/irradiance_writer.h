@@ -55,9 +55,19 @@ IrradianceFile ToIrradianceFile(const Scene& scene, const IrradianceResult& resu
 // what is wrong with it.
 IrradianceFile ReadIrradianceJson(const std::string& path);
 
-// Copies glTF `input` to `output` (.glb or .gltf) with COLOR_0 = irradiance added to every
-// primitive; meshes shared by several nodes are duplicated so each gets its own colours.
+// The vertex attribute that carries irradiance (lux, float RGB) in glTF out: application
+// data, so an underscore name (glTF 2.0, 3.7.2.1).
+inline constexpr const char* kIrradianceAttribute = "_IRRADIANCE";
+// What glTF out puts in COLOR_0 for viewers: nothing, or the irradiance scaled so that the
+// scene's 99th-percentile luminance is 1 and clamped to [0, 1] (linear, as COLOR_0 is).
+enum class DisplayColor { kNone, kToneMapped };
+DisplayColor ParseDisplayColor(const std::string& name);  // none | tonemapped
+
+// Copies glTF `input` to `output` (.glb or .gltf, WriteGltfModel) with _IRRADIANCE =
+// irradiance added to every primitive, and COLOR_0 as `color` says (replacing any it had);
+// meshes shared by several nodes are duplicated so each gets its own values.
 void WriteIrradianceGltf(const std::string& input, const std::string& output, const Scene& scene,
-                         const IrradianceResult& result);
+                         const IrradianceResult& result,
+                         DisplayColor color = DisplayColor::kToneMapped);
 
 }  // namespace penumbra

@@ -228,16 +228,8 @@ RenderOutput Rasterize(const Mesh& mesh, const Camera& camera, const RenderSetti
 std::vector<uint8_t> ToneMap(const Image& image, float exposure, bool autoExposure) {
     float scale = std::exp2(exposure);
     if (autoExposure) {
-        std::vector<float> lum;
-        for (const glm::vec3& p : image.pixels) {
-            float y = 0.2126f * p.x + 0.7152f * p.y + 0.0722f * p.z;
-            if (y > 0.0f && std::isfinite(y)) lum.push_back(y);
-        }
-        if (!lum.empty()) {
-            size_t k = std::min(lum.size() - 1, size_t(0.99 * double(lum.size())));
-            std::nth_element(lum.begin(), lum.begin() + k, lum.end());
-            if (lum[k] > 0.0f) scale /= lum[k];
-        }
+        const float key = Luminance99(image.pixels);
+        if (key > 0.0f) scale /= key;
     }
     auto srgb = [](float v) {
         v = std::clamp(v, 0.0f, 1.0f);

@@ -360,10 +360,7 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
     model.buffers.push_back(buffer);
     model.scenes.push_back(scene);
     model.defaultScene = 0;
-    bool binary = IsGlbPath(path);
-    tinygltf::TinyGLTF io;
-    if (!io.WriteGltfSceneToFile(&model, path, true, true, !binary, binary))
-        throw Error(path + ": cannot write glTF");
+    WriteGltfModel(std::move(model), path);
 }
 
 }  // namespace penumbra

@@ -3,8 +3,10 @@
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -64,24 +66,80 @@ TEST(BakeCli, WritesJsonWithStatsInInputVertexOrder) {
     EXPECT_GT(lit, 60);
 }
 
-TEST(BakeCli, WritesGlbWithColor0PerPrimitive) {
-    auto out = testing::TempDir("bake-glb") / "lit.glb";
-    ProcessResult r = Execute("bake " + kCornell + " -o " + out.string() +
-                              " --bins 64 --iterations 2 --element-size 0.1 --device cpu -q");
-    ASSERT_EQ(r.exitCode, 0) << r.output;
-    tinygltf::Model model;
-    tinygltf::TinyGLTF io;
-    std::string err, warn;
-    ASSERT_TRUE(io.LoadBinaryFromFile(&model, &err, &warn, out.string())) << err;
-    for (const auto& mesh : model.meshes)
-        for (const auto& prim : mesh.primitives) {
-            ASSERT_TRUE(prim.attributes.count("COLOR_0")) << mesh.name;
-            const auto& color = model.accessors[prim.attributes.at("COLOR_0")];
-            const auto& pos = model.accessors[prim.attributes.at("POSITION")];
-            EXPECT_EQ(color.count, pos.count) << mesh.name;
-            EXPECT_EQ(color.type, TINYGLTF_TYPE_VEC3);
-            EXPECT_EQ(color.componentType, TINYGLTF_COMPONENT_TYPE_FLOAT);
+// glTF out: the irradiance in _IRRADIANCE (float lux, as the JSON has it) on every primitive,
+// a display COLOR_0 in [0, 1] unless --color0 none, everything in the one BIN chunk.
+TEST(BakeCli, WritesGlbWithIrradiancePerPrimitive) {
+    const auto dir = testing::TempDir("bake-glb");
+    for (const std::string color0 : {"tonemapped", "none"}) {
+        const std::string out = (dir / ("lit-" + color0 + ".glb")).string();
+        ProcessResult r = Execute("bake " + kCornell + " -o " + out + " --color0 " + color0 +
+                                  " --bins 64 --iterations 2 --element-size 0.1 --device cpu -q");
+        ASSERT_EQ(r.exitCode, 0) << r.output;
+        tinygltf::Model model;
+        tinygltf::TinyGLTF io;
+        std::string err, warn;
+        ASSERT_TRUE(io.LoadBinaryFromFile(&model, &err, &warn, out)) << err;
+        EXPECT_EQ(model.buffers.size(), 1u);
+        EXPECT_TRUE(model.buffers[0].uri.empty());
+        float brightest = 0.0f, highest = 0.0f;
+        for (const auto& mesh : model.meshes)
+            for (const auto& prim : mesh.primitives) {
+                ASSERT_TRUE(prim.attributes.count("_IRRADIANCE")) << mesh.name;
+                const auto& e = model.accessors[prim.attributes.at("_IRRADIANCE")];
+                const auto& pos = model.accessors[prim.attributes.at("POSITION")];
+                EXPECT_EQ(e.count, pos.count) << mesh.name;
+                EXPECT_EQ(e.type, TINYGLTF_TYPE_VEC3);
+                EXPECT_EQ(e.componentType, TINYGLTF_COMPONENT_TYPE_FLOAT);
+                brightest = std::max(brightest, float(e.maxValues.at(1)));
+                EXPECT_EQ(prim.attributes.count("COLOR_0"), color0 == "none" ? 0u : 1u);
+                if (!prim.attributes.count("COLOR_0")) continue;
+                const auto& c = model.accessors[prim.attributes.at("COLOR_0")];
+                EXPECT_EQ(c.count, pos.count);
+                for (double v : c.maxValues) highest = std::max(highest, float(v));
+                for (double v : c.minValues) EXPECT_GE(v, 0.0);
+            }
+        EXPECT_GT(brightest, 1.0f);  // lux, not a colour
+        if (color0 == "tonemapped") {
+            EXPECT_LE(highest, 1.0f);
+            EXPECT_GT(highest, 0.5f);
         }
+    }
+    ProcessResult bad = Execute("bake " + kCornell + " -o " + (dir / "x.glb").string() +
+                                " --color0 hdr --device cpu -q");
+    EXPECT_NE(bad.exitCode, 0);
+    EXPECT_NE(bad.output.find("--color0 must be none or tonemapped"), std::string::npos)
+        << bad.output;
+}
+
+// The Khronos glTF validator (npm gltf-validator, installed by `make check`) on what bake
+// writes for every bundled scene, binary and JSON: no error, no warning.
+TEST(BakeCli, GltfOutputPassesTheKhronosValidator) {
+    const std::string tools = std::string(PENUMBRA_SOURCE_DIR) + "/tests/tools";
+    ASSERT_TRUE(std::filesystem::exists(tools + "/node_modules/gltf-validator"))
+        << "the validator is not installed: run scripts/install-deps.sh (make check does)";
+    const auto dir = testing::TempDir("bake-validate");
+    for (const char* name : {"cornell-box", "blocker", "maze", "office", "glossy-box"}) {
+        for (const char* ext : {".glb", ".gltf"}) {
+            const std::string out = (dir / (std::string(name) + ext)).string();
+            ProcessResult r = Execute(std::string("bake ") + PENUMBRA_SOURCE_DIR + "/scenes/" +
+                                      name + ".gltf -o " + out +
+                                      " --gather off --direct-rays 0 --iterations 1 --bins 32 "
+                                      "--element-size 0.5 --device cpu -q");
+            ASSERT_EQ(r.exitCode, 0) << r.output;
+            FILE* pipe =
+                popen(("node " + tools + "/validate_gltf.js " + out + " 2>&1").c_str(), "r");
+            ASSERT_NE(pipe, nullptr);
+            std::string report;
+            std::array<char, 4096> buf;
+            while (size_t n = fread(buf.data(), 1, buf.size(), pipe)) report.append(buf.data(), n);
+            const int status = pclose(pipe);
+            EXPECT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0) << out << ":\n" << report;
+            const auto j = nlohmann::json::parse(report, nullptr, false);
+            ASSERT_FALSE(j.is_discarded()) << report;
+            EXPECT_EQ(j["errors"], 0) << out << ":\n" << report;
+            EXPECT_EQ(j["warnings"], 0) << out << ":\n" << report;
+        }
+    }
 }
 
 TEST(BakeCli, LavapipeDeviceRuns) {

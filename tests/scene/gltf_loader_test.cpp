@@ -3,6 +3,7 @@
 #include "scene/gltf_loader.h"
 
 #include <gtest/gtest.h>
+#include <tiny_gltf.h>
 
 #include <fstream>
 #include <glm/gtc/matrix_transform.hpp>
@@ -10,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "base/check.h"
+#include "base/image.h"
 #include "scene/surfels.h"
 #include "test_util.h"
 
@@ -235,6 +237,53 @@ TEST(SceneTransform, BadMatricesAreRefusedAndChangeNothing) {
     glm::mat4 mirror = glm::scale(glm::mat4(1.0f), glm::vec3(-1.0f, 1.0f, 1.0f));
     EXPECT_NE(message(mirror).find("mirror"), std::string::npos) << message(mirror);
     EXPECT_EQ(p.positions, before);
+}
+
+// WriteGltfModel: a .glb holds its buffers and images in its one BIN chunk (the image's bytes
+// as they were in its file), and an infinite camera has no zfar, in either form.
+TEST(GltfWriter, GlbHoldsImagesAndBuffersInItsBinChunk) {
+    const auto dir = testing::TempDir("gltf-writer");
+    WritePng((dir / "tex.png").string(), 2, 2, std::vector<uint8_t>(12, 200));
+    std::ifstream png(dir / "tex.png", std::ios::binary);
+    const std::vector<unsigned char> pngBytes(std::istreambuf_iterator<char>(png), {});
+    tinygltf::Model model;
+    ReadGltfModel(kCornell, &model);
+    tinygltf::Buffer extra;
+    extra.data = {1, 2, 3, 4, 5};
+    model.buffers.push_back(extra);
+    tinygltf::BufferView view;
+    view.buffer = 1;
+    view.byteLength = 5;
+    model.bufferViews.push_back(view);
+    tinygltf::Image image;
+    image.uri = "tex.png";
+    model.images.push_back(image);
+    ASSERT_FALSE(model.cameras.empty());
+    model.cameras[0].perspective.zfar = 0.0;  // infinite
+    const std::string glb = (dir / "out.glb").string(), gltf = (dir / "out.gltf").string();
+    WriteGltfModel(model, glb, dir.string());
+    WriteGltfModel(model, gltf, dir.string());
+
+    tinygltf::Model back;
+    ReadGltfModel(glb, &back);
+    ASSERT_EQ(back.buffers.size(), 1u);
+    EXPECT_TRUE(back.buffers[0].uri.empty());
+    ASSERT_EQ(back.images.size(), 1u);
+    ASSERT_GE(back.images[0].bufferView, 0);
+    EXPECT_EQ(back.images[0].mimeType, "image/png");
+    const tinygltf::BufferView& iv = back.bufferViews[back.images[0].bufferView];
+    ASSERT_EQ(iv.byteLength, pngBytes.size());
+    EXPECT_TRUE(
+        std::equal(pngBytes.begin(), pngBytes.end(), back.buffers[0].data.begin() + iv.byteOffset));
+    const tinygltf::BufferView& ev = back.bufferViews[model.bufferViews.size() - 1];
+    EXPECT_EQ(back.buffers[0].data[ev.byteOffset + 4], 5);
+    // No "zfar": 0 in either file.
+    for (const std::string& f : {glb, gltf}) {
+        std::ifstream in(f, std::ios::binary);
+        const std::string text(std::istreambuf_iterator<char>(in), {});
+        EXPECT_EQ(text.find("\"zfar\""), std::string::npos) << f;
+    }
+    EXPECT_THROW(WriteGltfModel(model, glb, "/nonexistent"), Error);
 }
 
 }  // namespace
