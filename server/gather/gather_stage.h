@@ -118,6 +118,32 @@ class GatherStage : public Solver {
     // The lobe ray of target t's ray r, which met glossy `h`, and its cosine at h's surface.
     glm::vec3 LobeDirection(size_t target, int ray, const Hit& h, float& cosine) const;
     int LightWords() const { return (static_cast<int>(scene_.lights.size()) + 31) / 32; }
+    // Glints: points on the glossy triangles drawn from each target by area × F0 (one
+    // light-independent density for all targets), each with whether the target sees its front
+    // and which punctual lights it sees. They estimate the punctual lights seen through glossy
+    // lobes a second way, combined with the gather rays' glossy hits by multiple importance
+    // sampling (power heuristic): a gather ray meets a small glossy object rarely, and its
+    // lobe's highlight more rarely still.
+    struct Glint {
+        uint32_t triangle;  // refined triangle
+        uint16_t u, v;      // barycentrics in 1/65535
+        uint32_t seen;      // 1: the target sees its front, unoccluded
+    };
+    // As many as the gather's rays (glossy box against a 65,536-path reference, 256 rays:
+    // 64 glints 14.0%, 256 10.3%, 1,024 9.7%; none 15.1%).
+    int GlintCount() const { return settings_.gatherRays; }
+    // The punctual lights a glossy point y (on refined `triangle`, lifted off it) reflects
+    // towards wo through its lobe, without F0: Σ (n + 2)/(2π) cosⁿθ_r · E_l(y) over the lights
+    // set in `seen` (LightWords() words from entry · LightWords()).
+    glm::vec3 LobeLight(size_t entry, uint32_t triangle, const glm::vec3& wo, const glm::vec3& y,
+                        const std::vector<uint32_t>& seen) const;
+    // The glossy triangles and their cumulative weights (area × luminance of F0); none in a
+    // scene without glossy materials or without punctual lights.
+    void PlaceGlints();
+    // The glints' visibility: all of them anew, or after a move those it can have changed.
+    void TraceGlints(const Moved* moved = nullptr);
+    // The glints' area density at a point of glossy triangle `tri` (0 for any other).
+    float GlintDensity(uint32_t tri) const;
     glm::vec3 Direction(size_t target, int ray) const;
     // Secondary ray j from the short hit of target t's ray r, on triangle `tri`: point j of
     // the R2 sequence rotated by SecondRotation(t, r), cosine-distributed.
@@ -160,6 +186,11 @@ class GatherStage : public Solver {
     // The scene has glossy materials: the first shot serves the targets and the gather but is
     // not handed to the solver, whose lobes reflect the emission it carries itself.
     bool glossy_ = false;
+    std::vector<uint32_t> glossyTriangles_;   // refined triangles of glossy materials
+    std::vector<double> glossyCdf_;           // their weights, cumulative (glossyCdf_.back(): all)
+    std::vector<float> glintDensity_;         // per refined triangle: lum(F0) / all (or 0)
+    std::vector<std::vector<Glint>> glints_;  // per target
+    std::vector<std::vector<uint32_t>> glintSeen_;  // per target, LightWords() words a glint
     float diameter_ = 0.0f;  // the scene's: where directional lights' shadow rays end
     std::vector<std::vector<Hit>> second_;
     std::vector<uint32_t> secondStart_;

@@ -289,5 +289,40 @@ TEST(FinalGather, SolverBehindTheGatherDefaultsToFewerBins) {
     EXPECT_EQ(CreateGatheredSolver(cornell, s, {})->Stats().bins, 96);
 }
 
+// A point light's highlight in a glossy metal floor lights a white wall beside it: the wall's
+// indirect light is almost all that path (light → glossy floor → wall), which the gather
+// follows through the floor's lobe from each wall vertex's rays and from its glints (MIS).
+TEST(FinalGather, PunctualLightThroughAGlossyFloorMatchesTheReference) {
+    SceneBuilder b;
+    const uint32_t metal = b.AddMaterial("metal", glm::vec3(0.9f));
+    const uint32_t white = b.AddMaterial("white", glm::vec3(0.8f));
+    b.AddTiledQuad("floor", metal, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 8, 8, {0, 1, 0});
+    b.AddQuad("wall", white, {1, 0, -1}, {1, 0, 1}, {1, 1, 1}, {1, 1, -1}, {0, 0.5f, 0}, 6);
+    b.AddLight(
+        testing::MakeLight("lamp", LightType::kPoint, {-0.2f, 0.5f, 0.1f}, {0, -1, 0}, 2.0f));
+    Scene scene = b.Build();
+    scene.materials[metal] = PbrMaterial("metal", glm::vec3(0.9f), 1.0f, 0.5f);
+    ASSERT_TRUE(scene.materials[metal].Glossy());
+    // The path tracer follows this path no better than the gather: at 16,384 paths a vertex
+    // it is itself about 3% from a 65,536-path truth here.
+    const IrradianceFile truth = Truth(scene, 65536);
+    SolverSettings s = testing::CpuSettings(128, 0.1f);
+    auto alone = CreateSolver(scene, s);
+    IterateUntilConverged(*alone, 1e-4, 300);
+    GatherStage gathered(CreateSolver(scene, s), scene, {});
+    IterateUntilConverged(gathered, 1e-4, 300);
+    const int wall = FindNode(scene, "wall");
+    auto wallError = [&](Solver& solver) {
+        const IrradianceFile f =
+            ToIrradianceFile(scene, CollectIrradiance(scene, solver, Channel::kIndirect));
+        return Compare(f, truth).nodes.at(scene.nodes[wall].name).relRmse;
+    };
+    const double a = wallError(*alone), g = wallError(gathered);
+    std::printf("wall through the glossy floor: solver alone %.2f%%, gathered %.2f%%\n", 100 * a,
+                100 * g);
+    EXPECT_LT(g, 0.05);
+    EXPECT_LT(g, 0.5 * a);
+}
+
 }  // namespace
 }  // namespace penumbra
