@@ -110,7 +110,8 @@ constexpr Stage kStages[] = {{"solver alone", 0, 0},
 struct StageRun {
     std::vector<std::vector<glm::vec3>> perVertex;
     double seconds = 0, gatherMs = 0;
-    std::string declined;
+    std::string declined;  // notes on what was declined
+    bool off = false;      // the part this stage adds was declined
     int iterations = 0;
 };
 
@@ -131,6 +132,8 @@ StageRun RunStage(const Scene& scene, float elementSize, const Stage& stage) {
     run.perVertex = r.primitives;
     const SolverStats st = solver->Stats();
     run.gatherMs = st.msEmitterDirect + st.msGatherTrace + st.msGatherEvaluate;
+    run.off =
+        stage.gatherRays > 0 ? st.gatherRays == 0 : stage.emitterRays > 0 && st.emitterRays == 0;
     for (const std::string& n : notes) run.declined += (run.declined.empty() ? "" : "; ") + n;
     return run;
 }
@@ -181,6 +184,7 @@ void GatherTable(const Scene& scene, const IrradianceFile& truth, float elementS
           "seconds (load to answer) |\n|---|---|---|---|---|---|---|\n";
     std::vector<std::vector<glm::vec3>> truthVertices;
     for (const auto& p : truth.primitives) truthVertices.push_back(p.irradiance);
+    std::string notes;  // what was declined, once, after the table
     for (const Stage& stage : kStages) {
         StageRun r = RunStage(scene, elementSize, stage);
         IrradianceResult res;
@@ -190,7 +194,7 @@ void GatherTable(const Scene& scene, const IrradianceFile& truth, float elementS
         std::fprintf(stderr, "  %s: RMSE %.4f in %.2f s%s%s\n", stage.name, c.overall.relRmse,
                      r.seconds, r.declined.empty() ? "" : " — ", r.declined.c_str());
         std::snprintf(line, sizeof line, "| %s%s | %.1f%% | %.1f%% | %.1f%% | %d | %.0f | %.2f |\n",
-                      stage.name, r.declined.empty() ? "" : " (declined)", 100 * c.overall.relRmse,
+                      stage.name, r.off ? " (declined)" : "", 100 * c.overall.relRmse,
                       100 * c.overall.meanRel, 100 * dark, r.iterations, r.gatherMs, r.seconds);
         md << line;
         js["gather_stage"].push_back({{"stage", stage.name},
@@ -201,8 +205,10 @@ void GatherTable(const Scene& scene, const IrradianceFile& truth, float elementS
                                       {"gather_ms", r.gatherMs},
                                       {"seconds", r.seconds},
                                       {"declined", r.declined}});
-        if (!r.declined.empty()) md << "\n" << r.declined << "\n\n";
+        if (!r.declined.empty() && notes.find(r.declined) == std::string::npos)
+            notes += (notes.empty() ? "" : "; ") + r.declined;
     }
+    if (!notes.empty()) md << "\nNotes: " << notes << ".\n";
     md << "\nDarkest-vertex excess: the most a vertex gets where the truth is below 1% of "
           "its brightest vertex, as a share of that brightest vertex (how deep the umbrae "
           "are).\n\n";

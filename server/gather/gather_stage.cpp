@@ -157,6 +157,15 @@ float GatherStage::Distance(const glm::vec3& origin, const Hit& h) const {
     return glm::length(HitPoint(h) - origin);
 }
 
+GatherStage::Hit GatherStage::Cast(const glm::vec3& o, const glm::vec3& d, float* t) const {
+    const float inf = std::numeric_limits<float>::infinity();
+    const RayHit h = rays_->Intersect(o, d, inf);
+    if (t) *t = h.hit ? h.t : inf;
+    if (!h.hit) return Hit{kEscaped, 0, 0};
+    const uint32_t back = glm::dot(rays_->Triangles()[h.triangle].normal, d) >= 0.0f ? kBack : 0u;
+    return Hit{h.triangle | back, Quantise(h.u), Quantise(h.v)};
+}
+
 void GatherStage::Trace(const Moved* moved) {
     auto start = std::chrono::steady_clock::now();
     ++traces_;
@@ -165,17 +174,7 @@ void GatherStage::Trace(const Moved* moved) {
     const auto& tris = rays_->Triangles();
     const Surfels& surfels = inner_->GetSurfels();
     const float inf = std::numeric_limits<float>::infinity();
-    auto quantise = [](float x) {
-        return static_cast<uint16_t>(std::lround(std::clamp(x, 0.0f, 1.0f) * 65535.0f));
-    };
-    // The hit of one ray and its distance.
-    auto trace = [&](const glm::vec3& o, const glm::vec3& d, float& t) {
-        const RayHit h = rays_->Intersect(o, d, inf);
-        t = h.hit ? h.t : inf;
-        if (!h.hit) return Hit{kEscaped, 0, 0};
-        const uint32_t back = glm::dot(tris[h.triangle].normal, d) >= 0.0f ? kBack : 0u;
-        return Hit{h.triangle | back, quantise(h.u), quantise(h.v)};
-    };
+    auto trace = [&](const glm::vec3& o, const glm::vec3& d, float& t) { return Cast(o, d, &t); };
     // After a move: whether a cached hit still holds (its ray starts on a surface that did not
     // move, ends on one that did not, and passes by where the moved ones were and are). The
     // segment is the one to the hit point (no direction needed, which costs more to make
@@ -190,9 +189,7 @@ void GatherStage::Trace(const Moved* moved) {
                 if (cones[k].MayMeet(d, true) && boxes[k].Meets(o, d, inf)) return false;
             return true;
         }
-        const uint32_t tri = h.triangle & kIndex;
-        const glm::uvec3& c = rays_->Corners(tri);
-        if (moved->surfels[c.x] || moved->surfels[c.y] || moved->surfels[c.z]) return false;
+        if (moved->Touches(*rays_, h.triangle & kIndex)) return false;
         const glm::vec3 span = HitPoint(h) - o;
         for (size_t k = 0; k < boxes.size(); ++k)
             if (cones[k].MayMeet(span) && boxes[k].Meets(o, span, 1.0f)) return false;
@@ -407,18 +404,6 @@ void GatherStage::TraceLobes(const Moved* moved) {
     const float inf = std::numeric_limits<float>::infinity();
     lobes_.resize(targets_.size());
     seen_.resize(targets_.size());
-    auto cornersMoved = [&](const Hit& h) {
-        const glm::uvec3& c = rays_->Corners(h.triangle & kIndex);
-        return moved->surfels[c.x] || moved->surfels[c.y] || moved->surfels[c.z];
-    };
-    auto meets = [&](const glm::vec3& o, const glm::vec3& span, float tMax) {
-        for (const Bounds& b : moved->boxes)
-            if (b.Meets(o, span, tMax)) return true;
-        return false;
-    };
-    auto quantise = [](float x) {
-        return static_cast<uint16_t>(std::lround(std::clamp(x, 0.0f, 1.0f) * 65535.0f));
-    };
     std::atomic<size_t> traced{0};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
         size_t count = 0;
@@ -436,7 +421,7 @@ void GatherStage::TraceLobes(const Moved* moved) {
                 const uint32_t tri = h.triangle & kIndex;
                 const glm::vec3 y = HitPoint(h) + rays_->Epsilon() * tris[tri].normal;
                 const bool reuse = moved && k < old.size() && old[k].ray == r &&
-                                   Same(old[k].from, h) && !cornersMoved(h);
+                                   Same(old[k].from, h) && !moved->Touches(*rays_, tri);
                 LobeHit e =
                     reuse ? old[k]
                           : LobeHit{
@@ -445,9 +430,10 @@ void GatherStage::TraceLobes(const Moved* moved) {
                 bool again = !reuse;
                 if (reuse && e.hit.triangle == kEscaped) {
                     float c;
-                    again = meets(y, LobeDirection(t, r, h, c), inf);
+                    again = moved->Meets(y, LobeDirection(t, r, h, c), inf);
                 } else if (reuse && e.hit.triangle != kNone) {
-                    again = cornersMoved(e.hit) || meets(y, HitPoint(e.hit) - y, 1.0f);
+                    again = moved->Touches(*rays_, e.hit.triangle & kIndex) ||
+                            moved->Meets(y, HitPoint(e.hit) - y, 1.0f);
                 }
                 if (again) {
                     float cosine = 0.0f;
@@ -458,17 +444,10 @@ void GatherStage::TraceLobes(const Moved* moved) {
                     if (cosine > 0.0f) {
                         const float exponent = rays_->MaterialOf(tri).phongExponent;
                         e.weight = (exponent + 2.0f) / (exponent + 1.0f) * cosine;
-                        const RayHit hit = rays_->Intersect(y, wi, inf);
+                        e.hit = Cast(y, wi);
                         ++count;
-                        if (!hit.hit) {
-                            e.hit = {kEscaped, 0, 0};
-                            if (scene_.environment.Active())
-                                e.sky = scene_.environment.Radiance(wi);
-                        } else {
-                            const uint32_t back =
-                                glm::dot(tris[hit.triangle].normal, wi) >= 0.0f ? kBack : 0u;
-                            e.hit = {hit.triangle | back, quantise(hit.u), quantise(hit.v)};
-                        }
+                        if (e.hit.triangle == kEscaped && scene_.environment.Active())
+                            e.sky = scene_.environment.Radiance(wi);
                     }
                 }
                 // The punctual lights it sees: kept where their segments pass by what moved.
@@ -478,7 +457,7 @@ void GatherStage::TraceLobes(const Moved* moved) {
                     const LightArrival a =
                         PunctualArrival(scene_.lights[l], y, tris[tri].normal, diameter_);
                     if (!a.reaches) continue;
-                    if (reuse && !meets(y, a.span, 1.0f)) {
+                    if (reuse && !moved->Meets(y, a.span, 1.0f)) {
                         seen[at + l / 32] |= oldSeen[k * words + l / 32] & (1u << (l % 32));
                         continue;
                     }
@@ -534,18 +513,6 @@ void GatherStage::TraceGlints(const Moved* moved) {
     const Surfels& surfels = inner_->GetSurfels();
     glints_.resize(targets_.size());
     glintSeen_.resize(targets_.size());
-    auto quantise = [](float x) {
-        return static_cast<uint16_t>(std::lround(std::clamp(x, 0.0f, 1.0f) * 65535.0f));
-    };
-    auto cornersMoved = [&](uint32_t tri) {
-        const glm::uvec3& c = rays_->Corners(tri);
-        return moved->surfels[c.x] || moved->surfels[c.y] || moved->surfels[c.z];
-    };
-    auto meets = [&](const glm::vec3& o, const glm::vec3& span) {
-        for (const Bounds& b : moved->boxes)
-            if (b.Meets(o, span, 1.0f)) return true;
-        return false;
-    };
     std::atomic<size_t> traced{0};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
         size_t rays = 0;
@@ -566,7 +533,7 @@ void GatherStage::TraceGlints(const Moved* moved) {
                             glossyCdf_.begin(),
                         glossyCdf_.size() - 1);
                     const float r1 = std::sqrt(rng.Uniform()), r2 = rng.Uniform();
-                    glints[k] = {glossyTriangles_[j], quantise(r1 * (1.0f - r2)), quantise(r1 * r2),
+                    glints[k] = {glossyTriangles_[j], Quantise(r1 * (1.0f - r2)), Quantise(r1 * r2),
                                  0u};
                 }
                 seen.assign(size_t(count) * words, 0u);
@@ -576,9 +543,9 @@ void GatherStage::TraceGlints(const Moved* moved) {
                 const RayTriangle& tri = tris[g.triangle];
                 const glm::vec3 y =
                     HitPoint(Hit{g.triangle, g.u, g.v}) + rays_->Epsilon() * tri.normal;
-                const bool moves = !all && cornersMoved(g.triangle);
+                const bool moves = !all && moved->Touches(*rays_, g.triangle);
                 // Whether the target sees the glint's front.
-                if (all || moves || meets(x, y - x)) {
+                if (all || moves || moved->Meets(x, y - x, 1.0f)) {
                     const glm::vec3 d = y - x;
                     g.seen = glm::dot(surfels.normals[i], d) > 0.0f &&
                              glm::dot(tri.normal, d) < 0.0f && !rays_->Occluded(x, d);
@@ -588,7 +555,7 @@ void GatherStage::TraceGlints(const Moved* moved) {
                     const LightArrival a =
                         PunctualArrival(scene_.lights[l], y, tri.normal, diameter_);
                     uint32_t& word = seen[k * words + l / 32];
-                    if (!all && !moves && !(a.reaches && meets(y, a.span))) continue;
+                    if (!all && !moves && !(a.reaches && moved->Meets(y, a.span, 1.0f))) continue;
                     word &= ~(1u << (l % 32));
                     if (!a.reaches) continue;
                     ++rays;

@@ -16,6 +16,8 @@
 // and a move traces again only the rays that pass near what moved.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <memory>
 
 #include "gather/emitter_direct.h"
@@ -98,7 +100,25 @@ class GatherStage : public Solver {
     struct Moved {
         std::vector<uint8_t> surfels;  // per surfel: it moved (or turned)
         std::vector<Bounds> boxes;     // where the moved surfaces were and are
+        // Whether o + s·span, s in [0, tMax], meets a box.
+        bool Meets(const glm::vec3& o, const glm::vec3& span, float tMax) const {
+            for (const Bounds& b : boxes)
+                if (b.Meets(o, span, tMax)) return true;
+            return false;
+        }
+        // Whether a corner of refined triangle `tri` of `rays` moved.
+        bool Touches(const RayScene& rays, uint32_t tri) const {
+            const glm::uvec3& c = rays.Corners(tri);
+            return surfels[c.x] || surfels[c.y] || surfels[c.z];
+        }
     };
+    // A barycentric coordinate in 1/65535.
+    static uint16_t Quantise(float x) {
+        return static_cast<uint16_t>(std::lround(std::clamp(x, 0.0f, 1.0f) * 65535.0f));
+    }
+    // The first hit of the ray o + t·d (kBack set on a back side, kEscaped where there is
+    // none), and at `t` (when given) how far along it lies (∞ when it escaped).
+    Hit Cast(const glm::vec3& o, const glm::vec3& d, float* t = nullptr) const;
 
     // points_: the input vertices' estimate points, the others just inside their surface.
     void Place();
