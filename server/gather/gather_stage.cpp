@@ -370,6 +370,7 @@ void GatherStage::Trace(const Moved* moved) {
     }
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
+    lightsFresh_ = false;
     msTrace_ = Ms(start);
 }
 
@@ -473,6 +474,7 @@ void GatherStage::TraceLobes(const Moved* moved) {
     });
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
+    lightsFresh_ = false;
     msTrace_ += Ms(start);
 }
 
@@ -567,6 +569,7 @@ void GatherStage::TraceGlints(const Moved* moved) {
     });
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
+    lightsFresh_ = false;
     msTrace_ += Ms(start);
 }
 
@@ -610,6 +613,7 @@ void GatherStage::SeeLights(const std::vector<uint8_t>& which) {
         }
     });
     fresh_ = false;
+    lightsFresh_ = false;
 }
 
 void GatherStage::Sky() {
@@ -664,6 +668,64 @@ glm::vec3 GatherStage::LobeLight(size_t entry, uint32_t tri, const glm::vec3& wo
     return sum;
 }
 
+void GatherStage::LobeLights() {
+    const int n = settings_.gatherRays;
+    const auto& tris = rays_->Triangles();
+    const Surfels& s = inner_->GetSurfels();
+    lobeLight_.assign(targets_.size(), glm::vec3(0.0f));
+    lightsFresh_ = true;
+    if (scene_.lights.empty() || !glossy_) return;
+    const float glints = static_cast<float>(GlintCount());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
+        for (size_t t = range.begin(); t != range.end(); ++t) {
+            const glm::vec3& normal = s.normals[targets_[t]];
+            const glm::vec3 x = points_[targets_[t]] + rays_->Epsilon() * normal;
+            // The gather rays' glossy hits y: F0 (n + 2)/(2π) cosⁿθ_r · E_l(y) over the lights
+            // y sees, weighed against the glints drawing the same point (power heuristic).
+            glm::vec3 sum(0.0f);
+            const std::vector<LobeHit>& lobes = lobes_[t];
+            for (size_t q = 0; q < lobes.size(); ++q) {
+                const Hit& h = hits_[t * n + lobes[q].ray];
+                const uint32_t tri = h.triangle & kIndex;
+                const glm::vec3& ny = tris[tri].normal;
+                const glm::vec3 y = HitPoint(h) + rays_->Epsilon() * ny;
+                const glm::vec3 d = Direction(t, lobes[q].ray);
+                float weight = 1.0f;
+                if (!glints_.empty() && !glints_[t].empty()) {
+                    const glm::vec3 span = y - x;
+                    const float dist2 = glm::dot(span, span), cy = -glm::dot(ny, d);
+                    const float cosine = n * glm::dot(normal, d) / kPi;
+                    const float area = cy > 0.0f ? glints * GlintDensity(tri) * dist2 / cy : 0.0f;
+                    weight = cosine * cosine / (cosine * cosine + area * area);
+                }
+                sum +=
+                    rays_->MaterialOf(tri).specular * LobeLight(q, tri, -d, y, seen_[t]) * weight;
+            }
+            // The glints the target sees: w_a · L · cosθ_x / (K p_a), p_a the glints' density
+            // as a solid angle, L the punctual lights through the glint's lobe.
+            glm::vec3 glinted(0.0f);
+            for (size_t k = 0; t < glints_.size() && k < glints_[t].size(); ++k) {
+                const Glint& g = glints_[t][k];
+                if (!g.seen) continue;
+                const glm::vec3& ny = tris[g.triangle].normal;
+                const glm::vec3 y = HitPoint(Hit{g.triangle, g.u, g.v}) + rays_->Epsilon() * ny;
+                const glm::vec3 span = y - x;
+                const float dist2 = glm::dot(span, span);
+                const glm::vec3 w = span / std::sqrt(dist2);
+                const float cx = glm::dot(normal, w), cy = -glm::dot(ny, w);
+                if (!(cx > 0.0f && cy > 0.0f && dist2 > 0.0f)) continue;
+                const float density = GlintDensity(g.triangle) * dist2 / cy;
+                const float area = glints * density, cosine = n * cx / kPi;
+                const float weight = area * area / (area * area + cosine * cosine);
+                const glm::vec3 light = LobeLight(k, g.triangle, -w, y, glintSeen_[t]);
+                glinted += rays_->MaterialOf(g.triangle).specular * light *
+                           (weight * cx / (glints * density));
+            }
+            lobeLight_[t] = sum * (kPi / n) + glinted;
+        }
+    });
+}
+
 void GatherStage::Evaluate() {
     auto start = std::chrono::steady_clock::now();
     indirect_ = inner_->SurfelIrradiance(Channel::kIndirect);
@@ -684,7 +746,6 @@ void GatherStage::Evaluate() {
         return (1.0f - u - v) * f[c.x] + u * f[c.y] + v * f[c.z];
     };
     const int n = settings_.gatherRays, m = SecondRays();
-    const auto& tris = rays_->Triangles();
     // What a lobe ray meets sends towards it: emission (no first shot weighs these) and
     // (ρ + F0)/π · E, a glossy surface's lobe taken as if it spread its light evenly (one
     // glossy bounce is followed, not two).
@@ -697,13 +758,11 @@ void GatherStage::Evaluate() {
             lobeRadiance[i] = rho / kPi * (indirect_[i] + direct_[i]) + m.emission;
         }
     }
+    if (!lightsFresh_ || lobeLight_.size() != targets_.size()) LobeLights();
     std::vector<glm::vec3> gathered(targets_.size());
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
         for (size_t t = range.begin(); t != range.end(); ++t) {
             glm::vec3 sum(0.0f);
-            const glm::vec3& normal = s.normals[targets_[t]];
-            const glm::vec3 x = points_[targets_[t]] + rays_->Epsilon() * normal;
-            const float glints = static_cast<float>(GlintCount());
             size_t k = 0;  // this target's short hits so far
             for (int r = 0; r < n; ++r) {
                 const Hit& h = hits_[t * n + r];
@@ -727,55 +786,13 @@ void GatherStage::Evaluate() {
                 ++k;
             }
             // Glossy hits: what their lobes reflect towards the target, F0 times the lobe
-            // ray's estimate (the radiance where it lands, the sky where it escapes), plus
-            // the punctual lights y sees through the lobe: F0 (n + 2)/(2π) cosⁿθ_r · E_l(y).
-            const std::vector<LobeHit>& lobes = lobes_[t];
-            for (size_t q = 0; q < lobes.size(); ++q) {
-                const LobeHit& e = lobes[q];
-                const Hit& h = hits_[t * n + e.ray];
-                const uint32_t tri = h.triangle & kIndex;
-                const Material& mat = rays_->MaterialOf(tri);
-                glm::vec3 spec = (Front(e.hit) ? at(lobeRadiance, e.hit) : e.sky) * e.weight;
-                if (!scene_.lights.empty()) {
-                    const glm::vec3& ny = tris[tri].normal;
-                    const glm::vec3 y = HitPoint(h) + rays_->Epsilon() * ny;
-                    const glm::vec3 d = Direction(t, e.ray);
-                    // Weighed against the glints drawing the same point (power heuristic).
-                    float weight = 1.0f;
-                    if (!glints_.empty() && !glints_[t].empty()) {
-                        const glm::vec3 span = y - x;
-                        const float dist2 = glm::dot(span, span), cy = -glm::dot(ny, d);
-                        const float cosine = n * glm::dot(normal, d) / kPi;
-                        const float area =
-                            cy > 0.0f ? glints * GlintDensity(tri) * dist2 / cy : 0.0f;
-                        weight = cosine * cosine / (cosine * cosine + area * area);
-                    }
-                    const glm::vec3 light = LobeLight(q, tri, -d, y, seen_[t]);
-                    spec += light * weight;
-                }
-                sum += mat.specular * spec;
+            // ray's estimate (the radiance where it lands, the sky where it escapes); the
+            // punctual lights seen through the lobes are in lobeLight_ (LobeLights).
+            for (const LobeHit& e : lobes_[t]) {
+                const Material& mat = rays_->MaterialOf(hits_[t * n + e.ray].triangle & kIndex);
+                sum += mat.specular * (Front(e.hit) ? at(lobeRadiance, e.hit) : e.sky) * e.weight;
             }
-            // The glints the target sees: w_a · L · cosθ_x / (K p_a), p_a the glints' density
-            // as a solid angle, L the punctual lights through the glint's lobe.
-            glm::vec3 glinted(0.0f);
-            for (size_t k = 0; t < glints_.size() && k < glints_[t].size(); ++k) {
-                const Glint& g = glints_[t][k];
-                if (!g.seen) continue;
-                const glm::vec3& ny = tris[g.triangle].normal;
-                const glm::vec3 y = HitPoint(Hit{g.triangle, g.u, g.v}) + rays_->Epsilon() * ny;
-                const glm::vec3 span = y - x;
-                const float dist2 = glm::dot(span, span);
-                const glm::vec3 w = span / std::sqrt(dist2);
-                const float cx = glm::dot(normal, w), cy = -glm::dot(ny, w);
-                if (!(cx > 0.0f && cy > 0.0f && dist2 > 0.0f)) continue;
-                const float density = GlintDensity(g.triangle) * dist2 / cy;
-                const float area = glints * density, cosine = n * cx / kPi;
-                const float weight = area * area / (area * area + cosine * cosine);
-                const glm::vec3 light = LobeLight(k, g.triangle, -w, y, glintSeen_[t]);
-                glinted += rays_->MaterialOf(g.triangle).specular * light *
-                           (weight * cx / (glints * density));
-            }
-            gathered[t] = sum * (kPi / n) + sky_[t] + glinted;
+            gathered[t] = sum * (kPi / n) + sky_[t] + lobeLight_[t];
         }
     });
     for (size_t t = 0; t < targets_.size(); ++t) {
@@ -834,6 +851,7 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
         scene_.primitives[p].material = scene.primitives[p].material;
     inner_->UpdateMaterials(scene);
     fresh_ = false;
+    lightsFresh_ = false;
     // A scene that turned glossy takes the first shot back from the solver (its lobes would
     // miss it), one that turned diffuse hands it over.
     const bool wasGlossy = glossy_;
@@ -908,6 +926,7 @@ void GatherStage::UpdateLights(const Scene& scene) {
     Relit(before);
     if (sky && !targets_.empty()) Sky();
     fresh_ = false;
+    lightsFresh_ = false;
 }
 
 void GatherStage::UpdateGeometry(const Scene& scene) {
@@ -951,6 +970,7 @@ void GatherStage::UpdateGeometry(const Scene& scene) {
     }
     Shoot(partial);
     fresh_ = false;
+    lightsFresh_ = false;
 }
 
 void GatherStage::WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) {

@@ -164,6 +164,10 @@ class GatherStage : public Solver {
     void TraceGlints(const Moved* moved = nullptr);
     // The glints' area density at a point of glossy triangle `tri` (0 for any other).
     float GlintDensity(uint32_t tri) const;
+    // lobeLight_: per target, the punctual lights seen through glossy lobes, from the gather
+    // rays' glossy hits and the glints (MIS). It depends on the lights, materials and
+    // geometry but not on the solver's answer, so it is kept between evaluations.
+    void LobeLights();
     glm::vec3 Direction(size_t target, int ray) const;
     // Secondary ray j from the short hit of target t's ray r, on triangle `tri`: point j of
     // the R2 sequence rotated by SecondRotation(t, r), cosine-distributed.
@@ -211,7 +215,9 @@ class GatherStage : public Solver {
     std::vector<float> glintDensity_;         // per refined triangle: lum(F0) / all (or 0)
     std::vector<std::vector<Glint>> glints_;  // per target
     std::vector<std::vector<uint32_t>> glintSeen_;  // per target, LightWords() words a glint
-    float diameter_ = 0.0f;  // the scene's: where directional lights' shadow rays end
+    float diameter_ = 0.0f;             // the scene's: where directional lights' shadow rays end
+    std::vector<glm::vec3> lobeLight_;  // per target (LobeLights)
+    bool lightsFresh_ = false;          // lobeLight_ holds the current lights and geometry
     std::vector<std::vector<Hit>> second_;
     std::vector<uint32_t> secondStart_;
     std::vector<glm::vec3> secondSky_;
