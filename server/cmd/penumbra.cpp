@@ -26,7 +26,7 @@ bool EndsWith(const std::string& s, const std::string& suffix) {
 
 void WriteResult(const std::string& scenePath, const std::string& outPath, const Scene& scene,
                  const IrradianceResult& result, DisplayColor color) {
-    if (EndsWith(outPath, ".json"))
+    if (outPath == "-" || EndsWith(outPath, ".json"))
         WriteIrradianceJson(outPath, scene, result);
     else
         WriteIrradianceGltf(scenePath, outPath, scene, result, color);
@@ -125,8 +125,10 @@ struct GatherOptions {
 };
 
 void CheckOutputPath(const std::string& outPath) {
-    if (!EndsWith(outPath, ".json") && !EndsWith(outPath, ".glb") && !EndsWith(outPath, ".gltf"))
-        throw Error("output '" + outPath + "' must end in .json, .glb or .gltf");
+    if (outPath != "-" && !EndsWith(outPath, ".json") && !EndsWith(outPath, ".glb") &&
+        !EndsWith(outPath, ".gltf"))
+        throw Error("output '" + outPath +
+                    "' must end in .json, .glb or .gltf (or be -: JSON on standard output)");
 }
 
 // Exit status of `bake` when the solution diverged (SolverStats::divergence).
@@ -255,8 +257,9 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
                          "evaluated in %.1f ms (%s)",
                          s.gatherRays, s.gatherTargets, s.msGatherTrace, s.msGatherEvaluate,
                          s.gatherDevice.c_str());
-        std::fprintf(stderr, "\n  wrote %s (channel %s; %s)\n", outPath.c_str(),
-                     result.channel.c_str(), kIrradianceUnits);
+        std::fprintf(stderr, "\n  wrote %s (channel %s; %s)\n",
+                     outPath == "-" ? "standard output" : outPath.c_str(), result.channel.c_str(),
+                     kIrradianceUnits);
     }
     return 0;
 }
@@ -316,8 +319,9 @@ int Reference(const std::string& scenePath, const std::string& outPath, Referenc
                      "  relative standard error %.3g%% overall, %.3g%% at the worst vertex\n"
                      "  wrote %s (channel %s; %s)\n",
                      scenePath.c_str(), st.vertices, st.samples, st.seconds, st.RaysPerSecond(),
-                     st.threads, 100 * relStderr, 100 * worst, outPath.c_str(),
-                     result.channel.c_str(), kIrradianceUnits);
+                     st.threads, 100 * relStderr, 100 * worst,
+                     outPath == "-" ? "standard output" : outPath.c_str(), result.channel.c_str(),
+                     kIrradianceUnits);
     return 0;
 }
 
@@ -512,7 +516,9 @@ int main(int argc, char** argv) {
     IterationOptions iterations;
     bool quiet = false;
     bake->add_option("scene", scenePath, "glTF 2.0 scene (.gltf or .glb)")->required();
-    bake->add_option("-o,--output", outPath, "output file: .json, .glb or .gltf")->required();
+    bake->add_option("-o,--output", outPath,
+                     "output file: .json, .glb or .gltf; - for JSON on standard output")
+        ->required();
     std::string bakeColor0 = "tonemapped";
     AddColor0(bake, bakeColor0);
     bake->add_option("--solver", settings.solver, "solver (antiradiance)")->capture_default_str();
@@ -583,7 +589,10 @@ int main(int argc, char** argv) {
     ReferenceSettings refSettings;
     bool refQuiet = false;
     reference->add_option("scene", refScene, "glTF 2.0 scene (.gltf or .glb)")->required();
-    reference->add_option("-o,--output", refOut, "output file: .json, .glb or .gltf")->required();
+    reference
+        ->add_option("-o,--output", refOut,
+                     "output file: .json, .glb or .gltf; - for JSON on standard output")
+        ->required();
     std::string refColor0 = "tonemapped";
     AddColor0(reference, refColor0);
     reference->add_option("--samples", refSettings.samples, "light paths per vertex (>= 2)")

@@ -295,7 +295,10 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
                       "turns the sky about +Y, degrees");
 
     s.get = app.add_subcommand("get", "Write the current irradiance (.json, or .glb/.gltf)");
-    s.get->add_option("-o,--output", s.output, "output: .json, .glb or .gltf")->required();
+    s.get
+        ->add_option("-o,--output", s.output,
+                     "output: .json, .glb or .gltf; - for JSON on standard output")
+        ->required();
     s.get->add_option("--gltf", s.gltf,
                       "the scene's glTF file, needed for .glb/.gltf output (_IRRADIANCE is added)");
     s.get
@@ -600,7 +603,8 @@ int ServiceCommands::State::Execute(client::Client& c) {
         // The bake formats: a Scene carries each primitive's key (and, for glTF output, its
         // geometry, read from the local file).
         Scene scene;
-        bool json = output.size() >= 5 && output.compare(output.size() - 5, 5, ".json") == 0;
+        bool json = output == "-" ||
+                    (output.size() >= 5 && output.compare(output.size() - 5, 5, ".json") == 0);
         if (!json) {
             if (gltf.empty())
                 throw Error("glTF output needs the scene file: add --gltf FILE (or write .json)");
@@ -640,10 +644,11 @@ int ServiceCommands::State::Execute(client::Client& c) {
             WriteIrradianceJson(output, scene, result);
         else
             WriteIrradianceGltf(gltf, output, scene, result, ParseDisplayColor(color0));
-        if (!quiet)
-            std::printf("wrote %s (frame %llu, edit %llu, channel %s)\n", output.c_str(),
-                        (unsigned long long)f.frame, (unsigned long long)f.lastEdit,
-                        result.channel.c_str());
+        if (!quiet)  // on stderr when the data itself goes to standard output
+            std::fprintf(
+                output == "-" ? stderr : stdout, "wrote %s (frame %llu, edit %llu, channel %s)\n",
+                output == "-" ? "standard output" : output.c_str(), (unsigned long long)f.frame,
+                (unsigned long long)f.lastEdit, result.channel.c_str());
         return kExitOk;
     }
     if (step && step->parsed()) {

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <iostream>
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -115,6 +116,11 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
     }
     j["primitives"] = std::move(prims);
     j["stats"] = result.stats;
+    if (path == "-") {  // standard output
+        std::cout << j.dump(1) << "\n" << std::flush;
+        if (!std::cout) throw Error("standard output: write failed");
+        return;
+    }
     std::ofstream out(path);
     if (!out) throw Error(path + ": cannot open for writing");
     out << j.dump(1) << "\n";

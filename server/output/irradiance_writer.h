@@ -32,7 +32,7 @@ IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver,
 
 // `{"units", "solver", "channel", "primitives": [...], "stats": {...}}`; each primitive
 // `{"node", "mesh", "primitive", "irradiance": [[r,g,b], ...]}` and, with standard
-// errors, `"stderr": [[r,g,b], ...]`.
+// errors, `"stderr": [[r,g,b], ...]`. `path` "-" writes to standard output.
 void WriteIrradianceJson(const std::string& path, const Scene& scene,
                          const IrradianceResult& result);
 // The `stats` object of the JSON output.

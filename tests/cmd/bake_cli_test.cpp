@@ -13,6 +13,7 @@
 #include "base/image.h"
 #include "clutter_scenes.h"
 #include "gpu/context.h"
+#include "output/irradiance_writer.h"
 #include "scene/scene_builder.h"
 #include "test_util.h"
 
@@ -140,6 +141,17 @@ TEST(BakeCli, GltfOutputPassesTheKhronosValidator) {
             EXPECT_EQ(j["warnings"], 0) << out << ":\n" << report;
         }
     }
+}
+
+// `-o -`: the JSON on standard output, nothing else there (-q keeps stderr quiet too).
+TEST(BakeCli, DashWritesJsonToStandardOutput) {
+    ProcessResult r = Execute("bake " + kCornell +
+                              " -o - --bins 32 --iterations 1 --element-size 0.2 --device cpu -q");
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    const auto j = nlohmann::json::parse(r.output, nullptr, false);
+    ASSERT_FALSE(j.is_discarded()) << r.output.substr(0, 400);
+    EXPECT_EQ(j["primitives"].size(), 8u);
+    EXPECT_EQ(j["units"], kIrradianceUnits);
 }
 
 TEST(BakeCli, LavapipeDeviceRuns) {

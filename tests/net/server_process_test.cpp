@@ -598,6 +598,13 @@ TEST(ServerProcess, CliCommandsAndScriptAgainstTheServer) {
     EXPECT_EQ(after.exitCode, 0) << after.output;
     auto env = testing::Execute("stats", "PENUMBRA_CONNECT=" + server.Unix());
     EXPECT_EQ(env.exitCode, 0) << env.output;
+    // get -o -: the JSON alone on standard output (-q: no note on stderr either, which
+    // Execute merges in).
+    auto piped = testing::Execute(connect + "get -o - -q");
+    EXPECT_EQ(piped.exitCode, 0) << piped.output;
+    const auto got = nlohmann::json::parse(piped.output, nullptr, false);
+    ASSERT_FALSE(got.is_discarded()) << piped.output.substr(0, 400);
+    EXPECT_EQ(got["primitives"].size(), 8u);
     auto gone = testing::Execute("--connect unix:///nonexistent/socket stats");
     EXPECT_EQ(gone.exitCode, 5) << gone.output;
     std::ofstream(dir / "bad.txt") << "move tall_block --translate 1,2\n";
