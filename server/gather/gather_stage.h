@@ -2,14 +2,15 @@
 //
 // 1. The first shot: the emitters' direct light with explicit visibility (emitter_direct.h)
 //    at the solver's surfels, handed to it (Solver::SetEmitterDirect), so the solver carries
-//    only bounces.
+//    only bounces (not in a scene with glossy materials, whose lobes would miss it).
 // 2. The final gather: at each output surfel, cosine-distributed rays (a fixed pattern per
 //    surfel, so frames do not flicker); each ray that meets a surface reads the light that
 //    surface reflects, L = ρ/π · E with E the solver's irradiance interpolated on the refined
 //    mesh (first shot and punctual lights included); each ray that escapes reads the
 //    environment. E(x) = π/N Σ L over the N rays, plus the first shot at x. The solver's
 //    bin-scale blur and its leaks are integrated over the hemisphere instead of read
-//    directly (two-pass radiosity's final gather).
+//    directly (two-pass radiosity's final gather). A glossy surface met also reflects
+//    through its lobe: a lobe ray, and the punctual lights it sees (with glints, MIS).
 //
 // A Solver wrapping another: edits pass through; the rays are traced once and their outcomes
 // cached, so a light, material or sky edit re-reads them, an emissive edit re-weights them,
@@ -229,10 +230,9 @@ class GatherStage : public Solver {
 };
 
 // The parts of `settings` that can serve `scene`: the first shot is declined (0 rays) for a
-// scene without emitters and for one with glossy materials (their lobes would miss it); the
-// final gather for glossy scenes (the light a glossy surface sends towards a ray depends on
-// the ray's direction, which the gather does not read yet). `notes` (when given) gets a line
-// for each part declined. Throws penumbra::Error for ray counts out of range.
+// scene without emitters. In a scene with glossy materials it is kept but not handed to the
+// solver (GatherStage::glossy_), which a note says. `notes` (when given) gets a line for
+// each part declined or changed. Throws penumbra::Error for ray counts out of range.
 GatherSettings GatherParts(const Scene& scene, const GatherSettings& settings,
                            std::vector<std::string>* notes = nullptr);
 

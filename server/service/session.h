@@ -202,7 +202,7 @@ class Session {
     // The session's solver for `scene`: motion links where the settings ask for them and
     // `motionLinks` allows (false: the usual links), behind the gather stage where the
     // settings ask for it and the scene allows (`notes`, when given, gets why a part of it
-    // was declined: WithGather).
+    // was declined or changed: CreateGatheredSolver).
     std::unique_ptr<Solver> BuildSolver(const Scene& scene, bool motionLinks,
                                         const ProgressFn& progress = {},
                                         std::vector<std::string>* notes = nullptr) const;
