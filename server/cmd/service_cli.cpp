@@ -117,9 +117,22 @@ std::vector<std::string> SplitWords(const std::string& line) {
     return words;
 }
 
-void PrintFrame(const client::Frame& f, double fps) {
+// One line per frame: for people, or (`json`) a JSON object per line (JSON Lines).
+void PrintFrame(const client::Frame& f, double fps, bool json) {
     double device = 0.0;
     for (const auto& p : f.passes) device += p.second;
+    if (json) {
+        nlohmann::json j = {{"scene", f.scene},   {"frame", f.frame},
+                            {"edit", f.lastEdit}, {"iterations", f.iterations},
+                            {"ms", f.frameMs},    {"device_ms", device},
+                            {"fps", fps},         {"converged", f.converged},
+                            {"note", f.note}};
+        j["latency_ms"] = f.editLatencyMs > 0.0 ? nlohmann::json(f.editLatencyMs) : nullptr;
+        for (const auto& [name, ms] : f.passes) j["passes"][name] = ms;
+        std::printf("%s\n", j.dump().c_str());
+        std::fflush(stdout);
+        return;
+    }
     std::printf("frame %6llu  edit %3llu  %7.2f ms  device %7.2f ms  %5.1f fps",
                 (unsigned long long)f.frame, (unsigned long long)f.lastEdit, f.frameMs, device,
                 fps);
@@ -151,6 +164,7 @@ struct ServiceCommands::State {
     uint64_t minEdit = 0;
     double timeout = 0.0;
     bool untilConverged = false;
+    bool watchJson = false;
     std::string channel = "indirect", format = "f32";
 
     std::string node;
@@ -247,6 +261,9 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
                         "with --until-converged: the frame must include this edit id");
     s.watch->add_option("--channel", s.channel, "indirect|direct|total")->capture_default_str();
     s.watch->add_option("--format", s.format, "f32|f16")->capture_default_str();
+    s.watch->add_flag("--json", s.watchJson,
+                      "one JSON object per frame and line (scene, frame, edit, iterations, ms, "
+                      "device_ms, fps, converged, note, latency_ms, passes)");
 
     s.move = app.add_subcommand(
         "move", "Move a dynamic node: new local = translate × current × rotate-y (or --matrix)");
@@ -481,7 +498,7 @@ int ServiceCommands::State::Execute(client::Client& c) {
                 if (arrivals.size() > 1)
                     fps = (arrivals.size() - 1) /
                           std::chrono::duration<double>(arrivals.back() - arrivals.front()).count();
-                PrintFrame(f, fps);
+                PrintFrame(f, fps, watchJson);
                 ++seen;
                 if ((watchFrames > 0 && seen >= watchFrames) ||
                     (untilConverged && f.converged && f.lastEdit >= minEdit))
@@ -494,7 +511,9 @@ int ServiceCommands::State::Execute(client::Client& c) {
         if (timeout > 0.0) {
             if (!cv.wait_for(lock, std::chrono::duration<double>(timeout), stop)) {
                 done = true;
-                if (!quiet) std::printf("watch: %.1f s passed, %d frames\n", timeout, seen);
+                if (!quiet)  // on stderr when stdout is JSON Lines
+                    std::fprintf(watchJson ? stderr : stdout, "watch: %.1f s passed, %d frames\n",
+                                 timeout, seen);
                 return kExitOk;
             }
         } else {

@@ -13,6 +13,7 @@
 #include <fstream>
 #include <glm/glm.hpp>
 #include <mutex>
+#include <sstream>
 #include <thread>
 
 #include "client/client.h"
@@ -605,6 +606,20 @@ TEST(ServerProcess, CliCommandsAndScriptAgainstTheServer) {
     const auto got = nlohmann::json::parse(piped.output, nullptr, false);
     ASSERT_FALSE(got.is_discarded()) << piped.output.substr(0, 400);
     EXPECT_EQ(got["primitives"].size(), 8u);
+    // watch --json: JSON Lines, one object per frame (a subscriber gets the latest frame at
+    // once, so one comes even though the scene has converged).
+    auto lines = testing::Execute(connect + "watch --frames 1 --json --timeout 60");
+    EXPECT_EQ(lines.exitCode, 0) << lines.output;
+    std::istringstream in(lines.output);
+    int frames = 0;
+    for (std::string line; std::getline(in, line);) {
+        const auto frame = nlohmann::json::parse(line, nullptr, false);
+        ASSERT_FALSE(frame.is_discarded()) << line;
+        EXPECT_TRUE(frame.contains("frame") && frame.contains("edit") && frame.contains("fps"))
+            << line;
+        ++frames;
+    }
+    EXPECT_EQ(frames, 1);
     auto gone = testing::Execute("--connect unix:///nonexistent/socket stats");
     EXPECT_EQ(gone.exitCode, 5) << gone.output;
     std::ofstream(dir / "bad.txt") << "move tall_block --translate 1,2\n";
