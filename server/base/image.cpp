@@ -80,7 +80,7 @@ void WritePng(const std::string& path, int width, int height, const std::vector<
 float Luminance99(const std::vector<glm::vec3>& values) {
     std::vector<float> lum;
     for (const glm::vec3& p : values) {
-        const float y = 0.2126f * p.x + 0.7152f * p.y + 0.0722f * p.z;
+        const float y = Luminance(p);
         if (y > 0.0f && std::isfinite(y)) lum.push_back(y);
     }
     if (lum.empty()) return 0.0f;

@@ -23,6 +23,9 @@ struct Image {
     bool Empty() const { return pixels.empty(); }
 };
 
+// Rec. 709 luminance of linear RGB.
+inline float Luminance(const glm::vec3& c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
+
 // The luminance (Rec. 709) below which 99% of the positive, finite values lie: the scale an
 // automatic exposure maps to 1. 0 when there is none.
 float Luminance99(const std::vector<glm::vec3>& values);

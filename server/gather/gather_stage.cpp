@@ -11,6 +11,7 @@
 #include <limits>
 
 #include "base/check.h"
+#include "base/image.h"
 #include "base/pcg.h"
 #include "gather/sampling.h"
 
@@ -24,7 +25,6 @@ constexpr uint64_t kSecondStream = 0x5851f42d4c957f2dull;
 constexpr uint64_t kLobeStream = 0x2545f4914f6cdd1dull;
 constexpr uint64_t kGlintStream = 0x6a09e667f3bcc909ull;
 
-float Luminance(const glm::vec3& c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
 // A hit closer than this × the solver's element size is gathered again (GatherStage::kShort).
 // Measured (bake at 0.1 m elements against the reference at 4,096 samples; 0, 0.25, 0.5, 1):
 // the Cornell box 2.78, 2.15, 2.14, 2.13%; the office (0.37 m elements) 4.01, 3.90, 3.88,
@@ -55,8 +55,7 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
     CheckGatherRays(settings.emitterRays, "the first shot");
     CheckGatherRays(settings.gatherRays, "the final gather");
     rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
-    glossy_ = std::any_of(scene_.materials.begin(), scene_.materials.end(),
-                          [](const Material& m) { return m.Glossy(); });
+    glossy_ = AnyGlossy(scene_.materials);
     diameter_ = scene_.Diameter();
     Place();
     const Surfels& s = inner_->GetSurfels();
@@ -454,17 +453,8 @@ void GatherStage::TraceLobes(const Moved* moved) {
                 // The punctual lights it sees: kept where their segments pass by what moved.
                 const size_t at = seen.size();
                 seen.resize(at + words, 0u);
-                for (size_t l = 0; l < scene_.lights.size(); ++l) {
-                    const LightArrival a =
-                        PunctualArrival(scene_.lights[l], y, tris[tri].normal, diameter_);
-                    if (!a.reaches) continue;
-                    if (reuse && !moved->Meets(y, a.span, 1.0f)) {
-                        seen[at + l / 32] |= oldSeen[k * words + l / 32] & (1u << (l % 32));
-                        continue;
-                    }
-                    ++count;
-                    if (!rays_->Occluded(y, a.span)) seen[at + l / 32] |= 1u << (l % 32);
-                }
+                count += See(y, tris[tri].normal, &seen[at], reuse ? &oldSeen[k * words] : nullptr,
+                             moved);
                 lobes.push_back(e);
             }
             lobes_[t].assign(lobes.begin(), lobes.end());
@@ -553,16 +543,8 @@ void GatherStage::TraceGlints(const Moved* moved) {
                              glm::dot(tri.normal, d) < 0.0f && !rays_->Occluded(x, d);
                     ++rays;
                 }
-                for (size_t l = 0; l < scene_.lights.size(); ++l) {
-                    const LightArrival a =
-                        PunctualArrival(scene_.lights[l], y, tri.normal, diameter_);
-                    uint32_t& word = seen[k * words + l / 32];
-                    if (!all && !moves && !(a.reaches && moved->Meets(y, a.span, 1.0f))) continue;
-                    word &= ~(1u << (l % 32));
-                    if (!a.reaches) continue;
-                    ++rays;
-                    if (!rays_->Occluded(y, a.span)) word |= 1u << (l % 32);
-                }
+                uint32_t* bits = &seen[k * words];
+                rays += See(y, tri.normal, bits, all || moves ? nullptr : bits, moved);
             }
         }
         traced += rays;
@@ -573,42 +555,53 @@ void GatherStage::TraceGlints(const Moved* moved) {
     msTrace_ += Ms(start);
 }
 
+size_t GatherStage::See(const glm::vec3& y, const glm::vec3& n, uint32_t* bits, const uint32_t* old,
+                        const Moved* moved, const std::vector<uint8_t>* which) const {
+    size_t rays = 0;
+    for (size_t l = 0; l < scene_.lights.size(); ++l) {
+        const uint32_t bit = 1u << (l % 32);
+        uint32_t& word = bits[l / 32];
+        const LightArrival a = PunctualArrival(scene_.lights[l], y, n, diameter_);
+        const bool again =
+            !old || (which && (*which)[l]) || (moved && a.reaches && moved->Meets(y, a.span, 1.0f));
+        if (!again) {
+            word = (word & ~bit) | (old[l / 32] & bit);
+            continue;
+        }
+        word &= ~bit;
+        if (!a.reaches) continue;
+        ++rays;
+        if (!rays_->Occluded(y, a.span)) word |= bit;
+    }
+    return rays;
+}
+
 void GatherStage::SeeLights(const std::vector<uint8_t>& which) {
     if (!glossy_ || targets_.empty()) return;
     const int n = settings_.gatherRays, words = LightWords();
     const auto& tris = rays_->Triangles();
+    // Every light when `which` is empty (their count changed: the words are laid out anew).
+    const std::vector<uint8_t>* marked = which.empty() ? nullptr : &which;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
         for (size_t t = range.begin(); t != range.end(); ++t) {
             std::vector<uint32_t>& seen = seen_[t];
-            if (which.empty())
-                seen.assign(lobes_[t].size() * words, 0u);  // every light (and their count)
+            if (!marked) seen.assign(lobes_[t].size() * words, 0u);
             for (size_t k = 0; k < lobes_[t].size(); ++k) {
                 const Hit& h = hits_[t * n + lobes_[t][k].ray];
-                const uint32_t tri = h.triangle & kIndex;
-                const glm::vec3 y = HitPoint(h) + rays_->Epsilon() * tris[tri].normal;
-                for (size_t l = 0; l < scene_.lights.size(); ++l) {
-                    if (!which.empty() && !which[l]) continue;
-                    uint32_t& word = seen[k * words + l / 32];
-                    word &= ~(1u << (l % 32));
-                    const LightArrival a =
-                        PunctualArrival(scene_.lights[l], y, tris[tri].normal, diameter_);
-                    if (a.reaches && !rays_->Occluded(y, a.span)) word |= 1u << (l % 32);
-                }
+                const glm::vec3& ny = tris[h.triangle & kIndex].normal;
+                uint32_t* bits = &seen[k * words];
+                See(HitPoint(h) + rays_->Epsilon() * ny, ny, bits, marked ? bits : nullptr, nullptr,
+                    marked);
             }
             if (t >= glints_.size()) continue;
             std::vector<uint32_t>& glintSeen = glintSeen_[t];
-            if (which.empty()) glintSeen.assign(glints_[t].size() * words, 0u);
+            if (!marked) glintSeen.assign(glints_[t].size() * words, 0u);
             for (size_t k = 0; k < glints_[t].size(); ++k) {
                 const Glint& g = glints_[t][k];
                 const glm::vec3& ny = tris[g.triangle].normal;
-                const glm::vec3 y = HitPoint(Hit{g.triangle, g.u, g.v}) + rays_->Epsilon() * ny;
-                for (size_t l = 0; l < scene_.lights.size(); ++l) {
-                    if (!which.empty() && !which[l]) continue;
-                    uint32_t& word = glintSeen[k * words + l / 32];
-                    word &= ~(1u << (l % 32));
-                    const LightArrival a = PunctualArrival(scene_.lights[l], y, ny, diameter_);
-                    if (a.reaches && !rays_->Occluded(y, a.span)) word |= 1u << (l % 32);
-                }
+                uint32_t* bits = &glintSeen[k * words];
+                See(HitPoint(Hit{g.triangle, g.u, g.v}) + rays_->Epsilon() * ny, ny, bits,
+                    marked ? bits : nullptr, nullptr, marked);
             }
         }
     });
@@ -834,13 +827,10 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
     bool lobesChanged = scene.materials.size() != scene_.materials.size();
     // Whether the glints' density changed (a glossy material's F0, or which are glossy).
     bool glintsChanged = lobesChanged;
-    for (size_t p = 0; p < scene.primitives.size() && p < scene_.primitives.size(); ++p)
-        lobesChanged =
-            lobesChanged || scene.materials[scene.primitives[p].material].phongExponent !=
-                                scene_.materials[scene_.primitives[p].material].phongExponent;
     for (size_t p = 0; p < scene.primitives.size() && p < scene_.primitives.size(); ++p) {
         const Material& a = scene.materials[scene.primitives[p].material];
         const Material& b = scene_.materials[scene_.primitives[p].material];
+        lobesChanged = lobesChanged || a.phongExponent != b.phongExponent;
         glintsChanged =
             glintsChanged || a.Glossy() != b.Glossy() || (a.Glossy() && a.specular != b.specular);
     }
@@ -855,8 +845,7 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
     // A scene that turned glossy takes the first shot back from the solver (its lobes would
     // miss it), one that turned diffuse hands it over.
     const bool wasGlossy = glossy_;
-    glossy_ = std::any_of(scene_.materials.begin(), scene_.materials.end(),
-                          [](const Material& m) { return m.Glossy(); });
+    glossy_ = AnyGlossy(scene_.materials);
     if (glossy_ != wasGlossy && !shot_.empty())
         inner_->SetEmitterDirect(glossy_ ? std::vector<glm::vec3>() : shot_);
     if (lobesChanged && !targets_.empty()) {
@@ -996,8 +985,7 @@ GatherSettings GatherParts(const Scene& scene, const GatherSettings& settings,
                            std::vector<std::string>* notes) {
     CheckGatherRays(settings.emitterRays, "the first shot (emitter direct light)");
     CheckGatherRays(settings.gatherRays, "the final gather");
-    const bool glossy = std::any_of(scene.materials.begin(), scene.materials.end(),
-                                    [](const Material& m) { return m.Glossy(); });
+    const bool glossy = AnyGlossy(scene.materials);
     const bool emitters = std::any_of(
         scene.materials.begin(), scene.materials.end(),
         [](const Material& m) { return glm::any(glm::greaterThan(m.emission, glm::vec3(0.0f))); });
@@ -1029,8 +1017,7 @@ std::unique_ptr<Solver> CreateGatheredSolver(const Scene& scene, SolverSettings 
                                              const ProgressFn& progress,
                                              std::vector<std::string>* notes) {
     const GatherSettings parts = GatherParts(scene, gather, notes);
-    const bool glossy = std::any_of(scene.materials.begin(), scene.materials.end(),
-                                    [](const Material& m) { return m.Glossy(); });
+    const bool glossy = AnyGlossy(scene.materials);
     if (parts.gatherRays > 0 && !glossy) {
         if (settings.bins == 0) settings.bins = kGatherBins;
         settings.antiradianceTolerance = std::max(settings.antiradianceTolerance, kGatherSettle);

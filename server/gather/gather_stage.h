@@ -134,6 +134,12 @@ class GatherStage : public Solver {
     // Which punctual lights the lobe hits see, again for the lights marked in `which` (empty:
     // every light, after their count changed).
     void SeeLights(const std::vector<uint8_t>& which);
+    // The punctual lights a point y (lifted off its surface, normal n) sees, as LightWords()
+    // words of bits at `bits`: each light traced again where `old` is null, where `which`
+    // marks it or where `moved` can have cut its segment; the others keep their bit from
+    // `old` (which may be `bits` itself). Returns the shadow rays traced.
+    size_t See(const glm::vec3& y, const glm::vec3& n, uint32_t* bits, const uint32_t* old,
+               const Moved* moved, const std::vector<uint8_t>* which = nullptr) const;
     // SeeLights for the punctual lights placed otherwise than in `before` (scene_'s now).
     void Relit(const std::vector<PunctualLight>& before);
     // The lobe ray of target t's ray r, which met glossy `h`, and its cosine at h's surface.

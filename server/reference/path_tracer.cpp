@@ -18,6 +18,7 @@
 #include <string>
 
 #include "base/check.h"
+#include "base/image.h"
 #include "base/pcg.h"
 #include "gather/ray_scene.h"
 
@@ -45,8 +46,6 @@ glm::vec3 CosineSample(const glm::vec3& n, Rng& rng) {
     Frame(n, t, b);
     return r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0f, 1.0f - u1)) * n;
 }
-
-float Luminance(const glm::vec3& c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
 
 // A material's BRDF at a surface point seen from `wo` (Material, scene.h): ρ_d/π plus the
 // normalised Phong lobe F0 (n + 2)/(2π) cosⁿθ_r, θ_r the angle between the incoming

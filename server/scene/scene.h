@@ -33,6 +33,13 @@ struct Material {
     bool Glossy() const { return phongExponent > 0.0f; }
 };
 
+// Whether any of `materials` is glossy.
+inline bool AnyGlossy(const std::vector<Material>& materials) {
+    for (const Material& m : materials)
+        if (m.Glossy()) return true;
+    return false;
+}
+
 // Roughness above this has a lobe exponent below 1 and is treated as diffuse.
 inline constexpr float kGlossyRoughness = 0.7598357f;  // (1/3)^(1/4): n = 1
 // The sharpest lobe kept (roughness ≈ 0.06): sharper ones are mirrors to every solver here.
