@@ -22,6 +22,7 @@
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
 #include "scene/scene_builder.h"
+#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
 
 namespace {
@@ -69,7 +70,7 @@ struct Sweep {
     // With the paper's oracle: the area oracle's threshold that gives about as many links
     // (with receiverOracle 1), to compare the two at one cost (0: not run).
     float areaOracle = 0.0f;
-    float receiverOracle = SolverSettings{}.receiverOracle;
+    float receiverOracle = AntiradianceSettings{}.receiverOracle;
 };
 
 Sweep SweepFor(const std::string& name) {
@@ -80,12 +81,12 @@ Sweep SweepFor(const std::string& name) {
 Run Solve(const Scene& scene, const IrradianceFile& truth, int bins, int iterations,
           float elementSize, const Sweep& sweep) {
     SolverSettings s;
-    s.bins = bins;
+    SetOption(s.options, "bins", bins);
     s.elementSize = elementSize;
     s.device = DeviceChoice::kCpu;
-    s.linkOracle = sweep.linkOracle;
-    s.oracle = sweep.oracle;
-    s.receiverOracle = sweep.receiverOracle;
+    SetOption(s.options, "link-oracle", LinkOracleName(sweep.linkOracle));
+    SetOption(s.options, "oracle", sweep.oracle);
+    SetOption(s.options, "receiver-oracle", sweep.receiverOracle);
     auto t = Clock::now();
     auto solver = CreateSolver(scene, s);
     solver->Iterate(iterations);

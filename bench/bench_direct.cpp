@@ -16,6 +16,7 @@
 #include "bench_util.h"
 #include "direct/environment_light.h"
 #include "scene/gltf_loader.h"
+#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
 
 namespace {
@@ -56,10 +57,10 @@ int main(int argc, char** argv) {
     std::vector<int> mapSizes{0, 1024};  // 0: the solver's default, from the element size
     int updates = 10, iterations = 4;
     SolverSettings settings;
-    settings.bins = 128;
+    SetOption(settings.options, "bins", 128);
     settings.elementSize = 0.5f;
-    settings.linkOracle = LinkOracle::kPaper;
-    settings.oracle = 2.15f;
+    SetOption(settings.options, "link-oracle", "paper");
+    SetOption(settings.options, "oracle", 2.15f);
     app.add_option("--scene", scenePath, "office-scale glTF")->capture_default_str();
     app.add_option("--out", out, "folder for the results JSON")->capture_default_str();
     app.add_option("--devices", devices, "cpu, lavapipe, gpu")->capture_default_str();
@@ -135,9 +136,10 @@ int main(int argc, char** argv) {
                                              {"share_of_iteration", share}});
             }
         // The environment: binning a sky map (done at load and when the sky changes).
-        std::printf("\nenvironment binning, %d bins, median of 5 (all threads)\n", settings.bins);
+        std::printf("\nenvironment binning, %d bins, median of 5 (all threads)\n",
+                    ReadAntiradianceSettings(settings).bins);
         std::printf("%-24s %10s\n", "sky", "ms");
-        Directions dirs(settings.bins);
+        Directions dirs(ReadAntiradianceSettings(settings).bins);
         for (int width : {0, 512, 2048, 4096}) {
             Environment env = ConstantEnvironment(glm::vec3(1.0f));
             if (width) {
@@ -162,7 +164,9 @@ int main(int argc, char** argv) {
                       : "constant";
             std::printf("%-24s %10.2f\n", name.c_str(), Median(ms));
             report["environment_binning"].push_back(
-                {{"sky", name}, {"bins", settings.bins}, {"ms_median", Median(ms)}});
+                {{"sky", name},
+                 {"bins", ReadAntiradianceSettings(settings).bins},
+                 {"ms_median", Median(ms)}});
         }
         bench::WriteReport(report, out, "direct.json");
     } catch (const std::exception& e) {

@@ -15,6 +15,7 @@
 #include "base/check.h"
 #include "bench_util.h"
 #include "scene/gltf_loader.h"
+#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
 
 using namespace penumbra;
@@ -26,7 +27,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> devices{"cpu", "lavapipe"};
     int frames = 10, iterations = 3, samples = 1024;
     SolverSettings settings;
-    settings.bins = 128;
+    int bins = 128;
     settings.elementSize = 0.25f;
     app.add_option("--scene", scenePath, "glTF with glossy materials")->capture_default_str();
     app.add_option("--out", out, "folder for the results JSON")->capture_default_str();
@@ -37,11 +38,12 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--samples", samples, "reference paths per vertex for the RMSE (0: none)")
         ->capture_default_str();
-    app.add_option("--bins", settings.bins)->capture_default_str();
+    app.add_option("--bins", bins)->capture_default_str();
     app.add_option("--element-size", settings.elementSize)->capture_default_str();
     CLI11_PARSE(app, argc, argv);
 
     try {
+        SetOption(settings.options, "bins", bins);
         Scene glossy = LoadGltf(scenePath);
         Scene diffuse = glossy, allGlossy = glossy;
         for (Material& m : diffuse.materials)
@@ -56,10 +58,10 @@ int main(int argc, char** argv) {
         report["triangles"] = glossy.TriangleCount();
         report["machine"] = {{"cpu", bench::CpuModel()},
                              {"threads", std::thread::hardware_concurrency()}};
-        report["settings"] = {{"bins", settings.bins},
+        report["settings"] = {{"bins", bins},
                               {"element_size", settings.elementSize},
                               {"link_oracle", "conservative"},
-                              {"scheme", SchemeName(settings.scheme)},
+                              {"scheme", SchemeName(ReadAntiradianceSettings(settings).scheme)},
                               {"iterations_per_frame", iterations},
                               {"reference_samples", samples}};
         std::map<std::string, IrradianceFile> truth;
@@ -69,8 +71,8 @@ int main(int argc, char** argv) {
         std::printf(
             "%s: %zu triangles, %d bins, element %.2f m, %d iterations/frame, median of "
             "%d frames\n",
-            scenePath.c_str(), glossy.TriangleCount(), settings.bins, settings.elementSize,
-            iterations, frames);
+            scenePath.c_str(), glossy.TriangleCount(), bins, settings.elementSize, iterations,
+            frames);
         std::printf("%-30s %-10s %8s %7s %9s %9s %9s %9s %7s %9s\n", "device", "surfaces",
                     "elements", "glossy", "links", "local ms", "ms/iter", "frame ms", "fps",
                     "rel.RMSE");

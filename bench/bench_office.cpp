@@ -16,6 +16,7 @@
 #include "bench_util.h"
 #include "output/irradiance_writer.h"
 #include "scene/gltf_loader.h"
+#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
 
 using namespace penumbra;
@@ -27,10 +28,9 @@ int main(int argc, char** argv) {
     std::vector<std::string> devices{"cpu", "lavapipe"};
     int frames = 10, iterations = 1, samples = 1024;
     SolverSettings settings;
-    settings.bins = 128;
+    int bins = 128;
     settings.elementSize = 0.5f;
-    settings.linkOracle = LinkOracle::kPaper;
-    settings.oracle = 2.15f;  // 626K links: the paper office has 632K
+    float oracle = 2.15f;  // 626K links: the paper office has 632K
     app.add_option("--scene", scenePath, "office-scale glTF")->capture_default_str();
     app.add_option("--out", out, "folder for the results JSON")->capture_default_str();
     app.add_option("--devices", devices, "devices to run: cpu, lavapipe, gpu")
@@ -40,16 +40,19 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--samples", samples, "reference paths per vertex for the RMSE (0: none)")
         ->capture_default_str();
-    app.add_option("--bins", settings.bins)->capture_default_str();
+    app.add_option("--bins", bins)->capture_default_str();
     app.add_option("--element-size", settings.elementSize)->capture_default_str();
-    app.add_option("--oracle", settings.oracle, "paper oracle threshold")->capture_default_str();
+    app.add_option("--oracle", oracle, "paper oracle threshold")->capture_default_str();
     std::string tables = "auto";
     app.add_option("--tables", tables, "CPU back end tables: auto|fp32|fp16")
         ->capture_default_str();
     CLI11_PARSE(app, argc, argv);
 
     try {
-        settings.tables = ParseTablePrecision(tables);
+        SetOption(settings.options, "bins", bins);
+        SetOption(settings.options, "link-oracle", "paper");
+        SetOption(settings.options, "oracle", oracle);
+        SetOption(settings.options, "tables", tables);
         Scene scene = LoadGltf(scenePath);
         nlohmann::json report;
         report["benchmark"] = "office";
@@ -57,26 +60,25 @@ int main(int argc, char** argv) {
         report["triangles"] = scene.TriangleCount();
         report["machine"] = {{"cpu", bench::CpuModel()},
                              {"threads", std::thread::hardware_concurrency()}};
-        report["settings"] = {{"bins", settings.bins},
+        report["settings"] = {{"bins", bins},
                               {"element_size", settings.elementSize},
                               {"link_oracle", "paper"},
-                              {"oracle", settings.oracle},
-                              {"scheme", SchemeName(settings.scheme)},
+                              {"oracle", oracle},
+                              {"scheme", SchemeName(ReadAntiradianceSettings(settings).scheme)},
                               {"reference_samples", samples}};
         IrradianceFile truth;
         if (samples > 0) truth = bench::Reference(scene, samples);
         std::printf(
             "office: %zu triangles, %d bins, element %.2f m, paper oracle %.2f, "
             "%d iterations/frame, median of %d frames\n",
-            scene.TriangleCount(), settings.bins, settings.elementSize, settings.oracle, iterations,
-            frames);
+            scene.TriangleCount(), bins, settings.elementSize, oracle, iterations, frames);
         std::printf("%-34s %6s %8s %9s %8s %8s %8s %8s %8s %9s %7s %7s %8s %9s\n", "device",
                     "tables", "elements", "links", "build s", "global", "push", "local", "pull",
                     "ms/iter", "passes", "fps", "tbl MiB", "rel.RMSE");
         for (const auto& d : devices) {
             SolverSettings s = settings;
             s.device = ParseDevice(d);
-            if (s.device != DeviceChoice::kCpu) s.tables = TablePrecision::kAuto;
+            if (s.device != DeviceChoice::kCpu) SetOption(s.options, "tables", "auto");
             nlohmann::json r;
             try {
                 r = RunDevice(scene, s, frames, iterations, samples > 0 ? &truth : nullptr);

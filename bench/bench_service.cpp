@@ -121,8 +121,8 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
     o.path = c.path;
     o.device = c.device;
     o.elementSize = c.elementSize;
-    o.linkOracle = c.oracle;
-    o.oracle = c.oracleValue;
+    if (!c.oracle.empty()) o.solverOptions["link-oracle"] = c.oracle;
+    SetOption(o.solverOptions, "oracle", c.oracleValue);
     o.convergedChange = 0.0f;  // stream continuously: every frame is a frame to deliver
     o.reload = true;
     o.gatherRays = gatherRays;
@@ -253,8 +253,8 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
         if (sc.contains("solver") && sc["solver"].contains("motion")) {
             const auto& mo = sc["solver"]["motion"];
             moveMsServer = mo.value("last_move_ms", 0.0);
-            linkPassMs = mo.value("last_link_update_device_ms", 0.0);
-            linkUpdate = mo.value("link_update", "");
+            linkPassMs = sc["solver"].value("last_link_update_device_ms", 0.0);
+            linkUpdate = sc["solver"].value("link_update", "");
         }
     std::printf(
         "  edit→frame latency: light p50 %.1f ms, p99 %.1f ms (frame %.1f ms; goal p50 ≤ %.1f)\n",
@@ -347,8 +347,8 @@ int main(int argc, char** argv) {
                 o.path = c.path;
                 o.device = "cpu";
                 o.elementSize = 2.0f;
-                o.linkOracle = "paper";
-                o.oracle = 4.0f;
+                o.solverOptions["link-oracle"] = "paper";
+                o.solverOptions["oracle"] = "4";
                 for (const auto& n : probe.Load(o).nodes)
                     if (n.emissive) {
                         c.light = n.name;

@@ -16,6 +16,7 @@
 #include "output/compare.h"
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
+#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
 
 namespace {
@@ -80,8 +81,8 @@ int main(int argc, char** argv) {
         for (const std::string& device : Split(devices)) {
             SolverSettings settings;
             settings.device = ParseDevice(device);
-            settings.scheme = ParseScheme(scheme);
-            settings.bins = bins;
+            SetOption(settings.options, "scheme", scheme);
+            SetOption(settings.options, "bins", bins);
             settings.elementSize = elementSize;
             auto solver = CreateSolver(scene, settings);
             const float bound = solver->Stats().irradianceBound;
@@ -107,8 +108,8 @@ int main(int argc, char** argv) {
                                   {"bound_lux", bound},
                                   {"max_abs_irradiance_lux", largest},
                                   {"bounces", s.bounces},
-                                  {"last_antiradiance_steps", s.lastAntiradianceSteps},
-                                  {"antiradiance_cap_hits", s.antiradianceCapHits},
+                                  {"last_antiradiance_steps", s.Number("last_antiradiance_steps")},
+                                  {"antiradiance_cap_hits", s.Number("antiradiance_cap_hits")},
                                   {"ms_per_pass", ms / std::max(1, s.gathers)}};
             std::string change = "-", rmse = "-";
             if (!s.divergence.empty()) {
@@ -131,8 +132,8 @@ int main(int argc, char** argv) {
             }
             std::printf("| %s | %s | %zu | %zu | %.3g | %s | %d | %d | %.2f | %s |\n", name.c_str(),
                         s.device.c_str(), s.elements, s.links, largest / bound, change.c_str(),
-                        s.gathers, s.lastAntiradianceSteps, ms / std::max(1, s.gathers),
-                        rmse.c_str());
+                        s.gathers, int(s.Number("last_antiradiance_steps")),
+                        ms / std::max(1, s.gathers), rmse.c_str());
             std::fflush(stdout);
             report["runs"].push_back(row);
         }

@@ -285,13 +285,17 @@ SceneInfo Client::Load(const LoadOptions& o) {
     if (o.environmentColor)
         sky =
             fb::Vec3((*o.environmentColor)[0], (*o.environmentColor)[1], (*o.environmentColor)[2]);
+    std::vector<flatbuffers::Offset<fb::SolverOption>> options;
+    for (const auto& [name, value] : o.solverOptions)
+        options.push_back(fb::CreateSolverOptionDirect(b, name.c_str(), value.c_str()));
+    // bins, link_oracle and oracle: protocol 1's shorthands, left unset (solverOptions).
     b.Finish(fb::CreateLoadSceneDirect(
         b, o.path.empty() ? nullptr : o.path.c_str(), o.glb.empty() ? nullptr : &o.glb,
-        o.name.empty() ? nullptr : o.name.c_str(), o.solver.c_str(), o.bins, o.iterationsPerFrame,
-        o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload,
-        o.linkOracle.empty() ? nullptr : o.linkOracle.c_str(), o.oracle, o.convergedChange,
-        o.environment.empty() ? nullptr : o.environment.c_str(), sky ? &*sky : nullptr,
-        o.environmentIntensity, o.environmentRotation, o.emitterRays, o.gatherRays));
+        o.name.empty() ? nullptr : o.name.c_str(), o.solver.c_str(), 0, o.iterationsPerFrame,
+        o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload, nullptr, 1.0f,
+        o.convergedChange, o.environment.empty() ? nullptr : o.environment.c_str(),
+        sky ? &*sky : nullptr, o.environmentIntensity, o.environmentRotation, o.emitterRays,
+        o.gatherRays, options.empty() ? nullptr : &options));
     return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo));
 }
 

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -87,13 +88,14 @@ struct LoadOptions {
     std::vector<uint8_t> glb;  // or an uploaded binary glTF
     std::string name;          // session name for an upload
     std::string solver = "antiradiance";
-    int bins = 0;  // 0: the server's default (64 behind the final gather, 128 without)
+    // The solver's own options by name, as text ({"bins", "64"}); `penumbra --help` lists
+    // each solver's. Absent: the solver's defaults.
+    using Options = std::map<std::string, std::string>;
+    Options solverOptions;
     int iterationsPerFrame = 1;
     float elementSize = 0.0f;  // 0: automatic
     std::string device;        // "" = server default
     bool reload = false;
-    std::string linkOracle;  // "" (server default: conservative) | "paper" | "area"
-    float oracle = 1.0f;
     float convergedChange = 1e-3f;  // 0: frames stream continuously, never idle
     int emitterRays = 256;          // shadow rays per surfel for the emitters' direct light; 0: off
     int gatherRays = 256;           // final gather rays per input vertex; 0: off

@@ -36,7 +36,7 @@ inline size_t NearestSurfel(const Surfels& s, glm::vec3 p, glm::vec3 normal) {
 inline SolverSettings CpuSettings(int bins, float elementSize) {
     SolverSettings s;
     s.device = DeviceChoice::kCpu;
-    s.bins = bins;
+    SetOption(s.options, "bins", bins);
     s.elementSize = elementSize;
     return s;
 }
@@ -165,10 +165,12 @@ struct ProcessResult {
     int exitCode;
     std::string output;  // stdout and stderr together
 };
-// Runs the penumbra CLI with `args` (and `env`, "NAME=value ..." before it, when given).
-inline ProcessResult Execute(const std::string& args, const std::string& env = "") {
-    std::string cmd = (env.empty() ? "" : env + " ") + std::string(PENUMBRA_BINARY_DIR) +
-                      "/penumbra " + args + " 2>&1";
+// Runs the penumbra CLI (or `program`, under the build folder) with `args` (and `env`,
+// "NAME=value ..." before it, when given).
+inline ProcessResult Execute(const std::string& args, const std::string& env = "",
+                             const std::string& program = "penumbra") {
+    std::string cmd = (env.empty() ? "" : env + " ") + std::string(PENUMBRA_BINARY_DIR) + "/" +
+                      program + " " + args + " 2>&1";
     FILE* pipe = popen(cmd.c_str(), "r");
     ProcessResult r{-1, ""};
     std::array<char, 4096> buf;

@@ -7,13 +7,14 @@
 #include "base/check.h"
 #include "base/progress.h"
 #include "cmd/service_cli.h"
+#include "cmd/solver_options.h"
 #include "gather/gather_stage.h"
 #include "output/compare.h"
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
 #include "render/renderer.h"
 #include "scene/gltf_loader.h"
-#include "solver/solver.h"
+#include "solver/registry.h"
 
 namespace {
 
@@ -184,14 +185,14 @@ struct IterationOptions {
 };
 
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
-         const IterationOptions& iterations, const std::string& device, const std::string& scheme,
+         const IterationOptions& iterations, const std::string& device,
          const std::string& channelName, const EnvironmentOptions& environment,
          const GatherOptions& gather, DisplayColor color, bool quiet) {
     Channel channel = ParseChannel(channelName);
     CheckOutputPath(outPath);
     const GatherSettings gatherSettings = gather.Settings();
     settings.device = ParseDevice(device);
-    settings.scheme = ParseScheme(scheme);
+    CheckSolverSettings(settings);  // before the (long) load: a bad option fails fast
     iterations.Check();
 
     Progress progress(!quiet && StderrIsTerminal());
@@ -226,11 +227,11 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
         const SolverStats& s = solver->Stats();
         std::fprintf(stderr,
                      "%s: %zu triangles -> %zu elements, %zu links, %d bins, element size %.4g m\n"
-                     "  device %s; links built in %.3f s; %d iterations (%d passes, scheme %s) "
+                     "  device %s; links built in %.3f s; %d iterations (%d passes) "
                      "at %.2f ms a pass",
                      scenePath.c_str(), scene.TriangleCount(), s.elements, s.links, s.bins,
                      s.elementSize, s.device.c_str(), s.linkBuildSeconds, s.iterations, s.gathers,
-                     SchemeName(settings.scheme), s.gathers ? s.msTotal / s.gathers : 0.0);
+                     s.gathers ? s.msTotal / s.gathers : 0.0);
         for (const auto& p : s.passes)
             std::fprintf(stderr, " | %s %.2f", p.name.c_str(),
                          s.gathers ? p.msTotal / s.gathers : 0.0);
@@ -247,7 +248,7 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
                          glm::degrees(s.environmentRotation), s.twoSidedElements, s.elements);
         if (s.glossyElements)
             std::fprintf(stderr, "\n  %zu of %zu elements glossy (%zu lobes)", s.glossyElements,
-                         s.elements, s.glossyLobes);
+                         s.elements, size_t(s.Number("glossy_lobes")));
         if (s.emitterRays)
             std::fprintf(stderr, "\n  first shot: %d rays a surfel in %.0f ms", s.emitterRays,
                          s.msEmitterDirect);
@@ -355,6 +356,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
         throw Error("--mesh refined needs the solver's own result (drop --lighting)");
     Channel channel = ParseChannel(channelName);
     settings.device = ParseDevice(device);
+    CheckSolverSettings(settings);  // before the (long) load: a bad option fails fast
     iterations.Check();
     GatherSettings gatherSettings = o.gather.Settings();
     // Shading the refined mesh reads every surfel.
@@ -398,7 +400,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
         perSurfel = solver->SurfelIrradiance(channel);
         for (size_t p = 0; p < scene.primitives.size(); ++p)
             perVertex.push_back(PrimitiveIrradiance(solver->GetSurfels(), perSurfel, scene, p));
-        source = "antiradiance on " + solver->Stats().device + ", " +
+        source = solver->Stats().solver + " on " + solver->Stats().device + ", " +
                  std::to_string(solver->Stats().iterations) + " iterations, channel " +
                  ChannelName(channel);
     }
@@ -500,7 +502,10 @@ std::string Nearest(const CLI::App& app, const std::string& word) {
 }
 
 int main(int argc, char** argv) {
-    CLI::App app{"Penumbra: a headless lighting service (antiradiance global illumination)"};
+    CLI::App app{
+        "Penumbra: a headless lighting service (global illumination, per-vertex "
+        "irradiance streamed to clients)"};
+    app.footer(cli::SolversHelp());
     app.require_subcommand(1);
     app.set_version_flag("--version", std::string("penumbra ") + PENUMBRA_VERSION);
     // Options of the whole program (--connect, --session) may follow the subcommand too.
@@ -510,8 +515,7 @@ int main(int argc, char** argv) {
     auto* bake = app.add_subcommand("bake",
                                     "Light a glTF scene in-process and write per-vertex "
                                     "irradiance (.json, or .glb/.gltf with _IRRADIANCE)");
-    std::string scenePath, outPath, device = "auto", scheme = "adaptive",
-                                    linkOracle = "conservative", channel = "indirect";
+    std::string scenePath, outPath, device = "auto", channel = "indirect";
     SolverSettings settings;
     IterationOptions iterations;
     bool quiet = false;
@@ -521,29 +525,12 @@ int main(int argc, char** argv) {
         ->required();
     std::string bakeColor0 = "tonemapped";
     AddColor0(bake, bakeColor0);
-    bake->add_option("--solver", settings.solver, "solver (antiradiance)")->capture_default_str();
-    bake->add_option("--bins", settings.bins,
-                     "direction bins, 32..1024, a multiple of 4; 0: 64 behind the final "
-                     "gather, 128 without")
-        ->capture_default_str();
+    cli::AddSolverOptions(bake, settings.solver, settings.options);
     iterations.Add(bake);
     bake->add_option("--element-size", settings.elementSize,
                      "longest element edge after refinement, metres (default: scene diameter/40)");
-    bake->add_option("--scheme", scheme,
-                     "adaptive, symmetric or asymmetric iteration (Sec. 2.2; docs/SOLVER.md)")
-        ->capture_default_str();
     bake->add_option("--device", device,
                      "auto, gpu, lavapipe or cpu (auto: a real GPU if present, else cpu)")
-        ->capture_default_str();
-    bake->add_option("--oracle", settings.oracle,
-                     "link refinement threshold, in units of a bin's solid angle")
-        ->capture_default_str();
-    bake->add_option("--receiver-oracle", settings.receiverOracle,
-                     "receiver solid-angle threshold relative to --oracle")
-        ->capture_default_str();
-    bake->add_option("--link-oracle", linkOracle,
-                     "conservative (accurate), paper (Sec. 3.2: fewer links) or area (the "
-                     "paper's with a receiver test)")
         ->capture_default_str();
     bake->add_option("--threads", settings.threads, "CPU threads (0: all cores)")
         ->capture_default_str();
@@ -562,20 +549,9 @@ int main(int argc, char** argv) {
                      "auto|on|off: surfaces that do not bound a solid also block light arriving "
                      "at their backs (auto: on with an environment)")
         ->capture_default_str();
-    std::string tables = "auto";
-    bake->add_option("--tables", tables,
-                     "auto|fp32|fp16: how the CPU back end stores its radiance tables (fp16: "
-                     "half the memory traffic, ~5e-4 relative; auto: fp16 where the CPU has "
-                     "F16C). The Vulkan passes use fp32")
-        ->capture_default_str();
     bake->add_flag("--motion-links", settings.motionLinks,
-                   "link dynamic nodes for their motion bounds, as the service does (Sec. 3.3)");
-    bake->add_option("--motion-link-budget", settings.motionLinkBudget,
-                     "with --motion-links: build the usual links instead when the links touching "
-                     "dynamic nodes would outnumber the others by more than this factor (the "
-                     "service uses 1; 0: no limit)")
-        ->check(CLI::NonNegativeNumber)
-        ->capture_default_str();
+                   "prepare dynamic nodes to move in place, as the service does (antiradiance: "
+                   "links built for their motion bounds, Sec. 3.3)");
     GatherOptions bakeGather;
     bakeGather.Add(bake);
     bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
@@ -647,10 +623,7 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     render->add_option("--channel", renderChannel, "indirect, direct or total")
         ->capture_default_str();
-    render
-        ->add_option("--bins", renderSettings.bins,
-                     "direction bins (solver); 0: 64 behind the final gather, 128 without")
-        ->capture_default_str();
+    cli::AddSolverOptions(render, renderSettings.solver, renderSettings.options);
     renderIterations.Add(render);
     ro.gather.Add(render);
     render->add_option("--element-size", renderSettings.elementSize,
@@ -705,10 +678,8 @@ int main(int argc, char** argv) {
     if (service.Parsed()) return service.Run();
     try {
         if (bake->parsed()) {
-            settings.linkOracle = ParseLinkOracle(linkOracle);
             settings.backOcclusion = ParseBackOcclusion(backOcclusion);
-            settings.tables = ParseTablePrecision(tables);
-            return Bake(scenePath, outPath, settings, iterations, device, scheme, channel, bakeEnv,
+            return Bake(scenePath, outPath, settings, iterations, device, channel, bakeEnv,
                         bakeGather, ParseDisplayColor(bakeColor0), quiet);
         }
         if (reference->parsed()) {

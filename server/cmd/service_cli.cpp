@@ -19,10 +19,12 @@
 
 #include "base/check.h"
 #include "client/client.h"
+#include "cmd/solver_options.h"
 #include "net/server.h"
 #include "output/irradiance_writer.h"
 #include "scene/gltf_loader.h"
 #include "service/service.h"
+#include "solver/solver.h"
 
 namespace penumbra::cli {
 
@@ -75,18 +77,15 @@ std::array<float, 3> Triple(const std::vector<float>& v, const char* what) {
     return {v[0], v[1], v[2]};
 }
 
-client::Channel ParseChannel(const std::string& s) {
-    if (s == "indirect") return client::Channel::kIndirect;
-    if (s == "direct") return client::Channel::kDirect;
-    if (s == "total") return client::Channel::kTotal;
-    throw Error("channel must be indirect, direct or total, not '" + s + "'");
+// The channels by the solver interface's names (solver.h), as the protocol numbers them.
+static_assert(int(client::Channel::kIndirect) == int(Channel::kIndirect) &&
+              int(client::Channel::kDirect) == int(Channel::kDirect) &&
+              int(client::Channel::kTotal) == int(Channel::kTotal));
+client::Channel ParseClientChannel(const std::string& s) {
+    return static_cast<client::Channel>(ParseChannel(s));
 }
 
-const char* ChannelName(client::Channel c) {
-    return c == client::Channel::kDirect  ? "direct"
-           : c == client::Channel::kTotal ? "total"
-                                          : "indirect";
-}
+const char* ChannelName(client::Channel c) { return ChannelName(static_cast<Channel>(c)); }
 
 client::Format ParseFormat(const std::string& s) {
     if (s == "f32" || s == "float32") return client::Format::kFloat32;
@@ -204,12 +203,7 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.load = app.add_subcommand("load", "Load a scene on the server (or join its session)");
     s.load->add_option("path", s.loadPath, "glTF path under the server's --scene-root")->required();
     s.load->add_flag("--upload", s.upload, "send the local file as a .glb instead of a path");
-    s.load->add_option("--solver", s.loadOptions.solver, "solver (antiradiance)")
-        ->capture_default_str();
-    s.load
-        ->add_option("--bins", s.loadOptions.bins,
-                     "direction bins (32…1024); 0: 64 behind the final gather, 128 without")
-        ->capture_default_str();
+    AddSolverOptions(s.load, s.loadOptions.solver, s.loadOptions.solverOptions);
     s.load
         ->add_option("--iterations-per-frame", s.loadOptions.iterationsPerFrame,
                      "solver iterations per streamed frame")
@@ -218,9 +212,6 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
                        "metres (0: scene diameter / 40)");
     s.load->add_option("--device", s.loadOptions.device, "auto|gpu|lavapipe|cpu");
     s.load->add_flag("--reload", s.loadOptions.reload, "rebuild even if already loaded");
-    s.load->add_option("--link-oracle", s.loadOptions.linkOracle, "conservative|paper|area");
-    s.load->add_option("--oracle", s.loadOptions.oracle, "link refinement threshold")
-        ->capture_default_str();
     s.load
         ->add_option("--converged-change", s.loadOptions.convergedChange,
                      "idle once a frame changes irradiance by less (0: stream forever)")
@@ -505,7 +496,7 @@ int ServiceCommands::State::Execute(client::Client& c) {
                     done = true;
                 cv.notify_all();
             },
-            ParseChannel(channel), ParseFormat(format), session);
+            ParseClientChannel(channel), ParseFormat(format), session);
         std::unique_lock lock(m);
         auto stop = [&] { return done || !c.Connected(); };
         if (timeout > 0.0) {
@@ -618,7 +609,7 @@ int ServiceCommands::State::Execute(client::Client& c) {
         return kExitOk;
     }
     if (get && get->parsed()) {
-        client::Frame f = c.Get(ParseChannel(channel), client::Format::kFloat32, session);
+        client::Frame f = c.Get(ParseClientChannel(channel), client::Format::kFloat32, session);
         // The bake formats: a Scene carries each primitive's key (and, for glTF output, its
         // geometry, read from the local file).
         Scene scene;

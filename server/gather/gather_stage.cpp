@@ -103,7 +103,7 @@ void GatherStage::Shoot(const Moved* moved) {
         raysRetraced_ += traced;
     }
     for (size_t t = 0; t < targets_.size(); ++t) shot_[targets_[t]] += emitterHits_[t];
-    if (!glossy_) inner_->SetEmitterDirect(shot_);
+    if (HandsOver()) inner_->SetEmitterDirect(shot_);
     fresh_ = false;
     msShot_ = Ms(start);
 }
@@ -844,10 +844,10 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
     lightsFresh_ = false;
     // A scene that turned glossy takes the first shot back from the solver (its lobes would
     // miss it), one that turned diffuse hands it over.
-    const bool wasGlossy = glossy_;
+    const bool handed = HandsOver();
     glossy_ = AnyGlossy(scene_.materials);
-    if (glossy_ != wasGlossy && !shot_.empty())
-        inner_->SetEmitterDirect(glossy_ ? std::vector<glm::vec3>() : shot_);
+    if (HandsOver() != handed && !shot_.empty())
+        inner_->SetEmitterDirect(HandsOver() ? shot_ : std::vector<glm::vec3>());
     if (lobesChanged && !targets_.empty()) {
         TraceLobes();
         Sky();
@@ -873,7 +873,7 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
                 emitterHits_[t] += le[k] * emitterCoef_[t * slots + k];
             shot_[targets_[t]] += emitterHits_[t];
         }
-        if (!glossy_) inner_->SetEmitterDirect(shot_);
+        if (HandsOver()) inner_->SetEmitterDirect(shot_);
         msShot_ = Ms(start);
         return;
     }
@@ -918,11 +918,11 @@ void GatherStage::UpdateLights(const Scene& scene) {
     lightsFresh_ = false;
 }
 
-void GatherStage::UpdateGeometry(const Scene& scene) {
+std::string GatherStage::UpdateGeometry(const Scene& scene) {
     const std::vector<glm::vec3> before = inner_->GetSurfels().positions;
     const std::vector<glm::vec3> normalsBefore = inner_->GetSurfels().normals;
     const std::vector<PunctualLight> lightsBefore = scene_.lights;
-    inner_->UpdateGeometry(scene);
+    std::string done = inner_->UpdateGeometry(scene);
     scene_ = scene;
     const Surfels& s = inner_->GetSurfels();
     // What moved, and where it was and is: only the rays near it are traced again.
@@ -960,6 +960,7 @@ void GatherStage::UpdateGeometry(const Scene& scene) {
     Shoot(partial);
     fresh_ = false;
     lightsFresh_ = false;
+    return done;
 }
 
 void GatherStage::WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) {
@@ -1004,12 +1005,27 @@ GatherSettings GatherParts(const Scene& scene, const GatherSettings& settings,
     return s;
 }
 
+namespace {
+
+// `solver` behind a gather stage with `parts` (GatherParts has checked them).
+std::unique_ptr<Solver> Behind(std::unique_ptr<Solver> solver, const Scene& scene,
+                               const GatherSettings& parts, std::vector<std::string>* notes) {
+    if (parts.emitterRays == 0 && parts.gatherRays == 0) return solver;
+    if (notes && parts.emitterRays > 0 && !AnyGlossy(scene.materials) &&
+        !solver->TakesEmitterDirect())
+        notes->push_back(
+            "the first shot serves the output vertices and the gather, not the "
+            "solver: solver '" +
+            solver->Stats().solver + "' carries the emission itself");
+    return std::make_unique<GatherStage>(std::move(solver), scene, parts);
+}
+
+}  // namespace
+
 std::unique_ptr<Solver> WithGather(std::unique_ptr<Solver> solver, const Scene& scene,
                                    const GatherSettings& settings,
                                    std::vector<std::string>* notes) {
-    const GatherSettings s = GatherParts(scene, settings, notes);
-    if (s.emitterRays == 0 && s.gatherRays == 0) return solver;
-    return std::make_unique<GatherStage>(std::move(solver), scene, s);
+    return Behind(std::move(solver), scene, GatherParts(scene, settings, notes), notes);
 }
 
 std::unique_ptr<Solver> CreateGatheredSolver(const Scene& scene, SolverSettings settings,
@@ -1017,15 +1033,11 @@ std::unique_ptr<Solver> CreateGatheredSolver(const Scene& scene, SolverSettings 
                                              const ProgressFn& progress,
                                              std::vector<std::string>* notes) {
     const GatherSettings parts = GatherParts(scene, gather, notes);
-    const bool glossy = AnyGlossy(scene.materials);
-    if (parts.gatherRays > 0 && !glossy) {
-        if (settings.bins == 0) settings.bins = kGatherBins;
-        settings.antiradianceTolerance = std::max(settings.antiradianceTolerance, kGatherSettle);
-    }
+    settings.behindGather = parts.gatherRays > 0 && !AnyGlossy(scene.materials);
     std::unique_ptr<Solver> solver = CreateSolver(scene, settings, progress);
-    if (parts.emitterRays == 0 && parts.gatherRays == 0) return solver;
-    if (progress) progress("gather: tracing", 0.0);
-    return std::make_unique<GatherStage>(std::move(solver), scene, parts);
+    if (progress && (parts.emitterRays > 0 || parts.gatherRays > 0))
+        progress("gather: tracing", 0.0);
+    return Behind(std::move(solver), scene, parts, notes);
 }
 
 }  // namespace penumbra

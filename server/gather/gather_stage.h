@@ -58,7 +58,7 @@ class GatherStage : public Solver {
     std::string GeometryMismatch(const Scene& scene) const override {
         return inner_->GeometryMismatch(scene);
     }
-    void UpdateGeometry(const Scene& scene) override;
+    std::string UpdateGeometry(const Scene& scene) override;
     std::vector<float> SurfelExitant() override { return inner_->SurfelExitant(); }
     void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
     void SetInterrupt(const std::atomic<bool>* flag) override { inner_->SetInterrupt(flag); }
@@ -217,6 +217,9 @@ class GatherStage : public Solver {
     // The scene has glossy materials: the first shot serves the targets and the gather but is
     // not handed to the solver, whose lobes reflect the emission it carries itself.
     bool glossy_ = false;
+    // Whether the solver takes the first shot (then it carries only bounces): in a scene
+    // without glossy materials, from a solver that can (Solver::TakesEmitterDirect).
+    bool HandsOver() const { return !glossy_ && inner_->TakesEmitterDirect(); }
     std::vector<uint32_t> glossyTriangles_;   // refined triangles of glossy materials
     std::vector<double> glossyCdf_;           // their weights, cumulative (glossyCdf_.back(): all)
     std::vector<float> glintDensity_;         // per refined triangle: lum(F0) / all (or 0)
@@ -248,16 +251,11 @@ std::unique_ptr<Solver> WithGather(std::unique_ptr<Solver> solver, const Scene& 
                                    const GatherSettings& settings,
                                    std::vector<std::string>* notes = nullptr);
 
-// Behind a final gather the solver's answer is read only through the gather's hits, a bounce
-// later and averaged over the hemisphere, so its resolution matters less (docs/SOLVER.md,
-// "Settings behind the gather"): bins left at 0 become kGatherBins instead of
-// kDefaultBins, and the antiradiance settles each bounce to kGatherSettle of the largest
-// irradiance instead of 10⁻⁴.
-inline constexpr int kGatherBins = 64;
-inline constexpr float kGatherSettle = 1e-3f;
-
-// The solver `settings` names, built for what it will feed: with the settings above when
-// GatherParts keeps the final gather, then behind the gather stage (WithGather).
+// The solver `settings` names, built for what it will feed, then behind the gather stage
+// (WithGather). When GatherParts keeps the final gather in a scene without glossy materials,
+// the solver's answer is read only through the gather's hits, a bounce later and averaged
+// over the hemisphere, so its resolution matters less: SolverSettings::behindGather is set
+// and the solver picks cheaper defaults (docs/SOLVER.md, "Settings behind the gather").
 std::unique_ptr<Solver> CreateGatheredSolver(const Scene& scene, SolverSettings settings,
                                              const GatherSettings& gather,
                                              const ProgressFn& progress = {},

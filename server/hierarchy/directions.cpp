@@ -69,11 +69,15 @@ float AngleBetween(const glm::vec3& a, const glm::vec3& b) {
 
 }  // namespace
 
-Directions::Directions(int count) : count_(count) {
+void Directions::Check(int count) {
     if (count < kMinBins || count > kMaxBins || count % 4 != 0)
         throw Error("bin count " + std::to_string(count) + " must be a multiple of 4 in " +
                     std::to_string(kMinBins) + "…" + std::to_string(kMaxBins) +
                     " (table rows are read as whole vec4s on the device)");
+}
+
+Directions::Directions(int count) : count_(count) {
+    Check(count);
     const float pi = std::numbers::pi_v<float>;
     solidAngle_ = 4.0f * pi / count;
     spacing_ = std::sqrt(solidAngle_);

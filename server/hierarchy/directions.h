@@ -22,6 +22,9 @@ class Directions {
 
     // `count` in [kMinBins, kMaxBins]; throws penumbra::Error otherwise.
     explicit Directions(int count);
+    // penumbra::Error unless `count` is a bin count the tables can hold (kMinBins…kMaxBins,
+    // a multiple of 4).
+    static void Check(int count);
 
     int Count() const { return count_; }
     float BinSolidAngle() const { return solidAngle_; }  // ω_bin = 4π/m

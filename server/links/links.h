@@ -37,7 +37,7 @@ struct LinkSettings {
     float oracle = 1.0f;
     // Conservative and area modes: refine while the receiver subtends more than oracle ×
     // this × ω_bin (a large receiver takes one direction for all its members).
-    float receiverOracle = 0.5f;  // SolverSettings::receiverOracle
+    float receiverOracle = 0.5f;  // AntiradianceSettings::receiverOracle
     int threads = 0;              // 0: all cores
     // Motion bounds of group g at motion[g − 1] (Surfels::groups); empty: everything static.
     std::vector<MotionBounds> motion;

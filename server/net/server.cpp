@@ -8,6 +8,7 @@
 
 #include "base/check.h"
 #include "gather/gather_stage.h"
+#include "solver/registry.h"
 
 namespace penumbra::net {
 
@@ -388,15 +389,28 @@ class Connection : public std::enable_shared_from_this<Connection> {
                 }
                 req.environmentIntensity = l->environment_intensity();
                 req.environmentRotation = l->environment_rotation();
-                req.settings.solver = service.Defaults();
-                std::string solver = Str(l->solver());
-                if (!solver.empty() && solver != "antiradiance")
-                    throw ServiceError(ErrorKind::kUnsupported,
-                                       "solver '" + solver + "' is not available (antiradiance)");
-                if (l->bins() != 0 && (l->bins() < 32 || l->bins() > 1024))
-                    throw ServiceError(ErrorKind::kInvalidArgument,
-                                       "bins must be 32…1024 (or 0: the default)");
-                req.settings.solver.bins = l->bins();
+                // The solver and its options: each checked against the registry here, so a
+                // bad one is refused before anything loads.
+                const std::string solver = Str(l->solver());
+                try {
+                    req.settings.solver =
+                        service.DefaultsFor(solver.empty() ? "antiradiance" : solver);
+                } catch (const Error& e) {
+                    throw ServiceError(ErrorKind::kUnsupported, e.what());
+                }
+                SolverOptions& options = req.settings.solver.options;
+                if (l->options())
+                    for (const fb::SolverOption* o : *l->options())
+                        options[Str(o->name())] = Str(o->value());
+                // Protocol 1's shorthands for three antiradiance options, where given.
+                if (l->bins() != 0) options.try_emplace("bins", std::to_string(l->bins()));
+                if (l->oracle() != 1.0f) {
+                    char text[32];
+                    std::snprintf(text, sizeof text, "%.9g", l->oracle());
+                    options.try_emplace("oracle", text);
+                }
+                if (!Str(l->link_oracle()).empty())
+                    options.try_emplace("link-oracle", Str(l->link_oracle()));
                 if (!(l->element_size() >= 0.0f) || !std::isfinite(l->element_size()))
                     throw ServiceError(ErrorKind::kInvalidArgument,
                                        "element size must be ≥ 0 metres (0: automatic)");
@@ -405,9 +419,6 @@ class Connection : public std::enable_shared_from_this<Connection> {
                     throw ServiceError(ErrorKind::kInvalidArgument,
                                        "iterations per frame must be 1…64");
                 req.settings.iterationsPerFrame = l->iterations_per_frame();
-                if (!(l->oracle() > 0.0f) || !std::isfinite(l->oracle()))
-                    throw ServiceError(ErrorKind::kInvalidArgument, "oracle must be > 0");
-                req.settings.solver.oracle = l->oracle();
                 if (!(l->converged_change() >= 0.0f))
                     throw ServiceError(ErrorKind::kInvalidArgument,
                                        "converged_change must be ≥ 0 (0: never idle)");
@@ -422,19 +433,17 @@ class Connection : public std::enable_shared_from_this<Connection> {
                                                std::to_string(kMaxGatherRays));
                 req.settings.emitterRays = l->emitter_rays();
                 req.settings.gatherRays = l->gather_rays();
-                if (!Str(l->link_oracle()).empty()) {
-                    try {
-                        req.settings.solver.linkOracle = ParseLinkOracle(Str(l->link_oracle()));
-                    } catch (const Error& e) {
-                        throw ServiceError(ErrorKind::kInvalidArgument, e.what());
-                    }
-                }
                 if (!Str(l->device()).empty()) {
                     try {
                         req.settings.solver.device = ParseDevice(Str(l->device()));
                     } catch (const Error& e) {
                         throw ServiceError(ErrorKind::kInvalidArgument, e.what());
                     }
+                }
+                try {
+                    CheckSolverSettings(req.settings.solver);
+                } catch (const Error& e) {
+                    throw ServiceError(ErrorKind::kInvalidArgument, e.what());
                 }
                 Blocking(
                     id, [&service, req] { return service.Load(req); },

@@ -56,19 +56,14 @@ nlohmann::json StatsToJson(const SolverStats& s) {
                             {"rotation_degrees", s.environmentRotation * 57.29577951308232}};
     j["two_sided_elements"] = s.twoSidedElements;
     j["glossy_elements"] = s.glossyElements;
-    j["glossy_lobes"] = s.glossyLobes;
     if (s.motionGroups > 0)
         j["motion"] = {{"groups", s.motionGroups},
                        {"links", s.motionLinks},
                        {"moves", s.geometryUpdates},
                        {"links_updated", s.linksUpdated},
-                       {"last_move_ms", s.msGeometry},
-                       {"link_update", s.linkUpdate},
-                       {"last_link_update_device_ms", s.msLinkUpdateDevice}};
+                       {"last_move_ms", s.msGeometry}};
     if (!s.motionDeclined.empty()) j["motion_declined"] = s.motionDeclined;
     j["bounces"] = s.bounces;
-    j["last_antiradiance_steps"] = s.lastAntiradianceSteps;
-    j["antiradiance_cap_hits"] = s.antiradianceCapHits;
     if (std::isfinite(s.irradianceBound)) j["irradiance_bound"] = s.irradianceBound;
     if (!s.divergence.empty()) j["divergence"] = s.divergence;
     if (s.emitterRays > 0)
@@ -86,8 +81,14 @@ nlohmann::json StatsToJson(const SolverStats& s) {
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;
     j["passes"] = passes;
     j["table_bytes"] = s.tableBytes;
-    j["tables"] = s.tables;
     j["link_bytes"] = s.linkBytes;
+    // The solver's own figures, beside the common ones.
+    for (const auto& [name, value] : s.details) {
+        if (const double* number = std::get_if<double>(&value))
+            j[name] = *number;
+        else
+            j[name] = std::get<std::string>(value);
+    }
     return j;
 }
 

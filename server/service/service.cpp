@@ -6,6 +6,7 @@
 
 #include "base/check.h"
 #include "scene/gltf_loader.h"
+#include "solver/registry.h"
 
 namespace penumbra::service {
 
@@ -13,6 +14,17 @@ namespace fs = std::filesystem;
 
 Service::Service(fs::path sceneRoot, ServiceLimits limits, SolverSettings defaults)
     : root_(fs::weakly_canonical(sceneRoot)), limits_(limits), defaults_(std::move(defaults)) {}
+
+SolverSettings Service::DefaultsFor(const std::string& name) const {
+    const SolverEntry& entry = FindSolver(name);
+    SolverSettings s = defaults_;
+    s.solver = entry.name;
+    s.options.clear();
+    for (const auto& [option, value] : defaults_.options)
+        for (const OptionSpec& spec : entry.options)
+            if (spec.name == option) s.options[option] = value;
+    return s;
+}
 
 Service::~Service() { Shutdown(); }
 

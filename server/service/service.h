@@ -39,14 +39,16 @@ struct LoadResult {
     bool reused = false;
 };
 
-// The solver settings a service starts from: the library's defaults, with the links of
-// dynamic nodes built for their motion bounds (SolverSettings::motionLinks), so that moves
-// inside the bounds update links in place instead of rebuilding them, unless that would more
-// than double the scene's links (then moves rebuild).
+// The solver settings a service starts from: the library's defaults, with dynamic nodes
+// prepared to move in place (SolverSettings::motionLinks; for the antiradiance, links built
+// for their motion bounds, updated in place instead of rebuilt), unless that would more than
+// double the scene's links (then moves rebuild). Options here apply to the solvers that
+// declare them (Service::DefaultsFor).
 inline SolverSettings ServiceDefaults() {
     SolverSettings s;
     s.motionLinks = true;
-    s.motionLinkBudget = 1.0f;  // at most as many links for the dynamic nodes as for the rest
+    // At most as many links for the dynamic nodes as for the rest.
+    s.options["motion-link-budget"] = "1";
     return s;
 }
 
@@ -75,6 +77,9 @@ class Service {
 
     const ServiceLimits& Limits() const { return limits_; }
     const SolverSettings& Defaults() const { return defaults_; }
+    // The defaults for solver `name`: its name, the common settings, and those of the
+    // defaults' options it declares. penumbra::Error for a solver that is not registered.
+    SolverSettings DefaultsFor(const std::string& name) const;
 
   private:
     const std::filesystem::path root_;

@@ -641,11 +641,7 @@ bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string&
     std::string failure, done;
     try {
         if (moves) {
-            solver_->UpdateGeometry(applied_);
-            SolverStats st = solver_->Stats();
-            done = moved + ": links updated in place on the " + st.linkUpdate + " (" +
-                   std::to_string(st.linksUpdated) + " so far, this move " +
-                   std::to_string(int(st.msGeometry + 0.5)) + " ms)";
+            done = moved + ": " + solver_->UpdateGeometry(applied_);
         }
         solver_->UpdateMaterials(applied_);
         if (lights) solver_->UpdateLights(applied_);  // one shadow pass

@@ -1,19 +1,35 @@
-// Solver factory and the shared helpers of the solver interface.
+// The shared helpers of the solver interface (the factory is in registry.cpp).
 #include "solver/solver.h"
 
 #include <cmath>
 #include <cstdio>
 
 #include "base/check.h"
-#include "solver/antiradiance/antiradiance_solver.h"
 
 namespace penumbra {
 
-std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& settings,
-                                     const ProgressFn& progress) {
-    if (settings.solver == "antiradiance")
-        return std::make_unique<AntiradianceSolver>(scene, settings, progress);
-    throw Error("unknown solver '" + settings.solver + "' (available: antiradiance)");
+void SolverStats::SetDetail(const std::string& name, double value) {
+    for (auto& [n, v] : details)
+        if (n == name) return void(v = value);
+    details.emplace_back(name, value);
+}
+
+void SolverStats::SetDetail(const std::string& name, const std::string& value) {
+    for (auto& [n, v] : details)
+        if (n == name) return void(v = value);
+    details.emplace_back(name, value);
+}
+
+double SolverStats::Number(const std::string& name) const {
+    for (const auto& [n, v] : details)
+        if (n == name && std::holds_alternative<double>(v)) return std::get<double>(v);
+    return 0.0;
+}
+
+std::string SolverStats::Text(const std::string& name) const {
+    for (const auto& [n, v] : details)
+        if (n == name && std::holds_alternative<std::string>(v)) return std::get<std::string>(v);
+    return {};
 }
 
 DeviceChoice ParseDevice(const std::string& name) {
@@ -22,43 +38,6 @@ DeviceChoice ParseDevice(const std::string& name) {
     if (name == "lavapipe") return DeviceChoice::kLavapipe;
     if (name == "cpu") return DeviceChoice::kCpu;
     throw Error("unknown device '" + name + "' (use auto, gpu, lavapipe or cpu)");
-}
-
-LinkOracle ParseLinkOracle(const std::string& name) {
-    if (name == "conservative") return LinkOracle::kConservative;
-    if (name == "paper") return LinkOracle::kPaper;
-    if (name == "area") return LinkOracle::kArea;
-    throw Error("unknown link oracle '" + name + "' (use conservative, paper or area)");
-}
-
-const char* LinkOracleName(LinkOracle oracle) {
-    switch (oracle) {
-        case LinkOracle::kPaper:
-            return "paper";
-        case LinkOracle::kArea:
-            return "area";
-        default:
-            return "conservative";
-    }
-}
-
-Scheme ParseScheme(const std::string& name) {
-    if (name == "symmetric") return Scheme::kSymmetric;
-    if (name == "asymmetric") return Scheme::kAsymmetric;
-    if (name == "adaptive") return Scheme::kAdaptive;
-    throw Error("unknown scheme '" + name + "' (use adaptive, symmetric or asymmetric)");
-}
-
-const char* SchemeName(Scheme scheme) {
-    switch (scheme) {
-        case Scheme::kSymmetric:
-            return "symmetric";
-        case Scheme::kAsymmetric:
-            return "asymmetric";
-        case Scheme::kAdaptive:
-            return "adaptive";
-    }
-    return "?";
 }
 
 Channel ParseChannel(const std::string& name) {
@@ -73,13 +52,6 @@ BackOcclusion ParseBackOcclusion(const std::string& name) {
     if (name == "on") return BackOcclusion::kOn;
     if (name == "off") return BackOcclusion::kOff;
     throw Error("unknown back occlusion '" + name + "' (use auto, on or off)");
-}
-
-TablePrecision ParseTablePrecision(const std::string& name) {
-    if (name == "auto") return TablePrecision::kAuto;
-    if (name == "fp32") return TablePrecision::kFp32;
-    if (name == "fp16") return TablePrecision::kFp16;
-    throw Error("unknown table precision '" + name + "' (use auto, fp32 or fp16)");
 }
 
 const char* ChannelName(Channel channel) {

@@ -7,21 +7,17 @@
 #include <glm/glm.hpp>
 #include <memory>
 #include <string>
+#include <utility>
+#include <variant>
 #include <vector>
 
 #include "base/check.h"
-#include "links/oracle.h"
 #include "scene/scene.h"
 #include "scene/surfels.h"
+#include "solver/options.h"
 
 namespace penumbra {
 
-// How the local pass's two operators are scheduled (Sec. 2.2, docs/SOLVER.md "Stability").
-// kSymmetric: K and J in every pass (the paper's default; diverges on stacks of occluders).
-// kAsymmetric: one radiance step (K), then `antiradianceSteps` antiradiance steps (J).
-// kAdaptive: one radiance step, then antiradiance steps until the antiradiance has
-// converged for that radiance (at most `maxAntiradianceSteps`).
-enum class Scheme { kSymmetric, kAsymmetric, kAdaptive };
 // What a solver reports (DESIGN.md, Channels): `direct` is the shadowed direct light of
 // punctual lights, `indirect` everything else (emitters, environment, every bounce),
 // `total` their sum.
@@ -32,58 +28,25 @@ enum class DeviceChoice { kAuto, kGpu, kLavapipe, kCpu };
 // every back side; without one, light reaches a back only from inside the scene, which the
 // paper's front-side rule (Fig. 7) ignores at the cost of leaks through thin walls.
 enum class BackOcclusion { kAuto, kOn, kOff };
-// How the CPU back end stores its I_ex tables (cpu_passes.h): fp32, or fp16 over each
-// node's area (half the memory traffic, about 5·10⁻⁴ relative). kAuto: fp16 where the CPU
-// has F16C. The Vulkan passes use fp32.
-enum class TablePrecision { kAuto, kFp32, kFp16 };
-
-inline constexpr int kDefaultBins = 128;
-
+// What every solver takes (each solver's own options travel in `options`, declared in its
+// registry entry: solver/registry.h).
 struct SolverSettings {
-    std::string solver = "antiradiance";
-    // Direction bins, 32…1024, a multiple of 4; 0: the default, kDefaultBins (the gather
-    // stage's CreateGatheredSolver picks kGatherBins behind a final gather). Read Bins().
-    int bins = 0;
-    int Bins() const { return bins > 0 ? bins : kDefaultBins; }
+    std::string solver = "antiradiance";  // a name in the registry (Solvers())
     float elementSize = 0.0f;  // metres; 0 picks kDefaultElementFraction × scene diameter
-    // Adaptive by default: the paper's symmetric scheme diverges on rows and stacks of
-    // occluders (docs/SOLVER.md "Stability"); where it converges, both reach one fixed point.
-    Scheme scheme = Scheme::kAdaptive;
-    int antiradianceSteps = 3;  // asymmetric: antiradiance steps after each radiance step
-    // Adaptive: antiradiance steps end when no leaf's irradiance moved by more than
-    // `antiradianceTolerance` × the largest leaf irradiance in the last step, or after
-    // `maxAntiradianceSteps` (SolverStats::antiradianceCapHits counts those).
-    float antiradianceTolerance = 1e-4f;
-    int maxAntiradianceSteps = 64;
     DeviceChoice device = DeviceChoice::kAuto;
-    float oracle = 1.0f;  // link refinement threshold in units of ω_bin
-    // Receiver threshold relative to `oracle` (conservative and area oracles). 0.5: a
-    // receiver cluster's error is of the first order in its size (docs/SOLVER.md, "Receiver
-    // size"); against 1, at 128 bins and 0.1 m, the blocker goes from 16.2 to 12.5% RMSE, the
-    // Cornell box from 9.9 to 8.7%, the maze from 13.6 to 12.8%, for 1.4–1.7× the links.
-    float receiverOracle = 0.5f;
-    LinkOracle linkOracle = LinkOracle::kConservative;  // links/oracle.h
-    int threads = 0;                                    // CPU threads; 0 = all cores
+    int threads = 0;          // CPU threads; 0 = all cores
     bool validation = false;  // Vulkan validation layers (tests turn them on)
     int shadowMapSize = 0;    // texels per side of each shadow map; 0: from the element size
     BackOcclusion backOcclusion = BackOcclusion::kAuto;
-    TablePrecision tables = TablePrecision::kAuto;
-    // Sec. 3.3: build the links of dynamic nodes (extras.penumbra.dynamic) for the worst case
-    // over their motion bounds, so that a move recomputes only the form factors and bins of
-    // their links (Solver::UpdateGeometry) instead of rebuilding every link. Costs more links
-    // (every pair the bounds let come close is linked at the finest level); the service
-    // turns it on, a one-off bake has no use for it.
+    // Prepare the dynamic nodes (extras.penumbra.dynamic) to move inside their motion bounds
+    // without a rebuild (Solver::UpdateGeometry): for the antiradiance, links built for the
+    // worst case over the bounds (Sec. 3.3), so that a move recomputes only their form factors
+    // and bins. The service turns it on; a one-off bake has no use for it.
     bool motionLinks = false;
-    // With motionLinks: when the links touching dynamic nodes would outnumber the others by
-    // more than this factor, the usual links are built instead and moves rebuild them
-    // (Stats().motionDeclined says so). 0: no limit.
-    float motionLinkBudget = 0.0f;
-    // Where a move inside the bounds recomputes its links on a Vulkan back end: on the device
-    // (shaders/links.comp), or on the host with the links uploaded after. Default: the
-    // device, except lavapipe, whose "device" is the host's own cores and runs the pass
-    // slower than the host code does (office chair: 17 against 22 ms a move).
-    enum class LinkUpdate { kAuto, kDevice, kHost };
-    LinkUpdate linkUpdate = LinkUpdate::kAuto;
+    // A final gather reads this solver's answer (gather/gather_stage.h): the solver may pick
+    // cheaper defaults for the options not given (docs/SOLVER.md "Settings behind the gather").
+    bool behindGather = false;
+    SolverOptions options;  // the solver's own, by name, as text (solver/options.h)
 };
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
@@ -98,17 +61,16 @@ struct SolverStats {
     std::string device;
     size_t elements = 0;  // surfels (hierarchy leaves)
     size_t nodes = 0;     // hierarchy nodes, leaves and clusters
-    size_t links = 0;
-    int bins = 0;
-    int iterations = 0;  // done so far (Solver::Iterate)
-    int gathers = 0;     // global + local passes they took (docs/SOLVER.md "Stability")
+    size_t links = 0;     // links between elements (0: a solver without them)
+    int bins = 0;         // direction bins it resolves (0: none)
+    int iterations = 0;   // done so far (Solver::Iterate)
+    int gathers = 0;      // passes they took (the solver's own kind of pass: `passes`)
     float elementSize = 0.0f;
     double linkBuildSeconds = 0.0;
     double setupSeconds = 0.0;  // scene → device-resident tables, links included
     double msTotal = 0.0;       // wall time of all iterations
     std::vector<PassTiming> passes;
-    size_t tableBytes = 0;
-    std::string tables;  // "fp32" or "fp16": how I_ex is stored
+    size_t tableBytes = 0;  // the radiance it keeps
     size_t linkBytes = 0;
     int lights = 0;           // punctual lights
     int shadowViews = 0;      // shadow maps rendered per light update (cube faces count 6)
@@ -120,20 +82,17 @@ struct SolverStats {
     float environmentRotation = 0.0f;  // radians
     size_t twoSidedElements = 0;       // elements that occlude from both sides
     size_t glossyElements = 0;         // elements with a glossy lobe (Material::Glossy)
-    size_t glossyLobes = 0;            // distinct discretised lobes
-    size_t motionGroups = 0;           // dynamic nodes linked for their motion bounds (Sec. 3.3)
-    size_t motionLinks = 0;            // links touching them, recomputed when they move
-    size_t geometryUpdates = 0;        // moves taken by UpdateGeometry
-    size_t linksUpdated = 0;           // links recomputed by those moves, in all
-    double msGeometry = 0.0;           // the last move: links, leaves, uploads, shadow maps
-    std::string linkUpdate;            // where moves recompute links: "device" or "host"
-    double msLinkUpdateDevice = 0.0;   // the last move's link update pass, device time
-    std::string motionDeclined;        // why motion links were asked for and not built
-    // Convergence (docs/SOLVER.md "Stability"). The adaptive scheme: radiance steps done,
-    // the antiradiance steps the last finished bounce took, bounces that hit the cap.
-    int bounces = 0;
-    int lastAntiradianceSteps = 0;
-    size_t antiradianceCapHits = 0;
+    // Moves in place (SolverSettings::motionLinks): dynamic nodes prepared to move inside
+    // their motion bounds, the links touching them (recomputed when they move), moves taken by
+    // UpdateGeometry, links those recomputed in all, the last one's time (links, leaves,
+    // uploads, shadow maps), and why moves in place were asked for and not prepared.
+    size_t motionGroups = 0;
+    size_t motionLinks = 0;
+    size_t geometryUpdates = 0;
+    size_t linksUpdated = 0;
+    double msGeometry = 0.0;
+    std::string motionDeclined;
+    int bounces = 0;  // bounces of light carried so far
     // No surface can receive more than `irradianceBound` lux (the furnace bound of the
     // scene's emitters, lights, sky and albedos; infinite when an albedo reaches 1). A solution
     // past kDivergenceMargin × it, or not finite, has diverged: `divergence` says where, and
@@ -156,8 +115,15 @@ struct SolverStats {
     // Where the gather stage traces: the CPU (Embree) on every solver device for now (no
     // Vulkan ray-query path yet); empty without a gather stage.
     std::string gatherDevice;
+    // The solver's own figures by name (docs/SOLVER.md lists each solver's): a number or a
+    // word. StatsToJson writes them beside the fields above.
+    std::vector<std::pair<std::string, std::variant<double, std::string>>> details;
 
     double MsPerIteration() const { return iterations ? msTotal / iterations : 0.0; }
+    void SetDetail(const std::string& name, double value);
+    void SetDetail(const std::string& name, const std::string& value);
+    double Number(const std::string& name) const;     // 0 when absent or a word
+    std::string Text(const std::string& name) const;  // "" when absent or a number
 };
 
 // How far past SolverStats::irradianceBound a leaf may go before the solver calls the
@@ -193,10 +159,12 @@ class Solver {
         (void)scene;
         return "this solver has no motion links";
     }
-    // Moves the surfaces of the moved dynamic nodes to their places in `scene` and recomputes
-    // the links touching them; the iteration continues from the current solution. Call only
-    // when GeometryMismatch is empty (throws penumbra::Error otherwise).
-    virtual void UpdateGeometry(const Scene& scene) { throw Error(GeometryMismatch(scene)); }
+    // Moves the surfaces of the moved dynamic nodes to their places in `scene` and updates
+    // what depends on them (the antiradiance: the links touching them); the iteration
+    // continues from the current solution. Returns what the move did, for a frame's note
+    // ("links updated in place on the host (…)"). Call only when GeometryMismatch is empty
+    // (throws penumbra::Error otherwise).
+    virtual std::string UpdateGeometry(const Scene& scene) { throw Error(GeometryMismatch(scene)); }
     // Carrying a solution over a rebuild (a move rebuilds the links, Sec. 3.3): each surfel's
     // exitant intensity, `Bins()` RGB rows after one another per surfel (empty when the
     // solver has no such state), and a start from such rows for the surfels marked in `keep`
@@ -213,6 +181,10 @@ class Solver {
         (void)perSurfel;
         throw Error("this solver takes no emitter direct light from outside");
     }
+    // Whether SetEmitterDirect can take a first shot in a scene without glossy materials
+    // (else the gather stage keeps the shot for its own targets and the solver carries the
+    // emission itself).
+    virtual bool TakesEmitterDirect() const { return false; }
     virtual void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) {
         (void)rows, (void)keep;
     }
@@ -227,19 +199,15 @@ class Solver {
 
 using ProgressFn = std::function<void(const std::string& stage, double fraction)>;
 
-// Builds the named solver. Throws penumbra::Error for bad settings or an unusable device.
+// Builds the named solver (its registry entry, solver/registry.h). Throws penumbra::Error
+// for an unknown solver, bad options or an unusable device.
 std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& settings,
                                      const ProgressFn& progress = {});
 
-// Parses "auto|gpu|lavapipe|cpu" and "adaptive|symmetric|asymmetric"; throws penumbra::Error.
-DeviceChoice ParseDevice(const std::string& name);
-LinkOracle ParseLinkOracle(const std::string& name);  // "conservative" | "paper" | "area"
-const char* LinkOracleName(LinkOracle oracle);
-Scheme ParseScheme(const std::string& name);
-const char* SchemeName(Scheme scheme);
-Channel ParseChannel(const std::string& name);                // "indirect" | "direct" | "total"
-BackOcclusion ParseBackOcclusion(const std::string& name);    // "auto" | "on" | "off"
-TablePrecision ParseTablePrecision(const std::string& name);  // "auto" | "fp32" | "fp16"
+// Parse the common settings' words; throw penumbra::Error naming the choices.
+DeviceChoice ParseDevice(const std::string& name);          // "auto" | "gpu" | "lavapipe" | "cpu"
+Channel ParseChannel(const std::string& name);              // "indirect" | "direct" | "total"
+BackOcclusion ParseBackOcclusion(const std::string& name);  // "auto" | "on" | "off"
 const char* ChannelName(Channel channel);
 
 // How much a solution moved: Σ|now − before| / Σ|now| over surfels and channels; 1 when

@@ -21,7 +21,7 @@ using testing::Mean;
 SolverSettings Settings(float elementSize = 0.1f) {
     SolverSettings s;
     s.device = DeviceChoice::kCpu;
-    s.bins = 64;
+    SetOption(s.options, "bins", 64);
     s.elementSize = elementSize;
     return s;
 }

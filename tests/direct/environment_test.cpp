@@ -222,7 +222,7 @@ TEST(Environment, RoomLitThroughAnOpeningKeepsTheFurnaceBalance) {
     SceneBuilder b;
     Scene scene = testing::SkyFurnaceRoom(b, b.AddMaterial("white", glm::vec3(1.0f)));
     SolverSettings settings = CpuSettings(256, 0.05f);
-    settings.oracle = 0.25f;
+    SetOption(settings.options, "oracle", 0.25f);
     auto solver = CreateSolver(scene, settings);
     // ~1/10 of the light leaves through the opening per bounce: 60 iterations leave < 0.5%.
     solver->Iterate(60);

@@ -13,6 +13,7 @@
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
 #include "scene/scene_builder.h"
+#include "solver/antiradiance/settings.h"
 #include "test_util.h"
 
 namespace penumbra {
@@ -78,12 +79,12 @@ TEST(FirstShot, EmitterEditMatchesAFreshSolve) {
 TEST(FirstShot, LavapipeMatchesTheCpu) {
     const Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/blocker.gltf");
     SolverSettings s = Cpu();
-    s.bins = 64;
+    SetOption(s.options, "bins", 64);
     s.elementSize = 0.2f;
-    s.tables = TablePrecision::kFp32;
+    SetOption(s.options, "tables", "fp32");
     GatherStage cpu(CreateSolver(scene, s), scene, ShotOnly());
     s.device = DeviceChoice::kLavapipe;
-    s.tables = TablePrecision::kAuto;
+    SetOption(s.options, "tables", "auto");
     s.validation = true;
     GatherStage gpu(CreateSolver(scene, s), scene, ShotOnly());
     cpu.Iterate(6);
@@ -261,14 +262,14 @@ TEST(FinalGather, GlossyEditsMatchAFreshGather) {
         });
 }
 
-// Behind a final gather the solver's bins default to kGatherBins; a glossy scene keeps
-// kDefaultBins (its solver reflects the emitters' light through its lobes itself: the first
+// Behind a final gather the antiradiance solver's bins default to kBinsBehindGather; a glossy scene
+// keeps kDefaultBins (its solver reflects the emitters' light through its lobes itself: the first
 // shot is not handed to it, a note says so); bins given are kept.
 TEST(FinalGather, SolverBehindTheGatherDefaultsToFewerBins) {
     SolverSettings s = Cpu();
     s.elementSize = 0.25f;
     const Scene cornell = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
-    EXPECT_EQ(CreateGatheredSolver(cornell, s, {})->Stats().bins, kGatherBins);
+    EXPECT_EQ(CreateGatheredSolver(cornell, s, {})->Stats().bins, kBinsBehindGather);
     EXPECT_EQ(CreateSolver(cornell, s)->Stats().bins, kDefaultBins);
     GatherSettings off;
     off.gatherRays = 0;
@@ -285,7 +286,7 @@ TEST(FinalGather, SolverBehindTheGatherDefaultsToFewerBins) {
     EXPECT_GT(m.emitterRays, 0);
     ASSERT_EQ(notes.size(), 1u);
     EXPECT_NE(notes[0].find("not the solver"), std::string::npos) << notes[0];
-    s.bins = 96;
+    SetOption(s.options, "bins", 96);
     EXPECT_EQ(CreateGatheredSolver(cornell, s, {})->Stats().bins, 96);
 }
 

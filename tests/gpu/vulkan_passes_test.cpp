@@ -19,6 +19,7 @@
 #include "solver/antiradiance/antiradiance_solver.h"
 #include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/model.h"
+#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
 #include "test_util.h"
 
@@ -30,10 +31,10 @@ using Pass = VulkanAntiradiance::Pass;
 // The solver settings of these tests: 64 bins, validation layers on.
 SolverSettings TestSettings(float elementSize, DeviceChoice device) {
     SolverSettings s;
-    s.bins = 64;
+    SetOption(s.options, "bins", 64);
     s.elementSize = elementSize;
     s.device = device;
-    s.tables = TablePrecision::kFp32;  // the CPU twin, exact to the shaders' layout
+    SetOption(s.options, "tables", "fp32");  // the CPU twin, exact to the shaders' layout
     s.validation = true;
     return s;
 }
@@ -42,7 +43,7 @@ class VulkanTwin : public ::testing::Test {
   protected:
     void SetUp() override {
         SolverSettings s;
-        s.bins = 64;
+        SetOption(s.options, "bins", 64);
         s.elementSize = 0.08f;
         scene_ = scenes::CornellBox().Build();
         model_ = std::make_unique<AntiradianceModel>(BuildAntiradianceModel(scene_, s, {}));
@@ -184,7 +185,7 @@ TEST(VulkanPasses, WarmStartMatchesTheCpuBackEnd) {
 TEST(VulkanPasses, LinkUpdateOfAMoveMatchesTheHost) {
     Scene scene = scenes::CornellBox().Build();
     SolverSettings s;
-    s.bins = 64;
+    SetOption(s.options, "bins", 64);
     s.elementSize = 0.1f;
     s.motionLinks = true;
     AntiradianceModel host = BuildAntiradianceModel(scene, s, {});
@@ -234,11 +235,11 @@ TEST(VulkanPasses, LinkUpdateOfAMoveMatchesTheHost) {
 // glossy cube moves under a spot light (shadow casters and receivers moved in the direct
 // stage, mirror bins redone). Lavapipe recomputes the links on the device when told to
 // (LinkUpdate::kDevice), and by default on the host, then uploads them.
-class MovedSolver : public ::testing::TestWithParam<SolverSettings::LinkUpdate> {};
+class MovedSolver : public ::testing::TestWithParam<LinkUpdate> {};
 
 TEST_P(MovedSolver, MatchesTheCpuBackEnd) {
-    const SolverSettings::LinkUpdate linkUpdate = GetParam();
-    const bool onDevice = linkUpdate == SolverSettings::LinkUpdate::kDevice;
+    const LinkUpdate linkUpdate = GetParam();
+    const bool onDevice = linkUpdate == LinkUpdate::kDevice;
     struct Case {
         const char* file;
         const char* node;
@@ -260,7 +261,7 @@ TEST_P(MovedSolver, MatchesTheCpuBackEnd) {
         s.motionLinks = true;
         auto cpu = CreateSolver(scene, s);
         s.device = DeviceChoice::kLavapipe;
-        s.linkUpdate = linkUpdate;
+        SetOption(s.options, "link-update", onDevice ? "device" : "auto");
         auto gpu = CreateSolver(scene, s);
         cpu->Iterate(4);
         gpu->Iterate(4);
@@ -294,15 +295,14 @@ TEST_P(MovedSolver, MatchesTheCpuBackEnd) {
         EXPECT_LT(rel, c.tolerance);
         EXPECT_GT(gpu->Stats().linksUpdated, 0u);
         EXPECT_EQ(gpu->Stats().linksUpdated, cpu->Stats().linksUpdated);
-        EXPECT_EQ(gpu->Stats().linkUpdate, onDevice ? "device" : "host");
+        EXPECT_EQ(gpu->Stats().Text("link_update"), onDevice ? "device" : "host");
         for (const auto& m : dynamic_cast<AntiradianceSolver&>(*gpu).ValidationMessages())
             ADD_FAILURE() << "validation: " << m;
     }
 }
 
 INSTANTIATE_TEST_SUITE_P(VulkanPasses, MovedSolver,
-                         ::testing::Values(SolverSettings::LinkUpdate::kDevice,
-                                           SolverSettings::LinkUpdate::kAuto));
+                         ::testing::Values(LinkUpdate::kDevice, LinkUpdate::kAuto));
 
 }  // namespace
 }  // namespace penumbra

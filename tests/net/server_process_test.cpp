@@ -1,6 +1,8 @@
 // penumbra-server as a real process on loopback TCP and a Unix socket, with the client
 // library and the CLI as its clients: shared sessions, edits seen by watchers, raw bad bytes,
 // clients that vanish, refused requests, SIGTERM.
+#include "net/server_process.h"
+
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -27,67 +29,10 @@
 namespace penumbra {
 namespace {
 
+using testing::ServerProcess;
+
 using namespace std::chrono_literals;
 namespace fb = protocol::fb;
-
-// Starts penumbra-server on a Unix socket and an ephemeral loopback TCP port.
-class ServerProcess {
-  public:
-    explicit ServerProcess(const std::string& name, const std::string& extra = "") {
-        dir_ = testing::TempDir("server-" + name);
-        unixUrl_ = "unix://" + (dir_ / "s.sock").string();
-        std::string ready = (dir_ / "ready").string();
-        std::string cmd = std::string(PENUMBRA_BINARY_DIR) + "/penumbra-server --listen " +
-                          unixUrl_ + " --listen tcp://127.0.0.1:0 --scene-root " +
-                          PENUMBRA_SOURCE_DIR + "/scenes --device cpu --ready-file " + ready + " " +
-                          extra;
-        pid_ = fork();
-        if (pid_ == 0) {
-            std::string log = (dir_ / "server.log").string();
-            execl("/bin/sh", "sh", "-c", ("exec " + cmd + " 2>" + log).c_str(), nullptr);
-            _exit(127);
-        }
-        for (int i = 0; i < 300 && !std::filesystem::exists(ready); ++i)
-            std::this_thread::sleep_for(20ms);
-        std::ifstream in(ready);
-        std::string line;
-        while (std::getline(in, line))
-            if (line.rfind("tcp://", 0) == 0) tcpUrl_ = line;
-        EXPECT_FALSE(tcpUrl_.empty()) << "server did not become ready: " << Log();
-    }
-    ~ServerProcess() {
-        if (pid_ > 0) {
-            kill(pid_, SIGKILL);
-            waitpid(pid_, nullptr, 0);
-        }
-    }
-    // Sends SIGTERM and returns the exit status (-1 if it did not exit within 10 s).
-    int Terminate() {
-        kill(pid_, SIGTERM);
-        for (int i = 0; i < 500; ++i) {
-            int status;
-            if (waitpid(pid_, &status, WNOHANG) == pid_) {
-                pid_ = -1;
-                return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-            }
-            std::this_thread::sleep_for(20ms);
-        }
-        return -1;
-    }
-    std::string Log() const {
-        std::ifstream in(dir_ / "server.log");
-        return {std::istreambuf_iterator<char>(in), {}};
-    }
-    const std::string& Unix() const { return unixUrl_; }
-    const std::string& Tcp() const { return tcpUrl_; }
-    std::filesystem::path Dir() const { return dir_; }
-    std::string SocketPath() const { return unixUrl_.substr(7); }
-
-  private:
-    std::filesystem::path dir_;
-    std::string unixUrl_, tcpUrl_;
-    pid_t pid_ = -1;
-};
 
 // The protocol error code a client call fails with, or -1 when it succeeds.
 template <typename F>
@@ -103,7 +48,7 @@ int ErrorCodeOf(F call) {
 client::LoadOptions Cornell() {
     client::LoadOptions o;
     o.path = "cornell-box.gltf";
-    o.bins = 64;
+    o.solverOptions["bins"] = "64";
     o.elementSize = 0.06f;
     o.device = "cpu";
     return o;
@@ -286,7 +231,7 @@ TEST(ServerProcess, PunctualLightsOverTheWire) {
     o.glb.assign(std::istreambuf_iterator<char>(in), {});
     o.name = "spot.glb";
     o.device = "cpu";
-    o.bins = 64;
+    o.solverOptions["bins"] = "64";
     o.elementSize = 0.1f;
 
     client::Client c(server.Unix(), "lights");
@@ -356,8 +301,8 @@ TEST(ServerProcess, EnvironmentAtLoad) {
     scene.environment.intensity = 0.5f;
     SolverSettings s;
     s.motionLinks = true;  // as the server builds scenes (service::ServiceDefaults)
-    s.motionLinkBudget = 1.0f;
-    s.bins = 64;
+    SetOption(s.options, "motion-link-budget", 1.0f);
+    SetOption(s.options, "bins", 64);
     s.elementSize = 0.06f;
     s.device = DeviceChoice::kCpu;
     auto solver = WithGather(CreateSolver(scene, s), scene, {});  // as the server: gather on
@@ -393,9 +338,9 @@ TEST(ServerProcess, SkyChangedInALoadedSession) {
         scene.environment.intensity = intensity;
         SolverSettings s;
         s.motionLinks = true;  // as the server builds scenes (service::ServiceDefaults)
-        s.motionLinkBudget = 1.0f;
-        s.motionLinkBudget = 1.0f;
-        s.bins = 64;
+        SetOption(s.options, "motion-link-budget", 1.0f);
+        SetOption(s.options, "motion-link-budget", 1.0f);
+        SetOption(s.options, "bins", 64);
         s.elementSize = 0.06f;
         s.device = DeviceChoice::kCpu;
         auto solver = WithGather(CreateSolver(scene, s), scene, {});  // as the server

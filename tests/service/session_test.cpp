@@ -20,7 +20,7 @@ const std::string kBlocker = std::string(PENUMBRA_SOURCE_DIR) + "/scenes/blocker
 SessionSettings Settings() {
     SessionSettings s;
     s.solver.device = DeviceChoice::kCpu;
-    s.solver.bins = 64;
+    SetOption(s.solver.options, "bins", 64);
     s.solver.elementSize = 0.1f;
     s.iterationsPerFrame = 4;
     s.convergedChange = 1e-4;
@@ -454,7 +454,7 @@ namespace {
 // the last bounded irradiance: finite and within the guard's bound.
 TEST(Session, DivergedSolutionStopsAndKeepsTheLastBoundedFrame) {
     SessionSettings settings = Settings();
-    settings.solver.scheme = Scheme::kSymmetric;
+    SetOption(settings.solver.options, "scheme", "symmetric");
     settings.solver.elementSize = 0.12f;
     const Scene scene = scenes::BoxRow(10, 0.02f).Build();
     const float bound = scenes::FurnaceBound(scene);

@@ -27,7 +27,7 @@ using testing::NearestSurfel;
 
 SolverSettings CpuSettings(int bins = 128, float elementSize = 0.05f) {
     SolverSettings s;
-    s.bins = bins;
+    SetOption(s.options, "bins", bins);
     s.elementSize = elementSize;
     s.device = DeviceChoice::kCpu;
     return s;
@@ -40,7 +40,7 @@ struct FormFactorCase {
     float tiltDegrees;  // emitter normal tilted away from −y about +z
     float offsetX;      // receiver point offset from below the emitter
     int bins;
-    // SolverSettings::receiverOracle, here 1 (receivers held to the senders' threshold)
+    // AntiradianceSettings::receiverOracle, here 1 (receivers held to the senders' threshold)
     // unless said. Off-axis at 256 bins that gives +9.8%: the floor cluster that takes the
     // link hands its centre's transfer to the point, which is farther from the patch
     // (docs/SOLVER.md, "Receiver size"); 0.25 holds it to 2%.
@@ -61,7 +61,7 @@ TEST_P(FormFactor, SmallPatchMatchesPointToPointFormula) {
     const glm::vec3 o(0, height, 0);
     Scene scene = b.Build();
     SolverSettings settings = CpuSettings(c.bins, 0.1f);
-    settings.receiverOracle = c.receiverOracle;
+    SetOption(settings.options, "receiver-oracle", c.receiverOracle);
     auto solver = CreateSolver(scene, settings);
     solver->Iterate(1);
     auto irr = solver->SurfelIrradiance();
@@ -103,8 +103,8 @@ TEST(Antiradiance, WhiteFurnaceConvergesWithBlockers) {
     b.AddBox("blocker_b", m, {0.7f, 0.6f, 0.6f}, {0.25f, 0.1f, 0.3f}, 30.0f);
     Scene scene = b.Build();
     SolverSettings settings = CpuSettings(256, 0.05f);
-    settings.oracle = 0.25f;
-    settings.receiverOracle = 0.25f;
+    SetOption(settings.options, "oracle", 0.25f);
+    SetOption(settings.options, "receiver-oracle", 0.25f);
     auto solver = CreateSolver(scene, settings);
     solver->Iterate(24);
     auto irr = solver->SurfelIrradiance();
@@ -140,7 +140,8 @@ TEST(Antiradiance, AsymmetricSchemeConvergesToTheSymmetricSolution) {
     Scene scene = b.Build();
     SolverSettings settings = CpuSettings(128, 0.1f);
     auto symmetric = CreateSolver(scene, settings);
-    settings.scheme = Scheme::kAsymmetric;  // 1 radiance + 3 antiradiance steps a round
+    SetOption(settings.options, "scheme",
+              "asymmetric");  // 1 radiance + 3 antiradiance steps a round
     auto asymmetric = CreateSolver(scene, settings);
     // Early on the two schedules must differ (else this test would compare one scheme
     // with itself): after 2 iterations the asymmetric scheme has done no K step on the
@@ -190,7 +191,7 @@ TEST(Antiradiance, BlockerShadowAppearsWithIterations) {
     float unblocked = Mean(reference->SurfelIrradiance()[ri]);
 
     SolverSettings adaptive = settings;
-    adaptive.scheme = Scheme::kAdaptive;
+    SetOption(adaptive.options, "scheme", "adaptive");
     auto settled = CreateSolver(blocked.Build(), adaptive);
     settled->Iterate(1);
     const size_t si = NearestSurfel(settled->GetSurfels(), {0, 0, 0}, {0, 1, 0});
@@ -198,7 +199,7 @@ TEST(Antiradiance, BlockerShadowAppearsWithIterations) {
     std::printf("shadow, adaptive: iteration 1, E(under blocker)/E(unblocked) = %.4f\n", first);
     EXPECT_LT(std::abs(first), 0.1f) << "the adaptive scheme reports settled antiradiance only";
 
-    settings.scheme = Scheme::kSymmetric;
+    SetOption(settings.options, "scheme", "symmetric");
     auto solver = CreateSolver(blocked.Build(), settings);
     size_t i = NearestSurfel(solver->GetSurfels(), {0, 0, 0}, {0, 1, 0});
     int needed = -1;
@@ -300,13 +301,14 @@ TEST(Antiradiance, MaterialEditsConvergeToAFreshSolve) {
 TEST(LinkOracles, AreaOracleBoundsTheReceiversToo) {
     Scene scene = scenes::CornellBox().Build();
     SolverSettings s = CpuSettings(64, 0.1f);
-    s.oracle = 2.0f;
-    s.linkOracle = ParseLinkOracle("paper");
+    SetOption(s.options, "oracle", 2.0f);
+    SetOption(s.options, "link-oracle", "paper");
     const AntiradianceModel paper = BuildAntiradianceModel(scene, s, {});
-    s.linkOracle = ParseLinkOracle("area");
+    SetOption(s.options, "link-oracle", "area");
     const AntiradianceModel area = BuildAntiradianceModel(scene, s, {});
     EXPECT_GT(area.links.links.size(), paper.links.links.size());
-    const float bound = s.oracle * s.receiverOracle * area.dirs.BinSolidAngle() * 1.0001f;
+    const AntiradianceSettings own = ReadAntiradianceSettings(s);
+    const float bound = own.oracle * own.receiverOracle * area.dirs.BinSolidAngle() * 1.0001f;
     size_t clusterLinks = 0, paperOver = 0;
     const auto over = [&](const AntiradianceModel& m, uint32_t r, const Link& l) {
         const HierarchyNode& R = m.hierarchy.nodes[r];
@@ -346,10 +348,10 @@ TEST(LinkOracles, AreaOracleBoundsTheReceiversToo) {
 // not over the area); 10⁸ nits overflow fp16 unscaled.
 std::vector<glm::vec3> SolveWithTables(const Scene& scene, SolverSettings s, TablePrecision t,
                                        int iterations, Channel channel) {
-    s.tables = t;
+    SetOption(s.options, "tables", t == TablePrecision::kFp16 ? "fp16" : "fp32");
     auto solver = CreateSolver(scene, s);
     solver->Iterate(iterations);
-    EXPECT_EQ(solver->Stats().tables, t == TablePrecision::kFp16 ? "fp16" : "fp32");
+    EXPECT_EQ(solver->Stats().Text("tables"), t == TablePrecision::kFp16 ? "fp16" : "fp32");
     return solver->SurfelIrradiance(channel);
 }
 
@@ -389,7 +391,7 @@ TEST(HalfTables, MatchFp32WithLightsGlossAndSky) {
     SolverSettings s = CpuSettings(64, 0.3f);
     std::vector<glm::vec3> result[2];
     for (int k = 0; k < 2; ++k) {
-        s.tables = k ? TablePrecision::kFp16 : TablePrecision::kFp32;
+        SetOption(s.options, "tables", k ? "fp16" : "fp32");
         auto solver = CreateSolver(scene, s);
         solver->Iterate(3);
         Scene bright = scene;
@@ -408,7 +410,7 @@ TEST(HalfTables, AreACpuBackEndOption) {
     Scene scene = scenes::CornellBox().Build();
     SolverSettings s = CpuSettings(32, 0.2f);
     s.device = DeviceChoice::kLavapipe;
-    s.tables = TablePrecision::kFp16;
+    SetOption(s.options, "tables", "fp16");
     try {
         CreateSolver(scene, s);
         ADD_FAILURE() << "fp16 tables on a Vulkan device were accepted";

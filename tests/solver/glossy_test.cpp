@@ -169,8 +169,8 @@ MirrorProbe ProbeFloor(const Material& floorMaterial, bool emitter, DeviceChoice
     Scene scene = MirrorScene(floorMaterial, emitter);
     SolverSettings settings = CpuSettings(bins, 0.1f);
     settings.device = device;
-    settings.tables = TablePrecision::kFp32;  // Glossy.LavapipeMatchesTheCpuSolver: 1e-4
-    settings.oracle = 0.5f;
+    SetOption(settings.options, "tables", "fp32");  // Glossy.LavapipeMatchesTheCpuSolver: 1e-4
+    SetOption(settings.options, "oracle", 0.5f);
     settings.validation = true;
     auto solver = CreateSolver(scene, settings);
     solver->Iterate(4);
@@ -239,7 +239,7 @@ TEST(Glossy, SkyFurnaceNeverCreatesLight) {
         Scene scene =
             testing::SkyFurnaceRoom(b, b.AddPbrMaterial("white", glm::vec3(1.0f), metallic, 0.5f));
         SolverSettings settings = CpuSettings(128, 0.1f);
-        settings.oracle = 0.25f;
+        SetOption(settings.options, "oracle", 0.25f);
         auto solver = CreateSolver(scene, settings);
         solver->Iterate(60);
         auto e = solver->SurfelIrradiance();
@@ -281,7 +281,7 @@ TEST(Glossy, ReferenceKeepsTheFurnaceBoundAndAgreesWithTheSolver) {
     EXPECT_LT(over, 1.0) << "a path-traced E exceeds π·L by more than 5σ";
 
     SolverSettings settings = CpuSettings(128, 0.1f);
-    settings.oracle = 0.25f;
+    SetOption(settings.options, "oracle", 0.25f);
     auto solver = CreateSolver(scene, settings);
     solver->Iterate(60);
     auto e = solver->SurfelIrradiance();

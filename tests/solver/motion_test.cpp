@@ -188,8 +188,8 @@ TEST(MotionLinks, MovedGlossyCubeUnderASpotMatchesAFreshBake) {
     EXPECT_EQ(solver.Stats().geometryUpdates, 1u);
 }
 
-// The motion link budget (SolverSettings::motionLinkBudget): the build refines the static pairs
-// first, so it knows how many links the rest has, then stops as soon as the links touching
+// The motion link budget (AntiradianceSettings::motionLinkBudget): the build refines the static
+// pairs first, so it knows how many links the rest has, then stops as soon as the links touching
 // the dynamic nodes pass the budget, and the model falls back to the usual links.
 TEST(MotionLinks, BudgetStopsTheBuildEarlyAndFallsBack) {
     Scene scene = LoadGltf(kScenes + "cornell-box.gltf");
@@ -200,8 +200,9 @@ TEST(MotionLinks, BudgetStopsTheBuildEarlyAndFallsBack) {
     ASSERT_GT(moving, 0u);
     full.near.surfels = &full.surfels;  // re-pointed after the model was moved (model.h)
     LinkSettings ls;
-    ls.oracle = settings.oracle;
-    ls.receiverOracle = settings.receiverOracle;
+    const AntiradianceSettings own = ReadAntiradianceSettings(settings);
+    ls.oracle = own.oracle;
+    ls.receiverOracle = own.receiverOracle;
     for (const MotionGroup& g : full.motion) ls.motion.push_back(g.bounds);
     const double ratio = double(moving) / double(still);
     // A budget of half the ratio: stopped well before all the moving links were made.
@@ -219,7 +220,7 @@ TEST(MotionLinks, BudgetStopsTheBuildEarlyAndFallsBack) {
     EXPECT_EQ(kept.dynamic, full.links.dynamic);
     // The model over budget is the usual one, and says why.
     SolverSettings tight = settings;
-    tight.motionLinkBudget = float(0.5 * ratio);
+    SetOption(tight.options, "motion-link-budget", float(0.5 * ratio));
     AntiradianceModel fallback = BuildAntiradianceModel(scene, tight, {});
     AntiradianceModel plain = BuildAntiradianceModel(scene, testing::CpuSettings(64, 0.1f), {});
     EXPECT_TRUE(fallback.motion.empty());

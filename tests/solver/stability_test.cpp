@@ -26,7 +26,7 @@ TEST(Stability, ClutterScenesConvergeWithinTheirFurnaceBoundsOnTheCpu) {
 // it, says at which pass, and later passes do nothing.
 TEST(Stability, SymmetricSchemeDivergesOnARowOfBoxesAndIsStopped) {
     SolverSettings settings = ClutterSettings(DeviceChoice::kCpu);
-    settings.scheme = Scheme::kSymmetric;
+    SetOption(settings.options, "scheme", "symmetric");
     auto solver = CreateSolver(scenes::BoxRow(10, 0.02f).Build(), settings);
     solver->Iterate(200);
     const SolverStats s = solver->Stats();
@@ -44,10 +44,10 @@ TEST(Stability, SymmetricSchemeDivergesOnARowOfBoxesAndIsStopped) {
 TEST(Stability, AdaptiveSchemeReachesTheSymmetricFixedPoint) {
     const Scene scene = scenes::BoxRow(3, 0.05f).Build();
     SolverSettings settings = ClutterSettings(DeviceChoice::kCpu);
-    settings.scheme = Scheme::kSymmetric;
+    SetOption(settings.options, "scheme", "symmetric");
     auto symmetric = CreateSolver(scene, settings);
     symmetric->Iterate(60);
-    settings.scheme = Scheme::kAdaptive;
+    SetOption(settings.options, "scheme", "adaptive");
     auto adaptive = CreateSolver(scene, settings);
     adaptive->Iterate(300);
     ASSERT_EQ(symmetric->Stats().divergence, "");

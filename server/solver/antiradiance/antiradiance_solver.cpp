@@ -12,8 +12,8 @@
 namespace penumbra {
 
 AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings& settings,
-                                       const ProgressFn& progress)
-    : settings_(settings), progress_(progress), schedule_(settings) {
+                                       const AntiradianceSettings& own, const ProgressFn& progress)
+    : settings_(settings), own_(own), progress_(progress), schedule_(own) {
     auto start = std::chrono::steady_clock::now();
     // Resolve the device before the (long) model build so a bad choice fails fast.
     DeviceChoice device = settings.device;
@@ -23,20 +23,19 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
         // (PERFORMANCE-NOTES.md), so `auto` takes a real GPU only.
         device = gpu::FindRealGpu(&gpuName) ? DeviceChoice::kGpu : DeviceChoice::kCpu;
     }
-    if (settings.tables == TablePrecision::kFp16 && device != DeviceChoice::kCpu)
+    if (own.tables == TablePrecision::kFp16 && device != DeviceChoice::kCpu)
         throw Error(
             "fp16 tables are a CPU back end option (--device cpu); the Vulkan passes "
             "keep fp32 tables");
     ValidateEnvironment(scene.environment);
-    model_ = BuildAntiradianceModel(scene, settings, progress);
+    model_ = BuildAntiradianceModel(scene, settings, own, progress);
     environment_ = scene.environment;
     materials_ = scene.materials;
     if (device == DeviceChoice::kCpu) {
         // fp16 where the CPU converts in hardware, unless asked otherwise (kFp16 on a CPU
         // without F16C throws).
-        const bool half =
-            settings.tables == TablePrecision::kFp16 ||
-            (settings.tables == TablePrecision::kAuto && cpu::CpuBackend::HalfSupported());
+        const bool half = own.tables == TablePrecision::kFp16 ||
+                          (own.tables == TablePrecision::kAuto && cpu::CpuBackend::HalfSupported());
         cpu_ = std::make_unique<cpu::CpuBackend>(
             model_, half ? cpu::TableFormat::kHalf : cpu::TableFormat::kFloat);
         deviceName_ = "cpu";
@@ -90,12 +89,11 @@ std::string AntiradianceSolver::GeometryMismatch(const Scene& scene) const {
 }
 
 bool AntiradianceSolver::DeviceLinkUpdate() const {
-    using LinkUpdate = SolverSettings::LinkUpdate;
-    if (!gpu_ || settings_.linkUpdate == LinkUpdate::kHost) return false;
-    return settings_.linkUpdate == LinkUpdate::kDevice || !gpu_->OnCpu();
+    if (!gpu_ || own_.linkUpdate == LinkUpdate::kHost) return false;
+    return own_.linkUpdate == LinkUpdate::kDevice || !gpu_->OnCpu();
 }
 
-void AntiradianceSolver::UpdateGeometry(const Scene& scene) {
+std::string AntiradianceSolver::UpdateGeometry(const Scene& scene) {
     if (std::string why = GeometryMismatch(scene); !why.empty()) throw Error(why);
     auto start = std::chrono::steady_clock::now();
     // Surfels, nodes and leaves re-placed on the host (cheap: per element); the links touching
@@ -127,6 +125,9 @@ void AntiradianceSolver::UpdateGeometry(const Scene& scene) {
     }
     msGeometry_ =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return std::string("links updated in place on the ") +
+           (gpu_ && DeviceLinkUpdate() ? "device" : "host") + " (" + std::to_string(linksUpdated_) +
+           " so far, this move " + std::to_string(int(msGeometry_ + 0.5)) + " ms)";
 }
 
 std::vector<float> AntiradianceSolver::LeafIrradiance() {
@@ -368,19 +369,22 @@ SolverStats AntiradianceSolver::Stats() const {
     for (const LeafAttributes& leaf : model_.leaves)
         s.twoSidedElements += leaf.flags & kLeafTwoSided;
     s.glossyElements = model_.glossy.size();
-    s.glossyLobes = model_.lobes.size();
+    s.SetDetail("glossy_lobes", double(model_.lobes.size()));
     s.motionGroups = model_.motion.size();
     s.motionLinks = model_.links.dynamic.size();
     s.geometryUpdates = geometryUpdates_;
     s.linksUpdated = linksUpdated_;
     s.msGeometry = msGeometry_;
-    if (!model_.links.dynamic.empty()) s.linkUpdate = DeviceLinkUpdate() ? "device" : "host";
-    s.msLinkUpdateDevice = gpu_ ? gpu_->LinkUpdateMs() : 0.0;
+    if (!model_.links.dynamic.empty()) {
+        s.SetDetail("link_update", DeviceLinkUpdate() ? "device" : "host");
+        s.SetDetail("last_link_update_device_ms", gpu_ ? gpu_->LinkUpdateMs() : 0.0);
+    }
     s.motionDeclined = model_.motionDeclined;
     s.gathers = schedule_.passes;
     s.bounces = schedule_.bounces;
-    s.lastAntiradianceSteps = schedule_.lastSteps;
-    s.antiradianceCapHits = schedule_.capHits;
+    s.SetDetail("scheme", SchemeName(own_.scheme));
+    s.SetDetail("last_antiradiance_steps", schedule_.lastSteps);
+    s.SetDetail("antiradiance_cap_hits", double(schedule_.capHits));
     s.irradianceBound = bound_;
     s.divergence = divergence_;
     if (direct_ || gpuDirect_) {
@@ -395,11 +399,11 @@ SolverStats AntiradianceSolver::Stats() const {
                     {"local", cpu_->msLocal},
                     {"pull", cpu_->msPull}};
         s.tableBytes = cpu_->TableBytes();
-        s.tables = cpu_->Format() == cpu::TableFormat::kHalf ? "fp16" : "fp32";
+        s.SetDetail("tables", cpu_->Format() == cpu::TableFormat::kHalf ? "fp16" : "fp32");
     } else {
         s.passes = gpu_->PassTimings();
         s.tableBytes = gpu_->TableBytes();
-        s.tables = "fp32";
+        s.SetDetail("tables", "fp32");
     }
     return s;
 }

@@ -9,6 +9,7 @@
 #include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/model.h"
 #include "solver/antiradiance/schedule.h"
+#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
 
 namespace penumbra {
@@ -17,8 +18,13 @@ class VulkanAntiradiance;
 
 class AntiradianceSolver : public Solver {
   public:
+    // `own`: the solver's options, read from settings.options (ReadAntiradianceSettings).
     AntiradianceSolver(const Scene& scene, const SolverSettings& settings,
-                       const ProgressFn& progress);
+                       const AntiradianceSettings& own, const ProgressFn& progress);
+    // The same with `own` read from settings.options.
+    AntiradianceSolver(const Scene& scene, const SolverSettings& settings,
+                       const ProgressFn& progress)
+        : AntiradianceSolver(scene, settings, ReadAntiradianceSettings(settings), progress) {}
     ~AntiradianceSolver() override;
 
     void Iterate(int n) override;
@@ -28,9 +34,10 @@ class AntiradianceSolver : public Solver {
     void UpdateLights(const Scene& scene) override;
     SolverStats Stats() const override;
     std::string GeometryMismatch(const Scene& scene) const override;
-    void UpdateGeometry(const Scene& scene) override;
+    std::string UpdateGeometry(const Scene& scene) override;
     std::vector<float> SurfelExitant() override;
     void SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) override;
+    bool TakesEmitterDirect() const override { return true; }
     void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
     // Checked after each pass of an unsettled bounce: the schedule keeps its place.
     void SetInterrupt(const std::atomic<bool>* flag) override { interrupt_ = flag; }
@@ -40,9 +47,10 @@ class AntiradianceSolver : public Solver {
     std::vector<std::string> ValidationMessages() const;
 
   private:
-    // Whether moves recompute links on the Vulkan device (SolverSettings::linkUpdate).
+    // Whether moves recompute links on the Vulkan device (AntiradianceSettings::linkUpdate).
     bool DeviceLinkUpdate() const;
     SolverSettings settings_;
+    AntiradianceSettings own_;
     ProgressFn progress_;
     AntiradianceModel model_;
     std::unique_ptr<cpu::CpuBackend> cpu_;

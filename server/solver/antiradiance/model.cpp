@@ -49,9 +49,10 @@ void AssignMotionGroups(AntiradianceModel& model, const Scene& scene,
 }  // namespace
 
 AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSettings& settings,
+                                         const AntiradianceSettings& own,
                                          const ProgressFn& progress) {
     AntiradianceModel model;
-    model.dirs = Directions(settings.Bins());
+    model.dirs = Directions(own.bins);
     float h = settings.elementSize > 0.0f ? settings.elementSize
                                           : scene.Diameter() * kDefaultElementFraction;
     if (!(h > 0.0f) || !std::isfinite(h))
@@ -80,11 +81,11 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
     for (const MotionGroup& g : model.motion) frames.push_back(g.built);
     model.hierarchy = BuildHierarchy(model.surfels, frames);
 
-    ls.oracle = settings.oracle;
-    ls.receiverOracle = settings.receiverOracle;
-    ls.mode = settings.linkOracle;
+    ls.oracle = own.oracle;
+    ls.receiverOracle = own.receiverOracle;
+    ls.mode = own.linkOracle;
     ls.threads = settings.threads;
-    ls.dynamicBudget = settings.motionLinkBudget;
+    ls.dynamicBudget = own.motionLinkBudget;
     model.norms = ComputeLeafNorms(model.hierarchy, model.dirs);
     const LeafNorms& norms = model.norms;
     model.near = BuildNearField(model.surfels);
@@ -97,14 +98,14 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
         // will rebuild).
         SolverSettings plain = settings;
         plain.motionLinks = false;
-        AntiradianceModel fallback = BuildAntiradianceModel(scene, plain, progress);
+        AntiradianceModel fallback = BuildAntiradianceModel(scene, plain, own, progress);
         const double still = double(std::max<size_t>(1, model.links.staticLinks));
         char why[200];
         std::snprintf(why, sizeof why,
                       "more than %.0f links would touch the dynamic nodes, over %.2f× the other "
                       "%.0f (budget %.2f×)",
                       double(model.links.dynamicSeen), double(model.links.dynamicSeen) / still,
-                      still, settings.motionLinkBudget);
+                      still, own.motionLinkBudget);
         fallback.motionDeclined = why;
         return fallback;
     }
@@ -394,7 +395,12 @@ size_t MoveGroups(AntiradianceModel& model, const Scene& scene,
     return touched.size();
 }
 
-LocalMode ModeOfIteration(const SolverSettings& settings, int i) {
+AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSettings& settings,
+                                         const ProgressFn& progress) {
+    return BuildAntiradianceModel(scene, settings, ReadAntiradianceSettings(settings), progress);
+}
+
+LocalMode ModeOfIteration(const AntiradianceSettings& settings, int i) {
     if (settings.scheme == Scheme::kSymmetric) return kBoth;
     // Asymmetric (Eqs. 13, 14): one radiance step, then antiradiance steps with L frozen.
     return i % (1 + settings.antiradianceSteps) == 0 ? kReflect : kAntiradiance;

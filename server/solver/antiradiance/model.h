@@ -12,6 +12,7 @@
 #include "links/links.h"
 #include "scene/scene.h"
 #include "scene/surfels.h"
+#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
 
 namespace penumbra {
@@ -117,7 +118,7 @@ struct AntiradianceModel {
     NearField near;  // its `surfels` is re-pointed at `surfels` before use
     std::vector<glm::vec3> restPositions, restNormals, restCentroids;  // per surfel
     std::vector<glm::vec3> restCenters, restNodeNormals;               // per node
-    // Why motion links were asked for but not built (SolverSettings::motionLinkBudget).
+    // Why motion links were asked for but not built (AntiradianceSettings::motionLinkBudget).
     std::string motionDeclined;
 
     size_t Nodes() const { return hierarchy.size(); }
@@ -125,6 +126,11 @@ struct AntiradianceModel {
     size_t TableFloats() const { return Nodes() * Bins() * 3; }
 };
 
+AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSettings& settings,
+                                         const AntiradianceSettings& own,
+                                         const ProgressFn& progress);
+
+// The same with the solver's options read from settings.options (ReadAntiradianceSettings).
 AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSettings& settings,
                                          const ProgressFn& progress);
 
@@ -161,6 +167,6 @@ size_t MoveGroups(AntiradianceModel& model, const Scene& scene,
                   std::vector<uint32_t>* movedLeaves = nullptr);
 
 // The local-pass mode of iteration `i` (0-based) under the settings' scheme.
-LocalMode ModeOfIteration(const SolverSettings& settings, int i);
+LocalMode ModeOfIteration(const AntiradianceSettings& settings, int i);
 
 }  // namespace penumbra

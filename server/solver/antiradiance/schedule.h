@@ -26,7 +26,7 @@ namespace penumbra {
 // radius is that of the reflectances.
 class PassSchedule {
   public:
-    explicit PassSchedule(const SolverSettings& settings) : settings_(settings) {}
+    explicit PassSchedule(const AntiradianceSettings& settings) : settings_(settings) {}
     // The mode of the next pass.
     LocalMode Next() const;
     // Whether the scheme wants each pass's leaf irradiance (Finished) to schedule on.
@@ -47,7 +47,7 @@ class PassSchedule {
     size_t capHits = 0;  // bounces whose steps ended at the cap
 
   private:
-    SolverSettings settings_;
+    AntiradianceSettings settings_;
     bool antiradiance_ = true;  // adaptive: in the antiradiance steps
     std::vector<float> last_;   // the leaves' E after the previous pass
 };
