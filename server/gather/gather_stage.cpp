@@ -124,8 +124,7 @@ void GatherStage::Place() {
     surfelPrimitive_.assign(s.size(), 0);
     for (size_t p = 0; p < inset.size(); ++p) {
         std::copy(inset[p].begin(), inset[p].end(), points_.begin() + s.firstSurfel[p]);
-        const size_t end = p + 1 < s.firstSurfel.size() ? s.firstSurfel[p + 1] : s.size();
-        std::fill(surfelPrimitive_.begin() + s.firstSurfel[p], surfelPrimitive_.begin() + end,
+        std::fill(surfelPrimitive_.begin() + s.firstSurfel[p], surfelPrimitive_.begin() + s.End(p),
                   static_cast<uint32_t>(p));
     }
 }
@@ -963,9 +962,11 @@ std::string GatherStage::UpdateGeometry(const Scene& scene) {
     return done;
 }
 
-void GatherStage::WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) {
-    inner_->WarmStart(rows, keep);
+std::string GatherStage::WarmStart(Solver& previous, const SurfelCarry& carry) {
+    auto* before = dynamic_cast<GatherStage*>(&previous);
+    std::string note = inner_->WarmStart(before ? *before->inner_ : previous, carry);
     fresh_ = false;
+    return note;
 }
 
 SolverStats GatherStage::Stats() const {

@@ -59,8 +59,7 @@ class GatherStage : public Solver {
         return inner_->GeometryMismatch(scene);
     }
     std::string UpdateGeometry(const Scene& scene) override;
-    std::vector<float> SurfelExitant() override { return inner_->SurfelExitant(); }
-    void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
+    std::string WarmStart(Solver& previous, const SurfelCarry& carry) override;
     void SetInterrupt(const std::atomic<bool>* flag) override { inner_->SetInterrupt(flag); }
     Solver& Inner() { return *inner_; }
 

@@ -9,6 +9,7 @@
 #include "hierarchy/directions.h"
 #include "hierarchy/hierarchy.h"
 #include "links/oracle.h"
+#include "scene/motion.h"
 #include "scene/surfels.h"
 
 namespace penumbra {
@@ -25,11 +26,6 @@ static_assert(sizeof(Link) == 12);
 static_assert(offsetof(Link, bin) == 4 && offsetof(Link, level) == 6 &&
               offsetof(Link, formFactor) == 8);
 
-// Where a motion group's surfaces may go (Sec. 3.3), world space: links between a group and
-// anything else are refined for the worst case over this box.
-struct MotionBounds {
-    glm::vec3 min{0.0f}, max{0.0f};
-};
 
 struct LinkSettings {
     LinkOracle mode = LinkOracle::kConservative;

@@ -137,4 +137,23 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
     return out;
 }
 
+bool BackOcclusionOn(BackOcclusion choice, const Environment& sky) {
+    return choice == BackOcclusion::kOn || (choice == BackOcclusion::kAuto && sky.Present());
+}
+
+bool BackOcclusionChanges(BackOcclusion choice, const Environment& before,
+                          const Environment& after) {
+    return BackOcclusionOn(choice, before) != BackOcclusionOn(choice, after);
+}
+
+void MarkTwoSided(const Scene& scene, Surfels& s) {
+    const std::vector<bool> closed = ClosedNodes(scene);
+    s.twoSided.assign(s.size(), 0);
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        const int node = scene.primitives[p].nodeIndex;
+        const bool open = node < 0 || !closed[node];
+        for (size_t i = s.firstSurfel[p]; i < s.End(p); ++i) s.twoSided[i] = open;
+    }
+}
+
 }  // namespace penumbra

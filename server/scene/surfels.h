@@ -36,7 +36,23 @@ struct Surfels {
     std::vector<glm::vec3> ownCentroids, ownNormals;
 
     size_t size() const { return positions.size(); }
+    // Primitive p's surfels are [firstSurfel[p], End(p)).
+    size_t End(size_t p) const { return p + 1 < firstSurfel.size() ? firstSurfel[p + 1] : size(); }
 };
+
+// Whether surfaces that do not close a solid occlude light arriving at their backs
+// (Surfels::twoSided). `auto`: on when the scene has an environment, whose light reaches
+// every back side; without one, light reaches a back only from inside the scene, which the
+// antiradiance paper's front-side rule (Fig. 7) ignores at the cost of leaks through thin
+// walls.
+enum class BackOcclusion { kAuto, kOn, kOff };
+// The rule of `choice` under the scene's sky: decided when the surfels are made, so a sky
+// appearing or going under `auto` needs new surfels (BackOcclusionChanges).
+bool BackOcclusionOn(BackOcclusion choice, const Environment& sky);
+bool BackOcclusionChanges(BackOcclusion choice, const Environment& before,
+                          const Environment& after);
+// Marks the surfels of nodes that do not close a solid (ClosedNodes) as two-sided.
+void MarkTwoSided(const Scene& scene, Surfels& surfels);
 
 // Refines by longest-edge bisection until every edge is at most `elementSize`.
 // Midpoints of shared edges are shared within a primitive, so its surface stays connected.

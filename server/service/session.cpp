@@ -81,17 +81,6 @@ bool SubtreeHasLights(const Scene& scene, int node) {
     return false;
 }
 
-bool Outside(const Scene& scene, const SceneNode& node) {
-    if (!node.hasMotionBounds) return false;
-    const float slack = 1e-4f * std::max(scene.Diameter(), 1e-3f);
-    for (uint32_t pi : node.primitives)
-        for (const auto& v : scene.primitives[pi].positions)
-            if (glm::any(glm::lessThan(v, node.boundsMin - slack)) ||
-                glm::any(glm::greaterThan(v, node.boundsMax + slack)))
-                return true;
-    return false;
-}
-
 }  // namespace
 
 Session::Session(std::string name, Scene scene, SessionSettings settings,
@@ -179,7 +168,7 @@ uint64_t Session::Submit(const TransformEdit& edit) {
     }
     glm::mat4 local = edit.local;
     std::string what = "moved " + edit.node;
-    if (Outside(validated_, validated_.nodes[node])) what += " (outside its motion bounds)";
+    if (OutsideBounds(validated_, validated_.nodes[node])) what += " (outside its motion bounds)";
     return Queue([node, local](Scene& s) { SetNodeTransform(s, node, local); }, geometry, what,
                  lights);
 }
@@ -344,8 +333,8 @@ uint64_t Session::Submit(const EnvironmentEdit& edit) {
     }
     // Back occlusion `auto` is decided when the links are built: a sky appearing or going
     // changes which surfaces occlude from both sides, so the links are rebuilt.
-    const bool rebuild = settings_.solver.backOcclusion == BackOcclusion::kAuto &&
-                         next.Present() != validated_.environment.Present();
+    const bool rebuild =
+        BackOcclusionChanges(settings_.solver.backOcclusion, validated_.environment, next);
     auto apply = [next](Scene& s) { s.environment = next; };
     apply(validated_);
     std::string what = next.Active() ? "sky " + next.source : "sky off";
@@ -529,92 +518,12 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
     for (const auto& sink : sinks) sink(frame);
 }
 
-namespace {
-
-// The rotation that took node `n` from `before` to `after` when its world transform changed
-// by a rotation and a translation only; nullopt otherwise.
-std::optional<glm::mat3> RigidTurn(const Scene& before, const Scene& after, int n) {
-    if (n < 0 || n >= static_cast<int>(before.nodes.size()) ||
-        n >= static_cast<int>(after.nodes.size()))
-        return std::nullopt;
-    const glm::mat4 delta = after.nodes[n].world * glm::inverse(before.nodes[n].world);
-    const glm::mat3 r(delta);
-    const glm::mat3 rtr = glm::transpose(r) * r;
-    for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j)
-            if (!(std::abs(rtr[i][j] - (i == j ? 1.0f : 0.0f)) < 1e-3f)) return std::nullopt;
-    if (!(glm::determinant(r) > 0.0f)) return std::nullopt;
-    return r;
-}
-
-}  // namespace
-
 std::string Session::WarmStart(Solver& rebuilt, const Scene& next) {
-    // Surfels of primitives whose vertices stayed put keep the old solution's exitant
-    // intensity. Those of a primitive that moved rigidly keep it too, turned with them: the
-    // row leaving in bin b now is the one that left in the bin of R⁻¹ ω_b (Sec. 3.3: a
-    // moved object takes its light along; what arrives there has changed, and the next
-    // iterations correct it). Anything else (and everything, if the surfels do not line up)
-    // starts from its emission.
     // Surfels are numbered primitive by primitive: a primitive that did not move has the
     // same surfels, in the same order, in both solvers, and so has a dynamic node's that
     // moved (it is refined in its own space).
-    const Surfels& now = rebuilt.GetSurfels();
-    const Surfels& before = solver_->GetSurfels();
-    auto range = [](const Surfels& s, size_t p) {
-        size_t end = p + 1 < s.firstSurfel.size() ? s.firstSurfel[p + 1] : s.size();
-        return std::pair<size_t, size_t>(s.firstSurfel[p], end);
-    };
-    std::vector<uint8_t> keep(now.size(), 0);
-    std::vector<float> oldRows, rows;
-    size_t kept = 0, turned = 0;
-    std::unique_ptr<Directions> dirs;  // made when a moved primitive needs them
-    if (applied_.primitives.size() == next.primitives.size() &&
-        before.firstSurfel.size() == now.firstSurfel.size()) {
-        for (size_t p = 0; p < next.primitives.size(); ++p) {
-            auto [b0, b1] = range(before, p);
-            auto [n0, n1] = range(now, p);
-            if (b1 - b0 != n1 - n0) continue;
-            const bool stayed = applied_.primitives[p].positions == next.primitives[p].positions;
-            std::optional<glm::mat3> turn;
-            if (!stayed) {
-                turn = RigidTurn(applied_, next, next.primitives[p].nodeIndex);
-                if (!turn) continue;
-            }
-            if (oldRows.empty()) {
-                oldRows = solver_->SurfelExitant();
-                if (oldRows.empty()) break;  // a solver without such state
-                rows.assign(oldRows.size() / before.size() * now.size(), 0.0f);
-            }
-            const size_t row = oldRows.size() / before.size();
-            if (stayed) {
-                std::copy(oldRows.begin() + b0 * row, oldRows.begin() + b1 * row,
-                          rows.begin() + n0 * row);
-            } else {
-                const int bins = static_cast<int>(row / 3);
-                if (!dirs || dirs->Count() != bins) dirs = std::make_unique<Directions>(bins);
-                const glm::mat3 back = glm::transpose(*turn);
-                std::vector<uint32_t> from(bins);
-                for (int b = 0; b < bins; ++b) from[b] = dirs->Lookup(back * dirs->Direction(b));
-                for (size_t i = 0; i < n1 - n0; ++i)
-                    for (int b = 0; b < bins; ++b)
-                        std::copy_n(oldRows.begin() + (b0 + i) * row + from[b] * 3, 3,
-                                    rows.begin() + (n0 + i) * row + b * 3);
-                turned += n1 - n0;
-            }
-            for (size_t s = n0; s < n1; ++s) keep[s] = 1, ++kept;
-        }
-    }
-    try {
-        if (kept) rebuilt.WarmStart(rows, keep);
-    } catch (const Error& e) {
-        return std::string("cold start (") + e.what() + ")";
-    }
-    if (!kept) return "cold start";
-    std::string note =
-        "warm start for " + std::to_string(kept) + " of " + std::to_string(now.size()) + " surfels";
-    if (turned) note += " (" + std::to_string(turned) + " moved, their light turned with them)";
-    return note;
+    return rebuilt.WarmStart(
+        *solver_, CarrySurfels(applied_, solver_->GetSurfels(), next, rebuilt.GetSurfels()));
 }
 
 bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note) {

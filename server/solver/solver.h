@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "base/check.h"
+#include "scene/motion.h"
 #include "scene/scene.h"
 #include "scene/surfels.h"
 #include "solver/options.h"
@@ -23,11 +24,6 @@ namespace penumbra {
 // `total` their sum.
 enum class Channel { kIndirect, kDirect, kTotal };
 enum class DeviceChoice { kAuto, kGpu, kLavapipe, kCpu };
-// Whether surfaces that do not close a solid occlude light arriving at their backs
-// (Surfels::twoSided). `auto`: on when the scene has an environment, whose light reaches
-// every back side; without one, light reaches a back only from inside the scene, which the
-// paper's front-side rule (Fig. 7) ignores at the cost of leaks through thin walls.
-enum class BackOcclusion { kAuto, kOn, kOff };
 // What every solver takes (each solver's own options travel in `options`, declared in its
 // registry entry: solver/registry.h).
 struct SolverSettings {
@@ -37,7 +33,7 @@ struct SolverSettings {
     int threads = 0;          // CPU threads; 0 = all cores
     bool validation = false;  // Vulkan validation layers (tests turn them on)
     int shadowMapSize = 0;    // texels per side of each shadow map; 0: from the element size
-    BackOcclusion backOcclusion = BackOcclusion::kAuto;
+    BackOcclusion backOcclusion = BackOcclusion::kAuto;  // scene/surfels.h
     // Prepare the dynamic nodes (extras.penumbra.dynamic) to move inside their motion bounds
     // without a rebuild (Solver::UpdateGeometry): for the antiradiance, links built for the
     // worst case over the bounds (Sec. 3.3), so that a move recomputes only their form factors
@@ -165,12 +161,6 @@ class Solver {
     // ("links updated in place on the host (…)"). Call only when GeometryMismatch is empty
     // (throws penumbra::Error otherwise).
     virtual std::string UpdateGeometry(const Scene& scene) { throw Error(GeometryMismatch(scene)); }
-    // Carrying a solution over a rebuild (a move rebuilds the links, Sec. 3.3): each surfel's
-    // exitant intensity, `Bins()` RGB rows after one another per surfel (empty when the
-    // solver has no such state), and a start from such rows for the surfels marked in `keep`
-    // (the others start from their emission). Rows from a solver with other bins or another
-    // surfel count are refused with penumbra::Error.
-    virtual std::vector<float> SurfelExitant() { return {}; }
     // The first shot from outside (the gather stage, gather/gather_stage.h): per surfel, the
     // irradiance arriving straight from emitting surfaces, computed with explicit visibility.
     // The solver reflects it like the punctual lights' direct light, reports it in the
@@ -185,8 +175,15 @@ class Solver {
     // (else the gather stage keeps the shot for its own targets and the solver carries the
     // emission itself).
     virtual bool TakesEmitterDirect() const { return false; }
-    virtual void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) {
-        (void)rows, (void)keep;
+    // Carrying a solution over a rebuild (a move that rebuilds, Sec. 3.3): this solver, just
+    // built from the scene after an edit, starts from `previous` (the solver of the scene
+    // before, built with the same settings) for the surfels `carry` maps (CarrySurfels,
+    // scene/motion.h), their light turned with the moved ones; the others start from their
+    // emission. Returns what it did, for the frame's note ("warm start for N of M surfels",
+    // "cold start (why)").
+    virtual std::string WarmStart(Solver& previous, const SurfelCarry& carry) {
+        (void)previous, (void)carry;
+        return "cold start (this solver carries no state over)";
     }
     // While `flag` (null: none) reads true, Iterate returns after the pass under way instead
     // of finishing its iteration; the next Iterate takes the iteration up where it stopped

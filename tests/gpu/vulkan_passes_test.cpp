@@ -158,21 +158,22 @@ TEST(VulkanPasses, WarmStartMatchesTheCpuBackEnd) {
     SolverSettings s = TestSettings(0.1f, DeviceChoice::kCpu);
     auto source = CreateSolver(scene, s);
     source->Iterate(8);
-    std::vector<float> rows = source->SurfelExitant();
+    std::vector<float> rows = dynamic_cast<AntiradianceSolver&>(*source).ExitantRows();
     std::vector<uint8_t> keep(source->GetSurfels().size(), 1);
     for (size_t i = 0; i < keep.size(); i += 3) keep[i] = 0;  // some start from emission
     auto cpu = CreateSolver(scene, s);
     s.device = DeviceChoice::kLavapipe;
     auto gpu = CreateSolver(scene, s);
-    cpu->WarmStart(rows, keep);
-    gpu->WarmStart(rows, keep);
+    auto& cpuSolver = dynamic_cast<AntiradianceSolver&>(*cpu);
+    cpuSolver.StartFrom(rows, keep);
+    dynamic_cast<AntiradianceSolver&>(*gpu).StartFrom(rows, keep);
     cpu->Iterate(1);
     gpu->Iterate(1);
     double rel = testing::RelativeRms(gpu->SurfelIrradiance(), cpu->SurfelIrradiance());
     EXPECT_LT(rel, 1e-5);
     // And it is a warm start: one iteration lands near the source's solution.
     EXPECT_LT(testing::RelativeRms(cpu->SurfelIrradiance(), source->SurfelIrradiance()), 0.3);
-    EXPECT_THROW(cpu->WarmStart(std::vector<float>(7), keep), Error);
+    EXPECT_THROW(cpuSolver.StartFrom(std::vector<float>(7), keep), Error);
     for (const auto& m : dynamic_cast<AntiradianceSolver&>(*gpu).ValidationMessages())
         ADD_FAILURE() << "validation: " << m;
 }

@@ -10,6 +10,7 @@
 #include "gather/gather_stage.h"
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
+#include "solver/antiradiance/antiradiance_solver.h"
 #include "test_util.h"
 
 namespace penumbra::service {
@@ -196,15 +197,13 @@ TEST(Session, WarmStartAfterAMoveBeatsAColdStart) {
     Scene original = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
     auto before = CreateSolver(original, Settings().solver);
     before->Iterate(40);
-    std::vector<float> rows = before->SurfelExitant();
+    std::vector<float> rows = dynamic_cast<AntiradianceSolver&>(*before).ExitantRows();
     std::vector<uint8_t> keep(before->GetSurfels().size(), 1);
     const Surfels& sf = before->GetSurfels();
-    for (uint32_t p : block) {
-        size_t end = p + 1 < sf.firstSurfel.size() ? sf.firstSurfel[p + 1] : sf.size();
-        for (size_t s = sf.firstSurfel[p]; s < end; ++s) keep[s] = 0;
-    }
+    for (uint32_t p : block)
+        for (size_t s = sf.firstSurfel[p]; s < sf.End(p); ++s) keep[s] = 0;
     auto restarted = CreateSolver(scene, Settings().solver);
-    restarted->WarmStart(rows, keep);
+    dynamic_cast<AntiradianceSolver&>(*restarted).StartFrom(rows, keep);
     restarted->Iterate(int(first->iterations));
     std::vector<glm::vec3> got, was, want;
     for (uint32_t p : block) {

@@ -71,7 +71,7 @@ TEST(MotionLinks, MovingBackRestoresTheBuiltLinks) {
     const int node = FindNode(scene, "tall_block");
     const glm::mat4 home = scene.nodes[node].local;
     SetNodeTransform(scene, node, Moved(scene, "tall_block", {-0.05f, 0, 0.03f}, 25.0f));
-    ASSERT_EQ(MotionMismatch(m, scene), "");
+    ASSERT_EQ(MotionMismatch(m.motion, m.surfels, scene), "");
     size_t redone = MoveGroups(m, scene);
     EXPECT_GT(redone, 0u);
     EXPECT_LT(redone, m.links.dynamic.size());  // the short block's own links stay
@@ -203,7 +203,7 @@ TEST(MotionLinks, BudgetStopsTheBuildEarlyAndFallsBack) {
     const AntiradianceSettings own = ReadAntiradianceSettings(settings);
     ls.oracle = own.oracle;
     ls.receiverOracle = own.receiverOracle;
-    for (const MotionGroup& g : full.motion) ls.motion.push_back(g.bounds);
+    ls.motion = full.motion.Bounds();
     const double ratio = double(moving) / double(still);
     // A budget of half the ratio: stopped well before all the moving links were made.
     ls.dynamicBudget = float(0.5 * ratio);

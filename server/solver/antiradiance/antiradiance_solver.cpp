@@ -80,12 +80,12 @@ std::string AntiradianceSolver::GeometryMismatch(const Scene& scene) const {
     if (scene.lights.size() != static_cast<size_t>(lights_))
         return "the number of punctual lights changed";
     // Back occlusion `auto` follows whether there is a sky, and is decided at the build.
-    if (settings_.backOcclusion == BackOcclusion::kAuto &&
-        scene.environment.Present() == model_.surfels.twoSided.empty())
+    if (BackOcclusionOn(settings_.backOcclusion, scene.environment) ==
+        model_.surfels.twoSided.empty())
         return "a sky appeared or went, which changes back occlusion";
     if (!model_.motionDeclined.empty())
         return "motion links were not built: " + model_.motionDeclined;
-    return MotionMismatch(model_, scene);
+    return MotionMismatch(model_.motion, model_.surfels, scene);
 }
 
 bool AntiradianceSolver::DeviceLinkUpdate() const {
@@ -255,11 +255,8 @@ void AntiradianceSolver::UpdateLights(const Scene& scene) {
 void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
     PENUMBRA_CHECK_EQ(scene.primitives.size(), model_.surfels.firstSurfel.size());
     materials_ = scene.materials;
-    // Surfels of primitive p are the contiguous range [firstSurfel[p], firstSurfel[p + 1]).
     for (size_t p = 0; p < scene.primitives.size(); ++p) {
-        size_t end = p + 1 < scene.primitives.size() ? model_.surfels.firstSurfel[p + 1]
-                                                     : model_.surfels.size();
-        for (size_t s = model_.surfels.firstSurfel[p]; s < end; ++s)
+        for (size_t s = model_.surfels.firstSurfel[p]; s < model_.surfels.End(p); ++s)
             model_.surfels.materials[s] = scene.primitives[p].material;
     }
     for (LeafAttributes& leaf : model_.leaves) {
@@ -280,7 +277,7 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
     Rebound();
 }
 
-std::vector<float> AntiradianceSolver::SurfelExitant() {
+std::vector<float> AntiradianceSolver::ExitantRows() {
     const std::vector<float> table = cpu_ ? cpu_->Iex() : gpu_->ReadIex(false);
     const size_t row = size_t(model_.Bins()) * 3;
     std::vector<float> rows(model_.surfels.size() * row, 0.0f);
@@ -289,7 +286,7 @@ std::vector<float> AntiradianceSolver::SurfelExitant() {
     return rows;
 }
 
-void AntiradianceSolver::WarmStart(const std::vector<float>& rows,
+void AntiradianceSolver::StartFrom(const std::vector<float>& rows,
                                    const std::vector<uint8_t>& keep) {
     const size_t row = size_t(model_.Bins()) * 3;
     if (rows.size() != model_.surfels.size() * row || keep.size() != model_.surfels.size())
@@ -305,6 +302,51 @@ void AntiradianceSolver::WarmStart(const std::vector<float>& rows,
         gpu_->WriteIex(table, false);
         gpu_->WriteIex(table, true);
     }
+}
+
+std::string AntiradianceSolver::WarmStart(Solver& previous, const SurfelCarry& carry) {
+    // Surfels that stayed put keep the old solution's exitant intensity. Those of a primitive
+    // that moved rigidly keep it too, turned with them: the row leaving in bin b now is the
+    // one that left in the bin of R⁻¹ ω_b (Sec. 3.3: a moved object takes its light along;
+    // what arrives there has changed, and the next iterations correct it).
+    auto* before = dynamic_cast<AntiradianceSolver*>(&previous);
+    if (!before) return "cold start (the solver before was not an antiradiance solver)";
+    if (before->model_.Bins() != model_.Bins()) return "cold start (the bins changed)";
+    if (carry.from.size() != model_.surfels.size() || !carry.kept) return "cold start";
+    const int bins = model_.Bins();
+    const size_t row = size_t(bins) * 3;
+    const std::vector<float> old = before->ExitantRows();
+    // Per turn: the bin each of today's bins left in before.
+    std::vector<std::vector<uint32_t>> binFrom(carry.turns.size());
+    for (size_t t = 1; t < carry.turns.size(); ++t) {
+        const glm::mat3 back = glm::transpose(carry.turns[t]);
+        for (int b = 0; b < bins; ++b)
+            binFrom[t].push_back(model_.dirs.Lookup(back * model_.dirs.Direction(b)));
+    }
+    std::vector<float> rows(model_.surfels.size() * row, 0.0f);
+    std::vector<uint8_t> keep(model_.surfels.size(), 0);
+    for (size_t s = 0; s < keep.size(); ++s) {
+        if (carry.from[s] == SurfelCarry::kNone) continue;
+        keep[s] = 1;
+        const float* src = old.data() + size_t(carry.from[s]) * row;
+        float* dst = rows.data() + s * row;
+        if (!carry.turn[s]) {
+            std::copy_n(src, row, dst);
+            continue;
+        }
+        const std::vector<uint32_t>& from = binFrom[carry.turn[s]];
+        for (int b = 0; b < bins; ++b) std::copy_n(src + from[b] * 3, 3, dst + b * 3);
+    }
+    try {
+        StartFrom(rows, keep);
+    } catch (const Error& e) {
+        return std::string("cold start (") + e.what() + ")";
+    }
+    std::string note = "warm start for " + std::to_string(carry.kept) + " of " +
+                       std::to_string(model_.surfels.size()) + " surfels";
+    if (carry.turned)
+        note += " (" + std::to_string(carry.turned) + " moved, their light turned with them)";
+    return note;
 }
 
 std::vector<std::string> AntiradianceSolver::ValidationMessages() const {

@@ -35,10 +35,15 @@ class AntiradianceSolver : public Solver {
     SolverStats Stats() const override;
     std::string GeometryMismatch(const Scene& scene) const override;
     std::string UpdateGeometry(const Scene& scene) override;
-    std::vector<float> SurfelExitant() override;
     void SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) override;
     bool TakesEmitterDirect() const override { return true; }
-    void WarmStart(const std::vector<float>& rows, const std::vector<uint8_t>& keep) override;
+    std::string WarmStart(Solver& previous, const SurfelCarry& carry) override;
+    // The state WarmStart carries: each surfel's exitant intensity, Bins() RGB rows after one
+    // another per surfel; and a start from such rows for the surfels marked in `keep` (the
+    // others start from their emission). Rows for other bins or another surfel count are
+    // refused with penumbra::Error.
+    std::vector<float> ExitantRows();
+    void StartFrom(const std::vector<float>& rows, const std::vector<uint8_t>& keep);
     // Checked after each pass of an unsettled bounce: the schedule keeps its place.
     void SetInterrupt(const std::atomic<bool>* flag) override { interrupt_ = flag; }
 
