@@ -11,6 +11,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "base/check.h"
+#include "direct/direct_stage.h"
 
 namespace penumbra::direct {
 namespace {

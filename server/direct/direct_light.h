@@ -98,28 +98,4 @@ void DirectIrradiance(const Plan& plan, const float* maps,
                       const std::vector<GpuReceiver>& receivers, float* out,
                       float* perLight = nullptr);
 
-// Both stages on the CPU, with their wall times.
-class CpuDirect {
-  public:
-    CpuDirect(const Scene& scene, std::vector<GpuReceiver> receivers, int mapSize);
-    // Re-plans from the scene's lights (geometry as at construction) and recomputes.
-    void Update(const Scene& scene);
-    // After a rigid move (same triangles and receivers, at new places): takes the scene's
-    // triangles and `receivers` again, then Update.
-    void Move(const Scene& scene, std::vector<GpuReceiver> receivers);
-    const std::vector<float>& Irradiance() const { return out_; }     // stride 4
-    const std::vector<float>& PerLight() const { return perLight_; }  // lights × receivers × 4
-    const std::vector<float>& Maps() const { return maps_; }
-    double msShadow = 0.0, msDirect = 0.0;  // last update
-    int views = 0;                          // shadow maps the last update rendered
-
-  private:
-    std::vector<glm::vec3> triangles_;
-    std::vector<GpuReceiver> receivers_;
-    int mapSize_;
-    std::vector<float> maps_;
-    std::vector<float> out_;
-    std::vector<float> perLight_;
-};
-
 }  // namespace penumbra::direct

@@ -173,7 +173,10 @@ VulkanDirect::VulkanDirect(gpu::Context& ctx, const Scene& scene,
 
 VulkanDirect::~VulkanDirect() = default;
 
-void VulkanDirect::Update(const Scene& scene) { impl_->Update(scene, msShadow, msDirect, views); }
+void VulkanDirect::Update(const Scene& scene) {
+    impl_->Update(scene, msShadow, msDirect, views);
+    lights_ = scene.lights.size();
+}
 
 void VulkanDirect::Move(const Scene& scene, std::vector<GpuReceiver> receivers) {
     Impl& s = *impl_;
@@ -185,14 +188,14 @@ void VulkanDirect::Move(const Scene& scene, std::vector<GpuReceiver> receivers) 
     Update(scene);
 }
 
-std::vector<float> VulkanDirect::ReadIrradiance() const {
+std::vector<float> VulkanDirect::Irradiance() const {
     std::vector<float> v(impl_->receiverList.size() * 4);
     impl_->out.Download(v.data(), v.size() * sizeof(float));
     return v;
 }
 
-std::vector<float> VulkanDirect::ReadPerLight(size_t lights) const {
-    std::vector<float> v(lights * impl_->receiverList.size() * 4);
+std::vector<float> VulkanDirect::PerLight() const {
+    std::vector<float> v(size_t(lights_) * impl_->receiverList.size() * 4);
     if (!v.empty()) impl_->perLight->Download(v.data(), v.size() * sizeof(float));
     return v;
 }

@@ -7,7 +7,7 @@
 #include <memory>
 #include <vector>
 
-#include "direct/direct_light.h"
+#include "direct/direct_stage.h"
 
 namespace penumbra {
 namespace gpu {
@@ -17,7 +17,7 @@ class Context;
 
 namespace direct {
 
-class VulkanDirect {
+class VulkanDirect : public DirectStage {
   public:
     // `out` holds one vec4 per receiver and outlives this object. Throws penumbra::Error
     // when the device cannot rasterise into storage buffers.
@@ -26,20 +26,17 @@ class VulkanDirect {
     ~VulkanDirect();
 
     // Plans from the scene's lights (geometry as at construction), renders, waits.
-    void Update(const Scene& scene);
-    // After a rigid move (same triangles and receivers, at new places): uploads the scene's
-    // triangles and `receivers` into the buffers there are, then Update.
-    void Move(const Scene& scene, std::vector<GpuReceiver> receivers);
-    std::vector<float> ReadIrradiance() const;  // stride 4, as the CPU twin's
-    // Each of the first `lights` lights' share, as CpuDirect::PerLight.
-    std::vector<float> ReadPerLight(size_t lights) const;
-    std::vector<float> ReadMaps() const;    // depths, as RasterShadowMaps writes them
-    double msShadow = 0.0, msDirect = 0.0;  // last update, device time
-    int views = 0;                          // shadow maps the last update rendered
+    void Update(const Scene& scene) override;
+    // Uploads the scene's triangles and `receivers` into the buffers there are.
+    void Move(const Scene& scene, std::vector<GpuReceiver> receivers) override;
+    std::vector<float> Irradiance() const override;  // read back from `out`
+    std::vector<float> PerLight() const override;
+    std::vector<float> ReadMaps() const;  // depths, as RasterShadowMaps writes them
 
   private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
+    size_t lights_ = 0;  // of the last Update
 };
 
 }  // namespace direct

@@ -57,7 +57,7 @@ TEST(VulkanDirect, ShadowAndDirectPassesMatchTheirCpuTwins) {
     gpu::Buffer out(ctx, receivers.size() * 16);
     direct::VulkanDirect gpuDirect(ctx, scene, receivers, out, size);
     std::vector<float> gpuMaps = gpuDirect.ReadMaps();
-    std::vector<float> gpuE = gpuDirect.ReadIrradiance();
+    std::vector<float> gpuE = gpuDirect.Irradiance();
 
     // Maps: texels covered on one side only sit on triangle edges (tie rules differ).
     ASSERT_GE(gpuMaps.size(), cpuMaps.size());

@@ -5,8 +5,8 @@
 #include <limits>
 
 #include "base/check.h"
-#include "direct/environment_light.h"
 #include "gpu/context.h"
+#include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/vulkan_passes.h"
 
 namespace penumbra {
@@ -29,20 +29,18 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
             "keep fp32 tables");
     ValidateEnvironment(scene.environment);
     model_ = BuildAntiradianceModel(scene, settings, own, progress);
-    environment_ = scene.environment;
+    sky_.Binned(scene.environment);  // the model binned it
     materials_ = scene.materials;
     if (device == DeviceChoice::kCpu) {
         // fp16 where the CPU converts in hardware, unless asked otherwise (kFp16 on a CPU
         // without F16C throws).
         const bool half = own.tables == TablePrecision::kFp16 ||
                           (own.tables == TablePrecision::kAuto && cpu::CpuBackend::HalfSupported());
-        cpu_ = std::make_unique<cpu::CpuBackend>(
+        backend_ = std::make_unique<cpu::CpuBackend>(
             model_, half ? cpu::TableFormat::kHalf : cpu::TableFormat::kFloat);
-        deviceName_ = "cpu";
     } else {
-        gpu_ = std::make_unique<VulkanAntiradiance>(model_, device == DeviceChoice::kLavapipe,
-                                                    settings.validation);
-        deviceName_ = gpu_->DeviceName();
+        backend_ = std::make_unique<VulkanAntiradiance>(model_, device == DeviceChoice::kLavapipe,
+                                                        settings.validation);
     }
     if (!scene.lights.empty()) {
         if (progress) progress("shadow maps", 0.0);
@@ -65,14 +63,9 @@ std::vector<direct::GpuReceiver> AntiradianceSolver::LeafReceivers() const {
 }
 
 void AntiradianceSolver::MakeDirect(const Scene& scene) {
-    auto receivers = LeafReceivers();
-    gpuDirect_.reset();
     direct_.reset();
-    if (gpu_)
-        gpuDirect_ = std::make_unique<direct::VulkanDirect>(
-            gpu_->Context(), scene, std::move(receivers), gpu_->DirectBuffer(), mapSize_);
-    else
-        direct_ = std::make_unique<direct::CpuDirect>(scene, std::move(receivers), mapSize_);
+    direct_ = direct::MakeDirectStage(scene, LeafReceivers(), mapSize_, backend_->DirectDevice(),
+                                      backend_->DirectOut());
     CopyDirect(scene);
 }
 
@@ -89,8 +82,8 @@ std::string AntiradianceSolver::GeometryMismatch(const Scene& scene) const {
 }
 
 bool AntiradianceSolver::DeviceLinkUpdate() const {
-    if (!gpu_ || own_.linkUpdate == LinkUpdate::kHost) return false;
-    return own_.linkUpdate == LinkUpdate::kDevice || !gpu_->OnCpu();
+    if (!backend_->CanUpdateLinks() || own_.linkUpdate == LinkUpdate::kHost) return false;
+    return own_.linkUpdate == LinkUpdate::kDevice || !backend_->OnCpu();
 }
 
 std::string AntiradianceSolver::UpdateGeometry(const Scene& scene) {
@@ -100,39 +93,31 @@ std::string AntiradianceSolver::UpdateGeometry(const Scene& scene) {
     // the moved groups recomputed on the device when there is one (links.comp), else here.
     const std::vector<uint8_t> moved = PlaceGroups(model_, scene);
     const std::vector<uint32_t> touched = TouchedLinks(model_, moved);
-    if (gpu_ && !DeviceLinkUpdate()) {
-        RedoLinks(model_, touched);
-        gpu_->UploadLinks();
-        gpu_->UploadLeaves();
-        if (!model_.glossy.empty()) gpu_->UploadGlossy();
-    } else if (gpu_) {
-        gpu_->UpdateLinks(moved);
-        gpu_->UploadLeaves();
-        if (!model_.glossy.empty()) gpu_->UploadGlossy();
+    uint32_t changed = AntiradianceBackend::kLeaves;
+    if (!model_.glossy.empty()) changed |= AntiradianceBackend::kGlossy;
+    if (DeviceLinkUpdate()) {
+        backend_->UpdateLinks(moved);
     } else {
         RedoLinks(model_, touched);
+        changed |= AntiradianceBackend::kLinks;
     }
+    backend_->InputsChanged(changed);
     linksUpdated_ += touched.size();
     ++geometryUpdates_;
     // Shadow casters and receivers follow the moved surfaces (the same buffers, new
     // places); the sky needs nothing.
-    if (lights_) {
-        if (gpuDirect_)
-            gpuDirect_->Move(scene, LeafReceivers());
-        else
-            direct_->Move(scene, LeafReceivers());
+    if (direct_) {
+        direct_->Move(scene, LeafReceivers());
         CopyDirect(scene);
     }
     msGeometry_ =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return std::string("links updated in place on the ") +
-           (gpu_ && DeviceLinkUpdate() ? "device" : "host") + " (" + std::to_string(linksUpdated_) +
+           (DeviceLinkUpdate() ? "device" : "host") + " (" + std::to_string(linksUpdated_) +
            " so far, this move " + std::to_string(int(msGeometry_ + 0.5)) + " ms)";
 }
 
-std::vector<float> AntiradianceSolver::LeafIrradiance() {
-    return cpu_ ? cpu_->LeafIrradiance() : gpu_->ReadLeafIrradiance();
-}
+std::vector<float> AntiradianceSolver::LeafIrradiance() { return backend_->LeafIrradiance(); }
 
 void AntiradianceSolver::Iterate(int n) {
     if (n < 0) throw Error("iteration count must not be negative");
@@ -148,10 +133,7 @@ void AntiradianceSolver::Iterate(int n) {
                 break;
             }
             const LocalMode mode = schedule_.Next();
-            if (cpu_)
-                cpu_->Iterate(mode);
-            else
-                gpu_->Iterate(mode);
+            backend_->Iterate(mode);
             // Every pass's irradiance is read (on a Vulkan device 12 bytes a leaf after a
             // pass that was waited for anyway): the adaptive schedule goes by it, and the
             // guard. Settled solutions are held to the bound, the transients in between
@@ -193,19 +175,19 @@ std::vector<glm::vec3> AntiradianceSolver::SurfelIrradiance(Channel channel) {
 }
 
 void AntiradianceSolver::CopyDirect(const Scene& scene) {
-    // The device's E_d is already where its local pass reads it; keep a host copy for the
-    // `direct` channel. The CPU back end reads model_.leafDirect itself.
-    std::vector<float> e = gpuDirect_ ? gpuDirect_->ReadIrradiance() : direct_->Irradiance();
+    // On a device E_d is already where its local pass reads it; keep a host copy for the
+    // `direct` channel (and the CPU back end, which reads model_.leafDirect).
+    std::vector<float> e = direct_->Irradiance();
     for (size_t i = 0; i < model_.leafDirect.size(); ++i) {
         model_.leafDirect[i] = glm::vec4(e[i * 4], e[i * 4 + 1], e[i * 4 + 2], 0.0f);
         if (!emitterDirect_.empty()) model_.leafDirect[i] += glm::vec4(emitterDirect_[i], 0.0f);
     }
-    if (gpu_ && !emitterDirect_.empty()) gpu_->UploadDirect();
+    uint32_t changed = emitterDirect_.empty() ? 0u : uint32_t(AntiradianceBackend::kDirect);
     // Glossy leaves reflect each light along its own mirror direction: per-light shares.
     lightPlaces_ = scene.lights;
-    perLight_ = gpuDirect_ ? gpuDirect_->ReadPerLight(scene.lights.size()) : direct_->PerLight();
-    if (ReflectDirect() && gpu_) gpu_->UploadGlossyDirect();
-    if (cpu_) cpu_->InputsChanged();
+    perLight_ = direct_->PerLight();
+    if (ReflectDirect()) changed |= AntiradianceBackend::kGlossyDirect;
+    backend_->InputsChanged(changed);
     Rebound();
 }
 
@@ -228,27 +210,17 @@ bool AntiradianceSolver::ReflectDirect() {
 }
 
 void AntiradianceSolver::UpdateLights(const Scene& scene) {
-    // The environment: re-binned only when it changed (a map costs a pass over its pixels).
-    const Environment& env = scene.environment;
-    ValidateEnvironment(env);
-    if (env.image != environment_.image || env.constant != environment_.constant ||
-        env.intensity != environment_.intensity || env.rotation != environment_.rotation) {
-        model_.environment = direct::EnvironmentBins(env, model_.dirs);
-        if (gpu_) gpu_->UploadEnvironment();  // the CPU back end reads model_.environment
-        if (cpu_) cpu_->InputsChanged();
+    if (sky_.Update(scene.environment, model_.dirs, model_.environment)) {
+        backend_->InputsChanged(AntiradianceBackend::kEnvironment);
         Rebound();
-        environment_ = env;
     }
-    if (!direct_ && !gpuDirect_) {
+    if (!direct_) {
         if (scene.lights.empty()) return;
         throw Error("the scene was loaded without punctual lights; lights cannot be added");
     }
     if (scene.lights.size() != static_cast<size_t>(lights_))
         throw Error("the number of punctual lights cannot change in a loaded scene");
-    if (gpuDirect_)
-        gpuDirect_->Update(scene);
-    else
-        direct_->Update(scene);
+    direct_->Update(scene);
     CopyDirect(scene);
 }
 
@@ -267,18 +239,18 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
     }
     // Which leaves are glossy, and their lobes, may have changed with the materials (most
     // edits, a dimmed emitter say, leave them as they are).
+    uint32_t changed = AntiradianceBackend::kLeaves;
     if (!GlossyMatches(model_, scene)) {
         BuildGlossy(model_, scene);
         ReflectDirect();
-        if (gpu_) gpu_->UploadGlossy();
+        changed |= AntiradianceBackend::kGlossy;
     }
-    if (gpu_) gpu_->UploadLeaves();  // the CPU back end reads model_.leaves directly
-    if (cpu_) cpu_->InputsChanged();
+    backend_->InputsChanged(changed);
     Rebound();
 }
 
 std::vector<float> AntiradianceSolver::ExitantRows() {
-    const std::vector<float> table = cpu_ ? cpu_->Iex() : gpu_->ReadIex(false);
+    const std::vector<float> table = backend_->Iex();
     const size_t row = size_t(model_.Bins()) * 3;
     std::vector<float> rows(model_.surfels.size() * row, 0.0f);
     for (const LeafAttributes& leaf : model_.leaves)
@@ -291,17 +263,12 @@ void AntiradianceSolver::StartFrom(const std::vector<float>& rows,
     const size_t row = size_t(model_.Bins()) * 3;
     if (rows.size() != model_.surfels.size() * row || keep.size() != model_.surfels.size())
         throw Error("warm start: the rows are for another surfel count or bin count");
-    std::vector<float> table = cpu_ ? cpu_->Iex() : gpu_->ReadIex(false);
+    std::vector<float> table = backend_->Iex();
     for (const LeafAttributes& leaf : model_.leaves)
         if (keep[leaf.surfel])
             std::copy_n(rows.begin() + leaf.surfel * row, row, table.begin() + leaf.node * row);
     cpu::PullPass(model_, table.data());  // clusters = Σ children again
-    if (cpu_) {
-        cpu_->SetIex(table);
-    } else {
-        gpu_->WriteIex(table, false);
-        gpu_->WriteIex(table, true);
-    }
+    backend_->SetIex(table);
 }
 
 std::string AntiradianceSolver::WarmStart(Solver& previous, const SurfelCarry& carry) {
@@ -350,7 +317,7 @@ std::string AntiradianceSolver::WarmStart(Solver& previous, const SurfelCarry& c
 }
 
 std::vector<std::string> AntiradianceSolver::ValidationMessages() const {
-    return gpu_ ? gpu_->ValidationMessages() : std::vector<std::string>{};
+    return backend_->ValidationMessages();
 }
 
 void AntiradianceSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) {
@@ -379,18 +346,14 @@ void AntiradianceSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfe
                                 ? materials_[model_.surfels.materials[leaf.surfel]].emission
                                 : glm::vec3(0.0f);
     }
-    if (gpu_) {
-        gpu_->UploadLeaves();
-        gpu_->UploadDirect();
-    }
-    if (cpu_) cpu_->InputsChanged();
+    backend_->InputsChanged(AntiradianceBackend::kLeaves | AntiradianceBackend::kDirect);
     Rebound();
 }
 
 SolverStats AntiradianceSolver::Stats() const {
     SolverStats s;
     s.solver = "antiradiance";
-    s.device = deviceName_;
+    s.device = backend_->DeviceName();
     s.elements = model_.leaves.size();
     s.nodes = model_.Nodes();
     s.links = model_.links.Count();
@@ -403,10 +366,10 @@ SolverStats AntiradianceSolver::Stats() const {
     s.linkBytes =
         model_.links.links.size() * sizeof(Link) + model_.links.offsets.size() * sizeof(uint32_t);
     s.lights = lights_;
-    if (environment_.Active()) {
-        s.environment = environment_.source;
-        s.environmentIntensity = environment_.intensity;
-        s.environmentRotation = environment_.rotation;
+    if (const Environment& sky = sky_.Last(); sky.Active()) {
+        s.environment = sky.source;
+        s.environmentIntensity = sky.intensity;
+        s.environmentRotation = sky.rotation;
     }
     for (const LeafAttributes& leaf : model_.leaves)
         s.twoSidedElements += leaf.flags & kLeafTwoSided;
@@ -419,7 +382,7 @@ SolverStats AntiradianceSolver::Stats() const {
     s.msGeometry = msGeometry_;
     if (!model_.links.dynamic.empty()) {
         s.SetDetail("link_update", DeviceLinkUpdate() ? "device" : "host");
-        s.SetDetail("last_link_update_device_ms", gpu_ ? gpu_->LinkUpdateMs() : 0.0);
+        s.SetDetail("last_link_update_device_ms", backend_->LinkUpdateMs());
     }
     s.motionDeclined = model_.motionDeclined;
     s.gathers = schedule_.passes;
@@ -429,24 +392,15 @@ SolverStats AntiradianceSolver::Stats() const {
     s.SetDetail("antiradiance_cap_hits", double(schedule_.capHits));
     s.irradianceBound = bound_;
     s.divergence = divergence_;
-    if (direct_ || gpuDirect_) {
-        s.shadowViews = gpuDirect_ ? gpuDirect_->views : direct_->views;
+    if (direct_) {
+        s.shadowViews = direct_->views;
         s.shadowMapSize = mapSize_;
-        s.msShadow = gpuDirect_ ? gpuDirect_->msShadow : direct_->msShadow;
-        s.msDirect = gpuDirect_ ? gpuDirect_->msDirect : direct_->msDirect;
+        s.msShadow = direct_->msShadow;
+        s.msDirect = direct_->msDirect;
     }
-    if (cpu_) {
-        s.passes = {{"global", cpu_->msGlobal},
-                    {"push", cpu_->msPush},
-                    {"local", cpu_->msLocal},
-                    {"pull", cpu_->msPull}};
-        s.tableBytes = cpu_->TableBytes();
-        s.SetDetail("tables", cpu_->Format() == cpu::TableFormat::kHalf ? "fp16" : "fp32");
-    } else {
-        s.passes = gpu_->PassTimings();
-        s.tableBytes = gpu_->TableBytes();
-        s.SetDetail("tables", "fp32");
-    }
+    s.passes = backend_->PassTimings();
+    s.tableBytes = backend_->TableBytes();
+    s.SetDetail("tables", backend_->Tables());
     return s;
 }
 

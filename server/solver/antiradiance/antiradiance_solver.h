@@ -4,17 +4,14 @@
 
 #include <memory>
 
-#include "direct/direct_light.h"
-#include "direct/vulkan_direct.h"
-#include "solver/antiradiance/cpu_passes.h"
+#include "direct/direct_stage.h"
+#include "solver/antiradiance/backend.h"
 #include "solver/antiradiance/model.h"
 #include "solver/antiradiance/schedule.h"
 #include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
 
 namespace penumbra {
-
-class VulkanAntiradiance;
 
 class AntiradianceSolver : public Solver {
   public:
@@ -58,14 +55,12 @@ class AntiradianceSolver : public Solver {
     AntiradianceSettings own_;
     ProgressFn progress_;
     AntiradianceModel model_;
-    std::unique_ptr<cpu::CpuBackend> cpu_;
-    std::unique_ptr<VulkanAntiradiance> gpu_;
-    // Only when the scene has punctual lights: the CPU twin or the device's passes.
-    std::unique_ptr<direct::CpuDirect> direct_;
-    std::unique_ptr<direct::VulkanDirect> gpuDirect_;
+    std::unique_ptr<AntiradianceBackend> backend_;  // the CPU walk or the Vulkan passes
+    // Only when the scene has punctual lights; on the back end's device when it has one.
+    std::unique_ptr<direct::DirectStage> direct_;
     int lights_ = 0;
     int mapSize_ = 0;
-    Environment environment_;  // as last binned into model_.environment
+    direct::SkyBins sky_;  // the sky as last binned into model_.environment
     // Host copies of E_d (and each light's share), from the direct stage's last update.
     void CopyDirect(const Scene& scene);
     // The lights' direct light reflected by the glossy lobes (model_.glossyDirect); false
@@ -73,7 +68,6 @@ class AntiradianceSolver : public Solver {
     bool ReflectDirect();
     std::vector<PunctualLight> lightPlaces_;
     std::vector<float> perLight_;
-    std::string deviceName_;
     int iterations_ = 0;
     PassSchedule schedule_;
     std::string divergence_;    // SolverStats::divergence

@@ -195,7 +195,7 @@ float CpuBackend::ScaleFor(float peak) {
     return std::ldexp(1.0f, kPeakExponent - std::ilogb(peak) - 1);
 }
 
-void CpuBackend::InputsChanged() {
+void CpuBackend::InputsChanged(uint32_t) {
     // What this iteration adds to a leaf's I_ex / area whatever the transport: emission,
     // reflected direct light, the sky (which every node's L_in starts from) and the
     // lobes' direct reflection. Light arriving from surfaces is bounded by the last table.
@@ -215,7 +215,11 @@ void CpuBackend::InputsChanged() {
     inputPeak_ = peak;
 }
 
-std::vector<float> CpuBackend::Iex() const {
+std::vector<PassTiming> CpuBackend::PassTimings() const {
+    return {{"global", msGlobal}, {"push", msPush}, {"local", msLocal}, {"pull", msPull}};
+}
+
+std::vector<float> CpuBackend::Iex() {
     if (format_ == TableFormat::kFloat) return iex_[cur_];
     std::vector<float> out(m_.TableFloats());
     detail::HalfDecode(half_[cur_].data(), m_.Nodes(), size_t(m_.Bins()) * 3, readScale_.data(),
@@ -234,7 +238,7 @@ void CpuBackend::SetIex(const std::vector<float>& iex) {
     for (size_t n = 0; n < m_.Nodes(); ++n)
         for (size_t k = 0; k < row; ++k)
             peak = std::max(peak, std::abs(iex[n * row + k]) / norm_[n]);
-    InputsChanged();
+    InputsChanged(~0u);
     peak_ = std::max(peak, inputPeak_);
     scale_ = ScaleFor(peak_);
     for (size_t n = 0; n < m_.Nodes(); ++n) writeScale_[n] = scale_ / norm_[n];

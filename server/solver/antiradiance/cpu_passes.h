@@ -5,6 +5,7 @@
 
 #include <vector>
 
+#include "solver/antiradiance/backend.h"
 #include "solver/antiradiance/model.h"
 
 namespace penumbra::cpu {
@@ -32,23 +33,25 @@ enum class TableFormat { kFloat, kHalf };
 // passes (cpu_walk.h). Each node's L_in = its parent's (pushed down on the stack) + its
 // own links' gather; leaves run the local pass; clusters sum their children's fresh I_ex
 // rows while they are still in cache. Only I_ex (ping-pong) lives in memory.
-class CpuBackend {
+class CpuBackend : public AntiradianceBackend {
   public:
     // Throws penumbra::Error for kHalf on a CPU without F16C.
     CpuBackend(const AntiradianceModel& model, TableFormat format);
     static bool HalfSupported();  // whether kHalf runs on this CPU
-    void Iterate(LocalMode mode);
-    const std::vector<float>& LeafIrradiance() const { return irradiance_; }
-    size_t TableBytes() const;
+    std::string DeviceName() const override { return "cpu"; }
+    bool OnCpu() const override { return true; }
+    void Iterate(LocalMode mode) override;
+    std::vector<float> LeafIrradiance() override { return irradiance_; }
+    size_t TableBytes() const override;
     TableFormat Format() const { return format_; }
-    // The I_ex table the next iteration reads (fp32 I_ex whatever the format), and
-    // replacing it (both ping-pong tables).
-    std::vector<float> Iex() const;
-    void SetIex(const std::vector<float>& iex);
-    // The model's emission, albedo, direct light, sky or glossy direct light changed (the
-    // solver calls this where the Vulkan back end uploads them): the fp16 tables' scale
-    // follows what an iteration adds, measured here once instead of every iteration.
-    void InputsChanged();
+    const char* Tables() const override { return format_ == TableFormat::kHalf ? "fp16" : "fp32"; }
+    // fp32 I_ex whatever the format; SetIex replaces both ping-pong tables.
+    std::vector<float> Iex() override;
+    void SetIex(const std::vector<float>& iex) override;
+    // The fp16 tables' scale follows what an iteration adds, measured here once instead of
+    // every iteration; the rest of the model is read in place.
+    void InputsChanged(uint32_t inputs) override;
+    std::vector<PassTiming> PassTimings() const override;
     // Milliseconds per stage since construction: each stage's share of the threads' time,
     // scaled to the wall time of the fused walk.
     double msGlobal = 0, msPush = 0, msLocal = 0, msPull = 0;

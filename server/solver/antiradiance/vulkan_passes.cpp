@@ -505,6 +505,23 @@ std::vector<Link> VulkanAntiradiance::ReadLinks() const { return impl_->links.Do
 
 void VulkanAntiradiance::UploadLinks() { impl_->links.Upload(impl_->m.links.links); }
 
+void VulkanAntiradiance::SetIex(const std::vector<float>& iex) {
+    WriteIex(iex, false);
+    WriteIex(iex, true);
+}
+
+void VulkanAntiradiance::InputsChanged(uint32_t inputs) {
+    if (inputs & kLinks) UploadLinks();
+    if (inputs & kLeaves) UploadLeaves();
+    if (inputs & kDirect) UploadDirect();
+    if (inputs & kGlossy) {
+        UploadGlossy();
+    } else if (inputs & kGlossyDirect) {
+        UploadGlossyDirect();
+    }
+    if (inputs & kEnvironment) UploadEnvironment();
+}
+
 bool VulkanAntiradiance::OnCpu() const { return impl_->ctx.IsLavapipe(); }
 
 void VulkanAntiradiance::UploadDirect() { impl_->direct.Upload(impl_->m.leafDirect); }

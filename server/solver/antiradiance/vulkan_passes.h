@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "solver/antiradiance/backend.h"
 #include "solver/antiradiance/model.h"
 #include "solver/solver.h"
 
@@ -16,13 +17,23 @@ class Buffer;
 class Context;
 }  // namespace gpu
 
-class VulkanAntiradiance {
+class VulkanAntiradiance : public AntiradianceBackend {
   public:
     // `lavapipe`: use the CPU Vulkan device even if a GPU exists; otherwise a real GPU.
     VulkanAntiradiance(const AntiradianceModel& model, bool lavapipe, bool validation);
-    ~VulkanAntiradiance();
+    ~VulkanAntiradiance() override;
 
-    void Iterate(LocalMode mode);  // submits one iteration and waits for it
+    // AntiradianceBackend: the model's inputs are uploaded again (the Upload* below).
+    void Iterate(LocalMode mode) override;  // submits one iteration and waits for it
+    std::vector<float> LeafIrradiance() override { return ReadLeafIrradiance(); }
+    std::vector<float> Iex() override { return ReadIex(false); }
+    void SetIex(const std::vector<float>& iex) override;  // both ping-pong tables
+    void InputsChanged(uint32_t inputs) override;
+    bool CanUpdateLinks() const override { return true; }
+    const char* Tables() const override { return "fp32"; }
+    gpu::Context* DirectDevice() override { return &Context(); }
+    gpu::Buffer* DirectOut() override { return &DirectBuffer(); }
+
     std::vector<float> ReadLeafIrradiance();
     // Copies the model's per-leaf attributes (albedo, emission) to the device again.
     void UploadLeaves();
@@ -31,13 +42,13 @@ class VulkanAntiradiance {
     // from the model's nodes and surfels at their new places. The device's links are then
     // the authority: the model's host copy keeps its senders and offsets, not these values.
     // Needs a model with motion links.
-    void UpdateLinks(const std::vector<uint8_t>& moved);
+    void UpdateLinks(const std::vector<uint8_t>& moved) override;
     // Copies the model's links to the device again (after RedoLinks on the host).
     void UploadLinks();
     // Whether the device is lavapipe, which runs on the host's own cores.
-    bool OnCpu() const;
+    bool OnCpu() const override;
     // Device time of the last UpdateLinks (0 without timestamps).
-    double LinkUpdateMs() const;
+    double LinkUpdateMs() const override;
     std::vector<Link> ReadLinks() const;
     // Copies the model's per-leaf direct irradiance (E_d) to the device again.
     void UploadDirect();
@@ -52,10 +63,10 @@ class VulkanAntiradiance {
     // direct pass to render into.
     gpu::Context& Context();
     gpu::Buffer& DirectBuffer();
-    std::string DeviceName() const;
-    std::vector<PassTiming> PassTimings() const;
-    size_t TableBytes() const;
-    std::vector<std::string> ValidationMessages() const;
+    std::string DeviceName() const override;
+    std::vector<PassTiming> PassTimings() const override;
+    size_t TableBytes() const override;
+    std::vector<std::string> ValidationMessages() const override;
 
     // Single passes on the current tables, for GPU ≡ CPU twin tests. The passes are not
     // the CPU twin's one for one: kGlobal gathers the clusters depth by depth, each starting

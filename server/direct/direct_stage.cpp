@@ -1,0 +1,27 @@
+// The direct-light stage's back-end choice and the sky's re-binning.
+#include "direct/direct_stage.h"
+
+#include "direct/environment_light.h"
+#include "direct/vulkan_direct.h"
+
+namespace penumbra::direct {
+
+std::unique_ptr<DirectStage> MakeDirectStage(const Scene& scene, std::vector<GpuReceiver> receivers,
+                                             int mapSize, gpu::Context* device, gpu::Buffer* out) {
+    if (device && out)
+        return std::make_unique<VulkanDirect>(*device, scene, std::move(receivers), *out, mapSize);
+    return std::make_unique<CpuDirect>(scene, std::move(receivers), mapSize);
+}
+
+bool SkyBins::Update(const Environment& sky, const Directions& dirs, std::vector<glm::vec3>& bins) {
+    ValidateEnvironment(sky);
+    if (binned_ && sky.image == last_.image && sky.constant == last_.constant &&
+        sky.intensity == last_.intensity && sky.rotation == last_.rotation)
+        return false;
+    bins = EnvironmentBins(sky, dirs);
+    last_ = sky;
+    binned_ = true;
+    return true;
+}
+
+}  // namespace penumbra::direct
