@@ -92,8 +92,4 @@ class Server {
     std::map<EncodedKey, std::shared_ptr<const std::vector<uint8_t>>> encoded_;
 };
 
-// Builds the Frame payload of `frame` in `channel` and `format`.
-void BuildFramePayload(flatbuffers::FlatBufferBuilder& b, const service::FrameData& frame,
-                       service::Channel channel, protocol::fb::Format format);
-
 }  // namespace penumbra::net

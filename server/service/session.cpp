@@ -83,13 +83,33 @@ bool SubtreeHasLights(const Scene& scene, int node) {
 
 }  // namespace
 
+const glm::vec3* FrameData::Values(size_t p, Channel channel,
+                                   std::vector<glm::vec3>& scratch) const {
+    const bool hasDirect = !direct.empty();
+    if (channel == Channel::kIndirect || (!hasDirect && channel == Channel::kTotal))
+        return irradiance[p].data();
+    if (!hasDirect) return nullptr;
+    if (channel == Channel::kDirect) return direct[p].data();
+    scratch.resize(irradiance[p].size());
+    for (size_t i = 0; i < scratch.size(); ++i) scratch[i] = irradiance[p][i] + direct[p][i];
+    return scratch.data();
+}
+
+void CheckSessionSettings(const SessionSettings& s) {
+    if (s.iterationsPerFrame < 1 || s.iterationsPerFrame > kMaxIterationsPerFrame)
+        throw Error("iterations per frame must be 1…" + std::to_string(kMaxIterationsPerFrame) +
+                    ", not " + std::to_string(s.iterationsPerFrame));
+    if (!(s.convergedChange >= 0.0)) throw Error("converged_change must be ≥ 0 (0: never idle)");
+    CheckGatherRays(s.emitterRays, "emitter_rays");
+    CheckGatherRays(s.gatherRays, "gather_rays");
+    if (!(s.solver.elementSize >= 0.0f) || !std::isfinite(s.solver.elementSize))
+        throw Error("element size must be ≥ 0 metres (0: automatic)");
+}
+
 Session::Session(std::string name, Scene scene, SessionSettings settings,
                  const ProgressFn& progress)
     : name_(std::move(name)), settings_(std::move(settings)) {
-    if (settings_.iterationsPerFrame < 1 || settings_.iterationsPerFrame > 64)
-        throw Error("iterations per frame must be between 1 and 64");
-    CheckGatherRays(settings_.emitterRays, "emitter_rays");
-    CheckGatherRays(settings_.gatherRays, "gather_rays");
+    CheckSessionSettings(settings_);
     auto start = Clock::now();
     std::vector<std::string> notes;
     solver_ = BuildSolver(scene, true, progress, &notes);

@@ -67,6 +67,14 @@ struct SessionSettings {
     int maxFramesPerEdit = 400;
 };
 
+inline constexpr int kMaxIterationsPerFrame = 64;
+
+// Throws penumbra::Error naming what is wrong with `settings`: iterations per frame
+// (1…kMaxIterationsPerFrame), the converged change (≥ 0), the gather's rays
+// (CheckGatherRays), the element size (≥ 0, finite). The solver's own options are
+// CheckSolverSettings' (solver/registry.h).
+void CheckSessionSettings(const SessionSettings& settings);
+
 // Which glTF primitive an irradiance array belongs to.
 struct PrimitiveKey {
     std::string node;
@@ -89,6 +97,10 @@ struct FrameData {
     // `direct` (punctual lights, shadowed) the same way; empty when the scene has none.
     std::vector<std::vector<glm::vec3>> direct;
     std::shared_ptr<const std::vector<PrimitiveKey>> layout;  // one key per primitive
+
+    // Primitive p's irradiance in `channel`, one RGB per input vertex: `total` is their sum,
+    // made here into `scratch`; null where it is all zero (`direct` without punctual lights).
+    const glm::vec3* Values(size_t p, Channel channel, std::vector<glm::vec3>& scratch) const;
 };
 using FramePtr = std::shared_ptr<const FrameData>;
 

@@ -1,0 +1,123 @@
+// A client's socket: reads decoded into messages, writes queued with per-client backpressure.
+#include "net/connection.h"
+
+namespace penumbra::net {
+
+namespace fb = protocol::fb;
+using protocol::MessageType;
+
+Connection::Connection(Server& server, asio::generic::stream_protocol::socket socket, uint64_t id)
+    : server_(server),
+      socket_(std::move(socket)),
+      id_(id),
+      decoder_(server.Limits().maxFrameBytes) {}
+
+void Connection::Close() {
+    if (closed_) return;
+    closed_ = true;
+    Unsubscribe("");
+    std::error_code ec;
+    socket_.shutdown(asio::socket_base::shutdown_both, ec);
+    socket_.close(ec);
+    server_.Forget(this);
+}
+
+void Connection::CloseAfterWrites() {
+    closing_ = true;
+    if (!writing_) Close();
+}
+
+void Connection::PushFrame(std::shared_ptr<const std::vector<uint8_t>> bytes) {
+    if (closed_) return;
+    size_t queued = 0;
+    for (size_t i = writing_ ? 1 : 0; i < queue_.size(); ++i) queued += queue_[i].frame;
+    if (queued >= server_.Limits().maxQueuedFrames) {
+        for (size_t i = writing_ ? 1 : 0; i < queue_.size(); ++i)
+            if (queue_[i].frame) {
+                queue_.erase(queue_.begin() + static_cast<std::ptrdiff_t>(i));
+                ++server_.framesDropped;
+                break;
+            }
+    }
+    Enqueue(std::move(bytes), true);
+}
+
+void Connection::Read() {
+    auto self = shared_from_this();
+    socket_.async_read_some(asio::buffer(readBuffer_), [this, self](std::error_code ec, size_t n) {
+        if (closed_) return;
+        if (ec) {  // peer closed or vanished: nothing to answer
+            Close();
+            return;
+        }
+        decoder_.Feed(readBuffer_.data(), n);
+        protocol::Message message;
+        while (!closed_ && !closing_) {
+            auto r = decoder_.Next(message);
+            if (r == protocol::Decoder::Result::kNeedMore) break;
+            if (r == protocol::Decoder::Result::kError) {
+                ++server_.protocolErrors;
+                SendError(decoder_.errorRequestId(), decoder_.errorCode(), decoder_.error(), true);
+                return;
+            }
+            Dispatch(message);
+        }
+        if (!closed_ && !closing_) Read();
+    });
+}
+
+void Connection::Enqueue(std::shared_ptr<const std::vector<uint8_t>> bytes, bool frame) {
+    if (closed_) return;
+    queue_.push_back({std::move(bytes), frame});
+    if (!writing_) WriteNext();
+}
+
+void Connection::WriteNext() {
+    if (queue_.empty() || closed_) {
+        writing_ = false;
+        if (closing_ && !closed_) Close();
+        return;
+    }
+    writing_ = true;
+    auto self = shared_from_this();
+    auto bytes = queue_.front().bytes;
+    asio::async_write(socket_, asio::buffer(*bytes),
+                      [this, self, bytes](std::error_code ec, size_t) {
+                          if (closed_) return;
+                          if (ec) {
+                              Close();
+                              return;
+                          }
+                          if (queue_.front().frame) ++server_.framesSent;
+                          queue_.pop_front();
+                          WriteNext();
+                      });
+}
+
+void Connection::Send(MessageType type, uint32_t requestId,
+                      const flatbuffers::FlatBufferBuilder& b) {
+    Enqueue(
+        std::make_shared<const std::vector<uint8_t>>(protocol::EncodeFrame(type, requestId, b)));
+}
+
+void Connection::SendError(uint32_t requestId, fb::ErrorCode code, const std::string& message,
+                           bool close) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateErrorDirect(b, code, message.c_str()));
+    Send(MessageType::kError, requestId, b);
+    if (close) CloseAfterWrites();
+}
+
+void Connection::SendOk(uint32_t requestId, uint64_t frame) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateOk(b, frame));
+    Send(MessageType::kOk, requestId, b);
+}
+
+void Connection::SendAck(uint32_t requestId, uint64_t edit) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateEditAck(b, edit));
+    Send(MessageType::kEditAck, requestId, b);
+}
+
+}  // namespace penumbra::net

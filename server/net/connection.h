@@ -1,0 +1,111 @@
+// One client of penumbra-server: its socket's reads and queued writes (connection.cpp), and
+// its requests handled against the service (requests.cpp). Lives on the I/O thread; slow
+// requests run on the server's blocking pool and answer back on the I/O thread.
+#pragma once
+
+#include <array>
+#include <asio.hpp>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "net/messages.h"
+#include "net/server.h"
+#include "protocol/frame.h"
+
+namespace penumbra::net {
+
+class Connection : public std::enable_shared_from_this<Connection> {
+  public:
+    Connection(Server& server, asio::generic::stream_protocol::socket socket, uint64_t id);
+
+    void Start() { Read(); }
+    // Closes the socket; pending writes are abandoned.
+    void Close();
+    // Queues a subscribed frame (I/O thread). Keeps at most maxQueuedFrames unsent frames:
+    // a slow client sees fewer frames, never stale ones, and never holds up the others.
+    void PushFrame(std::shared_ptr<const std::vector<uint8_t>> bytes);
+
+  private:
+    struct Outgoing {
+        std::shared_ptr<const std::vector<uint8_t>> bytes;
+        bool frame = false;
+    };
+    struct Subscription {
+        std::weak_ptr<service::Session> session;
+        int id = 0;
+    };
+
+    // --- I/O (connection.cpp) ---
+    void Read();
+    void Enqueue(std::shared_ptr<const std::vector<uint8_t>> bytes, bool frame = false);
+    void WriteNext();
+    void Send(protocol::MessageType type, uint32_t requestId,
+              const flatbuffers::FlatBufferBuilder& b);
+    // An Error reply; with `close`, the connection closes once it is written.
+    void SendError(uint32_t requestId, protocol::fb::ErrorCode code, const std::string& message,
+                   bool close = false);
+    void SendOk(uint32_t requestId, uint64_t frame = 0);
+    void SendAck(uint32_t requestId, uint64_t edit);
+    // Closes once the queue is written.
+    void CloseAfterWrites();
+    // Runs `work` on the blocking pool and `reply` with its result back on the I/O thread;
+    // a ServiceError becomes an Error reply.
+    template <typename Work, typename Reply>
+    void Blocking(uint32_t requestId, Work work, Reply reply);
+
+    // --- Requests (requests.cpp) ---
+    // Hello first, then Handle; a ServiceError or any exception becomes an Error reply.
+    void Dispatch(const protocol::Message& m);
+    void Handle(const protocol::Message& m);
+    void OnHello(uint32_t id, const protocol::fb::Hello& h);
+    void OnLoadScene(uint32_t id, const protocol::fb::LoadScene& l);
+    void OnSetEnvironment(uint32_t id, const protocol::fb::SetEnvironment& s);
+    void OnSubscribe(uint32_t id, const protocol::fb::Subscribe& s);
+    void OnGetIrradiance(uint32_t id, const protocol::fb::GetIrradiance& g);
+    void OnStep(uint32_t id, const protocol::fb::Step& s);
+    void OnGetStats(uint32_t id, const protocol::fb::GetStats& g);
+    // "" unsubscribes from every scene.
+    void Unsubscribe(const std::string& scene);
+
+    Server& server_;
+    asio::generic::stream_protocol::socket socket_;
+    uint64_t id_;
+    protocol::Decoder decoder_;
+    std::array<uint8_t, 64 * 1024> readBuffer_;
+    std::deque<Outgoing> queue_;
+    bool writing_ = false;
+    bool closing_ = false;  // close once the queue is written
+    bool closed_ = false;
+    bool helloDone_ = false;
+    std::string client_;
+    std::map<std::string, Subscription> subscriptions_;
+};
+
+template <typename Work, typename Reply>
+void Connection::Blocking(uint32_t requestId, Work work, Reply reply) {
+    auto self = shared_from_this();
+    asio::post(server_.Blocking(), [this, self, requestId, work, reply]() mutable {
+        std::function<void()> done;
+        try {
+            auto result = std::make_shared<decltype(work())>(work());
+            done = [this, result, reply]() mutable { reply(*result); };
+        } catch (const service::ServiceError& e) {
+            std::string what = e.what();
+            protocol::fb::ErrorCode code = CodeOf(e.kind());
+            done = [this, requestId, code, what] { SendError(requestId, code, what); };
+        } catch (const std::exception& e) {
+            std::string what = e.what();
+            done = [this, requestId, what] {
+                SendError(requestId, protocol::fb::ErrorCode::Internal, what);
+            };
+        }
+        asio::post(server_.Io(), [self, done] { done(); });
+    });
+}
+
+}  // namespace penumbra::net

@@ -1,0 +1,198 @@
+// A client's requests handled against the service (protocol/SPEC.md, "Messages"): fields
+// read and checked by messages.h, slow work on the blocking pool.
+#include "net/connection.h"
+
+namespace penumbra::net {
+
+namespace fb = protocol::fb;
+using protocol::MessageType;
+using service::ErrorKind;
+using service::ServiceError;
+
+void Connection::Dispatch(const protocol::Message& m) {
+    const uint32_t id = m.header.requestId;
+    if (!helloDone_ && m.header.type != MessageType::kHello) {
+        SendError(id, fb::ErrorCode::HelloRequired,
+                  std::string("the first message must be Hello, got ") +
+                      protocol::MessageName(m.header.type),
+                  true);
+        return;
+    }
+    try {
+        Handle(m);
+    } catch (const ServiceError& e) {
+        SendError(id, CodeOf(e.kind()), e.what());
+    } catch (const std::exception& e) {
+        SendError(id, fb::ErrorCode::Internal, e.what());
+    }
+}
+
+void Connection::Handle(const protocol::Message& m) {
+    const uint32_t id = m.header.requestId;
+    service::Service& service = server_.GetService();
+    switch (m.header.type) {
+        case MessageType::kHello:
+            return OnHello(id, *m.As<fb::Hello>());
+        case MessageType::kBye: {
+            flatbuffers::FlatBufferBuilder b;
+            b.Finish(fb::CreateBye(b));
+            Send(MessageType::kBye, id, b);
+            return CloseAfterWrites();
+        }
+        case MessageType::kLoadScene:
+            return OnLoadScene(id, *m.As<fb::LoadScene>());
+        case MessageType::kGetSceneInfo: {
+            auto session = service.Find(Str(m.As<fb::GetSceneInfo>()->scene()));
+            flatbuffers::FlatBufferBuilder b;
+            BuildSceneInfo(b, *session, true);
+            return Send(MessageType::kSceneInfo, id, b);
+        }
+        case MessageType::kSetTransform: {
+            const auto* t = m.As<fb::SetTransform>();
+            auto session = service.Find(Str(t->scene()));
+            return SendAck(id, session->Submit(ReadSetTransform(*t)));
+        }
+        case MessageType::kSetLight: {
+            const auto* l = m.As<fb::SetLight>();
+            auto session = service.Find(Str(l->scene()));
+            return SendAck(id, session->Submit(ReadSetLight(*l)));
+        }
+        case MessageType::kSetMaterial: {
+            const auto* s = m.As<fb::SetMaterial>();
+            auto session = service.Find(Str(s->scene()));
+            return SendAck(id, session->Submit(ReadSetMaterial(*s)));
+        }
+        case MessageType::kSetEnvironment:
+            return OnSetEnvironment(id, *m.As<fb::SetEnvironment>());
+        case MessageType::kSubscribe:
+            return OnSubscribe(id, *m.As<fb::Subscribe>());
+        case MessageType::kUnsubscribe: {
+            auto session = service.Find(Str(m.As<fb::Unsubscribe>()->scene()));
+            Unsubscribe(session->Name());
+            return SendOk(id);
+        }
+        case MessageType::kGetIrradiance:
+            return OnGetIrradiance(id, *m.As<fb::GetIrradiance>());
+        case MessageType::kStep:
+            return OnStep(id, *m.As<fb::Step>());
+        case MessageType::kGetStats:
+            return OnGetStats(id, *m.As<fb::GetStats>());
+        default:
+            SendError(id, fb::ErrorCode::UnknownType,
+                      std::string(protocol::MessageName(m.header.type)) +
+                          " is a reply type; a client may not send it");
+    }
+}
+
+void Connection::OnHello(uint32_t id, const fb::Hello& h) {
+    uint16_t lo = std::max<uint16_t>(h.min_version(), protocol::kMinProtocolVersion);
+    uint16_t hi = std::min<uint16_t>(h.max_version(), protocol::kMaxProtocolVersion);
+    if (helloDone_) {
+        SendError(id, fb::ErrorCode::InvalidArgument, "Hello was already sent");
+        return;
+    }
+    if (lo > hi) {
+        SendError(id, fb::ErrorCode::VersionMismatch,
+                  "client speaks versions " + std::to_string(h.min_version()) + "–" +
+                      std::to_string(h.max_version()) + ", this server " +
+                      std::to_string(protocol::kMinProtocolVersion) + "–" +
+                      std::to_string(protocol::kMaxProtocolVersion),
+                  true);
+        return;
+    }
+    helloDone_ = true;
+    client_ = Str(h.client());
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateWelcomeDirect(b, "penumbra-server", hi, server_.Limits().maxFrameBytes));
+    Send(MessageType::kWelcome, id, b);
+}
+
+void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
+    service::Service& service = server_.GetService();
+    // Checked whole here, so a bad request is refused before anything loads.
+    service::LoadRequest req = ReadLoadScene(l, service);
+    Blocking(
+        id, [&service, req] { return service.Load(req); },
+        [this, id](service::LoadResult& r) {
+            flatbuffers::FlatBufferBuilder b;
+            BuildSceneInfo(b, *r.session, r.reused);
+            Send(MessageType::kSceneInfo, id, b);
+        });
+}
+
+void Connection::OnSetEnvironment(uint32_t id, const fb::SetEnvironment& s) {
+    service::Service& service = server_.GetService();
+    auto session = service.Find(Str(s.scene()));
+    EnvironmentRequest r = ReadSetEnvironment(s);
+    // Reading a sky map takes a while: on the blocking pool.
+    Blocking(
+        id,
+        [&service, session, r]() mutable {
+            if (!r.path.empty() || r.color)
+                r.edit.replace = service.MakeEnvironment(r.path, r.color);
+            return session->Submit(r.edit);
+        },
+        [this, id](uint64_t edit) { SendAck(id, edit); });
+}
+
+void Connection::OnSubscribe(uint32_t id, const fb::Subscribe& s) {
+    auto session = server_.GetService().Find(Str(s.scene()));
+    const service::Channel channel = ChannelOf(s.channel());
+    Unsubscribe(session->Name());
+    std::weak_ptr<Connection> weak = shared_from_this();
+    Server* server = &server_;
+    const fb::Format format = s.format();
+    int sub =
+        session->AddSubscriber([weak, server, channel, format](const service::FramePtr& frame) {
+            asio::post(server->Io(), [weak, server, channel, format, frame] {
+                if (auto c = weak.lock())
+                    c->PushFrame(server->EncodedFrame(frame, channel, format));
+            });
+        });
+    subscriptions_[session->Name()] = {session, sub};
+    SendOk(id);
+}
+
+void Connection::OnGetIrradiance(uint32_t id, const fb::GetIrradiance& g) {
+    auto session = server_.GetService().Find(Str(g.scene()));
+    const service::Channel channel = ChannelOf(g.channel());
+    const fb::Format format = g.format();
+    Blocking(
+        id, [session] { return session->Latest(); },
+        [this, id, channel, format](service::FramePtr& frame) {
+            flatbuffers::FlatBufferBuilder b;
+            BuildFramePayload(b, *frame, channel, format);
+            Send(MessageType::kFrame, id, b);
+        });
+}
+
+void Connection::OnStep(uint32_t id, const fb::Step& s) {
+    auto session = server_.GetService().Find(Str(s.scene()));
+    const int n = s.iterations();
+    Blocking(
+        id, [session, n] { return session->Step(n); },
+        [this, id](uint64_t& frame) { SendOk(id, frame); });
+}
+
+void Connection::OnGetStats(uint32_t id, const fb::GetStats& g) {
+    const std::string scene = Str(g.scene());
+    service::Service& service = server_.GetService();
+    nlohmann::json j = scene.empty() ? service.StatsJson() : service.Find(scene)->StatsJson();
+    j["server"] = server_.StatsJson();
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateStatsDirect(b, j.dump().c_str()));
+    Send(MessageType::kStats, id, b);
+}
+
+void Connection::Unsubscribe(const std::string& scene) {
+    for (auto it = subscriptions_.begin(); it != subscriptions_.end();) {
+        if (scene.empty() || it->first == scene) {
+            if (auto s = it->second.session.lock()) s->RemoveSubscriber(it->second.id);
+            it = subscriptions_.erase(it);
+        } else {
+            ++it;
+        }
+    }
+}
+
+}  // namespace penumbra::net
