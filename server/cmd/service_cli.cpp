@@ -1,5 +1,6 @@
-// Service commands of the CLI: argument handling, the embedded server and each command's
-// output. The protocol work is the client library's.
+// Service commands of the CLI: their arguments, the embedded server, the dispatch to one
+// function per command (service_commands.cpp) and scripts. The protocol work is the client
+// library's.
 #include "cmd/service_cli.h"
 
 #include <unistd.h>
@@ -19,6 +20,7 @@
 
 #include "base/check.h"
 #include "client/client.h"
+#include "cmd/service_state.h"
 #include "cmd/solver_options.h"
 #include "net/server.h"
 #include "output/irradiance_writer.h"
@@ -72,28 +74,6 @@ class EmbeddedServer {
     std::thread thread_;
 };
 
-std::array<float, 3> Triple(const std::vector<float>& v, const char* what) {
-    if (v.size() != 3) throw Error(std::string(what) + " needs three numbers, e.g. 1,0.9,0.8");
-    return {v[0], v[1], v[2]};
-}
-
-// The channels by the solver interface's names (solver.h), as the protocol numbers them.
-static_assert(int(client::Channel::kIndirect) == int(Channel::kIndirect) &&
-              int(client::Channel::kDirect) == int(Channel::kDirect) &&
-              int(client::Channel::kTotal) == int(Channel::kTotal));
-client::Channel ParseClientChannel(const std::string& s) {
-    return static_cast<client::Channel>(ParseChannel(s));
-}
-
-const char* ChannelName(client::Channel c) { return ChannelName(static_cast<Channel>(c)); }
-
-client::Format ParseFormat(const std::string& s) {
-    if (s == "f32" || s == "float32") return client::Format::kFloat32;
-    if (s == "f16" || s == "float16") return client::Format::kFloat16;
-    throw Error("format must be f32 or f16, not '" + s + "'");
-}
-
-// Splits a script line into words; "double quotes" group words with spaces.
 std::vector<std::string> SplitWords(const std::string& line) {
     std::vector<std::string> words;
     std::string w;
@@ -117,76 +97,7 @@ std::vector<std::string> SplitWords(const std::string& line) {
 }
 
 // One line per frame: for people, or (`json`) a JSON object per line (JSON Lines).
-void PrintFrame(const client::Frame& f, double fps, bool json) {
-    double device = 0.0;
-    for (const auto& p : f.passes) device += p.second;
-    if (json) {
-        nlohmann::json j = {{"scene", f.scene},   {"frame", f.frame},
-                            {"edit", f.lastEdit}, {"iterations", f.iterations},
-                            {"ms", f.frameMs},    {"device_ms", device},
-                            {"fps", fps},         {"converged", f.converged},
-                            {"note", f.note}};
-        j["latency_ms"] = f.editLatencyMs > 0.0 ? nlohmann::json(f.editLatencyMs) : nullptr;
-        for (const auto& [name, ms] : f.passes) j["passes"][name] = ms;
-        std::printf("%s\n", j.dump().c_str());
-        std::fflush(stdout);
-        return;
-    }
-    std::printf("frame %6llu  edit %3llu  %7.2f ms  device %7.2f ms  %5.1f fps",
-                (unsigned long long)f.frame, (unsigned long long)f.lastEdit, f.frameMs, device,
-                fps);
-    if (f.editLatencyMs > 0.0) std::printf("  latency %7.1f ms", f.editLatencyMs);
-    if (f.converged) std::printf("  converged");
-    if (!f.note.empty()) std::printf("  (%s)", f.note.c_str());
-    std::printf("\n");
-    std::fflush(stdout);
-}
-
 }  // namespace
-
-struct ServiceCommands::State {
-    bool forScript = false;
-    std::string connect, session, embeddedScene, device = "auto";
-    bool quiet = false;
-
-    CLI::App *load = nullptr, *info = nullptr, *watch = nullptr, *move = nullptr, *light = nullptr,
-             *material = nullptr, *sky = nullptr, *get = nullptr, *step = nullptr, *stats = nullptr,
-             *script = nullptr, *wait = nullptr, *sleep = nullptr;
-
-    client::LoadOptions loadOptions;
-    std::string loadPath;
-    bool upload = false;
-    std::vector<float> skyColor;
-    float skyRotationDegrees = 0.0f;
-
-    int watchFrames = 0;
-    uint64_t minEdit = 0;
-    double timeout = 0.0;
-    bool untilConverged = false;
-    bool watchJson = false;
-    std::string channel = "indirect", format = "f32";
-
-    std::string node;
-    std::vector<float> translate, matrix, color, albedo, emission, position, direction, cone;
-    float rotateY = 0.0f;
-    // Optional, so that a negative value reaches the server and is refused there with why.
-    std::optional<float> intensity, range;
-    std::optional<float> roughness, metallic;
-    std::string skyPath;
-    bool skyOff = false;
-    std::optional<float> skyIntensity, skyTurnDegrees;
-
-    std::string output, gltf, color0 = "tonemapped";
-    int stepIterations = 1;
-    std::string scriptFile;
-    double sleepSeconds = 0.0;
-
-    uint64_t lastEdit = 0;  // newest edit this run sent (for `wait`)
-
-    int Execute(client::Client& c);
-    int RunScript(client::Client& c);
-    int Wait(client::Client& c, uint64_t edit, double timeoutSeconds);
-};
 
 ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_unique<State>()) {
     State& s = *s_;
@@ -409,275 +320,20 @@ int ServiceCommands::State::Wait(client::Client& c, uint64_t edit, double timeou
 }
 
 int ServiceCommands::State::Execute(client::Client& c) {
-    if (load && load->parsed()) {
-        client::LoadOptions o = loadOptions;
-        if (skyColor.size() == 3) o.environmentColor = {skyColor[0], skyColor[1], skyColor[2]};
-        o.environmentRotation = skyRotationDegrees * 0.017453292519943295f;
-        if (upload) {
-            std::ifstream in(loadPath, std::ios::binary);
-            if (!in) throw Error(loadPath + ": cannot read");
-            if (!IsGlbPath(loadPath)) throw Error("--upload sends binary glTF: give a .glb file");
-            o.glb.assign(std::istreambuf_iterator<char>(in), {});
-            o.name = fs::path(loadPath).filename().string();
-        } else {
-            o.path = loadPath;
-        }
-        auto info = c.Load(o);
-        std::string dynamic, lights;
-        for (const auto& l : info.lights)
-            lights += (lights.empty() ? "" : ", ") + l.name + " (" + l.type + ")";
-        for (const auto& n : info.nodes) {
-            if (n.dynamic) dynamic += (dynamic.empty() ? "" : ", ") + n.name;
-            if (n.emissive) lights += (lights.empty() ? "" : ", ") + n.name + " (emissive)";
-        }
-        std::printf("%s %s: %u elements, %llu links, solver %s on %s, built in %.2f s\n",
-                    info.reused ? "joined" : "loaded", info.scene.c_str(), info.elements,
-                    (unsigned long long)info.links, info.solver.c_str(), info.device.c_str(),
-                    info.buildSeconds);
-        if (!info.environment.empty())
-            lights += (lights.empty() ? "" : ", ") + ("environment " + info.environment);
-        if (!quiet)
-            std::printf("  movable: %s\n  lights: %s\n",
-                        dynamic.empty() ? "(none)" : dynamic.c_str(),
-                        lights.empty() ? "(none)" : lights.c_str());
-        return kExitOk;
-    }
-    if (info && info->parsed()) {
-        auto i = c.Info(session);
-        std::printf("scene %s: solver %s on %s, %u elements, %llu links\n", i.scene.c_str(),
-                    i.solver.c_str(), i.device.c_str(), i.elements, (unsigned long long)i.links);
-        for (const auto& n : i.nodes) {
-            uint32_t vertices = 0;
-            for (const auto& p : n.primitives) vertices += p.vertices;
-            std::printf("  node %-20s %zu primitives, %u vertices%s%s\n", n.name.c_str(),
-                        n.primitives.size(), vertices, n.dynamic ? ", dynamic" : "",
-                        n.emissive ? ", light" : "");
-        }
-        for (const auto& l : i.lights)
-            std::printf(
-                "  light %-19s %s on node %s, colour %.3g %.3g %.3g × %.4g %s, at %.3g %.3g %.3g, "
-                "towards %.3g %.3g %.3g%s\n",
-                l.name.c_str(), l.type.c_str(), l.node.c_str(), l.color[0], l.color[1], l.color[2],
-                l.intensity, l.type == "directional" ? "lux" : "cd", l.position[0], l.position[1],
-                l.position[2], l.direction[0], l.direction[1], l.direction[2],
-                l.type == "spot" ? (", cone " + std::to_string(glm::degrees(l.innerCone)) + "°–" +
-                                    std::to_string(glm::degrees(l.outerCone)) + "°")
-                                       .c_str()
-                                 : "");
-        for (const auto& m : i.materials)
-            std::printf(
-                "  material %-16s albedo %.3g %.3g %.3g  emission %.3g %.3g %.3g  "
-                "roughness %.3g  metallic %.3g\n",
-                m.name.c_str(), m.albedo[0], m.albedo[1], m.albedo[2], m.emission[0], m.emission[1],
-                m.emission[2], m.roughness, m.metallic);
-        return kExitOk;
-    }
-    if (watch && watch->parsed()) {
-        std::mutex m;
-        std::condition_variable cv;
-        int seen = 0;
-        bool done = false;
-        std::deque<Clock::time_point> arrivals;
-        c.Subscribe(
-            [&](const client::Frame& f) {
-                std::lock_guard lock(m);
-                if (done) return;
-                auto now = Clock::now();
-                arrivals.push_back(now);
-                while (arrivals.size() > 10) arrivals.pop_front();
-                double fps = 0.0;
-                if (arrivals.size() > 1)
-                    fps = (arrivals.size() - 1) /
-                          std::chrono::duration<double>(arrivals.back() - arrivals.front()).count();
-                PrintFrame(f, fps, watchJson);
-                ++seen;
-                if ((watchFrames > 0 && seen >= watchFrames) ||
-                    (untilConverged && f.converged && f.lastEdit >= minEdit))
-                    done = true;
-                cv.notify_all();
-            },
-            ParseClientChannel(channel), ParseFormat(format), session);
-        std::unique_lock lock(m);
-        auto stop = [&] { return done || !c.Connected(); };
-        if (timeout > 0.0) {
-            if (!cv.wait_for(lock, std::chrono::duration<double>(timeout), stop)) {
-                done = true;
-                if (!quiet)  // on stderr when stdout is JSON Lines
-                    std::fprintf(watchJson ? stderr : stdout, "watch: %.1f s passed, %d frames\n",
-                                 timeout, seen);
-                return kExitOk;
-            }
-        } else {
-            while (!stop()) cv.wait_for(lock, std::chrono::milliseconds(200));
-        }
-        done = true;
-        if (!c.Connected()) {
-            std::fprintf(stderr, "penumbra: watch: the server closed the connection\n");
-            return kExitConnection;
-        }
-        return kExitOk;
-    }
-    if (move && move->parsed()) {
-        std::array<float, 16> out{};
-        if (!matrix.empty()) {
-            if (matrix.size() != 16) throw Error("--matrix needs 16 numbers");
-            std::copy(matrix.begin(), matrix.end(), out.begin());
-        } else {
-            auto i = c.Info(session);
-            const client::NodeInfo* n = i.Node(node);
-            if (!n) {
-                // As the server says it (Session::Submit): the nodes that can move.
-                std::string movable;
-                for (const auto& m : i.nodes)
-                    if (m.dynamic) movable += (movable.empty() ? "" : ", ") + m.name;
-                throw Error("no node '" + node + "' in scene '" + i.scene +
-                            "'; movable nodes: " + (movable.empty() ? "(none)" : movable));
-            }
-            glm::mat4 current;
-            for (int k = 0; k < 16; ++k) current[k / 4][k % 4] = n->matrix[k];
-            glm::mat4 t(1.0f);
-            if (!translate.empty()) {
-                auto v = Triple(translate, "--translate");
-                t = glm::translate(t, glm::vec3(v[0], v[1], v[2]));
-            }
-            glm::mat4 r = glm::rotate(glm::mat4(1.0f), glm::radians(rotateY), glm::vec3(0, 1, 0));
-            glm::mat4 next = t * current * r;
-            for (int k = 0; k < 16; ++k) out[k] = next[k / 4][k % 4];
-        }
-        lastEdit = c.SetTransform(node, out, session);
-        if (!quiet) std::printf("edit %llu: move %s\n", (unsigned long long)lastEdit, node.c_str());
-        return kExitOk;
-    }
-    if (light && light->parsed()) {
-        std::optional<std::array<float, 3>> col;
-        if (!color.empty()) col = Triple(color, "--color");
-        client::Client::LightChange change;
-        change.color = col;
-        // SetLight reads a negative intensity or range as "unchanged" (SPEC): refuse it here.
-        if (intensity && !(*intensity >= 0.0f))
-            throw Error("light: --intensity must be a number ≥ 0 (cd, lux or nits)");
-        if (range && !(*range >= 0.0f))
-            throw Error("light: --range must be a number of metres ≥ 0 (0: infinite)");
-        change.intensity = intensity;
-        if (!position.empty()) change.position = Triple(position, "--position");
-        if (!direction.empty()) change.direction = Triple(direction, "--direction");
-        if (!cone.empty()) {
-            if (cone.size() != 2) throw Error("--cone needs inner,outer (degrees)");
-            change.innerCone = glm::radians(cone[0]);
-            change.outerCone = glm::radians(cone[1]);
-        }
-        change.range = range;
-        if (!change.color && !change.intensity && !change.position && !change.direction &&
-            !change.innerCone && !change.range)
-            throw Error(
-                "light: give at least one of --intensity, --color, --position, --direction, "
-                "--cone, --range");
-        lastEdit = c.SetLight(node, change, session);
-        if (!quiet)
-            std::printf("edit %llu: light %s\n", (unsigned long long)lastEdit, node.c_str());
-        return kExitOk;
-    }
-    if (material && material->parsed()) {
-        client::Client::MaterialChange change;
-        if (!albedo.empty()) change.albedo = Triple(albedo, "--albedo");
-        if (!emission.empty()) change.emission = Triple(emission, "--emission");
-        change.roughness = roughness;
-        change.metallic = metallic;
-        if (!change.albedo && !change.emission && !roughness && !metallic)
-            throw Error(
-                "material: give at least one of --albedo, --emission, --roughness, "
-                "--metallic");
-        lastEdit = c.SetMaterial(node, change, session);
-        if (!quiet)
-            std::printf("edit %llu: material %s\n", (unsigned long long)lastEdit, node.c_str());
-        return kExitOk;
-    }
-    if (sky && sky->parsed()) {
-        client::Client::EnvironmentChange change;
-        change.path = skyPath;
-        if (skyColor.size() == 3) change.color = {skyColor[0], skyColor[1], skyColor[2]};
-        change.off = skyOff;
-        change.intensity = skyIntensity;
-        if (skyTurnDegrees) change.rotation = *skyTurnDegrees * 0.017453292519943295f;
-        if (change.path.empty() && !change.color && !change.off && !change.intensity &&
-            !change.rotation)
-            throw Error(
-                "sky: give --environment, --environment-color or --off, and/or "
-                "--environment-intensity, --environment-rotation");
-        lastEdit = c.SetEnvironment(change, session);
-        if (!quiet) std::printf("edit %llu: sky\n", (unsigned long long)lastEdit);
-        return kExitOk;
-    }
-    if (get && get->parsed()) {
-        client::Frame f = c.Get(ParseClientChannel(channel), client::Format::kFloat32, session);
-        // The bake formats: a Scene carries each primitive's key (and, for glTF output, its
-        // geometry, read from the local file).
-        Scene scene;
-        bool json = output == "-" ||
-                    (output.size() >= 5 && output.compare(output.size() - 5, 5, ".json") == 0);
-        if (!json) {
-            if (gltf.empty())
-                throw Error("glTF output needs the scene file: add --gltf FILE (or write .json)");
-            scene = LoadGltf(gltf);
-            if (scene.primitives.size() != f.primitives.size())
-                throw Error(gltf + " has " + std::to_string(scene.primitives.size()) +
-                            " primitives, the server's scene " +
-                            std::to_string(f.primitives.size()) + ": not the same scene");
-        } else {
-            for (const auto& p : f.primitives) {
-                Primitive prim;
-                prim.node = p.node;
-                prim.mesh = p.mesh;
-                prim.primitive = p.primitive;
-                scene.primitives.push_back(prim);
-            }
-        }
-        IrradianceResult result;
-        auto stats = nlohmann::json::parse(c.Stats(session));
-        const nlohmann::json& sc = stats.contains("scenes") ? stats["scenes"].back() : stats;
-        result.solver = sc["solver"].value("solver", "antiradiance");
-        result.channel = ChannelName(f.channel);
-        result.stats = sc["solver"];
-        result.stats["frame"] = f.frame;
-        result.stats["last_edit"] = f.lastEdit;
-        for (size_t p = 0; p < f.primitives.size(); ++p) {
-            const auto& rgb = f.primitives[p].rgb;
-            if (!json && rgb.size() != scene.primitives[p].positions.size() * 3)
-                throw Error(gltf + ": primitive " + std::to_string(p) +
-                            " has a different vertex count than the server's scene");
-            std::vector<glm::vec3> v(rgb.size() / 3);
-            for (size_t i = 0; i < v.size(); ++i)
-                v[i] = glm::vec3(rgb[i * 3], rgb[i * 3 + 1], rgb[i * 3 + 2]);
-            result.primitives.push_back(std::move(v));
-        }
-        if (json)
-            WriteIrradianceJson(output, scene, result);
-        else
-            WriteIrradianceGltf(gltf, output, scene, result, ParseDisplayColor(color0));
-        if (!quiet)  // on stderr when the data itself goes to standard output
-            std::fprintf(
-                output == "-" ? stderr : stdout, "wrote %s (frame %llu, edit %llu, channel %s)\n",
-                output == "-" ? "standard output" : output.c_str(), (unsigned long long)f.frame,
-                (unsigned long long)f.lastEdit, result.channel.c_str());
-        return kExitOk;
-    }
-    if (step && step->parsed()) {
-        uint64_t frame = c.Step(stepIterations, session);
-        if (!quiet) std::printf("frame %llu\n", (unsigned long long)frame);
-        return kExitOk;
-    }
-    if (stats && stats->parsed()) {
-        std::printf("%s\n", nlohmann::json::parse(c.Stats(session)).dump(2).c_str());
-        return kExitOk;
-    }
-    if (wait && wait->parsed()) return Wait(c, lastEdit, timeout > 0.0 ? timeout : 60.0);
-    if (sleep && sleep->parsed()) {
-        if (!(sleepSeconds >= 0.0) || sleepSeconds > 3600) throw Error("sleep: 0…3600 seconds");
-        std::this_thread::sleep_for(std::chrono::duration<double>(sleepSeconds));
-        return kExitOk;
-    }
-    if (script && script->parsed()) return RunScript(c);
+    using Command = int (State::*)(client::Client&);
+    const std::pair<CLI::App*, Command> commands[] = {
+        {load, &State::RunLoad},   {info, &State::RunInfo},   {watch, &State::RunWatch},
+        {move, &State::RunMove},   {light, &State::RunLight}, {material, &State::RunMaterial},
+        {sky, &State::RunSky},     {get, &State::RunGet},     {step, &State::RunStep},
+        {stats, &State::RunStats}, {sleep, &State::RunSleep}, {script, &State::RunScript},
+    };
+    for (const auto& [command, run] : commands)
+        if (command && command->parsed()) return (this->*run)(c);
     return kExitOk;
+}
+
+int ServiceCommands::State::RunWait(client::Client& c) {
+    return Wait(c, lastEdit, timeout > 0.0 ? timeout : 60.0);
 }
 
 int ServiceCommands::State::RunScript(client::Client& c) {
