@@ -1,0 +1,348 @@
+// The gather stage's rays: the first shot, the estimate points, the gather rays and their
+// secondary gathers at short hits, and the sky they see (gather_stage.h).
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "base/check.h"
+#include "base/image.h"
+#include "base/pcg.h"
+#include "gather/gather_detail.h"
+#include "gather/gather_stage.h"
+#include "gather/sampling.h"
+
+namespace penumbra {
+
+using namespace gather_detail;
+
+void GatherStage::Shoot(const Moved* moved) {
+    if (settings_.emitterRays <= 0) return;
+    auto start = std::chrono::steady_clock::now();
+    const Surfels& s = inner_->GetSurfels();
+    ++traces_;
+    if (!moved || !shooter_) {
+        EmitterDirectSettings es;
+        es.rays = settings_.emitterRays;
+        es.seed = settings_.seed;
+        shooter_ = std::make_unique<EmitterDirect>(es);
+        // At the targets the gather's rays join the shot's own cosine rays (emitterHits_).
+        std::vector<int> extra(s.size(), 0);
+        for (uint32_t i : targets_) extra[i] = settings_.gatherRays;
+        shot_ = shooter_->Trace(*rays_, points_, s.normals, extra);
+    } else {
+        size_t traced = 0;
+        shot_ =
+            shooter_->Retrace(*rays_, points_, s.normals, moved->surfels, moved->boxes, &traced);
+        raysRetraced_ += traced;
+    }
+    for (size_t t = 0; t < targets_.size(); ++t) shot_[targets_[t]] += emitterHits_[t];
+    if (HandsOver()) inner_->SetEmitterDirect(shot_);
+    fresh_ = false;
+    msShot_ = Ms(start);
+}
+
+void GatherStage::Place() {
+    const Surfels& s = inner_->GetSurfels();
+    // Surfels inside a primitive: at their position, or, on its boundary, moved as far towards
+    // their centroid as the input vertices are (a point on the edge where a wall meets the
+    // floor sees half its hemisphere behind that wall).
+    points_ = s.positions;
+    const float step = kVertexInset * scene_.Diameter();
+    for (size_t i = 0; i < s.size(); ++i) {
+        const glm::vec3 d = s.centroids[i] - s.positions[i];
+        const float len = glm::length(d);
+        if (len > 0.0f) points_[i] += std::min(len, step) * (d / len);
+    }
+    const auto inset = VertexEstimatePoints(scene_);
+    surfelPrimitive_.assign(s.size(), 0);
+    for (size_t p = 0; p < inset.size(); ++p) {
+        std::copy(inset[p].begin(), inset[p].end(), points_.begin() + s.firstSurfel[p]);
+        std::fill(surfelPrimitive_.begin() + s.firstSurfel[p], surfelPrimitive_.begin() + s.End(p),
+                  static_cast<uint32_t>(p));
+    }
+}
+
+glm::vec3 GatherStage::Direction(size_t target, int ray) const {
+    return CosineDirection(inner_->GetSurfels().normals[targets_[target]],
+                           R2Point(rotation_[target], ray));
+}
+
+glm::vec2 GatherStage::SecondRotation(size_t target, int ray) const {
+    Pcg32 rng(settings_.seed, kSecondStream + target * settings_.gatherRays + ray);
+    glm::vec2 rot;
+    rot.x = rng.Uniform(), rot.y = rng.Uniform();
+    return rot;
+}
+
+glm::vec3 GatherStage::SecondDirection(size_t target, int ray, uint32_t tri, int j) const {
+    return CosineDirection(rays_->Triangles()[tri].normal, R2Point(SecondRotation(target, ray), j));
+}
+
+glm::vec3 GatherStage::HitPoint(const Hit& h) const {
+    const RayTriangle& t = rays_->Triangles()[h.triangle & kIndex];
+    return t.p0 + (h.u * (1.0f / 65535.0f)) * t.e1 + (h.v * (1.0f / 65535.0f)) * t.e2;
+}
+
+float GatherStage::Distance(const glm::vec3& origin, const Hit& h) const {
+    if (h.triangle == kEscaped) return std::numeric_limits<float>::infinity();
+    return glm::length(HitPoint(h) - origin);
+}
+
+GatherStage::Hit GatherStage::Cast(const glm::vec3& o, const glm::vec3& d, float* t) const {
+    const float inf = std::numeric_limits<float>::infinity();
+    const RayHit h = rays_->Intersect(o, d, inf);
+    if (t) *t = h.hit ? h.t : inf;
+    if (!h.hit) return Hit{kEscaped, 0, 0};
+    const uint32_t back = glm::dot(rays_->Triangles()[h.triangle].normal, d) >= 0.0f ? kBack : 0u;
+    return Hit{h.triangle | back, Quantise(h.u), Quantise(h.v)};
+}
+
+void GatherStage::Trace(const Moved* moved) {
+    auto start = std::chrono::steady_clock::now();
+    ++traces_;
+    const int n = settings_.gatherRays, m = SecondRays();
+    const float shortHit = kShortHit * inner_->Stats().elementSize;
+    const auto& tris = rays_->Triangles();
+    const Surfels& surfels = inner_->GetSurfels();
+    const float inf = std::numeric_limits<float>::infinity();
+    auto trace = [&](const glm::vec3& o, const glm::vec3& d, float& t) { return Cast(o, d, &t); };
+    // After a move: whether a cached hit still holds (its ray starts on a surface that did not
+    // move, ends on one that did not, and passes by where the moved ones were and are). The
+    // segment is the one to the hit point (no direction needed, which costs more to make
+    // again than the test), or the ray to infinity when it escaped; `cones` (one per box,
+    // from the ray's origin) turn most segments away before the slab test.
+    auto holds = [&](const glm::vec3& o, const std::vector<BallCone>& cones, const auto& direction,
+                     const Hit& h) {
+        const std::vector<Bounds>& boxes = moved->boxes;
+        if (h.triangle == kEscaped) {
+            const glm::vec3 d = direction();
+            for (size_t k = 0; k < boxes.size(); ++k)
+                if (cones[k].MayMeet(d, true) && boxes[k].Meets(o, d, inf)) return false;
+            return true;
+        }
+        if (moved->Touches(*rays_, h.triangle & kIndex)) return false;
+        const glm::vec3 span = HitPoint(h) - o;
+        for (size_t k = 0; k < boxes.size(); ++k)
+            if (cones[k].MayMeet(span) && boxes[k].Meets(o, span, 1.0f)) return false;
+        return true;
+    };
+    // The cones from o towards the boxes (`grow`: each box's ball grown by that much), and
+    // which points of a cosine pattern about `normal` can fall in one (CosineCone); false
+    // when none can: no ray from o meets a box.
+    auto conesAt = [&](const glm::vec3& o, const glm::vec3& normal, float grow,
+                       std::vector<BallCone>& cones, std::vector<CosineCone>& pattern) {
+        cones.clear(), pattern.clear();
+        bool any = false;
+        for (const Bounds& b : moved->boxes) {
+            Ball ball(b);
+            ball.radius += grow;
+            cones.emplace_back(o, ball);
+            const BallCone& c = cones.back();
+            pattern.push_back(c.Inside() ? CosineCone()
+                                         : CosineCone(normal, c.Axis(), c.SinHalf()));
+            any = any || !pattern.back().Empty();
+        }
+        return any;
+    };
+    auto mayMeet = [](const std::vector<CosineCone>& pattern, const glm::vec2& u) {
+        for (const CosineCone& c : pattern)
+            if (c.MayContain(u)) return true;
+        return false;
+    };
+    hits_.resize(targets_.size() * n);  // in place: a target's hits are read, then written
+    second_.resize(targets_.size());
+    // Per target: a gather ray was traced again (its emitter hits are weighed again).
+    std::vector<uint8_t> touched(targets_.size(), moved ? 0 : 1);
+    std::atomic<size_t> traced{0};
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
+        size_t count = 0;
+        std::vector<BallCone> cones, wide, secondCones;
+        std::vector<CosineCone> pattern, secondPattern;
+        // Per normal met at this target's short hits, its secondaries' pattern.
+        std::vector<std::pair<glm::vec3, std::vector<CosineCone>>> patterns;
+        std::vector<uint8_t> kept(n), was(n);
+        std::vector<Hit> relaid;
+        for (size_t t = range.begin(); t != range.end(); ++t) {
+            const uint32_t i = targets_[t];
+            const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
+            const bool all = !moved || moved->surfels[i];
+            // Nothing moved in front of it: every hit holds, its secondaries are checked.
+            const bool clear = !all && !conesAt(o, surfels.normals[i], 0.0f, cones, pattern);
+            bool same = !all;  // its short hits are the rays they were
+            for (int r = 0; r < n; ++r) {
+                Hit& hit = hits_[t * n + r];
+                const Hit before = all ? Hit{kEscaped, 0, 0} : hit;
+                was[r] = Front(before) && (before.triangle & kShort);
+                kept[r] = !all && (clear || !mayMeet(pattern, R2Point(rotation_[t], r)) ||
+                                   holds(
+                                       o, cones, [&] { return Direction(t, r); }, before));
+                if (kept[r]) continue;
+                float dist = inf;
+                hit = trace(o, Direction(t, r), dist);
+                ++count;
+                touched[t] = 1;
+                const bool isShort = Front(hit) && dist < shortHit;
+                if (isShort) hit.triangle |= kShort;
+                same = same && isShort == static_cast<bool>(was[r]);
+            }
+            // A secondary ray from a short hit y (within shortHit of o) that meets a ball runs
+            // in a direction inside o's cone towards that ball grown by shortHit (the parallel
+            // ray from o passes within shortHit of where it does): the pattern about y's normal
+            // is made once per normal the target's short hits have, from o.
+            patterns.clear();
+            auto patternFor = [&](const glm::vec3& normal) -> const std::vector<CosineCone>& {
+                // Bit for bit: a −0 in the normal turns the pattern's basis (CosineDirection).
+                for (const auto& [nm, p] : patterns)
+                    if (std::memcmp(&nm, &normal, sizeof(glm::vec3)) == 0) return p;
+                if (wide.empty()) conesAt(o, normal, shortHit + rays_->Epsilon(), wide, pattern);
+                patterns.emplace_back(normal, std::vector<CosineCone>());
+                for (const BallCone& c : wide)
+                    patterns.back().second.push_back(
+                        c.Inside() ? CosineCone() : CosineCone(normal, c.Axis(), c.SinHalf()));
+                return patterns.back().second;
+            };
+            wide.clear();
+            // Ray r's secondary gather into `out`: the cached one (`old`, null where the hit
+            // did not hold) where each ray holds, traced again where not (out may be old).
+            auto gatherAgain = [&](int r, const Hit* old, Hit* out) {
+                const Hit& hit = hits_[t * n + r];
+                const uint32_t tri = hit.triangle & kIndex;
+                const glm::vec3& normal = tris[tri].normal;
+                const std::vector<CosineCone>* filter = old ? &patternFor(normal) : nullptr;
+                if (filter && std::all_of(filter->begin(), filter->end(),
+                                          [](const CosineCone& c) { return c.Empty(); })) {
+                    if (out != old) std::copy(old, old + m, out);  // none can meet a box
+                    return;
+                }
+                const glm::vec3 y = HitPoint(hit) + rays_->Epsilon() * normal;
+                const glm::vec2 rot = SecondRotation(t, r);
+                bool near = false;  // secondCones made at y
+                for (int j = 0; j < m; ++j) {
+                    const glm::vec2 u = R2Point(rot, j);
+                    auto d2 = [&] { return CosineDirection(normal, u); };
+                    bool holding = old && !mayMeet(*filter, u);
+                    if (old && !holding) {
+                        if (!near) conesAt(y, normal, 0.0f, secondCones, secondPattern);
+                        near = true;
+                        holding = holds(y, secondCones, d2, old[j]);
+                    }
+                    if (holding) {
+                        out[j] = old[j];
+                    } else {
+                        float t2 = inf;
+                        out[j] = trace(y, d2(), t2);
+                        ++count;
+                    }
+                }
+            };
+            auto isShort = [&](int r) {
+                return Front(hits_[t * n + r]) && (hits_[t * n + r].triangle & kShort);
+            };
+            // Its secondaries: in place where its short hits are the same rays as before.
+            std::vector<Hit>& block = second_[t];
+            if (same) {
+                Hit* at = block.data();
+                for (int r = 0; r < n; ++r)
+                    if (isShort(r)) {
+                        gatherAgain(r, kept[r] ? at : nullptr, at);
+                        at += m;
+                    }
+                continue;
+            }
+            relaid.clear();
+            size_t old = 0;  // its old secondaries (none when all are traced)
+            for (int r = 0; r < n; ++r) {
+                if (isShort(r)) {
+                    relaid.resize(relaid.size() + m);
+                    gatherAgain(r, kept[r] ? block.data() + old : nullptr,
+                                relaid.data() + relaid.size() - m);
+                }
+                if (was[r]) old += m;
+            }
+            block.assign(relaid.begin(), relaid.end());
+        }
+        traced += count;
+    });
+    secondStart_.assign(targets_.size() + 1, 0);
+    for (size_t t = 0; t < targets_.size(); ++t)
+        secondStart_[t + 1] = secondStart_[t] + static_cast<uint32_t>(second_[t].size() / m);
+
+    // The emitters the gather rays meet, weighted against the first shot's rays, as a
+    // coefficient per emitting primitive: again at the targets with a ray traced again.
+    const size_t slots = rays_->EmitterPrimitives().size();
+    if (!moved) {
+        emitterHits_.assign(targets_.size(), glm::vec3(0.0f));
+        emitterCoef_.assign(slots <= EmitterDirect::kMaxSlots ? targets_.size() * slots : 0, 0.0f);
+    }
+    if (settings_.emitterRays > 0 && slots > 0) {
+        EmitterDirectSettings es;  // the first shot's, for the weights of emitter hits
+        es.rays = settings_.emitterRays;
+        es.extraCosineRays = n;
+        tbb::parallel_for(
+            tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
+                for (size_t t = range.begin(); t != range.end(); ++t) {
+                    if (!touched[t]) continue;
+                    const uint32_t i = targets_[t];
+                    const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
+                    emitterHits_[t] = glm::vec3(0.0f);
+                    float* coef = emitterCoef_.empty() ? nullptr : &emitterCoef_[t * slots];
+                    if (coef) std::fill(coef, coef + slots, 0.0f);
+                    for (int r = 0; r < n; ++r) {
+                        const Hit& h = hits_[t * n + r];
+                        if (!Front(h) || !(rays_->AreaPdf(h.triangle & kIndex) > 0.0f)) continue;
+                        const uint32_t tri = h.triangle & kIndex;
+                        const float c = EmitterHitWeight(*rays_, es, surfels.normals[i],
+                                                         Direction(t, r), tri, Distance(o, h));
+                        emitterHits_[t] += rays_->MaterialOf(tri).emission * c;
+                        if (coef) coef[rays_->EmitterSlot(tris[tri].primitive)] += c;
+                    }
+                }
+            });
+    }
+    raysRetraced_ += moved ? traced.load() : 0;
+    fresh_ = false;
+    lightsFresh_ = false;
+    msTrace_ = Ms(start);
+}
+
+void GatherStage::Sky() {
+    const int n = settings_.gatherRays, m = SecondRays();
+    sky_.assign(targets_.size(), glm::vec3(0.0f));
+    secondSky_.assign(secondStart_.back(), glm::vec3(0.0f));
+    if (!scene_.environment.Active()) {
+        for (auto& lobes : lobes_)
+            for (LobeHit& e : lobes) e.sky = glm::vec3(0.0f);
+        return;
+    }
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
+        for (size_t t = range.begin(); t != range.end(); ++t) {
+            glm::vec3 sum(0.0f);
+            size_t k = 0;  // this target's short hits so far
+            for (int r = 0; r < n; ++r) {
+                const Hit& h = hits_[t * n + r];
+                if (h.triangle == kEscaped) sum += scene_.environment.Radiance(Direction(t, r));
+                if (!Front(h) || !(h.triangle & kShort)) continue;
+                glm::vec3 second(0.0f);
+                for (int j = 0; j < m; ++j)
+                    if (second_[t][k * m + j].triangle == kEscaped)
+                        second += scene_.environment.Radiance(
+                            SecondDirection(t, r, h.triangle & kIndex, j));
+                secondSky_[secondStart_[t] + k++] = second * (kPi / m);
+            }
+            sky_[t] = sum * (kPi / n);
+            for (LobeHit& e : lobes_[t]) {
+                if (e.hit.triangle != kEscaped) continue;
+                float cosine;
+                e.sky = scene_.environment.Radiance(LobeDirection(t, e.ray, e.from, cosine));
+            }
+        }
+    });
+    fresh_ = false;
+}
+
+}  // namespace penumbra
