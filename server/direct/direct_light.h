@@ -19,6 +19,7 @@
 #include <glm/glm.hpp>
 #include <vector>
 
+#include "gpu/layout.h"
 #include "scene/scene.h"
 #include "scene/surfels.h"
 
@@ -59,6 +60,17 @@ struct GpuReceiver {
     glm::vec4 centroid;  // xyz; centre of the footprint
 };
 static_assert(sizeof(GpuLight) == 80 && sizeof(GpuShadowView) == 96 && sizeof(GpuReceiver) == 48);
+PENUMBRA_GPU_FIELD(GpuLight, position, 0);
+PENUMBRA_GPU_FIELD(GpuLight, direction, 16);
+PENUMBRA_GPU_FIELD(GpuLight, radiant, 32);
+PENUMBRA_GPU_FIELD(GpuLight, cone, 48);
+PENUMBRA_GPU_FIELD(GpuLight, cube, 64);
+PENUMBRA_GPU_FIELD(GpuShadowView, viewProj, 0);
+PENUMBRA_GPU_FIELD(GpuShadowView, eye, 64);
+PENUMBRA_GPU_FIELD(GpuShadowView, forward, 80);
+PENUMBRA_GPU_FIELD(GpuReceiver, position, 0);
+PENUMBRA_GPU_FIELD(GpuReceiver, normal, 16);
+PENUMBRA_GPU_FIELD(GpuReceiver, centroid, 32);
 
 // A cube light's face `face` (0…5: +x, −x, +y, −y, +z, −z) projects world point q to
 // NDC as that face's view matrix does, from the light's `cube` parameters (direct.comp

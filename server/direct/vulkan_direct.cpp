@@ -10,6 +10,7 @@
 #include "base/check.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
+#include "gpu/layout.h"
 #include "gpu/pipeline.h"
 #include "gpu/render_target.h"
 #include "gpu/timestamps.h"
@@ -30,11 +31,19 @@ struct ShadowPush {
     uint32_t mapOffset;
     uint32_t size;
 };
+// shaders/shadow.vert (push constants).
+PENUMBRA_GPU_FIELD(ShadowPush, viewProj, 0);
+PENUMBRA_GPU_FIELD(ShadowPush, mapOffset, 64);
+PENUMBRA_GPU_FIELD(ShadowPush, size, 68);
 struct DirectPush {
     uint32_t receiverCount;
     uint32_t lightCount;
     uint32_t size;
 };
+// shaders/direct.comp (push constants).
+PENUMBRA_GPU_FIELD(DirectPush, receiverCount, 0);
+PENUMBRA_GPU_FIELD(DirectPush, lightCount, 4);
+PENUMBRA_GPU_FIELD(DirectPush, size, 8);
 
 }  // namespace
 

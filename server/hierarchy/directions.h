@@ -7,12 +7,17 @@
 #include <span>
 #include <vector>
 
+#include "gpu/layout.h"
+
 namespace penumbra {
 
 struct BinWeight {
     uint32_t bin;
     float weight;
 };
+static_assert(sizeof(BinWeight) == 8);
+PENUMBRA_GPU_FIELD(BinWeight, bin, 0);
+PENUMBRA_GPU_FIELD(BinWeight, weight, 4);
 
 class Directions {
   public:

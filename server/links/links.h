@@ -6,6 +6,7 @@
 #include <functional>
 #include <vector>
 
+#include "gpu/layout.h"
 #include "hierarchy/directions.h"
 #include "hierarchy/hierarchy.h"
 #include "links/oracle.h"
@@ -23,9 +24,11 @@ struct Link {
     float formFactor;  // Eq. 17: 1 / (d² ω_bin), with d² regularised by the sender's disc
 };
 static_assert(sizeof(Link) == 12);
-static_assert(offsetof(Link, bin) == 4 && offsetof(Link, level) == 6 &&
-              offsetof(Link, formFactor) == 8);
-
+// GLSL reads bin and level as one uint, binLevel = bin | level << 16 (little-endian).
+PENUMBRA_GPU_FIELD(Link, sender, 0);
+PENUMBRA_GPU_FIELD(Link, bin, 4);
+PENUMBRA_GPU_FIELD(Link, level, 6);
+PENUMBRA_GPU_FIELD(Link, formFactor, 8);
 
 struct LinkSettings {
     LinkOracle mode = LinkOracle::kConservative;

@@ -13,6 +13,7 @@
 #include "base/check.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
+#include "gpu/layout.h"
 #include "gpu/render_target.h"
 #include "shaders/render_frag_spv.h"
 #include "shaders/render_vert_spv.h"
@@ -42,6 +43,12 @@ struct GpuPush {
     glm::mat4 viewProj;
     glm::vec4 eye;
 };
+// shaders/render.vert (struct Vertex, push constants).
+PENUMBRA_GPU_FIELD(GpuVertex, position, 0);
+PENUMBRA_GPU_FIELD(GpuVertex, color, 16);
+PENUMBRA_GPU_FIELD(GpuVertex, normal, 32);
+PENUMBRA_GPU_FIELD(GpuPush, viewProj, 0);
+PENUMBRA_GPU_FIELD(GpuPush, eye, 64);
 
 }  // namespace
 

@@ -7,6 +7,7 @@
 #include <glm/glm.hpp>
 #include <vector>
 
+#include "gpu/layout.h"
 #include "scene/scene.h"
 
 namespace penumbra {
@@ -20,6 +21,8 @@ struct GlossyLeaf {
     uint32_t lobe;       // index into AntiradianceModel::lobes
 };
 static_assert(sizeof(GlossyLeaf) == 16);
+PENUMBRA_GPU_FIELD(GlossyLeaf, specular, 0);
+PENUMBRA_GPU_FIELD(GlossyLeaf, lobe, 12);
 
 // A normalised Phong lobe on the bins (Material): bin b's row holds cosⁿ∠(ω_b, ω_j) / N
 // for the bins j where that is at least kLobeCutoff of the peak, padded with zero weights
@@ -34,6 +37,10 @@ struct GlossyLobe {
     float norm;      // 1/N
 };
 static_assert(sizeof(GlossyLobe) == 16);
+PENUMBRA_GPU_FIELD(GlossyLobe, start, 0);
+PENUMBRA_GPU_FIELD(GlossyLobe, width, 4);
+PENUMBRA_GPU_FIELD(GlossyLobe, exponent, 8);
+PENUMBRA_GPU_FIELD(GlossyLobe, norm, 12);
 inline constexpr float kLobeCutoff = 1e-3f;
 // The sharpest lobe m bins resolve: σ = 1/√n at half the bin spacing √(4π/m) gives n = m/π.
 // Sharper lobes (roughness below ≈ 0.33 at 128 bins) are widened to it.

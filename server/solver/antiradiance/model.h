@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "gpu/layout.h"
 #include "hierarchy/directions.h"
 #include "hierarchy/hierarchy.h"
 #include "links/links.h"
@@ -41,6 +42,16 @@ inline constexpr uint32_t kLeafTwoSided = 1;
 inline constexpr uint32_t kLeafGlossy = 2;
 inline constexpr uint32_t kGlossyShift = 8;
 static_assert(sizeof(LeafAttributes) == 64);
+PENUMBRA_GPU_FIELD(LeafAttributes, normal, 0);
+PENUMBRA_GPU_FIELD(LeafAttributes, area, 12);
+PENUMBRA_GPU_FIELD(LeafAttributes, albedo, 16);
+PENUMBRA_GPU_FIELD(LeafAttributes, cosNormIn, 28);
+PENUMBRA_GPU_FIELD(LeafAttributes, emission, 32);
+PENUMBRA_GPU_FIELD(LeafAttributes, cosNormOut, 44);
+PENUMBRA_GPU_FIELD(LeafAttributes, node, 48);
+PENUMBRA_GPU_FIELD(LeafAttributes, parent, 52);
+PENUMBRA_GPU_FIELD(LeafAttributes, surfel, 56);
+PENUMBRA_GPU_FIELD(LeafAttributes, flags, 60);
 
 // What one local pass updates (Sec. 2.2): K reflects into the front hemisphere (Eq. 18),
 // J sends incident light through as antiradiance (Eq. 19). Symmetric: both.

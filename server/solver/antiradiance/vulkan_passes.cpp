@@ -9,6 +9,7 @@
 #include "base/check.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
+#include "gpu/layout.h"
 #include "gpu/pipeline.h"
 #include "gpu/timestamps.h"
 #include "shaders/global_spv.h"
@@ -38,10 +39,18 @@ struct LocalPush {
     float binSolidAngle;
     uint32_t envRow;
 };
+// shaders/local.comp (push constants).
+PENUMBRA_GPU_FIELD(LocalPush, first, 0);
+PENUMBRA_GPU_FIELD(LocalPush, count, 4);
+PENUMBRA_GPU_FIELD(LocalPush, binSolidAngle, 8);
+PENUMBRA_GPU_FIELD(LocalPush, envRow, 12);
 struct RangePush {
     uint32_t first;
     uint32_t count;
 };
+// shaders/global.comp, pull.comp (push constants).
+PENUMBRA_GPU_FIELD(RangePush, first, 0);
+PENUMBRA_GPU_FIELD(RangePush, count, 4);
 
 // A hierarchy node as the link update reads it. Layout shared with shaders/links.comp
 // (struct LinkNode).
@@ -56,6 +65,14 @@ struct LinkNode {
     float normOut;
 };
 static_assert(sizeof(LinkNode) == 48);
+PENUMBRA_GPU_FIELD(LinkNode, center, 0);
+PENUMBRA_GPU_FIELD(LinkNode, discRadius, 12);
+PENUMBRA_GPU_FIELD(LinkNode, normal, 16);
+PENUMBRA_GPU_FIELD(LinkNode, area, 28);
+PENUMBRA_GPU_FIELD(LinkNode, surfel, 32);
+PENUMBRA_GPU_FIELD(LinkNode, flags, 36);
+PENUMBRA_GPU_FIELD(LinkNode, normIn, 40);
+PENUMBRA_GPU_FIELD(LinkNode, normOut, 44);
 constexpr uint32_t kNodeLeaf = 1, kNodeOriented = 2, kNodeGroupShift = 2;
 
 struct LinkPush {
@@ -66,6 +83,13 @@ struct LinkPush {
     float binSolidAngle;
     float sigma0;
 };
+// shaders/links.comp (push constants).
+PENUMBRA_GPU_FIELD(LinkPush, first, 0);
+PENUMBRA_GPU_FIELD(LinkPush, count, 4);
+PENUMBRA_GPU_FIELD(LinkPush, cubeRes, 8);
+PENUMBRA_GPU_FIELD(LinkPush, adjacentWidth, 12);
+PENUMBRA_GPU_FIELD(LinkPush, binSolidAngle, 16);
+PENUMBRA_GPU_FIELD(LinkPush, sigma0, 20);
 
 // Invocations a dispatch of the link update covers (its workgroup count stays far below
 // the 65,535 every device allows).
