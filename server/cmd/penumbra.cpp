@@ -84,7 +84,7 @@ int main(int argc, char** argv) {
                      "auto|on|off: surfaces that do not bound a solid also block light arriving "
                      "at their backs (auto: on with an environment)")
         ->capture_default_str();
-    bake->add_flag("--motion-links", settings.motionLinks,
+    bake->add_flag("--motion-links", settings.prepareMoves,
                    "prepare dynamic nodes to move in place, as the service does (antiradiance: "
                    "links built for their motion bounds, Sec. 3.3)");
     GatherOptions bakeGather;

@@ -54,7 +54,7 @@ int main(int argc, char** argv) {
     try {
         SolverSettings defaults = service::ServiceDefaults();
         defaults.device = ParseDevice(device);
-        defaults.motionLinks = moves == "bounds";
+        defaults.prepareMoves = moves == "bounds";
         service::Service service(sceneRoot, serviceLimits, defaults);
         asio::io_context io;
         net::Server server(io, service, netLimits);

@@ -40,13 +40,13 @@ struct LoadResult {
 };
 
 // The solver settings a service starts from: the library's defaults, with dynamic nodes
-// prepared to move in place (SolverSettings::motionLinks; for the antiradiance, links built
+// prepared to move in place (SolverSettings::prepareMoves; for the antiradiance, links built
 // for their motion bounds, updated in place instead of rebuilt), unless that would more than
 // double the scene's links (then moves rebuild). Options here apply to the solvers that
 // declare them (Service::DefaultsFor).
 inline SolverSettings ServiceDefaults() {
     SolverSettings s;
-    s.motionLinks = true;
+    s.prepareMoves = true;
     // At most as many links for the dynamic nodes as for the rest.
     s.options["motion-link-budget"] = "1";
     return s;

@@ -180,11 +180,11 @@ nlohmann::json Session::StatsJson() const {
     return j;
 }
 
-std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool motionLinks,
+std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool prepareMoves,
                                              const ProgressFn& progress,
                                              std::vector<std::string>* notes) const {
     SolverSettings settings = settings_.solver;
-    settings.motionLinks = settings.motionLinks && motionLinks;
+    settings.prepareMoves = settings.prepareMoves && prepareMoves;
     GatherSettings gather;
     gather.emitterRays = settings_.emitterRays;
     gather.gatherRays = settings_.gatherRays;
@@ -391,12 +391,12 @@ void Session::Run() {
             editWaiting_ = false;
             Rebuild* r = rebuild_.get();
             // A scene whose motion links were over budget would be again: skip building them.
-            const bool motionLinks = !motionDeclined_;
-            r->thread = std::thread([this, r, motionLinks] {
+            const bool prepareMoves = !motionDeclined_;
+            r->thread = std::thread([this, r, prepareMoves] {
                 std::unique_ptr<Solver> built;
                 std::string error;
                 try {
-                    built = BuildSolver(r->scene, motionLinks);
+                    built = BuildSolver(r->scene, prepareMoves);
                 } catch (const std::exception& e) {
                     error = e.what();
                 }

@@ -212,10 +212,10 @@ class Session {
     // an edit needs a link rebuild or one is running. A failed update is put in `note`.
     bool ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note);
     // The session's solver for `scene`: motion links where the settings ask for them and
-    // `motionLinks` allows (false: the usual links), behind the gather stage where the
+    // `prepareMoves` allows (false: the usual links), behind the gather stage where the
     // settings ask for it and the scene allows (`notes`, when given, gets why a part of it
     // was declined or changed: CreateGatheredSolver).
-    std::unique_ptr<Solver> BuildSolver(const Scene& scene, bool motionLinks,
+    std::unique_ptr<Solver> BuildSolver(const Scene& scene, bool prepareMoves,
                                         const ProgressFn& progress = {},
                                         std::vector<std::string>* notes = nullptr) const;
     // Starts `rebuilt` (built for `next`) from the current solver's solution on the surfels

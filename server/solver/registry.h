@@ -19,9 +19,9 @@ struct SolverEntry {
     // Builds the solver; reads settings.options against `options` (penumbra::Error for bad
     // ones, an unusable device or a scene it cannot take).
     std::function<std::unique_ptr<Solver>(const Scene&, const SolverSettings&, const ProgressFn&)>
-        create;  // Checks settings.options beyond each one's kind and range (penumbra::Error),
-                 // without a
-    // scene; may be empty.
+        create;
+    // Checks settings.options beyond each one's kind and range, without a scene
+    // (penumbra::Error); may be empty.
     std::function<void(const SolverSettings&)> check;
 };
 

@@ -35,10 +35,9 @@ struct SolverSettings {
     int shadowMapSize = 0;    // texels per side of each shadow map; 0: from the element size
     BackOcclusion backOcclusion = BackOcclusion::kAuto;  // scene/surfels.h
     // Prepare the dynamic nodes (extras.penumbra.dynamic) to move inside their motion bounds
-    // without a rebuild (Solver::UpdateGeometry): for the antiradiance, links built for the
-    // worst case over the bounds (Sec. 3.3), so that a move recomputes only their form factors
-    // and bins. The service turns it on; a one-off bake has no use for it.
-    bool motionLinks = false;
+    // without a rebuild (Solver::UpdateGeometry; what that takes is the solver's own, see
+    // docs/SOLVER.md). The service turns it on; a one-off bake has no use for it.
+    bool prepareMoves = false;
     // A final gather reads this solver's answer (gather/gather_stage.h): the solver may pick
     // cheaper defaults for the options not given (docs/SOLVER.md "Settings behind the gather").
     bool behindGather = false;
@@ -78,9 +77,10 @@ struct SolverStats {
     float environmentRotation = 0.0f;  // radians
     size_t twoSidedElements = 0;       // elements that occlude from both sides
     size_t glossyElements = 0;         // elements with a glossy lobe (Material::Glossy)
-    // Moves in place (SolverSettings::motionLinks): dynamic nodes prepared to move inside
-    // their motion bounds, the links touching them (recomputed when they move), moves taken by
-    // UpdateGeometry, links those recomputed in all, the last one's time (links, leaves,
+    // Moves in place (SolverSettings::prepareMoves): dynamic nodes prepared to move inside
+    // their motion bounds, the links touching them (recomputed when they move; 0 for a solver
+    // without links), moves taken by UpdateGeometry, links those recomputed in all, the last
+    // one's time (links, leaves,
     // uploads, shadow maps), and why moves in place were asked for and not prepared.
     size_t motionGroups = 0;
     size_t motionLinks = 0;
@@ -140,23 +140,24 @@ class Solver {
     virtual const Surfels& GetSurfels() const = 0;
     // Re-reads every surfel's albedo and emission from `scene` (the scene it was built from,
     // with materials or primitive material assignments changed, geometry unchanged). The
-    // solution moves towards the new one from the next iteration on (Sec. 3.3: the
-    // iteration continues from the current radiance).
+    // solution moves towards the new one from the next iteration on (the iteration continues
+    // from the current solution).
     virtual void UpdateMaterials(const Scene& scene) = 0;
     // Re-reads the punctual lights and the environment of `scene` (same geometry; lights
     // moved, recoloured, dimmed; the sky changed, turned or scaled): one shadow pass and a
     // new direct light, the environment re-binned; the iteration continues.
     virtual void UpdateLights(const Scene& scene) = 0;
     virtual SolverStats Stats() const = 0;
-    // Sec. 3.3, moving objects: why `scene` (the scene this solver was built from, dynamic
-    // nodes moved) cannot be taken by UpdateGeometry, or empty when it can: the solver was
-    // built with motionLinks, every moved node moved rigidly and stays inside its bounds.
+    // Moving objects: why `scene` (the scene this solver was built from, dynamic nodes moved)
+    // cannot be taken by UpdateGeometry, or empty when it can: the solver was built with
+    // prepareMoves, every moved node moved rigidly and stays inside its bounds
+    // (MotionMismatch, scene/motion.h).
     virtual std::string GeometryMismatch(const Scene& scene) const {
         (void)scene;
         return "this solver has no motion links";
     }
     // Moves the surfaces of the moved dynamic nodes to their places in `scene` and updates
-    // what depends on them (the antiradiance: the links touching them); the iteration
+    // what depends on them (a solver with links: the links touching them); the iteration
     // continues from the current solution. Returns what the move did, for a frame's note
     // ("links updated in place on the host (…)"). Call only when GeometryMismatch is empty
     // (throws penumbra::Error otherwise).
@@ -175,7 +176,7 @@ class Solver {
     // (else the gather stage keeps the shot for its own targets and the solver carries the
     // emission itself).
     virtual bool TakesEmitterDirect() const { return false; }
-    // Carrying a solution over a rebuild (a move that rebuilds, Sec. 3.3): this solver, just
+    // Carrying a solution over a rebuild (a move that rebuilds): this solver, just
     // built from the scene after an edit, starts from `previous` (the solver of the scene
     // before, built with the same settings) for the surfels `carry` maps (CarrySurfels,
     // scene/motion.h), their light turned with the moved ones; the others start from their

@@ -168,7 +168,7 @@ using Edit = std::function<void(Scene&)>;
 // built fresh on the edited scene gives.
 void EditsMatchAFreshGather(Scene scene, const std::vector<std::pair<std::string, Edit>>& edits) {
     SolverSettings settings = Cpu();
-    settings.motionLinks = true;
+    settings.prepareMoves = true;
     GatherStage stage(CreateSolver(scene, settings), scene, {});
     ASSERT_GT(stage.Stats().gatherRays, 0);
     ASSERT_GT(stage.Stats().emitterRays, 0);

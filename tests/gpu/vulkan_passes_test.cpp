@@ -188,7 +188,7 @@ TEST(VulkanPasses, LinkUpdateOfAMoveMatchesTheHost) {
     SolverSettings s;
     SetOption(s.options, "bins", 64);
     s.elementSize = 0.1f;
-    s.motionLinks = true;
+    s.prepareMoves = true;
     AntiradianceModel host = BuildAntiradianceModel(scene, s, {});
     AntiradianceModel device = host;
     ASSERT_FALSE(host.links.dynamic.empty());
@@ -259,7 +259,7 @@ TEST_P(MovedSolver, MatchesTheCpuBackEnd) {
         SCOPED_TRACE(c.file);
         Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/" + c.file);
         SolverSettings s = TestSettings(c.elementSize, DeviceChoice::kCpu);
-        s.motionLinks = true;
+        s.prepareMoves = true;
         auto cpu = CreateSolver(scene, s);
         s.device = DeviceChoice::kLavapipe;
         SetOption(s.options, "link-update", onDevice ? "device" : "auto");

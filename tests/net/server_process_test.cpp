@@ -300,7 +300,7 @@ TEST(ServerProcess, EnvironmentAtLoad) {
     scene.environment = ConstantEnvironment(glm::vec3(1.0f));
     scene.environment.intensity = 0.5f;
     SolverSettings s;
-    s.motionLinks = true;  // as the server builds scenes (service::ServiceDefaults)
+    s.prepareMoves = true;  // as the server builds scenes (service::ServiceDefaults)
     SetOption(s.options, "motion-link-budget", 1.0f);
     SetOption(s.options, "bins", 64);
     s.elementSize = 0.06f;
@@ -337,7 +337,7 @@ TEST(ServerProcess, SkyChangedInALoadedSession) {
         scene.environment = ConstantEnvironment(glm::vec3(0.5f, 0.6f, 1.0f));
         scene.environment.intensity = intensity;
         SolverSettings s;
-        s.motionLinks = true;  // as the server builds scenes (service::ServiceDefaults)
+        s.prepareMoves = true;  // as the server builds scenes (service::ServiceDefaults)
         SetOption(s.options, "motion-link-budget", 1.0f);
         SetOption(s.options, "motion-link-budget", 1.0f);
         SetOption(s.options, "bins", 64);

@@ -112,7 +112,7 @@ TEST(Session, MoveConvergesToAFreshBakeOfTheMovedScene) {
 TEST(Session, MoveInsideItsBoundsUpdatesLinksInPlace) {
     Scene scene = LoadGltf(kBlocker);
     SessionSettings settings = Settings();
-    settings.solver.motionLinks = true;
+    settings.solver.prepareMoves = true;
     Session session("blocker", scene, settings);
     WaitFor(session, 0);
     int node = FindNode(scene, "blocker");

@@ -18,7 +18,7 @@ const std::string kScenes = std::string(PENUMBRA_SOURCE_DIR) + "/scenes/";
 
 SolverSettings MotionSettings(int bins, float elementSize) {
     SolverSettings s = testing::CpuSettings(bins, elementSize);
-    s.motionLinks = true;
+    s.prepareMoves = true;
     return s;
 }
 

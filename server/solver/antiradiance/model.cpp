@@ -29,7 +29,7 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
     if (BackOcclusionOn(settings.backOcclusion, scene.environment))
         MarkTwoSided(scene, model.surfels);
     LinkSettings ls;
-    if (settings.motionLinks) {
+    if (settings.prepareMoves) {
         model.motion = AssignMotionGroups(scene, model.surfels);
         ls.motion = model.motion.Bounds();
     }
@@ -52,7 +52,7 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
         // than the budget (BuildLinks stopped there), so build the usual links instead (moves
         // will rebuild).
         SolverSettings plain = settings;
-        plain.motionLinks = false;
+        plain.prepareMoves = false;
         AntiradianceModel fallback = BuildAntiradianceModel(scene, plain, own, progress);
         const double still = double(std::max<size_t>(1, model.links.staticLinks));
         char why[200];

@@ -88,7 +88,7 @@ struct AntiradianceModel {
     std::vector<glm::vec4> glossyDirect;
     std::vector<uint32_t> leftChild;  // per node; kNoParent for leaves
     std::vector<uint32_t> rightChild;
-    // Sec. 3.3, moving objects (SolverSettings::motionLinks): the surfels' motion groups
+    // Sec. 3.3, moving objects (SolverSettings::prepareMoves): the surfels' motion groups
     // (scene/motion.h), and what a move needs to recompute the links touching a group: the
     // oriented nodes' cosine norms, the near field, and the nodes as built.
     SurfelMotion motion;

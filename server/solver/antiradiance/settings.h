@@ -51,7 +51,7 @@ struct AntiradianceSettings {
     float receiverOracle = 0.5f;
     LinkOracle linkOracle = LinkOracle::kConservative;  // links/oracle.h
     TablePrecision tables = TablePrecision::kAuto;
-    // With SolverSettings::motionLinks: when the links touching dynamic nodes would outnumber
+    // With SolverSettings::prepareMoves: when the links touching dynamic nodes would outnumber
     // the others by more than this factor, the usual links are built instead and moves
     // rebuild them (the stats' motion_declined says so). 0: no limit.
     float motionLinkBudget = 0.0f;
