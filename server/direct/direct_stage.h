@@ -9,16 +9,12 @@
 #include <vector>
 
 #include "direct/direct_light.h"
+#include "gpu/fwd.h"
 #include "hierarchy/directions.h"
 #include "scene/environment.h"
 #include "scene/scene.h"
 
 namespace penumbra {
-namespace gpu {
-class Buffer;
-class Context;
-}  // namespace gpu
-
 namespace direct {
 
 class DirectStage {

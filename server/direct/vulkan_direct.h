@@ -8,13 +8,9 @@
 #include <vector>
 
 #include "direct/direct_stage.h"
+#include "gpu/fwd.h"
 
 namespace penumbra {
-namespace gpu {
-class Buffer;
-class Context;
-}  // namespace gpu
-
 namespace direct {
 
 class VulkanDirect : public DirectStage {
@@ -23,7 +19,7 @@ class VulkanDirect : public DirectStage {
     // when the device cannot rasterise into storage buffers.
     VulkanDirect(gpu::Context& ctx, const Scene& scene, std::vector<GpuReceiver> receivers,
                  gpu::Buffer& out, int mapSize);
-    ~VulkanDirect();
+    ~VulkanDirect() override;
 
     // Plans from the scene's lights (geometry as at construction), renders, waits.
     void Update(const Scene& scene) override;

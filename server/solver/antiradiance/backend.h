@@ -8,15 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "gpu/fwd.h"
 #include "solver/antiradiance/model.h"
 #include "solver/solver.h"
 
 namespace penumbra {
-
-namespace gpu {
-class Buffer;
-class Context;
-}  // namespace gpu
 
 class AntiradianceBackend {
   public:

@@ -8,14 +8,10 @@
 #include <memory>
 #include <vector>
 
+#include "gpu/fwd.h"
 #include "solver/antiradiance/model.h"
 
 namespace penumbra {
-
-namespace gpu {
-class Buffer;
-class Context;
-}  // namespace gpu
 
 class VulkanLinkUpdate {
   public:

@@ -6,16 +6,12 @@
 #include <string>
 #include <vector>
 
+#include "gpu/fwd.h"
 #include "solver/antiradiance/backend.h"
 #include "solver/antiradiance/model.h"
 #include "solver/solver.h"
 
 namespace penumbra {
-
-namespace gpu {
-class Buffer;
-class Context;
-}  // namespace gpu
 
 class VulkanAntiradiance : public AntiradianceBackend {
   public:
