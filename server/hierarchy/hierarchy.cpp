@@ -147,4 +147,51 @@ Hierarchy BuildHierarchy(const Surfels& surfels, const std::vector<glm::mat4>& f
     return h;
 }
 
+void RefitHierarchy(Hierarchy& h, const Surfels& s) {
+    // Children come after their parent in preorder: walk backwards, leaves before clusters.
+    for (size_t k = h.nodes.size(); k-- > 0;) {
+        HierarchyNode& n = h.nodes[k];
+        if (n.IsLeaf()) {
+            const uint32_t i = n.surfel;
+            n.center = s.centroids[i];
+            n.area = s.areas[i];
+            n.discRadius = std::sqrt(n.area / std::numbers::pi_v<float>);
+            n.radius = n.discRadius;
+            n.normal = s.normals[i];
+            n.coneCos = 1.0f;
+            continue;
+        }
+        const HierarchyNode& a = h.nodes[k + 1];
+        const HierarchyNode& b = h.nodes[a.end];
+        // The smallest sphere around both children's spheres.
+        const glm::vec3 d = b.center - a.center;
+        const float dist = glm::length(d);
+        if (dist + b.radius <= a.radius) {
+            n.center = a.center, n.radius = a.radius;
+        } else if (dist + a.radius <= b.radius) {
+            n.center = b.center, n.radius = b.radius;
+        } else {
+            n.radius = 0.5f * (dist + a.radius + b.radius);
+            n.center = a.center + d * ((n.radius - a.radius) / dist);
+        }
+        n.area = a.area + b.area;
+        n.discRadius = std::min(n.radius, std::sqrt(n.area / std::numbers::pi_v<float>));
+        const glm::vec3 sum = a.area * a.normal + b.area * b.normal;
+        const float len = glm::length(sum);
+        if (len <= 1e-12f || a.coneCos < -0.5f || b.coneCos < -0.5f) {
+            n.normal = len > 1e-12f ? sum / len : glm::vec3(0.0f, 0.0f, 1.0f);
+            n.coneCos = -1.0f;
+            continue;
+        }
+        n.normal = sum / len;
+        // Each child's cone around the new axis: its own axis' angle plus its half angle.
+        float cone = 0.0f;
+        for (const HierarchyNode* c : {&a, &b}) {
+            const float axis = std::acos(std::clamp(glm::dot(n.normal, c->normal), -1.0f, 1.0f));
+            cone = std::max(cone, axis + std::acos(std::clamp(c->coneCos, -1.0f, 1.0f)));
+        }
+        n.coneCos = cone >= std::numbers::pi_v<float> ? -1.0f : std::cos(cone);
+    }
+}
+
 }  // namespace penumbra

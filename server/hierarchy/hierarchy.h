@@ -53,4 +53,10 @@ struct Hierarchy {
 // its own frame, so that its clusters are the same at every pose (Sec. 3.3 moves).
 Hierarchy BuildHierarchy(const Surfels& surfels, const std::vector<glm::mat4>& frames = {});
 
+// The same tree over `surfels` at their places now (moved or deformed, same surfels): every
+// node's bounding sphere, normal and cone, area and disc radius again, leaves up (as a
+// bounding volume hierarchy is refitted; the implicit-visibility paper's UpdateElements).
+// The spheres are the children's spheres' bound, not the tightest.
+void RefitHierarchy(Hierarchy& hierarchy, const Surfels& surfels);
+
 }  // namespace penumbra

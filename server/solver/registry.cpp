@@ -5,13 +5,14 @@
 
 #include "base/check.h"
 #include "solver/antiradiance/settings.h"
+#include "solver/implicit/settings.h"
 
 namespace penumbra {
 namespace {
 
 std::vector<SolverEntry>& Registry() {
     // Built in: one line a solver.
-    static std::vector<SolverEntry> solvers = {AntiradianceEntry()};
+    static std::vector<SolverEntry> solvers = {AntiradianceEntry(), ImplicitEntry()};
     return solvers;
 }
 

@@ -1,0 +1,361 @@
+// The implicit-visibility solver's frame: refit, relink, bounce (implicit_solver.h).
+#include "solver/implicit/implicit_solver.h"
+
+#include <tbb/parallel_for.h>
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include "base/check.h"
+
+namespace penumbra {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+// Sums each node's two children's rows into its own, deepest clusters first (the pull).
+template <typename T>
+void PullRows(const Hierarchy& h, size_t width, std::vector<T>& rows) {
+    for (size_t depth = h.byDepth.size(); depth-- > 0;) {
+        const std::vector<uint32_t>& level = h.byDepth[depth];
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, level.size(), 32), [&](const auto& range) {
+            for (size_t k = range.begin(); k != range.end(); ++k) {
+                const uint32_t n = level[k];
+                if (h.nodes[n].IsLeaf()) continue;
+                T* row = rows.data() + size_t(n) * width;
+                const T* a = rows.data() + size_t(n + 1) * width;
+                const T* b = rows.data() + size_t(h.nodes[n + 1].end) * width;
+                for (size_t j = 0; j < width; ++j) row[j] = a[j] + b[j];
+            }
+        });
+    }
+}
+
+bool Finite(const glm::vec3& v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+}  // namespace
+
+ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& settings,
+                               const ImplicitSettings& own, const ProgressFn& progress)
+    : settings_(settings),
+      own_(own),
+      progress_(progress),
+      dirs_(own.bins),
+      linker_(dirs_, own.linkThreshold) {
+    const auto start = Clock::now();
+    if (settings.device == DeviceChoice::kGpu || settings.device == DeviceChoice::kLavapipe)
+        throw Error(
+            "the implicit solver runs on the CPU only for now (its Vulkan back end is not "
+            "built yet): use --device cpu or auto");
+    ValidateEnvironment(scene.environment);
+    const float h = settings.elementSize > 0.0f ? settings.elementSize
+                                                : scene.Diameter() * kDefaultElementFraction;
+    if (!(h > 0.0f) || !std::isfinite(h))
+        throw Error("element size must be a positive number of metres");
+    elementSize_ = h;
+    if (progress) progress("refining", 0.0);
+    surfels_ = RefineScene(scene, h);
+    if (progress) progress("clustering", 0.0);
+    hierarchy_ = BuildHierarchy(surfels_);
+    opposite_.resize(dirs_.Count());
+    for (int b = 0; b < dirs_.Count(); ++b) opposite_[b] = dirs_.Lookup(-dirs_.Direction(b));
+    sky_.Update(scene.environment, dirs_, environment_);
+    const size_t leaves = hierarchy_.leaves.size();
+    gathered_.assign(leaves, glm::vec3(0.0f));
+    direct_.assign(leaves, glm::vec3(0.0f));
+    ReadMaterials(scene);
+    if (!scene.lights.empty()) {
+        if (progress) progress("shadow maps", 0.0);
+        mapSize_ = settings.shadowMapSize > 0 ? settings.shadowMapSize
+                                              : direct::AutoMapSize(scene.Diameter(), h);
+        lights_ = static_cast<int>(scene.lights.size());
+        directStage_ = direct::MakeDirectStage(scene, LeafReceivers(), mapSize_);
+        CopyDirect();
+    }
+    if (progress) progress("linking", 0.0);
+    Relink();
+    Reradiate();
+    setupSeconds_ = std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+std::vector<direct::GpuReceiver> ImplicitSolver::LeafReceivers() const {
+    std::vector<uint32_t> order;
+    for (uint32_t node : hierarchy_.leaves) order.push_back(hierarchy_.nodes[node].surfel);
+    return direct::MakeReceivers(surfels_, order);
+}
+
+void ImplicitSolver::CopyDirect() {
+    const std::vector<float> e = directStage_->Irradiance();
+    for (size_t i = 0; i < direct_.size(); ++i)
+        direct_[i] = glm::vec3(e[i * 4], e[i * 4 + 1], e[i * 4 + 2]);
+}
+
+void ImplicitSolver::ReadMaterials(const Scene& scene) {
+    PENUMBRA_CHECK_EQ(scene.primitives.size(), surfels_.firstSurfel.size());
+    materials_ = scene.materials;
+    for (size_t p = 0; p < scene.primitives.size(); ++p)
+        for (size_t s = surfels_.firstSurfel[p]; s < surfels_.End(p); ++s)
+            surfels_.materials[s] = scene.primitives[p].material;
+    Rematerial();
+}
+
+void ImplicitSolver::Rematerial() {
+    const size_t leaves = hierarchy_.leaves.size();
+    albedo_.resize(leaves);
+    emission_.resize(leaves);
+    for (size_t i = 0; i < leaves; ++i) {
+        const Material& m =
+            materials_[surfels_.materials[hierarchy_.nodes[hierarchy_.leaves[i]].surfel]];
+        albedo_[i] = m.albedo;
+        // With a first shot from outside (SetEmitterDirect) the emitters' light is not carried.
+        emission_[i] = emitterDirect_.empty() ? m.emission : glm::vec3(0.0f);
+    }
+    Reradiate();
+}
+
+void ImplicitSolver::Reradiate() {
+    const float invPi = 1.0f / std::numbers::pi_v<float>;
+    radiance_.resize(gathered_.size());
+    for (size_t i = 0; i < radiance_.size(); ++i) {
+        glm::vec3 arriving = gathered_[i] + direct_[i];
+        if (!emitterDirect_.empty()) arriving += emitterDirect_[i];
+        radiance_[i] = emission_[i] + albedo_[i] * invPi * arriving;
+    }
+}
+
+void ImplicitSolver::Relink() {
+    auto start = Clock::now();
+    RefitHierarchy(hierarchy_, surfels_);
+    // Front-facing projected areas per node and bin, Σ A cos⁺(n, ω_b): the leaves', summed
+    // up the tree.
+    const size_t bins = dirs_.Count();
+    projected_.assign(hierarchy_.size() * bins, 0.0f);
+    tbb::parallel_for(size_t(0), hierarchy_.leaves.size(), [&](size_t i) {
+        const HierarchyNode& n = hierarchy_.nodes[hierarchy_.leaves[i]];
+        float* row = projected_.data() + size_t(hierarchy_.leaves[i]) * bins;
+        for (size_t b = 0; b < bins; ++b)
+            row[b] = n.area * std::max(0.0f, glm::dot(n.normal, dirs_.Direction(uint32_t(b))));
+    });
+    PullRows(hierarchy_, bins, projected_);
+    msUpdate_ = MsSince(start);
+    linker_.Build(hierarchy_, links_);
+    ++relinks_;
+}
+
+void ImplicitSolver::ExitantTables() {
+    const size_t bins = dirs_.Count();
+    intensity_.assign(hierarchy_.size() * bins, glm::vec3(0.0f));
+    tbb::parallel_for(size_t(0), hierarchy_.leaves.size(), [&](size_t i) {
+        const HierarchyNode& n = hierarchy_.nodes[hierarchy_.leaves[i]];
+        glm::vec3* row = intensity_.data() + size_t(hierarchy_.leaves[i]) * bins;
+        const glm::vec3 sent = n.area * radiance_[i];
+        for (size_t b = 0; b < bins; ++b)
+            row[b] = std::max(0.0f, glm::dot(n.normal, dirs_.Direction(uint32_t(b)))) * sent;
+    });
+    PullRows(hierarchy_, bins, intensity_);
+    // Mean radiance per node, area-weighted: Σ A L up the tree, then over Σ A.
+    mean_.assign(hierarchy_.size(), glm::vec3(0.0f));
+    for (size_t i = 0; i < hierarchy_.leaves.size(); ++i)
+        mean_[hierarchy_.leaves[i]] = hierarchy_.nodes[hierarchy_.leaves[i]].area * radiance_[i];
+    PullRows(hierarchy_, 1, mean_);
+    for (size_t n = 0; n < mean_.size(); ++n)
+        mean_[n] =
+            hierarchy_.nodes[n].area > 0.0f ? mean_[n] / hierarchy_.nodes[n].area : glm::vec3(0.0f);
+}
+
+void ImplicitSolver::Bounce() {
+    ExitantTables();
+    const size_t bins = dirs_.Count();
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, hierarchy_.leaves.size(), 64), [&](const auto& range) {
+            for (size_t i = range.begin(); i != range.end(); ++i) {
+                glm::vec3 e(0.0f);
+                for (uint32_t k = links_.offsets[i]; k < links_.offsets[i + 1]; ++k) {
+                    const uint32_t s = links_.sender[k];
+                    const uint32_t travel = links_.travel[k];
+                    glm::vec3 l(0.0f);
+                    if (s == kNoSender) {
+                        l = environment_[travel];
+                    } else if (travel == kFacing) {
+                        l = mean_[s];
+                    } else if (travel != kAway) {
+                        const size_t row = size_t(s) * bins;
+                        // What the sender shows: the larger of its front- and
+                        // back-facing projected areas (a closed solid hides its
+                        // back faces behind its front ones; a sheet seen from
+                        // behind is a dark blocker).
+                        const float p =
+                            std::max(projected_[row + travel], projected_[row + opposite_[travel]]);
+                        if (p > 0.0f) l = intensity_[row + travel] / p;
+                    }
+                    e += links_.weight[k] * l;
+                }
+                gathered_[i] = e;
+            }
+        });
+    Reradiate();
+    for (const glm::vec3& l : radiance_)
+        if (divergence_.empty() && !Finite(l))
+            divergence_ = "diverged at iteration " + std::to_string(iterations_ + 1) +
+                          ": a leaf's light is not finite";
+}
+
+void ImplicitSolver::Iterate(int n) {
+    if (n < 0) throw Error("iteration count must not be negative");
+    const auto start = Clock::now();
+    for (int i = 0; i < n && divergence_.empty(); ++i) {
+        const auto t = Clock::now();
+        Bounce();
+        msIllumination_ = MsSince(t);
+        if (divergence_.empty()) ++iterations_;
+        if (progress_) progress_("iterating", static_cast<double>(i + 1) / n);
+    }
+    msTotal_ += MsSince(start);
+}
+
+std::vector<glm::vec3> ImplicitSolver::SurfelIrradiance(Channel channel) {
+    std::vector<glm::vec3> out(surfels_.size(), glm::vec3(0.0f));
+    for (size_t i = 0; i < hierarchy_.leaves.size(); ++i) {
+        glm::vec3 indirect = gathered_[i];
+        if (!emitterDirect_.empty()) indirect += emitterDirect_[i];
+        glm::vec3 e = channel == Channel::kDirect  ? direct_[i]
+                      : channel == Channel::kTotal ? indirect + direct_[i]
+                                                   : indirect;
+        out[hierarchy_.nodes[hierarchy_.leaves[i]].surfel] = e;
+    }
+    return out;
+}
+
+void ImplicitSolver::UpdateMaterials(const Scene& scene) { ReadMaterials(scene); }
+
+void ImplicitSolver::UpdateLights(const Scene& scene) {
+    sky_.Update(scene.environment, dirs_, environment_);
+    if (!directStage_) {
+        if (scene.lights.empty()) return;
+        throw Error("the scene was loaded without punctual lights; lights cannot be added");
+    }
+    if (scene.lights.size() != static_cast<size_t>(lights_))
+        throw Error("the number of punctual lights cannot change in a loaded scene");
+    directStage_->Update(scene);
+    CopyDirect();
+    Reradiate();  // the radiance leaving, with the new direct light
+}
+
+std::string ImplicitSolver::GeometryMismatch(const Scene& scene) const {
+    if (scene.lights.size() != static_cast<size_t>(lights_))
+        return "the number of punctual lights changed";
+    if (scene.primitives.size() != surfels_.firstSurfel.size())
+        return "the scene has other primitives than the solver was built for";
+    const Surfels now = RefineScene(scene, elementSize_);
+    if (now.size() != surfels_.size() || now.refinedTriangles != surfels_.refinedTriangles)
+        return "the moved surfaces refine into other elements";
+    return {};
+}
+
+std::string ImplicitSolver::UpdateGeometry(const Scene& scene) {
+    if (std::string why = GeometryMismatch(scene); !why.empty()) throw Error(why);
+    const auto start = Clock::now();
+    Surfels now = RefineScene(scene, elementSize_);
+    surfels_.positions = std::move(now.positions);
+    surfels_.normals = std::move(now.normals);
+    surfels_.areas = std::move(now.areas);
+    surfels_.centroids = std::move(now.centroids);
+    if (directStage_) {
+        directStage_->Move(scene, LeafReceivers());
+        CopyDirect();
+        Reradiate();
+    }
+    Relink();
+    ++geometryUpdates_;
+    msGeometry_ = MsSince(start);
+    return "links rebuilt in place (" + std::to_string(links_.Count()) + " links, " +
+           std::to_string(int(msGeometry_ + 0.5)) + " ms)";
+}
+
+void ImplicitSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) {
+    if (!perSurfel.empty() && perSurfel.size() != surfels_.size())
+        throw Error("emitter direct light for " + std::to_string(perSurfel.size()) +
+                    " surfels; the solver has " + std::to_string(surfels_.size()));
+    emitterDirect_.clear();
+    for (uint32_t node : hierarchy_.leaves)
+        if (!perSurfel.empty()) emitterDirect_.push_back(perSurfel[hierarchy_.nodes[node].surfel]);
+    Rematerial();
+}
+
+std::string ImplicitSolver::WarmStart(Solver& previous, const SurfelCarry& carry) {
+    auto* before = dynamic_cast<ImplicitSolver*>(&previous);
+    if (!before) return "cold start (the solver before was not an implicit-visibility solver)";
+    if (carry.from.size() != surfels_.size() || !carry.kept) return "cold start";
+    size_t kept = 0;
+    for (size_t i = 0; i < hierarchy_.leaves.size(); ++i) {
+        const uint32_t s = hierarchy_.nodes[hierarchy_.leaves[i]].surfel;
+        if (carry.from[s] == SurfelCarry::kNone) continue;
+        const uint32_t old = before->hierarchy_.leafOfSurfel[size_t(carry.from[s])];
+        if (old == kNoParent) continue;
+        // Leaves are numbered in preorder; find the old leaf's index among the leaves.
+        const auto it = std::lower_bound(before->hierarchy_.leaves.begin(),
+                                         before->hierarchy_.leaves.end(), old);
+        const size_t j = size_t(it - before->hierarchy_.leaves.begin());
+        gathered_[i] = before->gathered_[j];
+        radiance_[i] = before->radiance_[j];
+        ++kept;
+    }
+    return "warm start for " + std::to_string(kept) + " of " + std::to_string(surfels_.size()) +
+           " surfels";
+}
+
+SolverStats ImplicitSolver::Stats() const {
+    SolverStats s;
+    s.solver = "implicit";
+    s.device = "cpu";
+    s.elements = hierarchy_.leaves.size();
+    s.nodes = hierarchy_.size();
+    s.links = links_.Count();
+    s.bins = dirs_.Count();
+    s.iterations = iterations_;
+    s.gathers = iterations_;
+    s.bounces = iterations_;
+    s.elementSize = elementSize_;
+    s.linkBuildSeconds = (links_.msCreate + links_.msPush) / 1000.0;
+    s.setupSeconds = setupSeconds_;
+    s.msTotal = msTotal_;
+    s.passes = {{"update", msUpdate_},
+                {"create", links_.msCreate},
+                {"refine_push", links_.msPush},
+                {"illumination", msIllumination_}};
+    s.tableBytes = intensity_.size() * sizeof(glm::vec3) + projected_.size() * sizeof(float);
+    s.linkBytes = links_.sender.size() * (2 * sizeof(uint32_t) + sizeof(float));
+    s.lights = lights_;
+    if (directStage_) {
+        s.shadowViews = directStage_->views;
+        s.shadowMapSize = mapSize_;
+        s.msShadow = directStage_->msShadow;
+        s.msDirect = directStage_->msDirect;
+    }
+    if (const Environment& sky = sky_.Last(); sky.Active()) {
+        s.environment = sky.source;
+        s.environmentIntensity = sky.intensity;
+        s.environmentRotation = sky.rotation;
+    }
+    s.geometryUpdates = geometryUpdates_;
+    s.msGeometry = msGeometry_;
+    s.divergence = divergence_;
+    // No furnace bound is computed (a Jacobi bounce with albedos below 1 cannot grow without
+    // bound); infinite: none is checked, only that the light stays finite.
+    s.irradianceBound = std::numeric_limits<float>::infinity();
+    s.SetDetail("link_threshold", own_.linkThreshold);
+    s.SetDetail("candidate_pairs", double(links_.pairs));
+    s.SetDetail("empty_bins", double(links_.empty));
+    s.SetDetail("relinks", double(relinks_));
+    return s;
+}
+
+}  // namespace penumbra

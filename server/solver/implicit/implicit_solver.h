@@ -1,0 +1,94 @@
+// The implicit-visibility solver (Dong, Kautz, Theobalt, Seidel, PG 2007) behind the Solver
+// interface, CPU back end. Algorithm 1: the surfels and their hierarchy are made once; every
+// frame that geometry changed, the hierarchy is refitted (UpdateElements) and the links are
+// built anew (implicit_links.h); every bounce, each leaf gathers the light of the closest
+// sender in each of its front bins (Eq. 5) and the exitant light is pulled up the tree.
+//
+// Radiance of a sender node s seen from a bin: per node and bin, the exitant intensity of its
+// leaves I(ω) = Σ A_i L_i cos⁺(n_i, ω) and their front-facing projected area
+// F(ω) = Σ A_i cos⁺(n_i, ω); L_s(ω) = I(ω) / max(F(ω), F(−ω)). The larger of the front- and
+// back-facing areas is what the sender shows: a closed solid hides its back faces behind its
+// front ones (F(ω) = F(−ω)), a surface turned away still hides what is behind it and sends
+// nothing (the paper's closest element as a blocker). A leaf's irradiance
+// E = Σ_bins cos⁺θ · ω_bin · CosineNorm · L, with L the closest sender's radiance towards it,
+// or the environment's where the bin is empty (Sec. 4.4). Weighting each bin by its solid
+// angle (not Eq. 5's A cosθ / r² of the sender) is the paper's own assumption that the
+// closest element covers the bin: a bin is never under-filled, and a closed room keeps its
+// energy (docs/SOLVER.md, "Implicit visibility").
+#pragma once
+
+#include <memory>
+
+#include "direct/direct_stage.h"
+#include "hierarchy/directions.h"
+#include "hierarchy/hierarchy.h"
+#include "solver/implicit/implicit_links.h"
+#include "solver/implicit/settings.h"
+#include "solver/solver.h"
+
+namespace penumbra {
+
+class ImplicitSolver : public Solver {
+  public:
+    ImplicitSolver(const Scene& scene, const SolverSettings& settings, const ImplicitSettings& own,
+                   const ProgressFn& progress);
+
+    void Iterate(int n) override;
+    std::vector<glm::vec3> SurfelIrradiance(Channel channel = Channel::kIndirect) override;
+    const Surfels& GetSurfels() const override { return surfels_; }
+    void UpdateMaterials(const Scene& scene) override;
+    void UpdateLights(const Scene& scene) override;
+    SolverStats Stats() const override;
+    // Any move or deformation that keeps the primitives, their refinement and the number of
+    // punctual lights: the links are rebuilt every frame anyway.
+    std::string GeometryMismatch(const Scene& scene) const override;
+    std::string UpdateGeometry(const Scene& scene) override;
+    void SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) override;
+    bool TakesEmitterDirect() const override { return true; }
+    std::string WarmStart(Solver& previous, const SurfelCarry& carry) override;
+
+    const ImplicitLinks& Links() const { return links_; }
+    const Hierarchy& GetHierarchy() const { return hierarchy_; }
+
+  private:
+    void Relink();  // refit, links, projected areas
+    void Bounce();  // one gather over the links and the pull of the new light
+    void ReadMaterials(const Scene& scene);  // the scene's materials, then Rematerial
+    void Rematerial();                       // albedo and emission per leaf, then Reradiate
+    void Reradiate();      // the light leaving each leaf from the light arriving there now
+    void CopyDirect();     // E_d per leaf from the direct stage
+    void ExitantTables();  // I and P per node and bin from the leaves' radiance
+    std::vector<direct::GpuReceiver> LeafReceivers() const;
+
+    SolverSettings settings_;
+    ImplicitSettings own_;
+    ProgressFn progress_;
+    float elementSize_ = 0.0f;
+    Surfels surfels_;
+    Hierarchy hierarchy_;
+    Directions dirs_;
+    std::vector<uint32_t> opposite_;  // per bin: the bin of the opposite direction
+    ImplicitLinker linker_;
+    ImplicitLinks links_;
+    // Per leaf (hierarchy leaf order): albedo, emission carried, irradiance gathered, the
+    // punctual lights' E_d, the gather stage's first shot (empty: none), radiance leaving.
+    std::vector<glm::vec3> albedo_, emission_, gathered_, direct_, emitterDirect_, radiance_;
+    std::vector<Material> materials_;
+    // Per node and bin: exitant intensity (RGB, ExitantTables) and front-facing projected
+    // area (Relink).
+    std::vector<glm::vec3> intensity_;
+    std::vector<glm::vec3> mean_;  // per node: its leaves' radiance, area-weighted
+    std::vector<float> projected_;
+    std::vector<glm::vec3> environment_;  // per bin, radiance travelling along it
+    std::unique_ptr<direct::DirectStage> directStage_;
+    direct::SkyBins sky_;
+    int lights_ = 0, mapSize_ = 0;
+    int iterations_ = 0;
+    size_t relinks_ = 0;
+    double setupSeconds_ = 0.0, msTotal_ = 0.0, msUpdate_ = 0.0, msIllumination_ = 0.0;
+    double msGeometry_ = 0.0;
+    size_t geometryUpdates_ = 0;
+    std::string divergence_;
+};
+
+}  // namespace penumbra

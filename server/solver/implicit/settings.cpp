@@ -1,0 +1,57 @@
+// The implicit-visibility solver's registry entry and options (solver/implicit/settings.h).
+#include "solver/implicit/settings.h"
+
+#include "hierarchy/directions.h"
+#include "solver/implicit/implicit_solver.h"
+
+namespace penumbra {
+namespace {
+
+std::vector<OptionSpec> Options() {
+    using K = OptionKind;
+    return {
+        {"bins",
+         K::kInt,
+         "0",
+         "direction bins, 32..1024, a multiple of 4 (the paper's 6×12×12 cube map is 864); "
+         "0: 128",
+         0,
+         1024,
+         {}},
+        {"link-threshold",
+         K::kFloat,
+         "0.5",
+         "refine a link end while it subtends more than this many bins' solid angle",
+         0.05,
+         4,
+         {}},
+    };
+}
+
+}  // namespace
+
+SolverEntry ImplicitEntry() {
+    return {"implicit",
+            "implicit visibility (Dong et al. 2007), in progress: links rebuilt every frame, the "
+            "closest surface in each direction bin, any move taken in place; CPU only, and far "
+            "off the truth with small emitters and the gather off (docs/SOLVER.md)",
+            Options(),
+            [](const Scene& scene, const SolverSettings& settings,
+               const ProgressFn& progress) -> std::unique_ptr<Solver> {
+                return std::make_unique<ImplicitSolver>(scene, settings,
+                                                        ReadImplicitSettings(settings), progress);
+            },
+            [](const SolverSettings& settings) { ReadImplicitSettings(settings); }};
+}
+
+ImplicitSettings ReadImplicitSettings(const SolverSettings& settings) {
+    const OptionReader r("implicit", Options(), settings.options);
+    ImplicitSettings s;
+    const int bins = r.Int("bins");
+    if (bins != 0) Directions::Check(bins);
+    s.bins = bins > 0 ? bins : kImplicitDefaultBins;
+    s.linkThreshold = r.Float("link-threshold");
+    return s;
+}
+
+}  // namespace penumbra
