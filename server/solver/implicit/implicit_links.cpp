@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <bit>
 #include <chrono>
 #include <cmath>
 #include <numbers>
@@ -16,20 +15,13 @@
 namespace penumbra {
 namespace {
 
-constexpr uint64_t kEmpty = ~0ull;
+// A bin covered at least this much is filled by its shares (ImplicitLinker::Build).
+constexpr float kFillCoverage = 0.5f;
 // Normal cones wider than this (cos of the half angle) are split before they are linked.
 constexpr float kMixedCone = 0.0f;
 
 double MsSince(std::chrono::steady_clock::time_point t) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
-}
-
-// Keeps the smaller of `slot` and `key`: the closer sender (Eq. 5's closest element).
-void AtomicMin(uint64_t& slot, uint64_t key) {
-    std::atomic_ref<uint64_t> ref(slot);
-    uint64_t now = ref.load(std::memory_order_relaxed);
-    while (key < now && !ref.compare_exchange_weak(now, key, std::memory_order_relaxed)) {
-    }
 }
 
 // Whether some member of `r` can receive light from some point of `s`, `d` = s.center −
@@ -68,39 +60,39 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
     splat_ = std::sin(0.5f * dirs.Spacing());
 }
 
-void ImplicitLinker::Store(uint32_t node, const glm::vec3& dir, float sinRadius, uint64_t key) {
-    const size_t bins = static_cast<size_t>(dirs_.Count());
-    uint64_t* row = slots_.data() + size_t(node) * bins;
-    // An end that cannot be split and still looks wider than a bin (a leaf next to its
-    // receiver: a contact, a corner) covers every bin its disc spans, not only the one of
-    // its centre; else the neighbouring bins would stay empty and read the environment or
-    // nothing (the paper's leak at elements larger than a bin).
-    if (sinRadius > splat_) {
-        const float cosRadius =
-            std::sqrt(std::max(0.0f, 1.0f - std::min(1.0f, sinRadius) * std::min(1.0f, sinRadius)));
-        for (size_t b = 0; b < bins; ++b)
-            if (glm::dot(dirs_.Direction(uint32_t(b)), dir) >= cosRadius) AtomicMin(row[b], key);
-    }
-    AtomicMin(row[dirs_.Lookup(dir)], key);
-}
-
-void ImplicitLinker::Build(const Hierarchy& h, ImplicitLinks& out) {
+void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontArea,
+                           ImplicitLinks& out) {
     const auto& nodes = h.nodes;
     const size_t bins = static_cast<size_t>(dirs_.Count());
-    const float limit = threshold_ * dirs_.BinSolidAngle();
+    const float omegaBin = dirs_.BinSolidAngle();
+    const float limit = threshold_ * omegaBin;
     const float pi = std::numbers::pi_v<float>;
+    PENUMBRA_CHECK_EQ(frontArea.size(), nodes.size() * bins);
     auto start = std::chrono::steady_clock::now();
-    slots_.assign(nodes.size() * bins, kEmpty);
+
+    // The solid angle sender `s` covers seen from `r` along `dir` (unit, r → s) at `dist`: a
+    // flat node's area times |cos| (turned away it still hides what is behind it), another
+    // cluster's larger projected area (front or back: a closed solid shows one side).
+    auto covered = [&](uint32_t s, const glm::vec3& dir, float dist) {
+        const HierarchyNode& n = nodes[s];
+        const float d2 = std::max(dist * dist, 1e-30f);
+        if (n.coneCos >= kFlatCone) return n.area * std::abs(glm::dot(n.normal, dir)) / d2;
+        const uint32_t t = dirs_.Lookup(-dir);  // the direction its light travels
+        const float* row = frontArea.data() + size_t(s) * bins;
+        return std::max(row[t], row[dirs_.Lookup(dir)]) / d2;
+    };
 
     // CreateHierarchicalLinks, level by level: each round splits or links every pair of the
-    // last round, in parallel.
+    // last round, in parallel; a link is recorded at each end that can receive.
     std::vector<Pair> round{{0, 0}};
     tbb::enumerable_thread_specific<std::vector<Pair>> next;
+    tbb::enumerable_thread_specific<std::vector<End>> recorded;
     std::atomic<size_t> pairs{0}, linked{0};
     while (!round.empty()) {
         pairs += round.size();
         tbb::parallel_for(tbb::blocked_range<size_t>(0, round.size(), 512), [&](const auto& range) {
             std::vector<Pair>& emit = next.local();
+            std::vector<End>& ends = recorded.local();
             size_t made = 0;
             for (size_t k = range.begin(); k != range.end(); ++k) {
                 const uint32_t a = round[k].a, b = round[k].b;
@@ -119,12 +111,12 @@ void ImplicitLinker::Build(const Hierarchy& h, ImplicitLinks& out) {
                 const bool aGets = CanReceive(A, B, d, dist);
                 const bool bGets = CanReceive(B, A, -d, dist);
                 if (!aGets && !bGets) continue;  // a pair's only use is what its ends receive
-                // Sec. 4.2.2: an end that looks bigger than a bin from the other is split.
+                // Sec. 4.2.2: an end that looks bigger than a bin from the other is split. A
+                // sender whose members face more than 90° apart (a box's corner) shows a mix
+                // of lit and hidden faces that no one radiance per direction stands for: it is
+                // split too, into parts that each face one way.
                 const bool overlap = dist <= A.radius + B.radius;
                 const float dist2 = std::max(dist * dist, 1e-30f);
-                // A sender whose members face more than 90° apart (a box's corner) shows
-                // a mix of lit and hidden faces that no one radiance per direction stands
-                // for: it is split too, into parts that each face one way.
                 const bool splitA = !A.IsLeaf() && (overlap || A.coneCos < kMixedCone ||
                                                     pi * A.radius * A.radius / dist2 > limit);
                 const bool splitB = !B.IsLeaf() && (overlap || B.coneCos < kMixedCone ||
@@ -140,10 +132,11 @@ void ImplicitLinker::Build(const Hierarchy& h, ImplicitLinks& out) {
                     continue;
                 }
                 if (!(dist > 0.0f)) continue;  // coincident ends: no direction between them
-                const uint64_t key = uint64_t(std::bit_cast<uint32_t>(dist)) << 32;
                 const glm::vec3 dir = d / dist;
-                if (aGets && AboveHorizon(A, dir)) Store(a, dir, B.radius / dist, key | b);
-                if (bGets && AboveHorizon(B, -dir)) Store(b, -dir, A.radius / dist, key | a);
+                if (aGets && AboveHorizon(A, dir))
+                    Record(a, b, dir, dist, B.radius / dist, covered(b, dir, dist), ends);
+                if (bGets && AboveHorizon(B, -dir))
+                    Record(b, a, -dir, dist, A.radius / dist, covered(a, -dir, dist), ends);
                 ++made;
             }
             linked += made;
@@ -156,75 +149,138 @@ void ImplicitLinker::Build(const Hierarchy& h, ImplicitLinks& out) {
     }
     out.pairs = pairs;
     out.linked = linked;
+
+    // The recorded ends by (node, bin), each slot's nearest first.
+    const size_t slots = nodes.size() * bins;
+    std::vector<uint32_t> first(slots + 1, 0);
+    size_t total = 0;
+    for (const auto& v : recorded) {
+        total += v.size();
+        for (const End& e : v) ++first[e.slot + 1];
+    }
+    for (size_t k = 0; k < slots; ++k) first[k + 1] += first[k];
+    std::vector<End> ends(total);
+    {
+        std::vector<uint32_t> fill(first.begin(), first.end() - 1);
+        for (const auto& v : recorded)
+            for (const End& e : v) ends[fill[e.slot]++] = e;
+    }
+    tbb::parallel_for(size_t(0), slots, [&](size_t k) {
+        if (first[k + 1] - first[k] > 1)
+            std::sort(ends.begin() + first[k], ends.begin() + first[k + 1],
+                      [](const End& x, const End& y) { return x.dist < y.dist; });
+    });
     out.msCreate = MsSince(start);
 
-    // RefineHierarchicalLinks + PushdownLinks: parents first, each bin keeps the shorter of
-    // its own link and its parent's (its ancestors', by then).
+    // RefineHierarchicalLinks + PushdownLinks, as front-to-back coverage: each leaf bin takes
+    // the links of the leaf and its ancestors in that bin, nearest first, each covering its
+    // solid angle of what the nearer ones left, until the bin is full (Eq. 5's closest
+    // element, extended to the closest layer: a small light covers its own solid angle and
+    // the ceiling around it the rest; a face hides what lies behind it). What no link covers
+    // sees the environment.
     start = std::chrono::steady_clock::now();
-    for (size_t depth = 1; depth < h.byDepth.size(); ++depth) {
-        const std::vector<uint32_t>& level = h.byDepth[depth];
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, level.size(), 64), [&](const auto& range) {
-            for (size_t k = range.begin(); k != range.end(); ++k) {
-                const uint32_t n = level[k];
-                uint64_t* row = slots_.data() + size_t(n) * bins;
-                const uint64_t* up = slots_.data() + size_t(nodes[n].parent) * bins;
-                for (size_t b = 0; b < bins; ++b) row[b] = std::min(row[b], up[b]);
-            }
-        });
-    }
-    // The leaves' front bins, compacted.
     const size_t leaves = h.leaves.size();
-    std::vector<uint32_t> counts(leaves + 1, 0);
-    tbb::parallel_for(size_t(0), leaves, [&](size_t i) {
-        const glm::vec3& n = nodes[h.leaves[i]].normal;
-        uint32_t c = 0;
-        for (size_t b = 0; b < bins; ++b) c += glm::dot(n, dirs_.Direction(uint32_t(b))) > 0.0f;
-        counts[i + 1] = c;
+    std::vector<std::vector<Entry>> perLeaf(leaves);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves, 16), [&](const auto& range) {
+        std::vector<uint32_t> chain;
+        std::vector<End> layer;
+        for (size_t i = range.begin(); i != range.end(); ++i) {
+            const uint32_t leaf = h.leaves[i];
+            chain.clear();
+            for (uint32_t n = leaf; n != kNoParent; n = nodes[n].parent) chain.push_back(n);
+            const glm::vec3& normal = nodes[leaf].normal;
+            const float norm = dirs_.CosineNorm(normal);
+            std::vector<Entry>& list = perLeaf[i];
+            for (size_t b = 0; b < bins; ++b) {
+                const float c = glm::dot(normal, dirs_.Direction(uint32_t(b)));
+                if (!(c > 0.0f)) continue;
+                layer.clear();
+                for (uint32_t n : chain) {
+                    const size_t slot = size_t(n) * bins + b;
+                    layer.insert(layer.end(), ends.begin() + first[slot],
+                                 ends.begin() + first[slot + 1]);
+                }
+                std::sort(layer.begin(), layer.end(),
+                          [](const End& x, const End& y) { return x.dist < y.dist; });
+                const size_t bin0 = list.size();
+                float left = omegaBin;
+                for (const End& e : layer) {
+                    const float take = std::min(left, e.omega);
+                    if (!(take > 0.0f)) continue;
+                    list.push_back({uint32_t(b), e.sender, c * norm * take});
+                    left -= take;
+                    if (left <= 1e-4f * omegaBin) break;
+                }
+                // A bin mostly covered is a surface the discretisation left gaps in (its
+                // ends' centres fall into the bins unevenly): its shares fill it. A bin
+                // covered less than kFillCoverage shows the environment around what is there
+                // (a small object under the sky).
+                if (left > 1e-4f * omegaBin && omegaBin - left >= kFillCoverage * omegaBin) {
+                    const float scale = omegaBin / (omegaBin - left);
+                    for (size_t k = bin0; k < list.size(); ++k) list[k].weight *= scale;
+                    left = 0.0f;
+                }
+                if (left > 1e-4f * omegaBin)
+                    list.push_back({uint32_t(b), kNoSender, c * norm * left});
+            }
+        }
     });
     out.offsets.assign(leaves + 1, 0);
-    for (size_t i = 0; i < leaves; ++i) out.offsets[i + 1] = out.offsets[i] + counts[i + 1];
-    const size_t total = out.offsets[leaves];
-    out.bin.resize(total);
-    out.sender.resize(total);
-    out.weight.resize(total);
-    out.travel.resize(total);
+    for (size_t i = 0; i < leaves; ++i)
+        out.offsets[i + 1] = out.offsets[i] + uint32_t(perLeaf[i].size());
+    const size_t count = out.offsets[leaves];
+    out.bin.resize(count);
+    out.sender.resize(count);
+    out.weight.resize(count);
+    out.travel.resize(count);
     std::atomic<size_t> empty{0};
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves, 64), [&](const auto& range) {
-        size_t none = 0;
-        for (size_t i = range.begin(); i != range.end(); ++i) {
-            const uint32_t node = h.leaves[i];
-            const glm::vec3& n = nodes[node].normal;
-            const float norm = dirs_.CosineNorm(n) * dirs_.BinSolidAngle();
-            const uint64_t* row = slots_.data() + size_t(node) * bins;
-            size_t k = out.offsets[i];
-            for (size_t b = 0; b < bins; ++b) {
-                const float c = glm::dot(n, dirs_.Direction(uint32_t(b)));
-                if (!(c > 0.0f)) continue;
-                out.bin[k] = uint32_t(b);
-                out.weight[k] = c * norm;
-                if (row[b] == kEmpty) {
-                    out.sender[k] = kNoSender;
-                    out.travel[k] = dirs_.Lookup(-dirs_.Direction(uint32_t(b)));
-                    ++none;
-                } else {
-                    const uint32_t sender = uint32_t(row[b]);
-                    const HierarchyNode& from = nodes[sender];
-                    const glm::vec3 toLeaf = nodes[node].center - from.center;
-                    out.sender[k] = sender;
-                    if (from.coneCos >= kFlatCone)
-                        out.travel[k] = glm::dot(from.normal, toLeaf) > 0.0f ? kFacing : kAway;
-                    else
-                        out.travel[k] = glm::dot(toLeaf, toLeaf) > 0.0f
-                                            ? dirs_.Lookup(glm::normalize(toLeaf))
-                                            : dirs_.Lookup(-dirs_.Direction(uint32_t(b)));
-                }
-                ++k;
+    tbb::parallel_for(size_t(0), leaves, [&](size_t i) {
+        const uint32_t leaf = h.leaves[i];
+        size_t k = out.offsets[i], none = 0;
+        for (const Entry& e : perLeaf[i]) {
+            out.bin[k] = e.bin;
+            out.sender[k] = e.sender;
+            out.weight[k] = e.weight;
+            if (e.sender == kNoSender) {
+                out.travel[k] = dirs_.Lookup(-dirs_.Direction(e.bin));
+                ++none;
+            } else {
+                const HierarchyNode& from = nodes[e.sender];
+                const glm::vec3 toLeaf = nodes[leaf].center - from.center;
+                if (from.coneCos >= kFlatCone)
+                    out.travel[k] = glm::dot(from.normal, toLeaf) > 0.0f ? kFacing : kAway;
+                else
+                    out.travel[k] = glm::dot(toLeaf, toLeaf) > 0.0f
+                                        ? dirs_.Lookup(glm::normalize(toLeaf))
+                                        : dirs_.Lookup(-dirs_.Direction(e.bin));
             }
+            ++k;
         }
         empty += none;
     });
     out.empty = empty;
     out.msPush = MsSince(start);
+}
+
+void ImplicitLinker::Record(uint32_t node, uint32_t sender, const glm::vec3& dir, float dist,
+                            float sinRadius, float omega, std::vector<End>& ends) const {
+    const size_t bins = static_cast<size_t>(dirs_.Count());
+    const size_t row = size_t(node) * bins;
+    // An end that cannot be split and still looks wider than a bin (a leaf next to its
+    // receiver: a contact, a corner) covers every bin its disc spans, not only the one of
+    // its centre; else the neighbouring bins would stay empty and read the environment or
+    // nothing (the paper's leak at elements larger than a bin).
+    if (sinRadius > splat_) {
+        const float s = std::min(1.0f, sinRadius);
+        const float cosRadius = std::sqrt(std::max(0.0f, 1.0f - s * s));
+        const uint32_t centre = dirs_.Lookup(dir);
+        for (size_t b = 0; b < bins; ++b)
+            if (b != centre && glm::dot(dirs_.Direction(uint32_t(b)), dir) >= cosRadius)
+                ends.push_back({uint32_t(row + b), sender, dist, dirs_.BinSolidAngle()});
+        ends.push_back({uint32_t(row + centre), sender, dist, dirs_.BinSolidAngle()});
+        return;
+    }
+    ends.push_back({uint32_t(row + dirs_.Lookup(dir)), sender, dist, omega});
 }
 
 }  // namespace penumbra

@@ -1,16 +1,18 @@
 // Implicit visibility (Dong et al. 2007, Sec. 4.2): links rebuilt from scratch every frame,
-// each node's directions cut into bins, and per (node, bin) only the closest link kept
-// (Eq. 5: the closest element in a bin covers it, so whatever lies behind it is hidden).
-// Visibility is never tested; it falls out of the closest-link rule.
+// each node's directions cut into bins, and in each bin the closest links kept (Eq. 5: the
+// closest element in a bin covers it, so whatever lies behind it is hidden). Visibility is
+// never tested; it falls out of the closest-link rule.
 //
 // CPU back end (TBB). CreateHierarchicalLinks walks candidate pairs level by level from the
 // root's self-pair (the data-parallel link creation of Meyer et al. 2009): a pair is split
 // while an end subtends more than linkThreshold × ω_bin from the other (Sec. 4.2.2), else it
-// becomes a link at both ends, written into the (node, bin) slot with an atomic minimum of
-// the 64-bit key (distance bits << 32 | sender). RefineHierarchicalLinks and PushdownLinks
-// fold into one top-down pass (Sec. 4.2.3, 4.2.4): each leaf bin takes the shortest link
-// among itself and its ancestors. The leaves' front bins are then compacted into a list per
-// leaf; a front bin without a link sees the environment (Sec. 4.4).
+// becomes a link at both ends, recorded in the end's (node, bin) slot with its distance and
+// the solid angle the other end covers. RefineHierarchicalLinks and PushdownLinks fold into
+// one pass per leaf (Sec. 4.2.3, 4.2.4): each front bin takes the links of the leaf and its
+// ancestors in that bin nearest first, each covering what the nearer ones left of the bin,
+// until it is full: the paper's closest element, extended to the closest layer, so that a
+// light smaller than a bin covers only its own solid angle. What no link covers sees the
+// environment (Sec. 4.4).
 #pragma once
 
 #include <cstdint>
@@ -30,10 +32,11 @@ inline constexpr uint32_t kAway = 0xfffffffdu;
 inline constexpr float kFlatCone = 0.9f;  // cos 25.8°
 
 struct ImplicitLinks {
-    // Per leaf (hierarchy leaf order), its front bins [offsets[i], offsets[i + 1]): the bin
-    // (direction from the leaf towards what it sees), the closest sender node in it
-    // (kNoSender: none, the environment), and the bin's weight cos⁺θ · ω_bin · CosineNorm(n),
-    // so that Σ weight · L = E and a leaf with every bin at radiance L receives exactly π L.
+    // Per leaf (hierarchy leaf order), the shares of its front bins [offsets[i],
+    // offsets[i + 1]): the bin (direction from the leaf towards what it sees), a sender node
+    // in it (kNoSender: the environment) and its weight cos⁺θ · Ω · CosineNorm(n), Ω the
+    // solid angle of the bin it covers; a bin's shares cover its ω_bin, so that Σ weight · L
+    // = E and a leaf with every bin at radiance L receives exactly π L.
     std::vector<uint32_t> offsets;
     std::vector<uint32_t> bin;
     std::vector<uint32_t> sender;
@@ -44,27 +47,43 @@ struct ImplicitLinks {
     // it).
     std::vector<uint32_t> travel;
     size_t pairs = 0;   // candidate pairs the last build examined
-    size_t linked = 0;  // pairs that became links (each written at up to two ends)
-    size_t empty = 0;   // front bins without a sender
+    size_t linked = 0;  // pairs that became links (each recorded at up to two ends)
+    size_t empty = 0;   // bin shares that see the environment
     double msCreate = 0.0, msPush = 0.0;
 
-    size_t Count() const { return sender.size() - empty; }  // filled front bins
+    size_t Count() const { return sender.size() - empty; }  // shares from a sender
 };
 
 class ImplicitLinker {
   public:
     ImplicitLinker(const Directions& dirs, float linkThreshold);
-    // The links of `hierarchy` as it is placed now.
-    void Build(const Hierarchy& hierarchy, ImplicitLinks& out);
+    // The links of `hierarchy` as it is placed now. `frontArea`: per node and bin, the
+    // front-facing projected area Σ A cos⁺(n, ω_b) (what a cluster covers of a bin).
+    void Build(const Hierarchy& hierarchy, const std::vector<float>& frontArea, ImplicitLinks& out);
 
   private:
-    // Writes `key` into `node`'s slot of direction `dir` (and of every bin within the other
-    // end's angular radius, asin(sinRadius), when that is wider than a bin).
-    void Store(uint32_t node, const glm::vec3& dir, float sinRadius, uint64_t key);
+    // A link at one end: the (node, bin) slot, the sender, the distance, the solid angle of
+    // the bin the sender covers.
+    struct End {
+        uint32_t slot;
+        uint32_t sender;
+        float dist;
+        float omega;
+    };
+    // One front bin's share of a leaf's light: from a sender (or kNoSender: the environment)
+    // with its weight.
+    struct Entry {
+        uint32_t bin, sender;
+        float weight;
+    };
+    // Records the link (`node` receives from `sender` along `dir`) in the slot of `dir`'s bin
+    // (and of every bin within the sender's angular radius, asin(sinRadius), covering each
+    // whole, when that is wider than a bin).
+    void Record(uint32_t node, uint32_t sender, const glm::vec3& dir, float dist, float sinRadius,
+                float omega, std::vector<End>& ends) const;
     const Directions& dirs_;
     float threshold_;
-    float splat_ = 0.0f;           // sin of the angular radius above which an end is spread
-    std::vector<uint64_t> slots_;  // nodes × bins keys (scratch, kept between frames)
+    float splat_ = 0.0f;  // sin of the angular radius above which an end is spread
 };
 
 }  // namespace penumbra

@@ -146,7 +146,7 @@ void ImplicitSolver::Relink() {
     });
     PullRows(hierarchy_, bins, projected_);
     msUpdate_ = MsSince(start);
-    linker_.Build(hierarchy_, links_);
+    linker_.Build(hierarchy_, projected_, links_);
     ++relinks_;
 }
 

@@ -33,8 +33,8 @@ std::vector<OptionSpec> Options() {
 SolverEntry ImplicitEntry() {
     return {"implicit",
             "implicit visibility (Dong et al. 2007), in progress: links rebuilt every frame, the "
-            "closest surface in each direction bin, any move taken in place; CPU only, and far "
-            "off the truth with small emitters and the gather off (docs/SOLVER.md)",
+            "closest surfaces in each direction bin, any move taken in place; CPU only, and "
+            "further off the truth than antiradiance (docs/SOLVER.md)",
             Options(),
             [](const Scene& scene, const SolverSettings& settings,
                const ProgressFn& progress) -> std::unique_ptr<Solver> {
