@@ -17,8 +17,6 @@ namespace {
 
 // A bin covered at least this much is filled by its shares (ImplicitLinker::Build).
 constexpr float kFillCoverage = 0.5f;
-// Normal cones wider than this (cos of the half angle) are split before they are linked.
-constexpr float kMixedCone = 0.0f;
 
 double MsSince(std::chrono::steady_clock::time_point t) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
@@ -111,16 +109,13 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 const bool aGets = CanReceive(A, B, d, dist);
                 const bool bGets = CanReceive(B, A, -d, dist);
                 if (!aGets && !bGets) continue;  // a pair's only use is what its ends receive
-                // Sec. 4.2.2: an end that looks bigger than a bin from the other is split. A
-                // sender whose members face more than 90° apart (a box's corner) shows a mix
-                // of lit and hidden faces that no one radiance per direction stands for: it is
-                // split too, into parts that each face one way.
+                // Sec. 4.2.2: an end that looks bigger than a bin from the other is split.
                 const bool overlap = dist <= A.radius + B.radius;
                 const float dist2 = std::max(dist * dist, 1e-30f);
-                const bool splitA = !A.IsLeaf() && (overlap || A.coneCos < kMixedCone ||
-                                                    pi * A.radius * A.radius / dist2 > limit);
-                const bool splitB = !B.IsLeaf() && (overlap || B.coneCos < kMixedCone ||
-                                                    pi * B.radius * B.radius / dist2 > limit);
+                const bool splitA =
+                    !A.IsLeaf() && (overlap || pi * A.radius * A.radius / dist2 > limit);
+                const bool splitB =
+                    !B.IsLeaf() && (overlap || pi * B.radius * B.radius / dist2 > limit);
                 if (splitB && (!splitA || B.radius >= A.radius)) {
                     emit.push_back({a, b + 1});
                     emit.push_back({a, nodes[b + 1].end});
