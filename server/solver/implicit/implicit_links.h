@@ -62,8 +62,8 @@ class ImplicitLinker {
     void Build(const Hierarchy& hierarchy, const std::vector<float>& frontArea, ImplicitLinks& out);
 
   private:
-    // A link at one end: the (node, bin) slot, the sender, the distance, the solid angle of
-    // the bin the sender covers.
+    // A link at one end: the (node, bin) slot, the sender, its depth along the bin (what the
+    // bin's front-to-back order sorts by), the solid angle of the bin the sender covers.
     struct End {
         uint32_t slot;
         uint32_t sender;
@@ -76,11 +76,11 @@ class ImplicitLinker {
         uint32_t bin, sender;
         float weight;
     };
-    // Records the link (`node` receives from `sender` along `dir`) in the slot of `dir`'s bin
-    // (and of every bin within the sender's angular radius, asin(sinRadius), covering each
-    // whole, when that is wider than a bin).
-    void Record(uint32_t node, uint32_t sender, const glm::vec3& dir, float dist, float sinRadius,
-                float omega, std::vector<End>& ends) const;
+    // Records the link (`node`, centred at `at`, receives from `sender`, node `from`, along
+    // `dir` at `dist`) in the slot of `dir`'s bin with the solid angle `omega` it covers, or,
+    // when the sender looks wider than a bin, in every bin its disc spans, covering each.
+    void Record(uint32_t node, uint32_t sender, const HierarchyNode& from, const glm::vec3& at,
+                const glm::vec3& dir, float dist, float omega, std::vector<End>& ends) const;
     const Directions& dirs_;
     float threshold_;
     float splat_ = 0.0f;  // sin of the angular radius above which an end is spread
