@@ -143,6 +143,42 @@ TEST(Implicit, CoaxialDiscFillsItsBins) {
     EXPECT_NEAR(e, expected, 0.08f * expected);
 }
 
+// Two rooms side by side, split by a wall 2 cm thick (a fifth of an element): only one has
+// a light. No light reaches the other room through the wall (the closest-layer rule hides
+// the lit room behind the wall's near face): its floor gets at most 1% of the lit floor's.
+TEST(Implicit, ThinWallKeepsTheDarkRoomDark) {
+    SceneBuilder b;
+    uint32_t white = b.AddMaterial("white", glm::vec3(0.7f));
+    uint32_t lamp = b.AddMaterial("lamp", glm::vec3(0.0f), glm::vec3(20.0f));
+    const glm::vec3 inside(1.0f, 0.5f, 0.5f);
+    // A 2 × 1 × 1 m box of two rooms, faces in.
+    b.AddQuad("floor_lit", white, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside, 4);
+    b.AddQuad("floor_dark", white, {1, 0, 0}, {2, 0, 0}, {2, 0, 1}, {1, 0, 1}, inside, 4);
+    b.AddQuad("ceiling", white, {0, 1, 0}, {2, 1, 0}, {2, 1, 1}, {0, 1, 1}, inside, 4);
+    b.AddQuad("south", white, {0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {0, 1, 0}, inside, 4);
+    b.AddQuad("north", white, {0, 0, 1}, {2, 0, 1}, {2, 1, 1}, {0, 1, 1}, inside, 4);
+    b.AddQuad("west", white, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 4);
+    b.AddQuad("east", white, {2, 0, 0}, {2, 0, 1}, {2, 1, 1}, {2, 1, 0}, inside, 4);
+    b.AddBox("wall", white, {1, 0.5f, 0.5f}, {0.02f, 1, 1});
+    b.AddQuad("lamp", lamp, {0.4f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.6f},
+              {0.4f, 0.99f, 0.6f}, {0.5f, 0, 0.5f});
+    Scene scene = b.Build();
+    auto solver = CreateSolver(scene, Implicit(0.1f));
+    solver->Iterate(20);
+    const std::vector<glm::vec3> e = solver->SurfelIrradiance(Channel::kIndirect);
+    const Surfels& s = solver->GetSurfels();
+    double lit = 0.0, dark = 0.0;
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        const std::string& node = scene.primitives[p].node;
+        if (node != "floor_lit" && node != "floor_dark") continue;
+        double& sum = node == "floor_lit" ? lit : dark;
+        for (size_t i = s.firstSurfel[p]; i < s.End(p); ++i) sum += e[i].x * s.areas[i];
+    }
+    std::printf("thin wall: dark floor %.5f of the lit floor's light\n", dark / lit);
+    EXPECT_GT(lit, 0.0);
+    EXPECT_LT(dark, 0.01 * lit);
+}
+
 // Any move is taken in place (the links are rebuilt every frame): a box on a floor under a sky,
 // moved and turned, its links rebuilt on the refitted hierarchy, lands near a solver built
 // afresh at the new pose (whose hierarchy is clustered there; the answers differ only by
