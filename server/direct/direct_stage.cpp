@@ -1,6 +1,7 @@
 // The direct-light stage's back-end choice and the sky's re-binning.
 #include "direct/direct_stage.h"
 
+#include "base/check.h"
 #include "direct/environment_light.h"
 #include "direct/vulkan_direct.h"
 
@@ -22,6 +23,31 @@ bool SkyBins::Update(const Environment& sky, const Directions& dirs, std::vector
     last_ = sky;
     binned_ = true;
     return true;
+}
+
+bool UpdateDirectStage(DirectStage* stage, int lights, const Scene& scene) {
+    if (!stage) {
+        if (scene.lights.empty()) return false;
+        throw Error("the scene was loaded without punctual lights; lights cannot be added");
+    }
+    if (scene.lights.size() != static_cast<size_t>(lights))
+        throw Error("the number of punctual lights cannot change in a loaded scene");
+    stage->Update(scene);
+    return true;
+}
+
+void DescribeLighting(const DirectStage* stage, int mapSize, const SkyBins& sky, SolverStats& s) {
+    if (stage) {
+        s.shadowViews = stage->views;
+        s.shadowMapSize = mapSize;
+        s.msShadow = stage->msShadow;
+        s.msDirect = stage->msDirect;
+    }
+    if (const Environment& env = sky.Last(); env.Active()) {
+        s.environment = env.source;
+        s.environmentIntensity = env.intensity;
+        s.environmentRotation = env.rotation;
+    }
 }
 
 }  // namespace penumbra::direct

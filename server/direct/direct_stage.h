@@ -13,6 +13,7 @@
 #include "hierarchy/directions.h"
 #include "scene/environment.h"
 #include "scene/scene.h"
+#include "solver/solver.h"
 
 namespace penumbra {
 namespace direct {
@@ -60,6 +61,11 @@ std::unique_ptr<DirectStage> MakeDirectStage(const Scene& scene, std::vector<Gpu
                                              int mapSize, gpu::Context* device = nullptr,
                                              gpu::Buffer* out = nullptr);
 
+// Re-reads `scene`'s punctual lights into `stage` (null: the solver was built without any;
+// `lights`: how many it was built with). False when there is no stage and no light; throws
+// penumbra::Error for lights added to a scene loaded without, or a changed count.
+bool UpdateDirectStage(DirectStage* stage, int lights, const Scene& scene);
+
 // The sky as a solver's bins see it (EnvironmentBins), re-binned only when it changed (a map
 // costs a pass over its pixels).
 class SkyBins {
@@ -75,6 +81,10 @@ class SkyBins {
     Environment last_;
     bool binned_ = false;
 };
+
+// The direct stage's figures (null: none; `mapSize` its maps') and the sky's in `stats`.
+void DescribeLighting(const DirectStage* stage, int mapSize, const SkyBins& sky,
+                      SolverStats& stats);
 
 }  // namespace direct
 }  // namespace penumbra

@@ -11,6 +11,13 @@
 
 namespace penumbra {
 
+OptionSpec BinsOption(const std::string& zeroMeans) {
+    return {"bins", OptionKind::kInt,
+            "0",    "direction bins, 32..1024, a multiple of 4; 0: " + zeroMeans,
+            0,      1024,
+            {}};
+}
+
 std::string JoinChoices(const std::vector<std::string>& words, const char* last) {
     std::string out;
     for (size_t i = 0; i < words.size(); ++i) {

@@ -24,6 +24,11 @@ struct OptionSpec {
     std::vector<std::string> choices;  // kChoice
 };
 
+// The direction-bin count of a solver with bins: "bins", 0…1024, 0 meaning `zeroMeans` (the
+// solver's own default); the solver checks the rest (Directions::Check: 32…1024, a multiple
+// of 4).
+OptionSpec BinsOption(const std::string& zeroMeans);
+
 // Options as given, by name, as text.
 using SolverOptions = std::map<std::string, std::string>;
 

@@ -214,13 +214,7 @@ void AntiradianceSolver::UpdateLights(const Scene& scene) {
         backend_->InputsChanged(AntiradianceBackend::kEnvironment);
         Rebound();
     }
-    if (!direct_) {
-        if (scene.lights.empty()) return;
-        throw Error("the scene was loaded without punctual lights; lights cannot be added");
-    }
-    if (scene.lights.size() != static_cast<size_t>(lights_))
-        throw Error("the number of punctual lights cannot change in a loaded scene");
-    direct_->Update(scene);
+    if (!direct::UpdateDirectStage(direct_.get(), lights_, scene)) return;
     CopyDirect(scene);
 }
 
@@ -366,11 +360,6 @@ SolverStats AntiradianceSolver::Stats() const {
     s.linkBytes =
         model_.links.links.size() * sizeof(Link) + model_.links.offsets.size() * sizeof(uint32_t);
     s.lights = lights_;
-    if (const Environment& sky = sky_.Last(); sky.Active()) {
-        s.environment = sky.source;
-        s.environmentIntensity = sky.intensity;
-        s.environmentRotation = sky.rotation;
-    }
     for (const LeafAttributes& leaf : model_.leaves)
         s.twoSidedElements += leaf.flags & kLeafTwoSided;
     s.glossyElements = model_.glossy.size();
@@ -392,12 +381,7 @@ SolverStats AntiradianceSolver::Stats() const {
     s.SetDetail("antiradiance_cap_hits", double(schedule_.capHits));
     s.irradianceBound = bound_;
     s.divergence = divergence_;
-    if (direct_) {
-        s.shadowViews = direct_->views;
-        s.shadowMapSize = mapSize_;
-        s.msShadow = direct_->msShadow;
-        s.msDirect = direct_->msDirect;
-    }
+    direct::DescribeLighting(direct_.get(), mapSize_, sky_, s);
     s.passes = backend_->PassTimings();
     s.tableBytes = backend_->TableBytes();
     s.SetDetail("tables", backend_->Tables());

@@ -14,14 +14,7 @@ namespace {
 std::vector<OptionSpec> Options() {
     using K = OptionKind;
     return {
-        {"bins",
-         K::kInt,
-         "0",
-         "direction bins, 32..1024, a multiple of 4; 0: 64 behind the final gather, 128 "
-         "without",
-         0,
-         1024,
-         {}},
+        BinsOption("64 behind the final gather, 128 without"),
         {"scheme",
          K::kChoice,
          "adaptive",

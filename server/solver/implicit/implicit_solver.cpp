@@ -238,13 +238,7 @@ void ImplicitSolver::UpdateMaterials(const Scene& scene) { ReadMaterials(scene);
 
 void ImplicitSolver::UpdateLights(const Scene& scene) {
     sky_.Update(scene.environment, dirs_, environment_);
-    if (!directStage_) {
-        if (scene.lights.empty()) return;
-        throw Error("the scene was loaded without punctual lights; lights cannot be added");
-    }
-    if (scene.lights.size() != static_cast<size_t>(lights_))
-        throw Error("the number of punctual lights cannot change in a loaded scene");
-    directStage_->Update(scene);
+    if (!direct::UpdateDirectStage(directStage_.get(), lights_, scene)) return;
     CopyDirect();
     Reradiate();  // the radiance leaving, with the new direct light
 }
@@ -334,17 +328,7 @@ SolverStats ImplicitSolver::Stats() const {
     s.tableBytes = intensity_.size() * sizeof(glm::vec3) + projected_.size() * sizeof(float);
     s.linkBytes = links_.sender.size() * (2 * sizeof(uint32_t) + sizeof(float));
     s.lights = lights_;
-    if (directStage_) {
-        s.shadowViews = directStage_->views;
-        s.shadowMapSize = mapSize_;
-        s.msShadow = directStage_->msShadow;
-        s.msDirect = directStage_->msDirect;
-    }
-    if (const Environment& sky = sky_.Last(); sky.Active()) {
-        s.environment = sky.source;
-        s.environmentIntensity = sky.intensity;
-        s.environmentRotation = sky.rotation;
-    }
+    direct::DescribeLighting(directStage_.get(), mapSize_, sky_, s);
     s.geometryUpdates = geometryUpdates_;
     s.msGeometry = msGeometry_;
     s.divergence = divergence_;

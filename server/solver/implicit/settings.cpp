@@ -10,14 +10,7 @@ namespace {
 std::vector<OptionSpec> Options() {
     using K = OptionKind;
     return {
-        {"bins",
-         K::kInt,
-         "0",
-         "direction bins, 32..1024, a multiple of 4 (the paper's 6×12×12 cube map is 864); "
-         "0: 128",
-         0,
-         1024,
-         {}},
+        BinsOption("128 (the paper's 6×12×12 cube map is 864)"),
         {"link-threshold",
          K::kFloat,
          "0.5",

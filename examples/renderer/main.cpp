@@ -1,0 +1,50 @@
+// What a renderer does with Penumbra: load a scene on the server, subscribe to its frames of
+// per-vertex irradiance, and hand each primitive's colours to its own vertex buffers (here:
+// print what would be uploaded). Usage: penumbra-renderer-example URL SCENE [FRAMES]
+#include <penumbra/client.h>
+
+#include <condition_variable>
+#include <cstdio>
+#include <cstdlib>
+#include <mutex>
+#include <string>
+
+int main(int argc, char** argv) {
+    if (argc < 3) {
+        std::fprintf(stderr, "usage: %s URL SCENE [FRAMES]\n", argv[0]);
+        return 2;
+    }
+    const int wanted = argc > 3 ? std::atoi(argv[3]) : 3;
+    try {
+        penumbra::client::Client client(argv[1], "renderer-example");
+        penumbra::client::LoadOptions load;
+        load.path = argv[2];
+        const penumbra::client::SceneInfo info = client.Load(load);
+        std::printf("scene %s: %zu nodes, solver %s on %s\n", info.scene.c_str(), info.nodes.size(),
+                    info.solver.c_str(), info.device.c_str());
+        std::mutex m;
+        std::condition_variable cv;
+        int seen = 0;
+        client.Subscribe([&](const penumbra::client::Frame& f) {
+            // A renderer would copy f.primitives[i].rgb into primitive i's colour buffer.
+            size_t vertices = 0;
+            double sum = 0.0;
+            for (const auto& p : f.primitives) {
+                vertices += p.rgb.size() / 3;
+                for (float v : p.rgb) sum += v;
+            }
+            std::printf("frame %llu: %zu primitives, %zu vertices, mean %.4g lux%s\n",
+                        static_cast<unsigned long long>(f.frame), f.primitives.size(), vertices,
+                        vertices ? sum / (3.0 * vertices) : 0.0, f.converged ? ", converged" : "");
+            std::lock_guard lock(m);
+            ++seen;
+            cv.notify_all();
+        });
+        std::unique_lock lock(m);
+        cv.wait(lock, [&] { return seen >= wanted || !client.Connected(); });
+        return seen >= wanted ? 0 : 1;
+    } catch (const penumbra::client::ClientError& e) {
+        std::fprintf(stderr, "penumbra: %s\n", e.what());
+        return 1;
+    }
+}
