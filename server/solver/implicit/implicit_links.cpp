@@ -29,11 +29,15 @@ bool CanReceive(const HierarchyNode& r, const HierarchyNode& s, const glm::vec3&
     if (r.coneCos <= -1.0f) return true;
     const float reach = r.radius + s.radius;
     if (dist <= reach) return true;
-    const float cosTheta = glm::dot(r.normal, d) / dist;
-    const float theta = std::acos(std::clamp(cosTheta, -1.0f, 1.0f));
-    const float cone = std::acos(std::clamp(r.coneCos, -1.0f, 1.0f));
-    const float spread = std::asin(std::min(1.0f, reach / dist));
-    return theta - cone - spread < 0.5f * std::numbers::pi_v<float>;
+    // θ − cone − spread < π/2, in cosines (no inverse trigonometry in the pair loop): with
+    // α = cone + spread, true when α ≥ π/2, else cos θ > cos(π/2 + α) = −sin α.
+    const float cosCone = std::clamp(r.coneCos, -1.0f, 1.0f);
+    const float sinCone = std::sqrt(1.0f - cosCone * cosCone);
+    const float sinSpread = reach / dist;
+    const float cosSpread = std::sqrt(1.0f - sinSpread * sinSpread);
+    if (cosCone * cosSpread - sinCone * sinSpread <= 0.0f) return true;
+    const float sinAlpha = sinCone * cosSpread + cosCone * sinSpread;
+    return glm::dot(r.normal, d) / dist > -sinAlpha;
 }
 
 struct Pair {
@@ -178,7 +182,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     std::vector<std::vector<Entry>> perLeaf(leaves);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves, 16), [&](const auto& range) {
         std::vector<uint32_t> chain;
-        std::vector<End> layer;
+        std::vector<std::pair<const End*, const End*>> heads;
         for (size_t i = range.begin(); i != range.end(); ++i) {
             const uint32_t leaf = h.leaves[i];
             chain.clear();
@@ -189,22 +193,27 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
             for (size_t b = 0; b < bins; ++b) {
                 const float c = glm::dot(normal, dirs_.Direction(uint32_t(b)));
                 if (!(c > 0.0f)) continue;
-                layer.clear();
+                // The chain's slots for this bin, each sorted nearest first, merged until
+                // the bin is full (most fill after a few links).
+                heads.clear();
                 for (uint32_t n : chain) {
                     const size_t slot = size_t(n) * bins + b;
-                    layer.insert(layer.end(), ends.begin() + first[slot],
-                                 ends.begin() + first[slot + 1]);
+                    if (first[slot] != first[slot + 1])
+                        heads.push_back({ends.data() + first[slot], ends.data() + first[slot + 1]});
                 }
-                std::sort(layer.begin(), layer.end(),
-                          [](const End& x, const End& y) { return x.dist < y.dist; });
                 const size_t bin0 = list.size();
                 float left = omegaBin;
-                for (const End& e : layer) {
+                while (left > 1e-4f * omegaBin) {
+                    std::pair<const End*, const End*>* next = nullptr;
+                    for (auto& h : heads)
+                        if (h.first != h.second && (!next || h.first->dist < next->first->dist))
+                            next = &h;
+                    if (!next) break;
+                    const End& e = *next->first++;
                     const float take = std::min(left, e.omega);
                     if (!(take > 0.0f)) continue;
                     list.push_back({uint32_t(b), e.sender, c * norm * take});
                     left -= take;
-                    if (left <= 1e-4f * omegaBin) break;
                 }
                 // A bin mostly covered is a surface the discretisation left gaps in (its
                 // ends' centres fall into the bins unevenly): its shares fill it. A bin
