@@ -167,7 +167,10 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     tbb::parallel_for(size_t(0), slots, [&](size_t k) {
         if (first[k + 1] - first[k] > 1)
             std::sort(ends.begin() + first[k], ends.begin() + first[k + 1],
-                      [](const End& x, const End& y) { return x.dist < y.dist; });
+                      [](const End& x, const End& y) {
+                          // The sender breaks ties: the order never depends on the threads.
+                          return x.dist < y.dist || (x.dist == y.dist && x.sender < y.sender);
+                      });
     });
     out.msCreate = MsSince(start);
 
