@@ -5,6 +5,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <numbers>
 
+#include "bundled_scenes.h"
 #include "scene/scene_builder.h"
 #include "solver/implicit/implicit_solver.h"
 #include "solver/registry.h"
@@ -177,6 +178,31 @@ TEST(Implicit, ThinWallKeepsTheDarkRoomDark) {
     std::printf("thin wall: dark floor %.5f of the lit floor's light\n", dark / lit);
     EXPECT_GT(lit, 0.0);
     EXPECT_LT(dark, 0.01 * lit);
+}
+
+// The hierarchy should only save work: links between clusters no wider than half a bin
+// against links between every pair of elements (a threshold so small that every pair is
+// split down to its leaves), the Cornell box at coarse elements.
+TEST(Implicit, HierarchicalLinksMatchBruteForce) {
+    Scene scene = scenes::CornellBox().Build();
+    SolverSettings settings = Implicit(0.08f);
+    ImplicitSolver hierarchical(scene, settings, ReadImplicitSettings(settings), {});
+    ImplicitSettings every = ReadImplicitSettings(settings);
+    every.linkThreshold = 1e-6f;
+    ImplicitSolver brute(scene, settings, every, {});
+    hierarchical.Iterate(20);
+    brute.Iterate(20);
+    const double rel =
+        testing::RelativeRms(testing::AllVertices(hierarchical, scene, Channel::kIndirect),
+                             testing::AllVertices(brute, scene, Channel::kIndirect));
+    std::printf("hierarchical (%zu pairs) against every pair (%zu): %.4f relative RMS\n",
+                hierarchical.Links().pairs, brute.Links().pairs, rel);
+    EXPECT_LT(hierarchical.Links().pairs, brute.Links().pairs / 2);
+    // Measured 8.7% (the issue's goal is 1%): a cluster's link, measured from the cluster's
+    // centre, stands for all its leaves in one bin and one layer order. Against the truth
+    // the brute force is 12.5% off, the hierarchy 13.8% (docs/STATUS.md, issue 21). This
+    // bound catches a regression.
+    EXPECT_LT(rel, 0.10);
 }
 
 // Any move is taken in place (the links are rebuilt every frame): a box on a floor under a sky,
