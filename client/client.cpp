@@ -234,14 +234,25 @@ struct Client::Impl {
     }
 };
 
-Client::Client(const std::string& url, const std::string& clientName)
+Client::Client(const std::string& url, const std::string& clientName, const std::string& token)
     : impl_(std::make_unique<Impl>()) {
     impl_->Connect(url);
     flatbuffers::FlatBufferBuilder b;
     b.Finish(fb::CreateHelloDirect(b, clientName.c_str(), protocol::kMinProtocolVersion,
-                                   protocol::kMaxProtocolVersion));
-    auto m = impl_->Call(MessageType::kHello, b, MessageType::kWelcome);
-    impl_->version = m.As<fb::Welcome>()->version();
+                                   protocol::kMaxProtocolVersion,
+                                   token.empty() ? nullptr : token.c_str()));
+    try {
+        auto m = impl_->Call(MessageType::kHello, b, MessageType::kWelcome);
+        impl_->version = m.As<fb::Welcome>()->version();
+    } catch (...) {
+        // Refused at Hello (a version mismatch, a wrong token): stop the reader before the
+        // exception leaves, so that nothing is left running.
+        std::error_code ec;
+        impl_->socket.shutdown(asio::socket_base::shutdown_both, ec);
+        if (impl_->reader.joinable()) impl_->reader.join();
+        impl_->socket.close(ec);
+        throw;
+    }
 }
 
 Client::~Client() {

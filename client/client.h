@@ -108,8 +108,11 @@ struct LoadOptions {
 
 class Client {
   public:
-    // Connects to "tcp://HOST:PORT" or "unix:///PATH" and says Hello. Throws ClientError.
-    explicit Client(const std::string& url, const std::string& clientName = "penumbra-client");
+    // Connects to "tcp://HOST:PORT" or "unix:///PATH" and says Hello, with `token` when the
+    // server asks for one (penumbra-server --token-file). Throws ClientError (code
+    // Unauthorized, 8, for a missing or wrong token).
+    explicit Client(const std::string& url, const std::string& clientName = "penumbra-client",
+                    const std::string& token = "");
     ~Client();  // says Bye if still connected
     Client(const Client&) = delete;
     Client& operator=(const Client&) = delete;

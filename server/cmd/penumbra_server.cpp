@@ -1,6 +1,7 @@
 // penumbra-server: keeps scenes resident on the device and streams per-vertex irradiance to
 // clients over TCP and Unix sockets (protocol/SPEC.md). Only wiring lives here.
 #include <CLI/CLI.hpp>
+#include <cctype>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
@@ -46,10 +47,26 @@ int main(int argc, char** argv) {
                    "bounds, updated in place; Sec. 3.3) or rebuild (every move rebuilds the links)")
         ->capture_default_str()
         ->check(CLI::IsMember({"bounds", "rebuild"}));
+    std::string tokenFile;
+    app.add_option("--token-file", tokenFile,
+                   "every client must give the token in this file (its first line) in Hello; "
+                   "for servers reachable from other machines (--allow-remote)")
+        ->check(CLI::ExistingFile);
     app.add_flag("-q,--quiet", quiet, "no log lines on stderr");
     CLI11_PARSE(app, argc, argv);
     if (listen.empty()) listen.push_back("tcp://127.0.0.1:7450");
     serviceLimits.maxUploadBytes = netLimits.maxFrameBytes;
+    if (!tokenFile.empty()) {
+        std::ifstream in(tokenFile);
+        std::getline(in, netLimits.token);
+        while (!netLimits.token.empty() && std::isspace(uint8_t(netLimits.token.back())))
+            netLimits.token.pop_back();
+        if (netLimits.token.empty()) {
+            std::fprintf(stderr, "penumbra-server: error: %s: no token on its first line\n",
+                         tokenFile.c_str());
+            return 2;
+        }
+    }
 
     try {
         SolverSettings defaults = service::ServiceDefaults();

@@ -6,10 +6,12 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <glm/gtc/matrix_transform.hpp>
@@ -265,6 +267,23 @@ bool ServiceCommands::Parsed() const {
     return false;
 }
 
+namespace {
+
+// The first line of the file PENUMBRA_TOKEN_FILE names (a server started with --token-file
+// asks for it in Hello); empty when the variable is not set.
+std::string TokenFromEnvironment() {
+    const char* path = std::getenv("PENUMBRA_TOKEN_FILE");
+    if (!path || !*path) return {};
+    std::ifstream in(path);
+    if (!in) throw Error(std::string(path) + " (PENUMBRA_TOKEN_FILE): cannot read");
+    std::string token;
+    std::getline(in, token);
+    while (!token.empty() && std::isspace(uint8_t(token.back()))) token.pop_back();
+    return token;
+}
+
+}  // namespace
+
 int ServiceCommands::Run() {
     State& s = *s_;
     try {
@@ -290,7 +309,7 @@ int ServiceCommands::Run() {
             s.gltf = scene.string();
             return s.Execute(c);
         }
-        client::Client c(url, "penumbra-cli");
+        client::Client c(url, "penumbra-cli", TokenFromEnvironment());
         return s.Execute(c);
     } catch (const client::ClientError& e) {
         std::fprintf(stderr, "penumbra: %s%s\n", e.code() ? "refused: " : "", e.what());

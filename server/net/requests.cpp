@@ -100,6 +100,13 @@ void Connection::OnHello(uint32_t id, const fb::Hello& h) {
                   true);
         return;
     }
+    if (!server_.Limits().token.empty() && Str(h.token()) != server_.Limits().token) {
+        SendError(id, fb::ErrorCode::Unauthorized,
+                  "this server asks for a token in Hello (--token-file); the one given does "
+                  "not match",
+                  true);
+        return;
+    }
     helloDone_ = true;
     client_ = Str(h.client());
     flatbuffers::FlatBufferBuilder b;

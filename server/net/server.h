@@ -21,6 +21,8 @@ struct NetLimits {
     size_t maxClients = 64;
     uint32_t maxFrameBytes = protocol::kDefaultMaxPayloadBytes;
     size_t maxQueuedFrames = 2;  // per subscriber; older unsent frames are dropped
+    // Every Hello must carry this token (empty: none asked for); --token-file.
+    std::string token;
 };
 
 // "tcp://HOST:PORT" or "unix:///PATH".

@@ -603,3 +603,39 @@ TEST(EmbeddedMode, ScriptRunsWithoutAServer) {
 
 }  // namespace
 }  // namespace penumbra
+
+namespace penumbra {
+namespace {
+
+// A server started with --token-file lets in only clients that give the token in Hello:
+// without it or with another, Error Unauthorized and the connection closes; with it the
+// session goes on. The CLI reads the token from PENUMBRA_TOKEN_FILE.
+TEST(ServerProcess, TokenFileGuardsHello) {
+    const auto dir = testing::TempDir("token");
+    const std::string tokenFile = (dir / "token").string();
+    testing::WriteFile(tokenFile, "s3cret-token\n");
+    testing::ServerProcess server("token", "--token-file " + tokenFile);
+    for (const std::string& wrong : {std::string(), std::string("guess")}) {
+        try {
+            client::Client c(server.Tcp(), "test", wrong);
+            ADD_FAILURE() << "let in with token '" << wrong << "'";
+        } catch (const client::ClientError& e) {
+            EXPECT_EQ(e.code(), 8) << e.what();
+            EXPECT_NE(std::string(e.what()).find("token"), std::string::npos) << e.what();
+        }
+    }
+    client::Client c(server.Tcp(), "test", "s3cret-token");
+    client::LoadOptions o;
+    o.path = "blocker.gltf";
+    EXPECT_GT(c.Load(o).elements, 0u);
+    const auto refused = testing::Execute("--connect " + server.Unix() + " info");
+    EXPECT_NE(refused.exitCode, 0) << refused.output;
+    const auto let = testing::Execute("--connect " + server.Unix() + " info",
+                                      "PENUMBRA_TOKEN_FILE=" + tokenFile);
+    EXPECT_EQ(let.exitCode, 0) << let.output;
+    EXPECT_NE(let.output.find("blocker"), std::string::npos) << let.output;
+    std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace penumbra
