@@ -243,21 +243,26 @@ void ImplicitSolver::UpdateLights(const Scene& scene) {
     Reradiate();  // the radiance leaving, with the new direct light
 }
 
-std::string ImplicitSolver::GeometryMismatch(const Scene& scene) const {
+std::string ImplicitSolver::Mismatch(const Scene& scene, Surfels& now) const {
     if (scene.lights.size() != static_cast<size_t>(lights_))
         return "the number of punctual lights changed";
     if (scene.primitives.size() != surfels_.firstSurfel.size())
         return "the scene has other primitives than the solver was built for";
-    const Surfels now = RefineScene(scene, elementSize_);
+    now = RefineScene(scene, elementSize_);
     if (now.size() != surfels_.size() || now.refinedTriangles != surfels_.refinedTriangles)
         return "the moved surfaces refine into other elements";
     return {};
 }
 
+std::string ImplicitSolver::GeometryMismatch(const Scene& scene) const {
+    Surfels now;
+    return Mismatch(scene, now);
+}
+
 std::string ImplicitSolver::UpdateGeometry(const Scene& scene) {
-    if (std::string why = GeometryMismatch(scene); !why.empty()) throw Error(why);
     const auto start = Clock::now();
-    Surfels now = RefineScene(scene, elementSize_);
+    Surfels now;  // refined once: checked, then taken
+    if (std::string why = Mismatch(scene, now); !why.empty()) throw Error(why);
     surfels_.positions = std::move(now.positions);
     surfels_.normals = std::move(now.normals);
     surfels_.areas = std::move(now.areas);

@@ -51,6 +51,9 @@ class ImplicitSolver : public Solver {
     const Hierarchy& GetHierarchy() const { return hierarchy_; }
 
   private:
+    // GeometryMismatch's reasons, with `now` the surfels refined from `scene` when it gets
+    // that far (UpdateGeometry takes them instead of refining again).
+    std::string Mismatch(const Scene& scene, Surfels& now) const;
     void Relink();  // refit, links, projected areas
     void Bounce();  // one gather over the links and the pull of the new light
     void ReadMaterials(const Scene& scene);  // the scene's materials, then Rematerial
