@@ -1,7 +1,7 @@
 // Path tracer on Embree 3: bounces sampled from each surface's BRDF (cosine-weighted for
 // the diffuse part, the Phong lobe for glossy materials), next-event estimation on emitting
-// triangles chosen by power, the two combined by MIS, Russian roulette after the second
-// bounce.
+// triangles chosen by power and on an environment map's bright pixels (SkySampler), each
+// combined with the BRDF's sampling by MIS, Russian roulette after the second bounce.
 #include "reference/path_tracer.h"
 
 #include <tbb/enumerable_thread_specific.h>
@@ -104,7 +104,7 @@ class Tracer {
     // a cosine-sampled path, combined by multiple importance sampling (Veach 1997, power
     // heuristic) so that neither the 1/d² of nearby emitters nor small far ones blow up.
     glm::vec3 Sample(const glm::vec3& x, const glm::vec3& n, Rng& rng, uint64_t& rays) const {
-        glm::vec3 e = NextEvent(x, n, nullptr, rng, rays);
+        glm::vec3 e = NextEvent(x, n, nullptr, rng, rays) + SkyEvent(x, n, nullptr, rng, rays);
         return e + kPi * Incoming(x, n, CosineSample(n, rng), rng, rays);
     }
 
@@ -156,6 +156,26 @@ class Tracer {
         return le * (weight * cx * cy / (dist2 * pdfArea));
     }
 
+    // The environment map's light at `x` (normal `n`) along one direction drawn by the map's
+    // brightness (SkySampler), weighted against the BRDF's (or the cosine's) sampling of the
+    // same direction; with `bsdf`, the radiance it reflects. 0 for a constant sky (drawn by
+    // the cosine alone: a map's density would only add noise to it).
+    glm::vec3 SkyEvent(const glm::vec3& x, const glm::vec3& n, const Bsdf* bsdf, Rng& rng,
+                       uint64_t& rays) const {
+        if (!skySampler_.Usable() || !sky_) return glm::vec3(0.0f);
+        float pdf;
+        const float u = rng.Uniform(), v = rng.Uniform();
+        const glm::vec3 w = skySampler_.Sample({u, v}, pdf);
+        const float cx = glm::dot(n, w);
+        if (!(pdf > 0.0f) || cx <= 0.0f) return glm::vec3(0.0f);
+        ++rays;
+        if (Occluded(x + eps_ * n, w * (2.0f * diameter_))) return glm::vec3(0.0f);
+        const float weight = PowerHeuristic(pdf, bsdf ? bsdf->Pdf(w) : cx / kPi);
+        glm::vec3 l = scene_.environment.Radiance(w);
+        if (bsdf) l *= bsdf->Eval(w);
+        return l * (weight * cx / pdf);
+    }
+
     // Radiance arriving at `x` (normal `n`) from direction `dir`, sampled with pdf cosθ/π:
     // the emission of what the ray hits (MIS-weighted against NextEvent) and the light that
     // surface reflects, followed bounce by bounce.
@@ -167,9 +187,13 @@ class Tracer {
                 rays_.Intersect(x + eps_ * n, dir, std::numeric_limits<float>::infinity());
             ++rays;
             if (!hit.hit) {
-                // Escaped: the environment's radiance from that direction (no next-event
-                // estimate for the sky, so no MIS weight either).
-                if (sky_) radiance += throughput * scene_.environment.Radiance(dir);
+                // Escaped: the environment's radiance from that direction, weighted against
+                // the map's next-event estimate (SkyEvent) where there is one.
+                if (sky_) {
+                    const float weight =
+                        skySampler_.Usable() ? PowerHeuristic(pdfDir, skySampler_.Pdf(dir)) : 1.0f;
+                    radiance += throughput * weight * scene_.environment.Radiance(dir);
+                }
                 break;
             }
             const uint32_t ti = hit.triangle;
@@ -190,8 +214,9 @@ class Tracer {
             n = t.normal;
             // Reflected: next-event estimates of emitters and punctual lights, then one
             // direction drawn from the BRDF carries the rest (throughput f·cos/pdf).
-            radiance += throughput *
-                        (NextEvent(x, n, &bsdf, rng, rays) + PunctualDirect(x, n, rays, &bsdf));
+            radiance +=
+                throughput * (NextEvent(x, n, &bsdf, rng, rays) + SkyEvent(x, n, &bsdf, rng, rays) +
+                              PunctualDirect(x, n, rays, &bsdf));
             dir = bsdf.Sample(rng);
             pdfDir = bsdf.Pdf(dir);
             float cosine = glm::dot(n, dir);
@@ -216,6 +241,7 @@ class Tracer {
     const std::vector<RayTriangle>& tris_;
     float eps_;
     bool sky_ = scene_.environment.Active();
+    SkySampler skySampler_{scene_.environment};
     float diameter_ = scene_.Diameter();  // where directional lights' shadow rays end
 };
 

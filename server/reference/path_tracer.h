@@ -47,7 +47,9 @@ struct ReferenceResult {
 // (punctual lights included), `direct` the light arriving straight from punctual lights
 // (shadow rays, exact: no sampling, so its standard error is 0), `total` their sum.
 // A path that leaves the scene picks up the environment's radiance (scene.environment) and
-// counts as `indirect`.
+// counts as `indirect`; an environment map is also sampled by its brightness (a next-event
+// estimate towards its bright pixels, by MIS against the BRDF's sampling), so that a sun in
+// the map is found by every path rather than by the few that happen to escape towards it.
 // Punctual lights follow KHR_lights_punctual (LightAttenuation in scene.h). Surfaces reflect
 // with their material's diffuse part and glossy lobe (docs/MATERIALS.md, the lobe with the
 // material's own exponent), reflecting and emitting on their front side (the side their vertex

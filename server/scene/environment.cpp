@@ -62,6 +62,150 @@ glm::vec3 Environment::Radiance(const glm::vec3& towardSky) const {
     return intensity * MapRadiance(RotateY(towardSky, -rotation));
 }
 
+SkySampler::SkySampler(const Environment& environment) {
+    if (!environment.image || environment.image->Empty()) return;
+    const Image& im = *environment.image;
+    width_ = im.width, height_ = im.height, rotation_ = environment.rotation;
+    // The map's mean luminance over the sphere (pixels weighted by sin θ at their centres);
+    // the margin keeps a flat map's rounding from counting as a sun.
+    double sphere = 0.0, sines = 0.0;
+    for (int y = 0; y < height_; ++y) {
+        const double sine = std::sin((y + 0.5) * std::numbers::pi / height_);
+        for (int x = 0; x < width_; ++x) sphere += Luminance(im.At(x, y)) * sine;
+        sines += sine * width_;
+    }
+    const double floor = 1.001 * sphere / sines;
+    above_.resize(im.pixels.size());
+    for (size_t i = 0; i < im.pixels.size(); ++i)
+        above_[i] = static_cast<float>(std::max(0.0, Luminance(im.pixels[i]) - floor));
+    // Cell weights: the integral of the bilinear lookup of above_ over the cell, times sin θ
+    // at its middle.
+    const int rows = height_ + 1;
+    std::vector<double> weight(size_t(rows) * width_);
+    std::vector<double> rowSum(rows, 0.0);
+    for (int j = 0; j < rows; ++j) {
+        const double lo = std::max(0.0, j - 0.5), hi = std::min(double(height_), j + 0.5);
+        const double sine = std::sin(0.5 * (lo + hi) * std::numbers::pi / height_);
+        for (int i = 0; i < width_; ++i) {
+            const glm::vec4 c = Corners(i, j);
+            const double w = 0.25 * (c.x + c.y + c.z + c.w) * (hi - lo) * sine;
+            weight[size_t(j) * width_ + i] = w;
+            rowSum[j] += w;
+        }
+    }
+    double total = 0.0;
+    for (double r : rowSum) total += r;
+    if (!(total > 0.0)) {
+        above_.clear();
+        return;
+    }
+    rowCdf_.assign(rows + 1, 0.0f);
+    rowWeight_.assign(rows, 0.0f);
+    columnCdf_.assign(size_t(rows) * (width_ + 1), 0.0f);
+    double acc = 0.0;
+    for (int j = 0; j < rows; ++j) {
+        acc += rowSum[j];
+        rowCdf_[j + 1] = static_cast<float>(acc / total);
+        rowWeight_[j] = static_cast<float>(rowSum[j] / total);
+        float* cdf = &columnCdf_[size_t(j) * (width_ + 1)];
+        double run = 0.0;
+        for (int i = 0; i < width_; ++i) {
+            run += weight[size_t(j) * width_ + i];
+            // A dark row (never drawn) keeps a uniform distribution.
+            cdf[i + 1] = rowSum[j] > 0.0 ? static_cast<float>(run / rowSum[j])
+                                         : static_cast<float>(i + 1) / width_;
+        }
+        cdf[width_] = 1.0f;
+    }
+    rowCdf_[rows] = 1.0f;
+}
+
+glm::vec4 SkySampler::Corners(int i, int j) const {
+    auto at = [&](int x, int y) {
+        return above_[size_t(std::clamp(y, 0, height_ - 1)) * width_ + (x + width_) % width_];
+    };
+    return {at(i, j - 1), at(i + 1, j - 1), at(i, j), at(i + 1, j)};
+}
+
+namespace {
+
+// The interval i of `cdf` (n + 1 increasing values from 0 to 1) that holds u, and where in it
+// u lies (0 … 1): the same u always gives the same point, so a stratified u stays stratified.
+int Invert(const float* cdf, int n, float u, float& within) {
+    u = std::clamp(u, 0.0f, std::nextafter(1.0f, 0.0f));
+    int i = static_cast<int>(std::upper_bound(cdf, cdf + n + 1, u) - cdf) - 1;
+    i = std::clamp(i, 0, n - 1);
+    const float width = cdf[i + 1] - cdf[i];
+    within = width > 0.0f ? std::clamp((u - cdf[i]) / width, 0.0f, 1.0f) : 0.5f;
+    return i;
+}
+
+// x in [0, 1] drawn with density ∝ (1 − x)·a + x·b (a, b ≥ 0) for u in [0, 1] (PBR 4th ed.,
+// SampleLinear).
+float SampleLinear(float u, float a, float b) {
+    if (u == 0.0f && a == 0.0f) return 0.0f;
+    if (!(std::abs(a - b) > 1e-6f * (a + b))) return u;
+    const float x = u * (a + b) / (a + std::sqrt((1.0f - u) * a * a + u * b * b));
+    return std::min(x, std::nextafter(1.0f, 0.0f));
+}
+
+float Bilinear(const glm::vec4& c, float s, float t) {
+    return (1.0f - t) * ((1.0f - s) * c.x + s * c.y) + t * ((1.0f - s) * c.z + s * c.w);
+}
+
+}  // namespace
+
+float SkySampler::CellPdf(int i, int j, float s, float t) const {
+    const glm::vec4 c = Corners(i, j);
+    const float mean = 0.25f * (c.x + c.y + c.z + c.w);
+    if (!(mean > 0.0f)) return 0.0f;
+    const float* cdf = &columnCdf_[size_t(j) * (width_ + 1)];
+    const float lo = std::max(0.0f, j - 0.5f), hi = std::min(float(height_), j + 0.5f);
+    // The cell's probability over its area in (u, v), shaped by the bilinear lookup.
+    const float area = (1.0f / width_) * ((hi - lo) / height_);
+    return rowWeight_[j] * (cdf[i + 1] - cdf[i]) / area * (Bilinear(c, s, t) / mean);
+}
+
+glm::vec3 SkySampler::Sample(const glm::vec2& u, float& pdf) const {
+    pdf = 0.0f;
+    if (!Usable()) return glm::vec3(0.0f, 1.0f, 0.0f);
+    float fj, fi;
+    const int j = Invert(rowCdf_.data(), height_ + 1, u.y, fj);
+    const int i = Invert(&columnCdf_[size_t(j) * (width_ + 1)], width_, u.x, fi);
+    // Inside the cell by the bilinear lookup: t by the rows' sums, s by the row at t.
+    const glm::vec4 c = Corners(i, j);
+    const float t = SampleLinear(fj, c.x + c.y, c.z + c.w);
+    const float s = SampleLinear(fi, c.x + (c.z - c.x) * t, c.y + (c.w - c.y) * t);
+    // Pixel coordinates (centres at + ½): the cell spans the centres i … i + 1, j − 1 … j
+    // (the first and last row of cells are half cells at the poles, where the lookup is flat
+    // in v).
+    const float lo = std::max(0.0f, j - 0.5f), hi = std::min(float(height_), j + 0.5f);
+    const float x = i + 0.5f + s, y = lo + (hi - lo) * t;
+    const float v = std::clamp(y / height_, 0.0f, 1.0f);
+    const float sine = std::sin(v * kPi);
+    if (sine > 0.0f) pdf = CellPdf(i, j, s, t) / (2.0f * kPi * kPi * sine);
+    float uu = x / width_;
+    if (uu >= 1.0f) uu -= 1.0f;
+    return RotateY(EquirectDirection(uu, v), rotation_);
+}
+
+float SkySampler::Pdf(const glm::vec3& towardSky) const {
+    if (!Usable()) return 0.0f;
+    const glm::vec3 d = RotateY(towardSky, -rotation_);
+    const glm::vec2 uv = EquirectUv(d);
+    const float sine = std::sqrt(std::max(0.0f, 1.0f - d.y * d.y));
+    if (!(sine > 0.0f)) return 0.0f;
+    // The cell the lookup reads (Environment::MapRadiance): x, y between pixel centres.
+    const float x = uv.x * width_ - 0.5f, y = uv.y * height_ - 0.5f;
+    const float fx = std::floor(x), fy = std::floor(y);
+    const int i = ((static_cast<int>(fx) % width_) + width_) % width_;
+    const int j = std::clamp(static_cast<int>(fy) + 1, 0, height_);
+    const float s = std::clamp(x - fx, 0.0f, 1.0f);
+    // In a half cell at a pole the lookup is flat in v, so t does not matter there.
+    const float t = std::clamp(y - fy, 0.0f, 1.0f);
+    return CellPdf(i, j, s, t) / (2.0f * kPi * kPi * sine);
+}
+
 Environment LoadEnvironment(const std::string& path) {
     Environment env;
     auto image = std::make_shared<Image>(ReadExr(path));
