@@ -180,4 +180,22 @@ inline ProcessResult Execute(const std::string& args, const std::string& env = "
     return r;
 }
 
+// An equirectangular map of `w` × w/2 pixels holding f(direction at the pixel centre).
+template <typename F>
+Image MapOf(int w, F f) {
+    Image im(w, w / 2);
+    for (int y = 0; y < im.height; ++y)
+        for (int x = 0; x < im.width; ++x)
+            im.At(x, y) = f(EquirectDirection((x + 0.5f) / im.width, (y + 0.5f) / im.height));
+    return im;
+}
+
+// A sky of `sky` nits with a sun of `sun` nits and angular radius `radius` (radians) around
+// `toward` (unit, map space): the map sunny skies are.
+inline Image SunnyMap(int w, glm::vec3 toward, float radius, float sun, float sky) {
+    const float cosine = std::cos(radius);
+    return MapOf(w,
+                 [&](glm::vec3 d) { return glm::vec3(glm::dot(d, toward) >= cosine ? sun : sky); });
+}
+
 }  // namespace penumbra::testing

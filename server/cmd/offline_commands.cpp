@@ -110,7 +110,10 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
             std::fprintf(stderr, "\n  %zu of %zu elements glossy (%zu lobes)", s.glossyElements,
                          s.elements, size_t(s.Number("glossy_lobes")));
         if (s.emitterRays)
-            std::fprintf(stderr, "\n  first shot: %d rays a surfel in %.0f ms", s.emitterRays,
+            std::fprintf(stderr, "\n  first shot: %d rays a surfel%s in %.0f ms", s.emitterRays,
+                         s.sunRays
+                             ? (" and " + std::to_string(s.sunRays) + " to the sky's sun").c_str()
+                             : "",
                          s.msEmitterDirect);
         if (s.gatherRays)
             std::fprintf(stderr,

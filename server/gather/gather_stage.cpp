@@ -23,9 +23,20 @@ using namespace gather_detail;
 
 namespace {
 
-bool SameEnvironment(const Environment& a, const Environment& b) {
+// The same sky but perhaps for its intensity.
+bool SameShape(const Environment& a, const Environment& b) {
     return a.source == b.source && a.image == b.image && a.constant == b.constant &&
-           a.intensity == b.intensity && a.rotation == b.rotation;
+           a.rotation == b.rotation;
+}
+
+bool SameEnvironment(const Environment& a, const Environment& b) {
+    return SameShape(a, b) && a.intensity == b.intensity;
+}
+
+bool AnyEmitter(const std::vector<Material>& materials) {
+    return std::any_of(materials.begin(), materials.end(), [](const Material& m) {
+        return glm::any(glm::greaterThan(m.emission, glm::vec3(0.0f)));
+    });
 }
 
 }  // namespace
@@ -43,6 +54,8 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
     CheckGatherRays(settings.gatherRays, "the final gather");
     rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
     glossy_ = AnyGlossy(scene_.materials);
+    emitters_ = AnyEmitter(scene_.materials);
+    skyParts_ = Parts(scene_.environment);
     diameter_ = scene_.Diameter();
     Place();
     const Surfels& s = inner_->GetSurfels();
@@ -67,6 +80,29 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
         Sky();
     }
     Shoot();
+    HandSky(false);
+}
+
+SkyParts GatherStage::Parts(const Environment& sky) const {
+    if (settings_.emitterRays > 0) return SplitSky(sky);
+    SkyParts whole;
+    whole.rest = sky;
+    return whole;
+}
+
+void GatherStage::HandSky(bool always) {
+    const bool rest = SunHanded();
+    if (rest == innerRest_ && !always) return;
+    innerRest_ = rest;
+    if (!rest) {
+        inner_->UpdateLights(scene_);
+        return;
+    }
+    // scene_ with the sky the solver is to see, for the call.
+    Environment whole = std::move(scene_.environment);
+    scene_.environment = skyParts_.rest;
+    inner_->UpdateLights(scene_);
+    scene_.environment = std::move(whole);
 }
 
 void GatherStage::Evaluate() {
@@ -196,8 +232,11 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
     // miss it), one that turned diffuse hands it over.
     const bool handed = HandsOver();
     glossy_ = AnyGlossy(scene_.materials);
-    if (HandsOver() != handed && !shot_.empty())
+    emitters_ = AnyEmitter(scene_.materials);
+    if (HandsOver() != handed && !shot_.empty()) {
         inner_->SetEmitterDirect(HandsOver() ? shot_ : std::vector<glm::vec3>());
+        HandSky(false);  // the sun goes with the shot
+    }
     if (lobesChanged && !targets_.empty()) {
         TraceLobes();
         Sky();
@@ -211,7 +250,7 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
     // emission: re-weighted from their coefficients, unless an emitter is new.
     auto start = std::chrono::steady_clock::now();
     const size_t slots = rays_->EmitterPrimitives().size();
-    if (!newEmitter && shooter_ && shooter_->Reevaluate(*rays_, shot_) &&
+    if (!newEmitter && shooter_ && shooter_->Reevaluate(*rays_, emitterShot_) &&
         (targets_.empty() || emitterCoef_.size() == targets_.size() * slots)) {
         std::vector<glm::vec3> le(slots);
         for (size_t k = 0; k < slots; ++k)
@@ -221,9 +260,9 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
             emitterHits_[t] = glm::vec3(0.0f);
             for (size_t k = 0; k < slots; ++k)
                 emitterHits_[t] += le[k] * emitterCoef_[t * slots + k];
-            shot_[targets_[t]] += emitterHits_[t];
+            emitterShot_[targets_[t]] += emitterHits_[t];
         }
-        if (HandsOver()) inner_->SetEmitterDirect(shot_);
+        Combine();
         msShot_ = Ms(start);
         return;
     }
@@ -240,10 +279,33 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
 
 void GatherStage::UpdateLights(const Scene& scene) {
     const bool sky = !SameEnvironment(scene.environment, scene_.environment);
+    const bool reshaped = !SameShape(scene.environment, scene_.environment);
     const std::vector<PunctualLight> before = scene_.lights;
     scene_.lights = scene.lights;
     scene_.environment = scene.environment;
-    inner_->UpdateLights(scene);
+    if (sky && settings_.emitterRays > 0) {
+        auto start = std::chrono::steady_clock::now();
+        if (!reshaped) {
+            // Only its intensity: the sun's rays keep their directions and what they met.
+            skyParts_.sun.intensity = skyParts_.rest.intensity = scene.environment.intensity;
+            if (sun_ && skyParts_.Split())
+                sunShot_ = sun_->Reevaluate(skyParts_, inner_->GetSurfels().normals);
+        } else {
+            skyParts_ = Parts(scene_.environment);
+            ++traces_;
+            if (skyParts_.Split()) {
+                sun_ = std::make_unique<SunDirect>(SunRays(), settings_.seed);
+                sunShot_ = sun_->Trace(*rays_, skyParts_, points_, inner_->GetSurfels().normals,
+                                       2.0f * diameter_);
+            } else {
+                sun_.reset();
+                sunShot_.clear();
+            }
+        }
+        Combine();
+        msShot_ = Ms(start);
+    }
+    HandSky(true);
     Relit(before);
     if (sky && !targets_.empty()) Sky();
     fresh_ = false;
@@ -254,8 +316,17 @@ std::string GatherStage::UpdateGeometry(const Scene& scene) {
     const std::vector<glm::vec3> before = inner_->GetSurfels().positions;
     const std::vector<glm::vec3> normalsBefore = inner_->GetSurfels().normals;
     const std::vector<PunctualLight> lightsBefore = scene_.lights;
-    std::string done = inner_->UpdateGeometry(scene);
     scene_ = scene;
+    std::string done;
+    if (innerRest_) {
+        // The solver keeps the sky without its sun.
+        Environment whole = std::move(scene_.environment);
+        scene_.environment = skyParts_.rest;
+        done = inner_->UpdateGeometry(scene_);
+        scene_.environment = std::move(whole);
+    } else {
+        done = inner_->UpdateGeometry(scene);
+    }
     const Surfels& s = inner_->GetSurfels();
     // What moved, and where it was and is: only the rays near it are traced again.
     Moved moved;
@@ -305,6 +376,7 @@ std::string GatherStage::WarmStart(Solver& previous, const SurfelCarry& carry) {
 SolverStats GatherStage::Stats() const {
     SolverStats s = inner_->Stats();
     s.emitterRays = shot_.empty() ? 0 : settings_.emitterRays;
+    s.sunRays = sun_ ? sun_->Rays() : 0;
     s.msEmitterDirect = msShot_;
     s.gatherRays = targets_.empty() ? 0 : settings_.gatherRays;
     s.gatherTargets = targets_.size();
@@ -321,16 +393,14 @@ GatherSettings GatherParts(const Scene& scene, const GatherSettings& settings,
     CheckGatherRays(settings.emitterRays, "the first shot (emitter direct light)");
     CheckGatherRays(settings.gatherRays, "the final gather");
     const bool glossy = AnyGlossy(scene.materials);
-    const bool emitters = std::any_of(
-        scene.materials.begin(), scene.materials.end(),
-        [](const Material& m) { return glm::any(glm::greaterThan(m.emission, glm::vec3(0.0f))); });
+    const bool emitters = AnyEmitter(scene.materials);
     GatherSettings s = settings;
     auto note = [&](const std::string& line) {
         if (notes) notes->push_back(line);
     };
-    if (s.emitterRays > 0 && !emitters) {
+    if (s.emitterRays > 0 && !emitters && !SplitSky(scene.environment).Split()) {
         s.emitterRays = 0;
-        note("no first shot: the scene has no emitting surfaces");
+        note("no first shot: the scene has no emitting surfaces and no sun in its sky");
     } else if (s.emitterRays > 0 && glossy) {
         note(
             "the first shot serves the output vertices and the gather, not the solver: with "

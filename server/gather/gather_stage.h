@@ -1,8 +1,10 @@
 // The gather stage (issue 19, DESIGN.md): solver-neutral, between any solver and the output.
 //
 // 1. The first shot: the emitters' direct light with explicit visibility (emitter_direct.h)
-//    at the solver's surfels, handed to it (Solver::SetEmitterDirect), so the solver carries
-//    only bounces (not in a scene with glossy materials, whose lobes would miss it).
+//    and an environment map's sun (sun_direct.h: the part of the map above its mean, drawn by
+//    its brightness) at the solver's surfels, handed to it (Solver::SetEmitterDirect), so the
+//    solver carries only bounces and the rest of the sky (not in a scene with glossy
+//    materials, whose lobes would miss it).
 // 2. The final gather: at each output surfel, cosine-distributed rays (a fixed pattern per
 //    surfel, so frames do not flicker); each ray that meets a surface reads the light that
 //    surface reflects, L = ρ/π · E with E the solver's irradiance interpolated on the refined
@@ -23,13 +25,16 @@
 
 #include "gather/emitter_direct.h"
 #include "gather/ray_scene.h"
+#include "gather/sun_direct.h"
 #include "solver/solver.h"
 
 namespace penumbra {
 
 struct GatherSettings {
-    int emitterRays = 256;  // first shot: shadow rays a surfel; 0: the solver carries emission
-    int gatherRays = 256;   // final gather: rays an output surfel; 0: the solver's own answer
+    // First shot: rays a surfel to the emitters (half of them to a sky map's sun); 0: the
+    // solver carries the emission and the whole sky.
+    int emitterRays = 256;
+    int gatherRays = 256;  // final gather: rays an output surfel; 0: the solver's own answer
     // Gather at every surfel (a render of the refined mesh) or only at the input vertices
     // (what bake and the service write).
     bool allSurfels = false;
@@ -122,7 +127,25 @@ class GatherStage : public Solver {
 
     // points_: the input vertices' estimate points, the others just inside their surface.
     void Place();
-    void Shoot(const Moved* moved = nullptr);  // the emitters' light at the surfels
+    // The emitters' and the sun's light at the surfels (all of it, or after a move the rays
+    // it can have changed), then Combine.
+    void Shoot(const Moved* moved = nullptr);
+    // shot_ = emitterShot_ + sunShot_, handed to the solver where it takes it.
+    void Combine();
+    // The sky the solver is given: without its sun where the solver takes the sun's shot
+    // (SunHanded), the whole sky otherwise. Calls inner_->UpdateLights when that changed or
+    // `always`.
+    void HandSky(bool always);
+    bool SunHanded() const { return skyParts_.Split() && HandsOver(); }
+    // The sky the gather's cosine rays read where they escape: without its sun where the
+    // first shot carries it.
+    const Environment& CosineSky() const {
+        return skyParts_.Split() ? skyParts_.rest : scene_.environment;
+    }
+    // scene_'s environment split for the first shot (not split without one).
+    SkyParts Parts(const Environment& sky) const;
+    // Rays a surfel to the sun: half the first shot's.
+    int SunRays() const { return std::max(1, settings_.emitterRays / 2); }
     // The gather rays' hits at the targets: all of them, or after a move those that it can
     // have changed; then emitterHits_ (Shoot reads them).
     void Trace(const Moved* moved = nullptr);
@@ -195,8 +218,14 @@ class GatherStage : public Solver {
     // (VertexEstimatePoints, where the reference estimates it too), others where they are.
     std::vector<glm::vec3> points_;
     std::vector<uint32_t> surfelPrimitive_;   // per surfel: its primitive
-    std::unique_ptr<EmitterDirect> shooter_;  // the first shot's rays (null: off)
+    std::unique_ptr<EmitterDirect> shooter_;  // the first shot's rays (null: no emitters)
     std::vector<glm::vec3> shot_;             // first shot per surfel (empty: off)
+    std::vector<glm::vec3> emitterShot_;      // its emitters' part (empty: none)
+    bool emitters_ = false;                   // the scene has emitting materials
+    SkyParts skyParts_;                       // the sky, its sun split off for the first shot
+    std::unique_ptr<SunDirect> sun_;          // the sun's rays (null: no sun)
+    std::vector<glm::vec3> sunShot_;          // the first shot's sun part (empty: none)
+    bool innerRest_ = false;                  // the solver has skyParts_.rest as its sky
     // Per target: the emitters its gather rays meet, weighted against the first shot's
     // shadow rays (EmitterHitWeight), which at the targets counts the gather rays in.
     std::vector<glm::vec3> emitterHits_;

@@ -25,25 +25,52 @@ void GatherStage::Shoot(const Moved* moved) {
     auto start = std::chrono::steady_clock::now();
     const Surfels& s = inner_->GetSurfels();
     ++traces_;
-    if (!moved || !shooter_) {
-        EmitterDirectSettings es;
-        es.rays = settings_.emitterRays;
-        es.seed = settings_.seed;
-        shooter_ = std::make_unique<EmitterDirect>(es);
-        // At the targets the gather's rays join the shot's own cosine rays (emitterHits_).
-        std::vector<int> extra(s.size(), 0);
-        for (uint32_t i : targets_) extra[i] = settings_.gatherRays;
-        shot_ = shooter_->Trace(*rays_, points_, s.normals, extra);
-    } else {
-        size_t traced = 0;
-        shot_ =
-            shooter_->Retrace(*rays_, points_, s.normals, moved->surfels, moved->boxes, &traced);
-        raysRetraced_ += traced;
+    if (emitters_) {
+        if (!moved || !shooter_) {
+            EmitterDirectSettings es;
+            es.rays = settings_.emitterRays;
+            es.seed = settings_.seed;
+            shooter_ = std::make_unique<EmitterDirect>(es);
+            // At the targets the gather's rays join the shot's own cosine rays (emitterHits_).
+            std::vector<int> extra(s.size(), 0);
+            for (uint32_t i : targets_) extra[i] = settings_.gatherRays;
+            emitterShot_ = shooter_->Trace(*rays_, points_, s.normals, extra);
+        } else {
+            size_t traced = 0;
+            emitterShot_ = shooter_->Retrace(*rays_, points_, s.normals, moved->surfels,
+                                             moved->boxes, &traced);
+            raysRetraced_ += traced;
+        }
+        for (size_t t = 0; t < targets_.size(); ++t) emitterShot_[targets_[t]] += emitterHits_[t];
     }
-    for (size_t t = 0; t < targets_.size(); ++t) shot_[targets_[t]] += emitterHits_[t];
+    if (skyParts_.Split()) {
+        const float reach = 2.0f * diameter_;
+        if (!moved || !sun_) {
+            sun_ = std::make_unique<SunDirect>(SunRays(), settings_.seed);
+            sunShot_ = sun_->Trace(*rays_, skyParts_, points_, s.normals, reach);
+        } else {
+            size_t traced = 0;
+            sunShot_ = sun_->Retrace(*rays_, skyParts_, points_, s.normals, reach, moved->surfels,
+                                     moved->boxes, &traced);
+            raysRetraced_ += traced;
+        }
+    } else {
+        sun_.reset();
+        sunShot_.clear();
+    }
+    Combine();
+    msShot_ = Ms(start);
+}
+
+void GatherStage::Combine() {
+    const size_t n = inner_->GetSurfels().size();
+    shot_.assign(n, glm::vec3(0.0f));
+    if (emitterShot_.size() == n)
+        for (size_t i = 0; i < n; ++i) shot_[i] += emitterShot_[i];
+    if (sunShot_.size() == n)
+        for (size_t i = 0; i < n; ++i) shot_[i] += sunShot_[i];
     if (HandsOver()) inner_->SetEmitterDirect(shot_);
     fresh_ = false;
-    msShot_ = Ms(start);
 }
 
 void GatherStage::Place() {
@@ -314,6 +341,9 @@ void GatherStage::Sky() {
     const int n = settings_.gatherRays, m = SecondRays();
     sky_.assign(targets_.size(), glm::vec3(0.0f));
     secondSky_.assign(secondStart_.back(), glm::vec3(0.0f));
+    // The cosine rays read the sky without the sun the first shot carries; a lobe ray
+    // (drawn from a glossy lobe, not by the cosine) reads the whole sky.
+    const Environment& sky = CosineSky();
     if (!scene_.environment.Active()) {
         for (auto& lobes : lobes_)
             for (LobeHit& e : lobes) e.sky = glm::vec3(0.0f);
@@ -325,13 +355,12 @@ void GatherStage::Sky() {
             size_t k = 0;  // this target's short hits so far
             for (int r = 0; r < n; ++r) {
                 const Hit& h = hits_[t * n + r];
-                if (h.triangle == kEscaped) sum += scene_.environment.Radiance(Direction(t, r));
+                if (h.triangle == kEscaped) sum += sky.Radiance(Direction(t, r));
                 if (!Front(h) || !(h.triangle & kShort)) continue;
                 glm::vec3 second(0.0f);
                 for (int j = 0; j < m; ++j)
                     if (second_[t][k * m + j].triangle == kEscaped)
-                        second += scene_.environment.Radiance(
-                            SecondDirection(t, r, h.triangle & kIndex, j));
+                        second += sky.Radiance(SecondDirection(t, r, h.triangle & kIndex, j));
                 secondSky_[secondStart_[t] + k++] = second * (kPi / m);
             }
             sky_[t] = sum * (kPi / n);

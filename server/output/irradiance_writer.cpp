@@ -67,8 +67,10 @@ nlohmann::json StatsToJson(const SolverStats& s) {
     if (std::isfinite(s.irradianceBound)) j["irradiance_bound"] = s.irradianceBound;
     if (!s.divergence.empty()) j["divergence"] = s.divergence;
     if (s.emitterRays > 0)
-        j["emitter_direct"] = {
-            {"rays", s.emitterRays}, {"ms", s.msEmitterDirect}, {"device", s.gatherDevice}};
+        j["emitter_direct"] = {{"rays", s.emitterRays},
+                               {"sun_rays", s.sunRays},
+                               {"ms", s.msEmitterDirect},
+                               {"device", s.gatherDevice}};
     if (s.gatherRays > 0)
         j["final_gather"] = {{"rays", s.gatherRays},
                              {"targets", s.gatherTargets},

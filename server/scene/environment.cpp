@@ -62,19 +62,28 @@ glm::vec3 Environment::Radiance(const glm::vec3& towardSky) const {
     return intensity * MapRadiance(RotateY(towardSky, -rotation));
 }
 
-SkySampler::SkySampler(const Environment& environment) {
+namespace {
+
+// Where SkySampler and SplitSky split a map: its mean luminance over the sphere (pixels
+// weighted by sin θ at their centres), with a margin that keeps a flat map's rounding from
+// counting as a sun.
+double SplitLevel(const Image& im) {
+    double sphere = 0.0, sines = 0.0;
+    for (int y = 0; y < im.height; ++y) {
+        const double sine = std::sin((y + 0.5) * std::numbers::pi / im.height);
+        for (int x = 0; x < im.width; ++x) sphere += Luminance(im.At(x, y)) * sine;
+        sines += sine * im.width;
+    }
+    return sines > 0.0 ? 1.001 * sphere / sines : 0.0;
+}
+
+}  // namespace
+
+SkySampler::SkySampler(const Environment& environment, bool aboveMean) {
     if (!environment.image || environment.image->Empty()) return;
     const Image& im = *environment.image;
     width_ = im.width, height_ = im.height, rotation_ = environment.rotation;
-    // The map's mean luminance over the sphere (pixels weighted by sin θ at their centres);
-    // the margin keeps a flat map's rounding from counting as a sun.
-    double sphere = 0.0, sines = 0.0;
-    for (int y = 0; y < height_; ++y) {
-        const double sine = std::sin((y + 0.5) * std::numbers::pi / height_);
-        for (int x = 0; x < width_; ++x) sphere += Luminance(im.At(x, y)) * sine;
-        sines += sine * width_;
-    }
-    const double floor = 1.001 * sphere / sines;
+    const double floor = aboveMean ? SplitLevel(im) : 0.0;
     above_.resize(im.pixels.size());
     for (size_t i = 0; i < im.pixels.size(); ++i)
         above_[i] = static_cast<float>(std::max(0.0, Luminance(im.pixels[i]) - floor));
@@ -204,6 +213,36 @@ float SkySampler::Pdf(const glm::vec3& towardSky) const {
     // In a half cell at a pole the lookup is flat in v, so t does not matter there.
     const float t = std::clamp(y - fy, 0.0f, 1.0f);
     return CellPdf(i, j, s, t) / (2.0f * kPi * kPi * sine);
+}
+
+SkyParts SplitSky(const Environment& environment) {
+    SkyParts parts;
+    parts.rest = environment;
+    parts.sun = environment;
+    parts.sun.image.reset();
+    parts.sun.constant = glm::vec3(0.0f);
+    if (!environment.image || environment.image->Empty()) return parts;
+    const Image& im = *environment.image;
+    const double level = SplitLevel(im);
+    auto sun = std::make_shared<Image>(im.width, im.height);
+    auto rest = std::make_shared<Image>(im.width, im.height);
+    bool any = false;
+    for (size_t i = 0; i < im.pixels.size(); ++i) {
+        const float y = Luminance(im.pixels[i]);
+        const float share = y > level ? static_cast<float>((y - level) / y) : 0.0f;
+        sun->pixels[i] = share * im.pixels[i];
+        rest->pixels[i] = im.pixels[i] - sun->pixels[i];
+        any = any || share > 0.0f;
+    }
+    if (!any) return parts;
+    Environment split = environment;
+    split.image = std::move(sun);
+    SkySampler sampler(split, false);
+    if (!sampler.Usable()) return parts;
+    parts.sun = std::move(split);
+    parts.rest.image = std::move(rest);
+    parts.sampler = std::move(sampler);
+    return parts;
 }
 
 Environment LoadEnvironment(const std::string& path) {

@@ -47,11 +47,12 @@ struct Environment {
 // whole map drawn by pixel luminance 0.9 (one draw in two missed the sun); the mean left out, per
 // pixel 0.5 (the sun's rim pixels are mostly dark); per bilinear cell, as here, 0.02–0.04. Follows
 // the environment's rotation, ignores its intensity. Usable for a map with a part above its mean
-// only: a constant sky is drawn best by the receiver's cosine.
+// only: a constant sky is drawn best by the receiver's cosine. With `aboveMean` false the whole
+// map is drawn by its luminance (SplitSky's sun, which is all above the mean).
 class SkySampler {
   public:
     SkySampler() = default;  // not usable
-    explicit SkySampler(const Environment& environment);
+    explicit SkySampler(const Environment& environment, bool aboveMean = true);
     bool Usable() const { return !rowCdf_.empty(); }
     // A direction towards the sky (world space) for a point u of the unit square, and its
     // density over solid angle (0 at a pole: draw nothing then).
@@ -73,6 +74,19 @@ class SkySampler {
     std::vector<float> columnCdf_;  // per row of cells width_ + 1 entries, 0 … 1
     std::vector<float> rowWeight_;  // per row of cells: its share of the whole
 };
+
+// An environment map split where SkySampler splits it: `sun` holds each pixel's part above
+// the map's mean luminance (the pixel scaled by (Y − mean)/Y), `rest` the remainder, so that
+// sun + rest is the map under any lookup (both are bilinear in the pixels); both keep the
+// map's intensity, rotation and source. `sampler` draws `sun` (exactly by its luminance).
+// For a constant sky or a map without a part above its mean, `sun` is black (no image, no
+// colour) and `rest` is the environment itself.
+struct SkyParts {
+    Environment sun, rest;
+    SkySampler sampler;
+    bool Split() const { return sampler.Usable(); }
+};
+SkyParts SplitSky(const Environment& environment);
 
 // Reads an equirectangular EXR; every pixel must be finite and non-negative. Throws
 // penumbra::Error naming the file and, for a bad pixel, its position.

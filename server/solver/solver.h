@@ -99,6 +99,7 @@ struct SolverStats {
     // emitters' direct light (0: the solver carries the emission itself), and the last
     // computation's milliseconds.
     int emitterRays = 0;
+    int sunRays = 0;  // of those, rays a surfel to an environment map's sun (0: no sun)
     double msEmitterDirect = 0.0;
     // Its final gather (0 rays: none): rays a surfel, the surfels gathered at, the last
     // tracing of their hits and the last evaluation of those hits, in milliseconds.

@@ -265,6 +265,15 @@ TEST(BakeCli, EnvironmentLightsTheSceneThroughItsOpening) {
     }
     EXPECT_GT(sumLit, sumDark * 1.05);
     EXPECT_NEAR(sumConstant, sumLit, 1e-3 * sumLit);
+    // A flat map has no sun; a map with one sends rays to it in the first shot.
+    EXPECT_EQ(lit.json["stats"]["emitter_direct"]["sun_rays"], 0);
+    WriteExr((dir / "sunny.exr").string(),
+             testing::SunnyMap(64, glm::normalize(glm::vec3(0, 0.3f, -1)), 0.1f, 500.0f, 0.5f));
+    auto sunny =
+        BakeJson("bake-sunny", "--device cpu --environment " + (dir / "sunny.exr").string());
+    ASSERT_EQ(sunny.run.exitCode, 0) << sunny.run.output;
+    EXPECT_EQ(sunny.json["stats"]["emitter_direct"]["sun_rays"], 128);
+    EXPECT_NE(sunny.run.output.find("128 to the sky's sun"), std::string::npos) << sunny.run.output;
 
     auto missing = BakeJson("bake-sky-missing", base + " --environment /nonexistent/sky.exr");
     EXPECT_EQ(missing.run.exitCode, 1);

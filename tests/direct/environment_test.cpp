@@ -22,20 +22,12 @@ namespace {
 
 using direct::EnvironmentBins;
 using testing::AddRoomSides;
+using testing::MapOf;
 using testing::Mean;
+using testing::SunnyMap;
 constexpr float kPi = std::numbers::pi_v<float>;
 
 using testing::CpuSettings;
-
-// An equirectangular map of `w` × w/2 pixels holding f(direction at the pixel centre).
-template <typename F>
-Image MapOf(int w, F f) {
-    Image im(w, w / 2);
-    for (int y = 0; y < im.height; ++y)
-        for (int x = 0; x < im.width; ++x)
-            im.At(x, y) = f(EquirectDirection((x + 0.5f) / im.width, (y + 0.5f) / im.height));
-    return im;
-}
 
 TEST(Environment, EquirectMappingRoundTripsAndFollowsTheConvention) {
     // The image centre looks down −Z, ¾ of the width down +X, the top row is +Y.
@@ -245,14 +237,6 @@ TEST(Environment, RoomLitThroughAnOpeningKeepsTheFurnaceBalance) {
     // 5% (cosines quantised to bin centres near corners, docs/STATUS.md).
     EXPECT_LT(sumErr / n, 0.02);
     EXPECT_LT(maxErr, 0.05) << "worst surfel E = " << Mean(e[worst]);
-}
-
-// A sky of `sky` nits with a sun of `sun` nits and angular radius `radius` (radians) around
-// `toward` (unit, map space): the map sunny skies are.
-Image SunnyMap(int w, glm::vec3 toward, float radius, float sun, float sky) {
-    const float cosine = std::cos(radius);
-    return MapOf(w,
-                 [&](glm::vec3 d) { return glm::vec3(glm::dot(d, toward) >= cosine ? sun : sky); });
 }
 
 // ∫ f(ω) dω over the sphere by the midpoint rule on an equirectangular grid (dω = 2π² sin θ
