@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check bench bench-service bench-direct bench-glossy bench-stability accuracy images format clean
+.PHONY: all deps build demo check fuzz bench bench-service bench-direct bench-glossy bench-stability accuracy images format clean
 
 all: build
 
@@ -22,6 +22,10 @@ demo: build
 
 check: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+
+# libFuzzer targets with ASan and UBSan (scripts/fuzz.sh): FUZZ_SECONDS each (default 60).
+fuzz: deps
+	@scripts/fuzz.sh
 
 bench: build
 	$(BUILD)/bench/penumbra-bench-office --out bench/results

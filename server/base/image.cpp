@@ -22,9 +22,10 @@ Image ReadExr(const std::string& path) {
         Imf::InputFile file(path.c_str());
         const Imath::Box2i dw = file.header().dataWindow();
         const long w = long(dw.max.x) - dw.min.x + 1, h = long(dw.max.y) - dw.min.y + 1;
-        if (w <= 0 || h <= 0 || w > kMaxImageSide || h > kMaxImageSide)
+        if (w <= 0 || h <= 0 || w > kMaxImageSide || h > kMaxImageSide || w * h > kMaxImagePixels)
             throw Error(path + ": image of " + std::to_string(w) + " × " + std::to_string(h) +
-                        " pixels (each side must be 1…" + std::to_string(kMaxImageSide) + ")");
+                        " pixels (each side must be 1…" + std::to_string(kMaxImageSide) +
+                        ", all of them at most " + std::to_string(kMaxImagePixels) + ")");
         const Imf::ChannelList& channels = file.header().channels();
         const bool rgb =
             channels.findChannel("R") || channels.findChannel("G") || channels.findChannel("B");

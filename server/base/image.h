@@ -30,8 +30,11 @@ inline float Luminance(const glm::vec3& c) { return 0.2126f * c.x + 0.7152f * c.
 // automatic exposure maps to 1. 0 when there is none.
 float Luminance99(const std::vector<glm::vec3>& values);
 
-// Largest image side accepted from a file (a 16K equirectangular map is 16384 × 8192).
+// Largest image accepted from a file: each side, and all its pixels (a 16K equirectangular
+// map is 16384 × 8192, 1.6 GB as floats). Checked from the header, before any pixel is
+// allocated: a file of a few bytes can declare any size.
 inline constexpr int kMaxImageSide = 16384;
+inline constexpr long kMaxImagePixels = 16384L * 8192L;
 
 // Reads the R, G, B channels of an OpenEXR file as linear floats (half or float storage;
 // a luminance-only file gives grey). Throws penumbra::Error naming the file and the reason.

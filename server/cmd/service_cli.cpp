@@ -368,26 +368,12 @@ int ServiceCommands::State::RunScript(client::Client& c) {
     uint64_t lastSent = 0;
     while (std::getline(*in, line)) {
         ++number;
-        size_t hash = line.find('#');
-        if (hash != std::string::npos) line.resize(hash);
-        std::vector<std::string> words;
-        try {
-            words = SplitWords(line);
-        } catch (const Error& e) {
-            throw Error(scriptFile + ":" + std::to_string(number) + ": " + e.what());
-        }
-        if (words.empty()) continue;
         CLI::App lineApp{"script line"};
-        lineApp.require_subcommand(1);
         ServiceCommands commands(lineApp, /*forScript=*/true);
         State& ls = *commands.s_;
-        std::vector<std::string> reversed(words.rbegin(), words.rend());
-        try {
-            lineApp.parse(reversed);
-        } catch (const CLI::ParseError& e) {
-            throw Error(scriptFile + ":" + std::to_string(number) + ": '" + line +
-                        "': " + e.what());
-        }
+        if (!ParseScriptLine(line, scriptFile + ":" + std::to_string(number), lineApp)) continue;
+        const size_t hash = line.find('#');
+        if (hash != std::string::npos) line.resize(hash);
         ls.session = session;
         ls.gltf = ls.gltf.empty() ? gltf : ls.gltf;
         ls.lastEdit = lastSent;
@@ -406,6 +392,33 @@ int ServiceCommands::State::RunScript(client::Client& c) {
         lastSent = std::max(lastSent, ls.lastEdit);
     }
     return kExitOk;
+}
+
+bool ParseScriptLine(const std::string& text, const std::string& where, CLI::App& app) {
+    std::string line = text;
+    const size_t hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    std::vector<std::string> words;
+    try {
+        words = SplitWords(line);
+    } catch (const Error& e) {
+        throw Error(where + ": " + e.what());
+    }
+    if (words.empty()) return false;
+    app.require_subcommand(1);
+    std::vector<std::string> reversed(words.rbegin(), words.rend());
+    try {
+        app.parse(reversed);
+    } catch (const CLI::ParseError& e) {
+        throw Error(where + ": '" + line + "': " + e.what());
+    }
+    return true;
+}
+
+bool CheckScriptLine(const std::string& line, const std::string& where) {
+    CLI::App app{"script line"};
+    ServiceCommands commands(app, /*forScript=*/true);
+    return ParseScriptLine(line, where, app);
 }
 
 }  // namespace penumbra::cli

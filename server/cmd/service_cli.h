@@ -32,4 +32,13 @@ class ServiceCommands {
     std::unique_ptr<State> s_;
 };
 
+// One line of a `script` file parsed into `app` (a CLI::App with ServiceCommands added for
+// script use), as `script` does before it runs the line: text from '#' on is a comment;
+// false for a line with no command. A line that is not a script command throws
+// penumbra::Error naming `where` (file:line), the line and why.
+bool ParseScriptLine(const std::string& line, const std::string& where, CLI::App& app);
+
+// ParseScriptLine into an app of its own, nothing run: for the fuzz target.
+bool CheckScriptLine(const std::string& line, const std::string& where);
+
 }  // namespace penumbra::cli

@@ -93,7 +93,7 @@ void Connection::Blocking(uint32_t requestId, Work work, Reply reply) {
         std::function<void()> done;
         try {
             auto result = std::make_shared<decltype(work())>(work());
-            done = [this, result, reply]() mutable { reply(*result); };
+            done = [result, reply]() mutable { reply(*result); };
         } catch (const service::ServiceError& e) {
             std::string what = e.what();
             protocol::fb::ErrorCode code = CodeOf(e.kind());

@@ -4,6 +4,7 @@
 
 #include <tiny_gltf.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstring>
@@ -65,6 +66,31 @@ bool Finite(const glm::mat4& m) {
     return true;
 }
 
+// The first byte an accessor reads, for `acc.count` elements of `size` bytes each, `stride`
+// (set here: the view's byteStride, or `size`) apart: fails unless its view and buffer exist
+// and every element lies inside both. Overflow-safe: counts and offsets come from the file.
+const unsigned char* AccessorBytes(const Context& ctx, const std::string& where,
+                                   const tinygltf::Accessor& acc, size_t size, size_t& stride,
+                                   const std::string& what) {
+    const auto& model = ctx.model;
+    if (acc.bufferView < 0 || acc.bufferView >= static_cast<int>(model.bufferViews.size()))
+        ctx.Fail(where, what + " accessor has no buffer view");
+    const auto& view = model.bufferViews[acc.bufferView];
+    if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size()))
+        ctx.Fail(where, what + " accessor's buffer view names buffer " +
+                            std::to_string(view.buffer) + ", which does not exist");
+    const auto& buffer = model.buffers[view.buffer];
+    stride = view.byteStride ? view.byteStride : size;
+    // The bytes the view may give: its length, cut to what its buffer holds.
+    const size_t held = buffer.data.size();
+    if (view.byteOffset > held) ctx.Fail(where, what + " buffer view starts past its buffer");
+    const size_t limit = std::min<size_t>(view.byteLength, held - view.byteOffset);
+    if (acc.count > 0 && (acc.byteOffset > limit || size > limit - acc.byteOffset ||
+                          (acc.count - 1) > (limit - acc.byteOffset - size) / stride))
+        ctx.Fail(where, what + " accessor reads past the end of its buffer");
+    return buffer.data.data() + view.byteOffset + acc.byteOffset;
+}
+
 // Reads a float VEC3 accessor (POSITION, NORMAL), honouring byteStride.
 std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, int accessorIndex,
                                 const char* attribute) {
@@ -79,19 +105,13 @@ std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, in
         acc.normalized)
         ctx.Fail(where, std::string(attribute) +
                             " must be float VEC3 (quantized attributes are not supported)");
-    if (acc.bufferView < 0 || acc.bufferView >= static_cast<int>(model.bufferViews.size()))
-        ctx.Fail(where, std::string(attribute) + " accessor has no buffer view");
-    const auto& view = model.bufferViews[acc.bufferView];
-    const auto& buffer = model.buffers[view.buffer];
-    size_t stride = view.byteStride ? view.byteStride : sizeof(float) * 3;
-    size_t begin = view.byteOffset + acc.byteOffset;
-    if (acc.count > 0 && (begin + stride * (acc.count - 1) + 12 > buffer.data.size() ||
-                          acc.byteOffset + stride * (acc.count - 1) + 12 > view.byteLength))
-        ctx.Fail(where, std::string(attribute) + " accessor reads past the end of its buffer");
+    size_t stride = 0;
+    const unsigned char* bytes =
+        AccessorBytes(ctx, where, acc, sizeof(float) * 3, stride, attribute);
     std::vector<glm::vec3> out(acc.count);
     for (size_t i = 0; i < acc.count; ++i) {
         float v[3];
-        std::memcpy(v, buffer.data.data() + begin + stride * i, sizeof(v));
+        std::memcpy(v, bytes + stride * i, sizeof(v));
         out[i] = glm::vec3(v[0], v[1], v[2]);
     }
     return out;
@@ -99,7 +119,7 @@ std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, in
 
 std::vector<uint32_t> ReadIndices(const Context& ctx, const std::string& where, int accessorIndex) {
     const auto& model = ctx.model;
-    if (accessorIndex >= static_cast<int>(model.accessors.size()))
+    if (accessorIndex < 0 || accessorIndex >= static_cast<int>(model.accessors.size()))
         ctx.Fail(where, "indices name accessor " + std::to_string(accessorIndex) +
                             ", which does not exist");
     const auto& acc = model.accessors[accessorIndex];
@@ -119,18 +139,11 @@ std::vector<uint32_t> ReadIndices(const Context& ctx, const std::string& where, 
         default:
             ctx.Fail(where, "indices must be unsigned byte, short or int");
     }
-    if (acc.bufferView < 0 || acc.bufferView >= static_cast<int>(model.bufferViews.size()))
-        ctx.Fail(where, "indices accessor has no buffer view");
-    const auto& view = model.bufferViews[acc.bufferView];
-    const auto& buffer = model.buffers[view.buffer];
-    size_t stride = view.byteStride ? view.byteStride : size;
-    size_t begin = view.byteOffset + acc.byteOffset;
-    if (acc.count > 0 && (begin + stride * (acc.count - 1) + size > buffer.data.size() ||
-                          acc.byteOffset + stride * (acc.count - 1) + size > view.byteLength))
-        ctx.Fail(where, "indices accessor reads past the end of its buffer");
+    size_t stride = 0;
+    const unsigned char* bytes = AccessorBytes(ctx, where, acc, size, stride, "indices");
     std::vector<uint32_t> out(acc.count);
     for (size_t i = 0; i < acc.count; ++i) {
-        const unsigned char* p = buffer.data.data() + begin + stride * i;
+        const unsigned char* p = bytes + stride * i;
         if (size == 1) {
             out[i] = p[0];
         } else if (size == 2) {

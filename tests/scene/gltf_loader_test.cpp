@@ -136,6 +136,23 @@ TEST(GltfLoader, IndexPastTheVerticesIsRefused) {
     EXPECT_NE(msg.find("past the"), std::string::npos) << msg;
 }
 
+// Found by the glTF fuzz target (issue 24): a buffer view naming a buffer that does not exist
+// was read; counts and offsets large enough to wrap the bounds check around must not pass it.
+TEST(GltfLoader, AccessorsOutsideTheirBuffersAreRefused) {
+    int acc = Cornell()["meshes"][0]["primitives"][0]["attributes"]["POSITION"];
+    auto noBuffer = Cornell();
+    int view = noBuffer["accessors"][acc]["bufferView"];
+    noBuffer["bufferViews"][view]["buffer"] = 7;
+    std::string msg = LoadError(noBuffer, "nobuffer.gltf");
+    EXPECT_NE(msg.find("buffer 7"), std::string::npos) << msg;
+    for (const char* field : {"count", "byteOffset"}) {
+        auto huge = Cornell();
+        huge["accessors"][acc][field] = uint64_t{1} << 62;
+        msg = LoadError(huge, std::string("huge-") + field + ".gltf");
+        EXPECT_NE(msg.find("past the end"), std::string::npos) << field << ": " << msg;
+    }
+}
+
 TEST(GltfLoader, MissingPositionIsRefused) {
     auto doc = Cornell();
     doc["meshes"][0]["primitives"][0]["attributes"].erase("POSITION");

@@ -3,6 +3,10 @@
 
 #include <tbb/parallel_for.h>
 
+#if defined(PENUMBRA_HAVE_F16C)
+#include <cpuid.h>
+#endif
+
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -122,7 +126,11 @@ void LocalPass(const AntiradianceModel& m, const float* lin, const float* iexOld
 void PullPass(const AntiradianceModel& m, float* iex) { PullRows(m, iex); }
 
 #if defined(PENUMBRA_HAVE_F16C)
-bool CpuBackend::HalfSupported() { return __builtin_cpu_supports("f16c"); }
+// CPUID leaf 1, ECX: F16C (GCC's __builtin_cpu_supports("f16c") is unknown to clang 14).
+bool CpuBackend::HalfSupported() {
+    unsigned a, b, c, d;
+    return __get_cpuid(1, &a, &b, &c, &d) && (c & bit_F16C);
+}
 #else
 // No cpu_half.cpp on this architecture: the fp16 entry points are never reached (the
 // constructor refuses kHalf first).
