@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check fuzz bench bench-service bench-direct bench-glossy bench-stability accuracy images format clean
+.PHONY: all deps build demo check check-asan fuzz bench bench-service bench-direct bench-glossy bench-stability accuracy images format clean
 
 all: build
 
@@ -20,8 +20,15 @@ build: deps $(BUILD)/CMakeCache.txt
 demo: build
 	@scripts/demo.sh $(BUILD)
 
+# Every test, then each fuzz target for CHECK_FUZZ_SECONDS (scripts/fuzz.sh).
+CHECK_FUZZ_SECONDS ?= 30
 check: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+	FUZZ_SECONDS=$(CHECK_FUZZ_SECONDS) JOBS=$(JOBS) scripts/fuzz.sh
+
+# The tests built with ASan and UBSan (scripts/check-asan.sh lists the ones left out, and why).
+check-asan: deps
+	@scripts/check-asan.sh
 
 # libFuzzer targets with ASan and UBSan (scripts/fuzz.sh): FUZZ_SECONDS each (default 60).
 fuzz: deps

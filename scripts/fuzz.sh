@@ -2,26 +2,23 @@
 # `make fuzz` (issue 24): builds the libFuzzer targets (fuzz/) with clang, AddressSanitizer and
 # UndefinedBehaviorSanitizer in a build tree of their own, writes their seed corpora, runs
 # each target for FUZZ_SECONDS and fails on any crash, leak, sanitizer report or timeout
-# (the input that did it is kept under $FUZZ_BUILD/artifacts). The executions each target
+# (the input that did it is kept under $SANITIZE_BUILD/artifacts). The executions each target
 # reached go to $FUZZ_OUT/fuzz.json.
 #   FUZZ_SECONDS  seconds a target (default 60)
 #   FUZZ_TARGETS  which (default: frame gltf exr script)
-#   FUZZ_BUILD    the build tree (default build-fuzz); its corpus/ keeps what was found
+#   SANITIZE_BUILD  the build tree (default build-sanitize, shared with check-asan.sh); its
+#                   corpus/ keeps what was found
 #   FUZZ_OUT      where fuzz.json goes (default: the build tree; bench/results to record)
 #   JOBS          build jobs (default: the cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${FUZZ_SECONDS:-60}
 targets=${FUZZ_TARGETS:-frame gltf exr script}
-build=${FUZZ_BUILD:-build-fuzz}
+# shellcheck source=scripts/sanitize_tree.sh
+source scripts/sanitize_tree.sh
+build=$sanitize_build
 out=${FUZZ_OUT:-$build}
 jobs=${JOBS:-$(nproc)}
-flags="-O1 -g -fno-omit-frame-pointer -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all"
-
-if [ ! -f "$build/CMakeCache.txt" ]; then
-    cmake -S . -B "$build" -DCMAKE_BUILD_TYPE= -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
-        -DCMAKE_C_FLAGS="$flags" -DCMAKE_CXX_FLAGS="$flags" -DPENUMBRA_FUZZ=ON >/dev/null
-fi
 names=fuzz_seeds
 for t in $targets; do names="$names fuzz_$t"; done
 # shellcheck disable=SC2086
@@ -35,8 +32,7 @@ status=0
 for t in $targets; do
     log="$build/fuzz_$t.log"
     echo "fuzz_$t: $seconds s"
-    if ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
-        "$build/fuzz/fuzz_$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
+    if "$build/fuzz/fuzz_$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
         -print_final_stats=1 -artifact_prefix="$build/artifacts/$t-" "$build/corpus/$t" \
         >"$log" 2>&1; then
         crashes=0

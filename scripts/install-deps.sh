@@ -10,6 +10,7 @@ packages=(
     libcli11-dev libtbb-dev libgtest-dev libembree-dev
     libflatbuffers-dev flatbuffers-compiler libasio-dev libopenexr-dev
     clang-format
+    clang libclang-rt-14-dev
 )
 
 missing=()

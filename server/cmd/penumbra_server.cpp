@@ -33,6 +33,10 @@ int main(int argc, char** argv) {
                    "largest request payload accepted (bytes)")
         ->capture_default_str()
         ->check(CLI::Range(uint32_t(1024), protocol::kMaxPayloadCeiling));
+    app.add_option("--frame-timeout", netLimits.frameTimeoutSeconds,
+                   "seconds a frame may take to arrive whole from its first byte (0: no limit)")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 86400.0));
     app.add_option("--max-scenes", serviceLimits.maxScenes, "scenes loaded at once")
         ->capture_default_str()
         ->check(CLI::Range(1, 1000));

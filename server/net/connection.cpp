@@ -1,6 +1,9 @@
 // A client's socket: reads decoded into messages, writes queued with per-client backpressure.
 #include "net/connection.h"
 
+#include <chrono>
+#include <cstdio>
+
 namespace penumbra::net {
 
 namespace fb = protocol::fb;
@@ -10,11 +13,14 @@ Connection::Connection(Server& server, asio::generic::stream_protocol::socket so
     : server_(server),
       socket_(std::move(socket)),
       id_(id),
-      decoder_(server.Limits().maxFrameBytes) {}
+      decoder_(server.Limits().maxFrameBytes),
+      stall_(socket_.get_executor()) {}
 
 void Connection::Close() {
     if (closed_) return;
     closed_ = true;
+    stallArmed_ = false;
+    stall_.cancel();
     Unsubscribe("");
     std::error_code ec;
     socket_.shutdown(asio::socket_base::shutdown_both, ec);
@@ -52,6 +58,7 @@ void Connection::Read() {
         }
         decoder_.Feed(readBuffer_.data(), n);
         protocol::Message message;
+        bool decoded = false;
         while (!closed_ && !closing_) {
             auto r = decoder_.Next(message);
             if (r == protocol::Decoder::Result::kNeedMore) break;
@@ -61,8 +68,39 @@ void Connection::Read() {
                 return;
             }
             Dispatch(message);
+            decoded = true;
         }
-        if (!closed_ && !closing_) Read();
+        if (closed_ || closing_) return;
+        WatchStall(decoded);
+        Read();
+    });
+}
+
+void Connection::WatchStall(bool decoded) {
+    const double limit = server_.Limits().frameTimeoutSeconds;
+    if (!(limit > 0.0)) return;
+    if (decoder_.buffered() == 0) {
+        if (stallArmed_) stall_.cancel();
+        stallArmed_ = false;
+        return;
+    }
+    if (stallArmed_ && !decoded) return;  // the same frame, still arriving
+    stallArmed_ = true;
+    const uint64_t epoch = ++stallEpoch_;
+    stall_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(limit)));
+    auto self = shared_from_this();
+    stall_.async_wait([this, self, epoch, limit](std::error_code ec) {
+        if (ec || closed_ || closing_ || !stallArmed_ || epoch != stallEpoch_) return;
+        ++server_.protocolErrors;
+        char seconds[32];
+        std::snprintf(seconds, sizeof(seconds), "%g", limit);
+        SendError(0, fb::ErrorCode::Stalled,
+                  "a frame began " + std::string(seconds) + " s ago and has not arrived whole (" +
+                      std::to_string(decoder_.buffered()) +
+                      " bytes of it so far; the limit is "
+                      "the server's --frame-timeout)",
+                  true);
     });
 }
 

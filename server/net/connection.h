@@ -53,6 +53,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
     void SendAck(uint32_t requestId, uint64_t edit);
     // Closes once the queue is written.
     void CloseAfterWrites();
+    // After a read: with part of a frame buffered, the frame must be whole within the
+    // frame timeout of its first byte (a new frame, `decoded` one before it, starts the
+    // clock again); a client that stalls mid-frame gets Error Stalled and is closed.
+    void WatchStall(bool decoded);
     // Runs `work` on the blocking pool and `reply` with its result back on the I/O thread;
     // a ServiceError becomes an Error reply.
     template <typename Work, typename Reply>
@@ -82,6 +86,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
     bool closing_ = false;  // close once the queue is written
     bool closed_ = false;
     bool helloDone_ = false;
+    asio::steady_timer stall_;  // WatchStall
+    uint64_t stallEpoch_ = 0;   // which arming a firing belongs to
+    bool stallArmed_ = false;
     std::string client_;
     std::map<std::string, Subscription> subscriptions_;
 };

@@ -21,6 +21,9 @@ struct NetLimits {
     size_t maxClients = 64;
     uint32_t maxFrameBytes = protocol::kDefaultMaxPayloadBytes;
     size_t maxQueuedFrames = 2;  // per subscriber; older unsent frames are dropped
+    // A frame begun must arrive whole within this many seconds of its first byte, else the
+    // connection gets Error Stalled and closes (0: no limit); --frame-timeout.
+    double frameTimeoutSeconds = 60.0;
     // Every Hello must carry this token (empty: none asked for); --token-file.
     std::string token;
 };

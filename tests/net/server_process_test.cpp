@@ -429,6 +429,26 @@ TEST(ServerProcess, OversizedFrameGetsAnErrorAndTheConnectionCloses) {
     EXPECT_NE(std::string(m.As<fb::Error>()->message()->c_str()).find("4096"), std::string::npos);
 }
 
+// Issue 24: a client that sends half a frame and stalls holds nothing for long: after
+// --frame-timeout it gets Error Stalled and is closed; the server keeps serving the others.
+TEST(ServerProcess, AStalledHalfFrameTimesOut) {
+    ServerProcess server("stalled", "--frame-timeout 1");
+    const std::vector<uint8_t> half = {'P', 'N', 'B', 'R', 1, 0, 1, 0};
+    const auto start = std::chrono::steady_clock::now();
+    bool closed = false;
+    protocol::Message m = RawExchange(server, half, &closed);
+    const double waited =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    EXPECT_TRUE(closed);
+    ASSERT_EQ(m.header.type, protocol::MessageType::kError);
+    EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::Stalled);
+    EXPECT_NE(std::string(m.As<fb::Error>()->message()->c_str()).find("--frame-timeout"),
+              std::string::npos);
+    EXPECT_GE(waited, 0.9);
+    client::Client after(server.Unix(), "after");
+    EXPECT_EQ(after.ProtocolVersion(), 1);
+}
+
 TEST(ServerProcess, RequestsBeforeHelloAreRefused) {
     ServerProcess server("hello");
     asio::io_context io;

@@ -1,0 +1,14 @@
+# Sourced by fuzz.sh and check-asan.sh: the build tree both use, compiled with clang,
+# AddressSanitizer, UndefinedBehaviorSanitizer (every report fatal) and libFuzzer's coverage
+# instrumentation (harmless to programs that are not fuzz targets).
+sanitize_build=${SANITIZE_BUILD:-build-sanitize}
+sanitize_flags="-O1 -g -fno-omit-frame-pointer -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all"
+if [ ! -f "$sanitize_build/CMakeCache.txt" ]; then
+    cmake -S . -B "$sanitize_build" -DCMAKE_BUILD_TYPE= -DCMAKE_CXX_COMPILER=clang++ \
+        -DCMAKE_CXX_FLAGS="$sanitize_flags" -DPENUMBRA_FUZZ=ON >/dev/null
+fi
+# Leaks in the system's own libraries (the Vulkan loader and Mesa's drivers keep what they
+# load for the life of the process) are not ours.
+export LSAN_OPTIONS="suppressions=$PWD/scripts/lsan.supp:print_suppressions=0"
+export ASAN_OPTIONS="detect_leaks=1"
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
