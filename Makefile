@@ -20,11 +20,13 @@ build: deps $(BUILD)/CMakeCache.txt
 demo: build
 	@scripts/demo.sh $(BUILD)
 
-# Every test, then each fuzz target for CHECK_FUZZ_SECONDS (scripts/fuzz.sh).
-CHECK_FUZZ_SECONDS ?= 30
+# Every test; then each fuzz target for CHECK_FUZZ_SECONDS (scripts/fuzz.sh); then the tests
+# again with ASan and UBSan, but for the slowest (scripts/check-asan.sh --quick lists them).
+CHECK_FUZZ_SECONDS ?= 20
 check: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 	FUZZ_SECONDS=$(CHECK_FUZZ_SECONDS) JOBS=$(JOBS) scripts/fuzz.sh
+	JOBS=$(JOBS) scripts/check-asan.sh --quick
 
 # The tests built with ASan and UBSan (scripts/check-asan.sh lists the ones left out, and why).
 check-asan: deps

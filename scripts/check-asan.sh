@@ -7,13 +7,30 @@
 #     the same solver code runs sanitized in every other solver test;
 #   Install.ExampleRendererBuildsAgainstTheInstalledClient: installs and builds the example
 #     with the system compiler; nothing sanitized runs in it.
+# With --quick (what `make check`, and so CI, runs: the whole CI run must stay under 30 min on
+# two cores) also the eleven tests that take 35 s or more sanitized (measured: 39–138 s each,
+# ~750 s of the suite's 1,240 s of CPU); each runs its code paths again at smaller sizes in
+# other tests, and all of them run in the full `make check-asan`.
 #   JOBS  build and test jobs (default: the cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # shellcheck source=scripts/sanitize_tree.sh
 source scripts/sanitize_tree.sh
 jobs=${JOBS:-$(nproc)}
-excluded='^(Stability\.ClutterScenes.*|Install\..*)$'
+excluded='^(Stability\.ClutterScenes.*|Install\..*'
+if [ "${1:-}" = "--quick" ]; then
+    excluded="$excluded|Antiradiance\.WhiteFurnaceConvergesWithBlockers|FirstShot\.SunEditsMatchAFreshGather"
+    excluded="$excluded|Environment\.RoomLitThroughAnOpeningKeepsTheFurnaceBalance"
+    excluded="$excluded|FinalGather\.(Glossy)?EditsMatchAFreshGather|Accuracy\.(MazeUnderASky|MazeCoarse|GlossyBoxCoarse)"
+    excluded="$excluded|Stability\.AdaptiveSchemeReachesTheSymmetricFixedPoint"
+    excluded="$excluded|DirectLight\.BlockerCastsAShadowFromEveryLightType|BakeCli\.DivergedSolutionExitsSixAndWritesNothing"
+fi
+excluded="$excluded)\$"
 cmake --build "$sanitize_build" -j "$jobs"
+# The Vulkan loader unloads Mesa's lavapipe at vkDestroyInstance, after which LeakSanitizer
+# cannot name the library its lifetime allocations came from (nor suppress them): kept loaded
+# for the run. (The validation layer cannot be preloaded: it crashes outside the loader.)
+lavapipe=$(ls /usr/lib/*/libvulkan_lvp.so 2>/dev/null | head -1 || true)
+[ -n "$lavapipe" ] && export LD_PRELOAD="$lavapipe"
 cd "$sanitize_build"
 ctest --output-on-failure -j "$jobs" -E "$excluded"

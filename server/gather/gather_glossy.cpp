@@ -100,8 +100,10 @@ void GatherStage::TraceLobes(const Moved* moved) {
                 // The punctual lights it sees: kept where their segments pass by what moved.
                 const size_t at = seen.size();
                 seen.resize(at + words, 0u);
-                count += See(y, tris[tri].normal, &seen[at], reuse ? &oldSeen[k * words] : nullptr,
-                             moved);
+                // (Pointers, not &v[i]: with no punctual light a lobe hit has no words, and
+                // v[size()] is undefined.)
+                count += See(y, tris[tri].normal, seen.data() + at,
+                             reuse ? oldSeen.data() + k * words : nullptr, moved);
                 lobes.push_back(e);
             }
             lobes_[t].assign(lobes.begin(), lobes.end());
@@ -190,7 +192,7 @@ void GatherStage::TraceGlints(const Moved* moved) {
                              glm::dot(tri.normal, d) < 0.0f && !rays_->Occluded(x, d);
                     ++rays;
                 }
-                uint32_t* bits = &seen[k * words];
+                uint32_t* bits = seen.data() + k * words;
                 rays += See(y, tri.normal, bits, all || moves ? nullptr : bits, moved);
             }
         }
@@ -236,7 +238,7 @@ void GatherStage::SeeLights(const std::vector<uint8_t>& which) {
             for (size_t k = 0; k < lobes_[t].size(); ++k) {
                 const Hit& h = hits_[t * n + lobes_[t][k].ray];
                 const glm::vec3& ny = tris[h.triangle & kIndex].normal;
-                uint32_t* bits = &seen[k * words];
+                uint32_t* bits = seen.data() + k * words;
                 See(HitPoint(h) + rays_->Epsilon() * ny, ny, bits, marked ? bits : nullptr, nullptr,
                     marked);
             }
@@ -246,7 +248,7 @@ void GatherStage::SeeLights(const std::vector<uint8_t>& which) {
             for (size_t k = 0; k < glints_[t].size(); ++k) {
                 const Glint& g = glints_[t][k];
                 const glm::vec3& ny = tris[g.triangle].normal;
-                uint32_t* bits = &glintSeen[k * words];
+                uint32_t* bits = glintSeen.data() + k * words;
                 See(HitPoint(Hit{g.triangle, g.u, g.v}) + rays_->Epsilon() * ny, ny, bits,
                     marked ? bits : nullptr, nullptr, marked);
             }

@@ -238,7 +238,14 @@ Link MakeLink(const Hierarchy& h, const Directions& dirs, const LeafNorms& norms
     glm::vec3 d = R.center - S.center;  // direction of travel: sender → receiver
     float dist2 = glm::dot(d, d);
     float dist = std::sqrt(dist2);
-    glm::vec3 u = d / dist;
+    // Centres that coincide (two faces in contact, e.g. a box's base on the floor element
+    // under it) give no direction: light leaves along the sender's normal, or arrives against
+    // the receiver's. (d / 0 made it NaN, and the bin of a NaN direction undefined: found by
+    // UndefinedBehaviorSanitizer.)
+    glm::vec3 u = dist > 0.0f   ? d / dist
+                  : Oriented(S) ? S.normal
+                  : Oriented(R) ? -R.normal
+                                : glm::vec3(0.0f, 1.0f, 0.0f);
     // A leaf sender emits radiance on its front side and antiradiance behind (Fig. 6a), and
     // a leaf receiver takes light on its front only: the bin must lie on the same sides as
     // the true direction, or quantisation would turn radiance into antiradiance at edges.
