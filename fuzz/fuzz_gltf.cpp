@@ -12,7 +12,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     const bool binary = size >= 4 && std::memcmp(data, "glTF", 4) == 0;
     penumbra::fuzz::InputFile file(data, size, binary ? ".glb" : ".gltf");
     try {
-        penumbra::LoadGltf(file.Path());
+        // As an upload is loaded: no external files.
+        penumbra::LoadGltf(file.Path(), penumbra::GltfFiles{std::filesystem::path()});
     } catch (const penumbra::Error&) {
     }
     return 0;

@@ -324,9 +324,59 @@ bool IsGlbPath(const std::string& path) {
     return path.size() >= 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
 }
 
-void ReadGltfModel(const std::string& path, tinygltf::Model* model) {
+namespace {
+
+// What tinygltf's file reading may read: the glTF itself, and its external files as `files`
+// confines them.
+struct Confinement {
+    const GltfFiles* files;
+    std::filesystem::path self;  // the glTF, canonical
+};
+
+// tinygltf's file reading (the glTF itself goes through it too), refused outside
+// GltfFiles::root.
+bool ReadConfinedFile(std::vector<unsigned char>* out, std::string* err,
+                      const std::string& filepath, void* user) {
+    const Confinement& c = *static_cast<const Confinement*>(user);
+    const GltfFiles& files = *c.files;
+    std::error_code ec;
+    const std::filesystem::path file = std::filesystem::weakly_canonical(filepath, ec);
+    if (files.root && (ec || file != c.self)) {
+        bool inside = false;
+        if (!ec && !files.root->empty()) {
+            const std::filesystem::path root = std::filesystem::weakly_canonical(*files.root, ec);
+            const std::filesystem::path rel = file.lexically_relative(root);
+            inside = !ec && !rel.empty() && *rel.begin() != "..";
+        }
+        if (!inside) {
+            if (err)
+                *err += files.root->empty()
+                            ? "external file '" + filepath +
+                                  "' refused: an uploaded .glb must hold its buffers and images"
+                            : "external file '" + filepath + "' lies outside the scene root " +
+                                  files.root->string();
+            return false;
+        }
+    }
+    return tinygltf::ReadWholeFile(out, err, filepath, nullptr);
+}
+
+bool RefuseWrite(std::string* err, const std::string& path, const std::vector<unsigned char>&,
+                 void*) {
+    if (err) *err += "not writing " + path;
+    return false;
+}
+
+}  // namespace
+
+void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFiles& files) {
     if (std::ifstream probe(path); !probe) throw Error(path + ": cannot open (no such file?)");
     tinygltf::TinyGLTF loader;
+    std::error_code ec;
+    Confinement confinement{&files, std::filesystem::weakly_canonical(path, ec)};
+    tinygltf::FsCallbacks fs{&tinygltf::FileExists, &tinygltf::ExpandFilePath, &ReadConfinedFile,
+                             &RefuseWrite, &confinement};
+    loader.SetFsCallbacks(fs);
     std::string err, warn;
     bool ok = IsGlbPath(path) ? loader.LoadBinaryFromFile(model, &err, &warn, path)
                               : loader.LoadASCIIFromFile(model, &err, &warn, path);
@@ -337,9 +387,9 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model) {
     }
 }
 
-Scene LoadGltf(const std::string& path) {
+Scene LoadGltf(const std::string& path, const GltfFiles& files) {
     tinygltf::Model model;
-    ReadGltfModel(path, &model);
+    ReadGltfModel(path, &model, files);
     Context ctx{path, model};
 
     for (const auto& ext : model.extensionsRequired) {

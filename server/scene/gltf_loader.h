@@ -2,6 +2,8 @@
 // Errors name the file, the offending object and the reason (penumbra::Error).
 #pragma once
 
+#include <filesystem>
+#include <optional>
 #include <string>
 
 #include "scene/scene.h"
@@ -15,8 +17,17 @@ namespace penumbra {
 // True for a binary glTF (.glb) path.
 bool IsGlbPath(const std::string& path);
 
+// Where a glTF's external files (buffers and images given by a URI that is not a data URI)
+// may be read from. `root` unset: anywhere (a user's own files, offline). Set: each must
+// resolve, symlinks followed, to a file inside that folder (the service's --scene-root);
+// set to an empty path: none at all (an uploaded .glb must hold everything it uses). A URI
+// that leads elsewhere fails the load, naming it.
+struct GltfFiles {
+    std::optional<std::filesystem::path> root;
+};
+
 // Reads a .gltf/.glb file into a tinygltf model; throws penumbra::Error naming the file.
-void ReadGltfModel(const std::string& path, tinygltf::Model* model);
+void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFiles& files = {});
 
 // Writes `model` to `path`: .gltf (JSON, its one buffer and its images embedded as data URIs)
 // or .glb (every buffer and image in the one BIN chunk), in a form the Khronos validator
@@ -28,8 +39,9 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model);
 void WriteGltfModel(tinygltf::Model model, const std::string& path,
                     const std::string& inputDir = ".");
 
-// Loads `path`. Throws penumbra::Error for unreadable, malformed or unsupported input.
-Scene LoadGltf(const std::string& path);
+// Loads `path`, its external files confined as `files` says. Throws penumbra::Error for
+// unreadable, malformed or unsupported input, or a file outside the confinement.
+Scene LoadGltf(const std::string& path, const GltfFiles& files = {});
 
 // sRGB-encoded 8-bit value to linear [0, 1].
 float SrgbToLinear(float encoded);

@@ -123,7 +123,7 @@ LoadResult Service::Load(const LoadRequest& request) {
                 if (!out) throw Error("cannot stage the upload in " + tmp.string());
             }
             try {
-                scene = LoadGltf(tmp.string());
+                scene = LoadGltf(tmp.string(), GltfFiles{fs::path()});
             } catch (...) {
                 fs::remove(tmp);
                 throw;
@@ -131,7 +131,7 @@ LoadResult Service::Load(const LoadRequest& request) {
             fs::remove(tmp);
             scene.source = name;
         } else {
-            scene = LoadGltf(file.string());
+            scene = LoadGltf(file.string(), GltfFiles{root_});
             scene.source = name;
         }
     } catch (const Error& e) {

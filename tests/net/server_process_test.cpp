@@ -15,6 +15,7 @@
 #include <fstream>
 #include <glm/glm.hpp>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <thread>
 
@@ -36,10 +37,11 @@ namespace fb = protocol::fb;
 
 // The protocol error code a client call fails with, or -1 when it succeeds.
 template <typename F>
-int ErrorCodeOf(F call) {
+int ErrorCodeOf(F call, std::string* message = nullptr) {
     try {
         call();
     } catch (const client::ClientError& e) {
+        if (message) *message = e.what();
         return e.code();
     }
     return -1;
@@ -447,6 +449,40 @@ TEST(ServerProcess, AStalledHalfFrameTimesOut) {
     EXPECT_GE(waited, 0.9);
     client::Client after(server.Unix(), "after");
     EXPECT_EQ(after.ProtocolVersion(), 1);
+}
+
+// Issue 24: an uploaded .glb whose buffer names a file (here one the server could read)
+// is refused: an upload must hold everything it uses, nothing on the server's disk is read.
+TEST(ServerProcess, AnUploadCannotReadTheServersFiles) {
+    ServerProcess server("upload-uri");
+    std::ifstream in(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
+    nlohmann::json doc = nlohmann::json::parse(in);
+    doc["buffers"][0]["uri"] = "../../../../../../etc/hostname";
+    std::string json = doc.dump();
+    json.resize((json.size() + 3) / 4 * 4, ' ');
+    // A .glb of one JSON chunk: header (magic, version 2, length), chunk (length, "JSON").
+    std::vector<uint8_t> glb;
+    auto word = [&](uint32_t v) {
+        for (int i = 0; i < 4; ++i) glb.push_back(uint8_t(v >> (8 * i)));
+    };
+    glb.insert(glb.end(), {'g', 'l', 'T', 'F'});
+    word(2);
+    word(uint32_t(12 + 8 + json.size()));
+    word(uint32_t(json.size()));
+    glb.insert(glb.end(), {'J', 'S', 'O', 'N'});
+    glb.insert(glb.end(), json.begin(), json.end());
+    client::LoadOptions o;
+    o.glb = glb;
+    o.name = "reader.glb";
+    o.device = "cpu";
+    client::Client c(server.Unix(), "uploader");
+    std::string message;
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(o); }, &message), int(fb::ErrorCode::LoadFailed));
+    EXPECT_NE(message.find("etc/hostname' refused: an uploaded .glb must hold its buffers"),
+              std::string::npos)
+        << message;
+    // The server goes on serving.
+    EXPECT_EQ(c.Load(Cornell()).nodes.empty(), false);
 }
 
 TEST(ServerProcess, RequestsBeforeHelloAreRefused) {

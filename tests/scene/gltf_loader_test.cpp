@@ -153,6 +153,51 @@ TEST(GltfLoader, AccessorsOutsideTheirBuffersAreRefused) {
     }
 }
 
+// Issue 24: a glTF's external files stay inside the folder the caller names (the service's
+// scene root): a URI with "..", an absolute one or a symlink leading out fails the load with
+// the file named; a file inside loads; with an empty root (an upload) none is read.
+TEST(GltfLoader, ExternalFilesStayInsideTheirRoot) {
+    const auto dir = testing::TempDir("gltf-confined");
+    const auto root = dir / "root";
+    std::filesystem::create_directories(root / "sub");
+    // The Cornell box with its one buffer moved out of its data URI into files.
+    nlohmann::json doc = Cornell();
+    tinygltf::Model model;
+    ReadGltfModel(kCornell, &model);
+    const std::string bytes(model.buffers[0].data.begin(), model.buffers[0].data.end());
+    for (const auto& file : {dir / "outside.bin", root / "inside.bin"})
+        std::ofstream(file, std::ios::binary) << bytes;
+    std::filesystem::create_symlink(dir / "outside.bin", root / "link.bin");
+    auto load = [&](const std::string& bufferUri, const GltfFiles& files) -> std::string {
+        nlohmann::json d = doc;
+        d["buffers"][0]["uri"] = bufferUri;
+        const auto path = root / "sub" / "scene.gltf";
+        std::ofstream(path) << d.dump();
+        try {
+            LoadGltf(path.string(), files);
+        } catch (const Error& e) {
+            return e.what();
+        }
+        return "";
+    };
+    const GltfFiles confined{root};
+    EXPECT_EQ(load("../inside.bin", confined), "");
+    for (const std::string& out : {std::string("../../outside.bin"), std::string("../link.bin")}) {
+        const std::string msg = load(out, confined);
+        EXPECT_NE(msg.find("outside the scene root"), std::string::npos) << out << ": " << msg;
+    }
+    // tinygltf looks for an absolute URI under the glTF's own folder: not found there.
+    EXPECT_NE(load((dir / "outside.bin").string(), confined), "");
+    // Unconfined (the CLI's own files), everything is read.
+    EXPECT_EQ(load("../../outside.bin", {}), "");
+    // An upload: no external file at all.
+    const std::string msg = load("../inside.bin", GltfFiles{std::filesystem::path()});
+    EXPECT_NE(msg.find("external file '" + (root / "sub" / "../inside.bin").string() +
+                       "' refused: an uploaded .glb must hold its buffers"),
+              std::string::npos)
+        << msg;
+}
+
 TEST(GltfLoader, MissingPositionIsRefused) {
     auto doc = Cornell();
     doc["meshes"][0]["primitives"][0]["attributes"].erase("POSITION");
