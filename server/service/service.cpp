@@ -157,7 +157,12 @@ LoadResult Service::Load(const LoadRequest& request) {
                 std::to_string(limits_.maxSceneTriangles) + " (--max-scene-triangles)");
     std::shared_ptr<Session> session;
     try {
-        session = std::make_shared<Session>(name, std::move(scene), request.settings);
+        // A shutdown stops the build at its next progress report instead of waiting for it.
+        auto cancel = [this](const std::string&, double) {
+            if (stopping_.load(std::memory_order_relaxed))
+                throw ServiceError(ErrorKind::kShuttingDown, "the server is shutting down");
+        };
+        session = std::make_shared<Session>(name, std::move(scene), request.settings, cancel);
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kInvalidArgument, name + ": " + e.what());
     }
@@ -202,6 +207,7 @@ nlohmann::json Service::StatsJson() const {
 }
 
 void Service::Shutdown() {
+    stopping_ = true;
     std::map<std::string, std::shared_ptr<Session>> sessions;
     {
         std::lock_guard lock(mutex_);

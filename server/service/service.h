@@ -2,6 +2,7 @@
 // root, and the limits a server enforces. Thread-safe; knows nothing of sockets.
 #pragma once
 
+#include <atomic>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -90,6 +91,9 @@ class Service {
     std::vector<std::string> order_;  // load order, newest last
     size_t loading_ = 0;
     bool shutdown_ = false;
+    // Set by Shutdown before anything else: a load in flight stops at its next progress
+    // report (its build's progress callback throws ShuttingDown).
+    std::atomic<bool> stopping_{false};
 };
 
 }  // namespace penumbra::service

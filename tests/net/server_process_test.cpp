@@ -641,6 +641,35 @@ TEST(ServerProcess, SigtermShutsDownCleanly) {
     EXPECT_NE(server.Log().find("SIGTERM"), std::string::npos) << server.Log();
 }
 
+// Issue 24: SIGTERM while a scene is loading: the build stops at its next progress report
+// (the office's takes seconds), the loading client gets an error or a closed connection,
+// and the server exits 0 without its socket file.
+TEST(ServerProcess, SigtermMidLoadStopsTheBuild) {
+    ServerProcess server("sigterm-load");
+    client::LoadOptions o;
+    o.path = "office.gltf";
+    o.device = "cpu";
+    std::atomic<bool> answered{false};
+    std::thread loader([&] {
+        try {
+            client::Client c(server.Unix());
+            c.Load(o);
+        } catch (const std::exception&) {
+        }
+        answered = true;
+    });
+    std::this_thread::sleep_for(std::chrono::milliseconds(800));
+    EXPECT_FALSE(answered.load()) << "the office loaded in under 0.8 s: no build to stop";
+    const auto start = std::chrono::steady_clock::now();
+    EXPECT_EQ(server.Terminate(), 0) << server.Log();
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    loader.join();
+    std::printf("exited %.2f s after SIGTERM\n", seconds);
+    EXPECT_LT(seconds, 3.0) << server.Log();
+    EXPECT_FALSE(std::filesystem::exists(server.SocketPath())) << "socket file left behind";
+}
+
 TEST(EmbeddedMode, ScriptRunsWithoutAServer) {
     auto dir = testing::TempDir("embedded");
     std::ofstream(dir / "edits.txt") << "light emitter --intensity 4\n"
