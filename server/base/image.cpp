@@ -10,8 +10,11 @@
 #include <stb/stb_image_write.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <exception>
+#include <fstream>
 
 #include "base/check.h"
 
@@ -74,8 +77,20 @@ void WriteExr(const std::string& path, const Image& image) {
 
 void WritePng(const std::string& path, int width, int height, const std::vector<uint8_t>& rgb) {
     PENUMBRA_CHECK_EQ(rgb.size(), size_t(width) * size_t(height) * 3);
-    if (!stbi_write_png(path.c_str(), width, height, 3, rgb.data(), width * 3))
-        throw Error(path + ": cannot write PNG");
+    // Encoded in memory, then written and closed here: stb's own file writing does not check
+    // its writes, so a full disk gave a truncated PNG and no error.
+    std::vector<uint8_t> png;
+    auto append = [](void* context, void* data, int size) {
+        auto* out = static_cast<std::vector<uint8_t>*>(context);
+        out->insert(out->end(), static_cast<uint8_t*>(data), static_cast<uint8_t*>(data) + size);
+    };
+    if (!stbi_write_png_to_func(append, &png, width, height, 3, rgb.data(), width * 3))
+        throw Error(path + ": cannot encode PNG");
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    if (!out) throw Error(path + ": cannot open for writing (" + std::strerror(errno) + ")");
+    out.write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
+    out.close();
+    if (!out) throw Error(path + ": cannot write PNG (" + std::strerror(errno) + ")");
 }
 
 float Luminance99(const std::vector<glm::vec3>& values) {

@@ -3,6 +3,7 @@
 
 #include <tiny_gltf.h>
 
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -125,9 +126,11 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
         return;
     }
     std::ofstream out(path);
-    if (!out) throw Error(path + ": cannot open for writing");
+    if (!out) throw Error(path + ": cannot open for writing (" + std::strerror(errno) + ")");
     out << j.dump(1) << "\n";
-    if (!out) throw Error(path + ": write failed");
+    // Closed here, so that an error of the last buffered write (a full disk) is seen.
+    out.close();
+    if (!out) throw Error(path + ": write failed (" + std::strerror(errno) + ")");
 }
 
 IrradianceFile ToIrradianceFile(const Scene& scene, const IrradianceResult& result) {

@@ -121,5 +121,26 @@ TEST(Render, BadOptionsFailClearly) {
     EXPECT_NE(r.output.find(".exr or .png"), std::string::npos) << r.output;
 }
 
+// Issue 24: a full disk (files that are links to /dev/full) is an error with the reason,
+// exit 1, for every kind of output; before, a PNG was written short and reported done.
+TEST(Render, AFullDiskIsAnError) {
+    auto dir = testing::TempDir("full-disk");
+    for (const char* name : {"out.png", "out.exr", "out.json", "out.glb"})
+        std::filesystem::create_symlink("/dev/full", dir / name);
+    const std::string base = " --device cpu --bins 32 --iterations 1 --element-size 0.2 -q";
+    for (const char* name : {"out.png", "out.exr"}) {
+        auto r = Execute("render " + kCornell + " -o " + (dir / name).string() + base);
+        EXPECT_EQ(r.exitCode, 1) << name << "\n" << r.output;
+        EXPECT_NE(r.output.find("No space left on device"), std::string::npos) << name << "\n"
+                                                                               << r.output;
+    }
+    for (const char* name : {"out.json", "out.glb"}) {
+        auto r = Execute("bake " + kCornell + " -o " + (dir / name).string() + base);
+        EXPECT_EQ(r.exitCode, 1) << name << "\n" << r.output;
+        EXPECT_NE(r.output.find((dir / name).string()), std::string::npos) << name << "\n"
+                                                                           << r.output;
+    }
+}
+
 }  // namespace
 }  // namespace penumbra
