@@ -25,7 +25,7 @@ demo: build
 CHECK_FUZZ_SECONDS ?= 20
 check: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
-	FUZZ_SECONDS=$(CHECK_FUZZ_SECONDS) JOBS=$(JOBS) scripts/fuzz.sh
+	FUZZ_SECONDS=$(CHECK_FUZZ_SECONDS) FUZZ_SEED=1 JOBS=$(JOBS) scripts/fuzz.sh
 	JOBS=$(JOBS) scripts/check-asan.sh --quick
 
 # The tests built with ASan and UBSan (scripts/check-asan.sh lists the ones left out, and why).

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # `make fuzz` (issue 24): builds the libFuzzer targets (fuzz/) with clang, AddressSanitizer and
-# UndefinedBehaviorSanitizer in a build tree of their own, writes their seed corpora, runs
+# UndefinedBehaviorSanitizer in the sanitizer build tree (scripts/sanitize_tree.sh, shared
+# with check-asan.sh), writes their seed corpora, runs
 # each target for FUZZ_SECONDS and fails on any crash, leak, sanitizer report or timeout
 # (the input that did it is kept under $SANITIZE_BUILD/artifacts). The executions each target
 # reached go to $FUZZ_OUT/fuzz.json.
@@ -9,6 +10,8 @@
 #   SANITIZE_BUILD  the build tree (default build-sanitize, shared with check-asan.sh); its
 #                   corpus/ keeps what was found
 #   FUZZ_OUT      where fuzz.json goes (default: the build tree; bench/results to record)
+#   FUZZ_SEED     libFuzzer's random seed (default: a new one each run; make check sets 1,
+#                 so that a CI run does the same work every time)
 #   JOBS          build jobs (default: the cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,6 +22,7 @@ source scripts/sanitize_tree.sh
 build=$sanitize_build
 out=${FUZZ_OUT:-$build}
 jobs=${JOBS:-$(nproc)}
+seed=${FUZZ_SEED:-0}
 names=fuzz_seeds
 for t in $targets; do names="$names fuzz_$t"; done
 # shellcheck disable=SC2086
@@ -32,7 +36,7 @@ status=0
 for t in $targets; do
     log="$build/fuzz_$t.log"
     echo "fuzz_$t: $seconds s"
-    if "$build/fuzz/fuzz_$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
+    if "$build/fuzz/fuzz_$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -seed="$seed" \
         -print_final_stats=1 -artifact_prefix="$build/artifacts/$t-" "$build/corpus/$t" \
         >"$log" 2>&1; then
         crashes=0
