@@ -94,14 +94,19 @@ void GatherStage::HandSky(bool always) {
     const bool rest = SunHanded();
     if (rest == innerRest_ && !always) return;
     innerRest_ = rest;
-    if (!rest) {
-        inner_->UpdateLights(scene_);
+    ToInner([&](const Scene& scene) { inner_->UpdateLights(scene); });
+}
+
+template <typename F>
+void GatherStage::ToInner(F&& call) {
+    if (!innerRest_) {
+        call(scene_);
         return;
     }
     // scene_ with the sky the solver is to see, for the call.
     Environment whole = std::move(scene_.environment);
     scene_.environment = skyParts_.rest;
-    inner_->UpdateLights(scene_);
+    call(scene_);
     scene_.environment = std::move(whole);
 }
 
@@ -318,15 +323,7 @@ std::string GatherStage::UpdateGeometry(const Scene& scene) {
     const std::vector<PunctualLight> lightsBefore = scene_.lights;
     scene_ = scene;
     std::string done;
-    if (innerRest_) {
-        // The solver keeps the sky without its sun.
-        Environment whole = std::move(scene_.environment);
-        scene_.environment = skyParts_.rest;
-        done = inner_->UpdateGeometry(scene_);
-        scene_.environment = std::move(whole);
-    } else {
-        done = inner_->UpdateGeometry(scene);
-    }
+    ToInner([&](const Scene& forInner) { done = inner_->UpdateGeometry(forInner); });
     const Surfels& s = inner_->GetSurfels();
     // What moved, and where it was and is: only the rays near it are traced again.
     Moved moved;
@@ -398,7 +395,7 @@ GatherSettings GatherParts(const Scene& scene, const GatherSettings& settings,
     auto note = [&](const std::string& line) {
         if (notes) notes->push_back(line);
     };
-    if (s.emitterRays > 0 && !emitters && !SplitSky(scene.environment).Split()) {
+    if (s.emitterRays > 0 && !emitters && !HasSun(scene.environment)) {
         s.emitterRays = 0;
         note("no first shot: the scene has no emitting surfaces and no sun in its sky");
     } else if (s.emitterRays > 0 && glossy) {

@@ -136,6 +136,10 @@ class GatherStage : public Solver {
     // (SunHanded), the whole sky otherwise. Calls inner_->UpdateLights when that changed or
     // `always`.
     void HandSky(bool always);
+    // Calls `call` with scene_ as the solver is to see it (its sky without the sun where
+    // innerRest_).
+    template <typename F>
+    void ToInner(F&& call);
     bool SunHanded() const { return skyParts_.Split() && HandsOver(); }
     // The sky the gather's cosine rays read where they escape: without its sun where the
     // first shot carries it.

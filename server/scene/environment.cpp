@@ -215,6 +215,14 @@ float SkySampler::Pdf(const glm::vec3& towardSky) const {
     return CellPdf(i, j, s, t) / (2.0f * kPi * kPi * sine);
 }
 
+bool HasSun(const Environment& environment) {
+    if (!environment.image || environment.image->Empty()) return false;
+    const double level = SplitLevel(*environment.image);
+    for (const glm::vec3& p : environment.image->pixels)
+        if (Luminance(p) > level) return true;
+    return false;
+}
+
 SkyParts SplitSky(const Environment& environment) {
     SkyParts parts;
     parts.rest = environment;

@@ -87,6 +87,9 @@ struct SkyParts {
     bool Split() const { return sampler.Usable(); }
 };
 SkyParts SplitSky(const Environment& environment);
+// Whether SplitSky would split `environment` (a map with a pixel above its mean), without
+// making the parts.
+bool HasSun(const Environment& environment);
 
 // Reads an equirectangular EXR; every pixel must be finite and non-negative. Throws
 // penumbra::Error naming the file and, for a bad pixel, its position.
