@@ -20,6 +20,19 @@
 
 namespace penumbra {
 
+namespace {
+
+// OpenEXR's own limit, checked when a header is read: without it a file of a few bytes that
+// declares a wide data window has its line and compression buffers allocated (and zeroed)
+// before the size check below runs. Set once at start; the fuzz target lowers it.
+const bool kExrLimitsSet = [] {
+    Imf::Header::setMaxImageSize(kMaxImageSide, kMaxImageSide);
+    Imf::Header::setMaxTileSize(kMaxImageSide, kMaxImageSide);
+    return true;
+}();
+
+}  // namespace
+
 Image ReadExr(const std::string& path) {
     try {
         Imf::InputFile file(path.c_str());

@@ -415,10 +415,4 @@ bool ParseScriptLine(const std::string& text, const std::string& where, CLI::App
     return true;
 }
 
-bool CheckScriptLine(const std::string& line, const std::string& where) {
-    CLI::App app{"script line"};
-    ServiceCommands commands(app, /*forScript=*/true);
-    return ParseScriptLine(line, where, app);
-}
-
 }  // namespace penumbra::cli

@@ -38,7 +38,4 @@ class ServiceCommands {
 // penumbra::Error naming `where` (file:line), the line and why.
 bool ParseScriptLine(const std::string& line, const std::string& where, CLI::App& app);
 
-// ParseScriptLine into an app of its own, nothing run: for the fuzz target.
-bool CheckScriptLine(const std::string& line, const std::string& where);
-
 }  // namespace penumbra::cli
