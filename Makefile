@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check check-asan fuzz bench bench-service bench-direct bench-glossy bench-stability accuracy images format clean
+.PHONY: all deps build demo check check-asan fuzz bench bench-service bench-direct bench-glossy bench-stability bench-soak accuracy images format clean
 
 all: build
 
@@ -50,6 +50,12 @@ bench-glossy: build
 
 bench-stability: build
 	$(BUILD)/bench/penumbra-bench-stability --devices cpu,lavapipe --out bench/results
+
+# A live server for SOAK_SECONDS (default 10 minutes) under 64 subscribers, 4 editors, a
+# subscriber SIGKILLed every 30 s, one that stops reading and one sending garbage.
+SOAK_SECONDS ?= 600
+bench-soak: build
+	$(BUILD)/bench/penumbra-bench-soak --seconds $(SOAK_SECONDS) --out bench/results
 
 accuracy: build
 	$(BUILD)/bench/penumbra-bench-accuracy --out bench/results

@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "bench_client.h"
 #include "bench_util.h"
 #include "client/client.h"
 #include "net/server.h"
@@ -25,17 +26,11 @@
 namespace penumbra {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using bench::Clock;
+using bench::FrameToFile;
+using bench::Ms;
+using bench::Percentile;
 namespace fs = std::filesystem;
-
-double Ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
-
-double Percentile(std::vector<double> v, double p) {
-    if (v.empty()) return 0.0;
-    std::sort(v.begin(), v.end());
-    size_t i = std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5));
-    return v[i];
-}
 
 // A server with its I/O thread, on a private Unix socket.
 struct InProcessServer {
@@ -99,20 +94,6 @@ struct Case {
     float oracleValue;
     std::string light, mover;
 };
-
-// A streamed frame as `compare` reads it.
-IrradianceFile FrameToFile(const client::Frame& f) {
-    IrradianceFile file;
-    file.solver = "antiradiance";
-    file.channel = "indirect";
-    for (const auto& p : f.primitives) {
-        IrradianceRecord r{p.node, p.mesh, p.primitive, {}};
-        for (size_t i = 0; i + 2 < p.rgb.size(); i += 3)
-            r.irradiance.emplace_back(p.rgb[i], p.rgb[i + 1], p.rgb[i + 2]);
-        file.primitives.push_back(std::move(r));
-    }
-    return file;
-}
 
 nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int edits, int moves,
                        const IrradianceFile* truth, int gatherRays, int directRays) {
