@@ -14,6 +14,13 @@ class Error : public std::runtime_error {
     explicit Error(const std::string& message) : std::runtime_error(message) {}
 };
 
+// The accelerator stopped answering (Vulkan's VK_ERROR_DEVICE_LOST): nothing on it can be
+// used again. A session that meets it goes on with the CPU back end (service/session.h).
+class DeviceLost : public Error {
+  public:
+    explicit DeviceLost(const std::string& message) : Error(message) {}
+};
+
 [[noreturn]] void CheckFailed(const char* file, int line, const std::string& what);
 
 namespace detail {

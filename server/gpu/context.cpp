@@ -129,7 +129,10 @@ Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<
 }
 
 Context::~Context() {
-    if (device_) device_->waitIdle();
+    try {
+        if (device_) device_->waitIdle();
+    } catch (const vk::SystemError&) {  // a lost device: nothing to wait for
+    }
     // Members go in reverse declaration order: pool, queue, device, ..., instance.
     pool_.reset();
     queue_.reset();
@@ -145,12 +148,32 @@ vk::raii::CommandBuffer Context::AllocateCommandBuffer() const {
     return std::move(cbs.front());
 }
 
+namespace {
+std::atomic<int> gSimulatedLoss{-1};  // submissions until a simulated loss; < 0: none
+}  // namespace
+
+void SimulateDeviceLoss(int after) { gSimulatedLoss = after; }
+
 void Context::SubmitAndWait(const vk::raii::CommandBuffer& cb) const {
+    if (lost_) throw DeviceLost(name_ + ": the device was lost earlier (VK_ERROR_DEVICE_LOST)");
+    int countdown = gSimulatedLoss.load();
+    while (countdown >= 0 && !gSimulatedLoss.compare_exchange_weak(countdown, countdown - 1)) {
+    }
+    if (countdown == 0) {
+        lost_ = true;
+        throw DeviceLost(name_ + ": vkQueueSubmit failed: VK_ERROR_DEVICE_LOST (simulated)");
+    }
     vk::raii::Fence fence(*device_, vk::FenceCreateInfo());
     vk::CommandBuffer raw = *cb;
     vk::SubmitInfo si({}, {}, raw);
-    queue_->submit(si, *fence);
-    vk::Result r = device_->waitForFences({*fence}, VK_TRUE, UINT64_MAX);
+    vk::Result r;
+    try {
+        queue_->submit(si, *fence);
+        r = device_->waitForFences({*fence}, VK_TRUE, UINT64_MAX);
+    } catch (const vk::DeviceLostError& e) {
+        lost_ = true;
+        throw DeviceLost(name_ + ": " + e.what());
+    }
     if (r != vk::Result::eSuccess) ThrowVulkan("vkWaitForFences", r);
 }
 

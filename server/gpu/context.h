@@ -3,6 +3,7 @@
 // (with buffer/pipeline) that includes Vulkan headers.
 #pragma once
 
+#include <atomic>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -45,6 +46,8 @@ class Context {
         SubmitAndWait(cb);
     }
     vk::raii::CommandBuffer AllocateCommandBuffer() const;
+    // Every submission goes through here, where a driver reports a lost device: it throws
+    // penumbra::DeviceLost then, and for every later submission on this context.
     void SubmitAndWait(const vk::raii::CommandBuffer& cb) const;
 
     // Validation-layer messages (warnings and errors) seen so far.
@@ -71,8 +74,14 @@ class Context {
     bool lavapipe_ = false;
     bool graphics_ = false;
     bool validation_ = false;
+    mutable std::atomic<bool> lost_{false};
     std::string name_;
 };
+
+// Fault injection for tests (a device cannot be lost on purpose otherwise): the submission
+// `after` submissions from now, on any context, reports VK_ERROR_DEVICE_LOST as a driver
+// would, and that context stays lost. A negative `after` turns it off.
+void SimulateDeviceLoss(int after);
 
 // True when a Vulkan device other than a CPU implementation exists; its name in `name`.
 bool FindRealGpu(std::string* name);

@@ -4,8 +4,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <memory>
+#include <new>
 #include <optional>
+#include <system_error>
 
 #include "base/check.h"
 #include "gather/gather_stage.h"
@@ -161,6 +164,7 @@ nlohmann::json Session::StatsJson() const {
     j["pending_edits"] = pending_.size();
     j["link_rebuilds"] = rebuilds_;
     j["link_updates"] = linkUpdates_;
+    j["device_fallbacks"] = deviceFallbacks_;
     j["rebuilding"] = rebuild_ != nullptr;
     j["subscribers"] = subscribers_.size();
     j["converged"] = converged_;
@@ -185,6 +189,7 @@ std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool prepareMov
                                              std::vector<std::string>* notes) const {
     SolverSettings settings = settings_.solver;
     settings.prepareMoves = settings.prepareMoves && prepareMoves;
+    if (onCpu_) settings.device = DeviceChoice::kCpu;
     GatherSettings gather;
     gather.emitterRays = settings_.emitterRays;
     gather.gatherRays = settings_.gatherRays;
@@ -278,6 +283,47 @@ std::string Session::WarmStart(Solver& rebuilt, const Scene& next) {
         *solver_, CarrySurfels(applied_, solver_->GetSurfels(), next, rebuilt.GetSurfels()));
 }
 
+bool Session::FallBackToCpu(std::unique_lock<std::mutex>& lock, std::string& note) {
+    const std::string why = std::move(deviceLost_);
+    deviceLost_.clear();
+    if (settings_.solver.device == DeviceChoice::kCpu || onCpu_) return false;
+    onCpu_ = true;
+    const Scene scene = applied_;
+    const bool prepareMoves = !motionDeclined_;
+    lock.unlock();
+    const auto start = Clock::now();
+    std::unique_ptr<Solver> cpu;
+    std::string error;
+    try {
+        cpu = BuildSolver(scene, prepareMoves);
+    } catch (const std::exception& e) {
+        error = e.what();
+    }
+    const double seconds = MsSince(start) / 1000.0;
+    lock.lock();
+    if (!cpu) {
+        lastError_ = "device lost (" + why + "), and the CPU back end failed too: " + error;
+        note += (note.empty() ? "" : "; ") + lastError_;
+        return false;
+    }
+    std::swap(solver_, cpu);  // the lost device's solver goes below, outside the lock
+    passTotals_.clear();
+    lastSurfels_.clear();
+    diverged_.clear();
+    solverStatsRaw_ = solver_->Stats();
+    ++deviceFallbacks_;
+    lastError_ = "device lost (" + why + "); the session goes on with the CPU back end";
+    char built[32];
+    std::snprintf(built, sizeof(built), "%.1f", seconds);
+    note += (note.empty() ? "" : "; ") + lastError_ + " (built in " + built + " s)";
+    converged_ = false;
+    framesSinceEdit_ = 0;
+    lock.unlock();
+    cpu.reset();
+    lock.lock();
+    return true;
+}
+
 bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note) {
     if (rebuild_ || pending_.empty()) return false;
     Scene next = applied_;
@@ -299,17 +345,20 @@ bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string&
     editWaiting_ = false;
     applied_ = std::move(next);
     lock.unlock();
-    std::string failure, done;
+    std::string failure, done, lost;
     try {
         if (moves) {
             done = moved + ": " + solver_->UpdateGeometry(applied_);
         }
         solver_->UpdateMaterials(applied_);
         if (lights) solver_->UpdateLights(applied_);  // one shadow pass
+    } catch (const DeviceLost& e) {
+        lost = e.what();
     } catch (const std::exception& e) {
         failure = std::string(moves ? "update failed: " : "light update failed: ") + e.what();
     }
     lock.lock();
+    if (!lost.empty()) deviceLost_ = lost;  // the edits are in applied_: the CPU takes them
     if (!done.empty()) {
         if (moves) ++linkUpdates_;
         note += (note.empty() ? "" : "; ") + done;
@@ -339,7 +388,7 @@ void Session::Run() {
 
         // A finished link rebuild swaps in at this frame boundary.
         if (rebuild_ && rebuild_->done) {
-            rebuild_->thread.join();
+            if (rebuild_->thread.joinable()) rebuild_->thread.join();
             if (rebuild_->result) {
                 lock.unlock();
                 std::string warm = WarmStart(*rebuild_->result, rebuild_->scene);
@@ -352,11 +401,16 @@ void Session::Run() {
                 ++rebuilds_;
                 note = "links rebuilt: " + rebuild_->what + "; " + warm;
                 if (!rebuild_->reason.empty()) note += " (" + rebuild_->reason + ")";
+            } else if (rebuild_->deviceLost) {
+                // The edits stand: the CPU back end builds them (FallBackToCpu, below).
+                applied_ = std::move(rebuild_->scene);
+                deviceLost_ = rebuild_->error;
             } else {
                 // The edits were valid but the device could not take them (memory, say):
                 // report it and keep serving the scene as it was.
                 note = "link rebuild failed (" + rebuild_->error + "); the edits up to " +
                        std::to_string(rebuild_->lastEdit) + " are not applied";
+                lastError_ = note;
                 validated_ = applied_;
                 for (auto& p : pending_) p.apply(validated_);
             }
@@ -392,38 +446,59 @@ void Session::Run() {
             Rebuild* r = rebuild_.get();
             // A scene whose motion links were over budget would be again: skip building them.
             const bool prepareMoves = !motionDeclined_;
-            r->thread = std::thread([this, r, prepareMoves] {
+            auto build = [this, r, prepareMoves] {
                 std::unique_ptr<Solver> built;
                 std::string error;
+                bool lost = false;
                 try {
                     built = BuildSolver(r->scene, prepareMoves);
+                } catch (const DeviceLost& e) {
+                    error = e.what();
+                    lost = true;
+                } catch (const std::bad_alloc&) {
+                    error = "out of memory while building the new links";
                 } catch (const std::exception& e) {
                     error = e.what();
                 }
                 std::lock_guard guard(mutex_);
                 r->result = std::move(built);
                 r->error = error;
+                r->deviceLost = lost;
                 r->done = true;
                 wake_.notify_all();
-            });
+            };
+            try {
+                r->thread = std::thread(build);
+            } catch (const std::system_error& e) {  // no memory for its stack, say
+                r->error = std::string("cannot start the rebuild: ") + e.what();
+                r->done = true;
+            }
         }
 
+        // A lost device (an edit's update or a rebuild met it): the CPU back end from here.
+        if (!deviceLost_.empty()) FallBackToCpu(lock, note);
+
         // A device failure stops this session's frames, not the server: it is reported in
-        // stats and to the step that hit it, and the next edit tries again.
+        // stats and to the step that hit it, and the next edit tries again. A lost device is
+        // left for the CPU back end, and the frame made again there.
         auto produce = [&](int iterations, bool interruptible) -> std::exception_ptr {
-            lock.unlock();
-            std::exception_ptr failure;
-            try {
-                ProduceFrame(iterations, note, interruptible);
-            } catch (const std::exception& e) {
-                failure = std::current_exception();
-                lock.lock();
-                lastError_ = e.what();
-                converged_ = true;
-                return failure;
+            for (bool retried = false;; retried = true) {
+                lock.unlock();
+                try {
+                    ProduceFrame(iterations, note, interruptible);
+                    lock.lock();
+                    return nullptr;
+                } catch (const std::exception& e) {
+                    lock.lock();
+                    if (!retried && dynamic_cast<const DeviceLost*>(&e)) {
+                        deviceLost_ = e.what();
+                        if (FallBackToCpu(lock, note)) continue;
+                    }
+                    lastError_ = e.what();
+                    converged_ = true;
+                    return std::current_exception();
+                }
             }
-            lock.lock();
-            return failure;
         };
         if (!steps_.empty()) {
             auto [iterations, promise] = std::move(steps_.front());

@@ -194,6 +194,7 @@ class Session {
         bool done = false;   // set by the thread, under mutex_
         std::unique_ptr<Solver> result;
         std::string error;
+        bool deviceLost = false;  // the error was the device's loss
     };
 
     uint64_t Queue(std::function<void(Scene&)> apply, bool moves, std::string what,
@@ -221,6 +222,12 @@ class Session {
     // Starts `rebuilt` (built for `next`) from the current solver's solution on the surfels
     // that did not move; returns what it did, for the frame note.
     std::string WarmStart(Solver& rebuilt, const Scene& next);
+    // After a DeviceLost (deviceLost_ says why): the solver rebuilt for applied_ on the CPU
+    // back end, which later builds use too; the note says so. False when that is not
+    // possible (already on the CPU, or the CPU build failed): the session stops its frames
+    // and reports why, as for any device failure. Worker thread, `lock` held (released while
+    // building).
+    bool FallBackToCpu(std::unique_lock<std::mutex>& lock, std::string& note);
 
     const std::string name_;
     const SessionSettings settings_;
@@ -248,6 +255,7 @@ class Session {
     int framesSinceEdit_ = 0;
     std::vector<glm::vec3> lastSurfels_;
     uint64_t frames_ = 0, rebuilds_ = 0, linkUpdates_ = 0;
+    int deviceFallbacks_ = 0;    // FallBackToCpu done (0 or 1)
     std::string rebuildReason_;  // Solver::GeometryMismatch of the moves about to rebuild
     // The first build found motion links over budget: rebuilds build the usual links only.
     bool motionDeclined_ = false;
@@ -265,6 +273,10 @@ class Session {
     // The solver's SolverStats::divergence once it stopped: no more iterations until a rebuild
     // brings a new solver; frames keep the last bounded irradiance.
     std::string diverged_;
+    // Why the device was lost, until FallBackToCpu has taken it (empty: it was not).
+    std::string deviceLost_;
+    // Set by FallBackToCpu: every build from then on is on the CPU back end.
+    std::atomic<bool> onCpu_{false};
     std::atomic<bool> editWaiting_{false};  // an edit is queued and no rebuild runs
     std::thread worker_;
 };

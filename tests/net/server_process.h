@@ -20,16 +20,18 @@ namespace penumbra::testing {
 // Starts penumbra-server on a Unix socket and an ephemeral loopback TCP port.
 class ServerProcess {
   public:
-    // `binary`: the server program under the build folder.
+    // `binary`: the server program under the build folder; `root`: its --scene-root (default:
+    // the bundled scenes).
     explicit ServerProcess(const std::string& name, const std::string& extra = "",
-                           const std::string& binary = "penumbra-server") {
+                           const std::string& binary = "penumbra-server",
+                           const std::string& root = "") {
         dir_ = TempDir("server-" + name);
         unixUrl_ = "unix://" + (dir_ / "s.sock").string();
         std::string ready = (dir_ / "ready").string();
         std::string cmd = std::string(PENUMBRA_BINARY_DIR) + "/" + binary + " --listen " +
                           unixUrl_ + " --listen tcp://127.0.0.1:0 --scene-root " +
-                          PENUMBRA_SOURCE_DIR + "/scenes --device cpu --ready-file " + ready + " " +
-                          extra;
+                          (root.empty() ? std::string(PENUMBRA_SOURCE_DIR) + "/scenes" : root) +
+                          " --device cpu --ready-file " + ready + " " + extra;
         pid_ = fork();
         if (pid_ == 0) {
             std::string log = (dir_ / "server.log").string();
@@ -71,6 +73,7 @@ class ServerProcess {
     const std::string& Tcp() const { return tcpUrl_; }
     std::filesystem::path Dir() const { return dir_; }
     std::string SocketPath() const { return unixUrl_.substr(7); }
+    pid_t Pid() const { return pid_; }
 
   private:
     std::filesystem::path dir_;

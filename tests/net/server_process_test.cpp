@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -485,6 +486,46 @@ TEST(ServerProcess, AnUploadCannotReadTheServersFiles) {
     EXPECT_EQ(c.Load(Cornell()).nodes.empty(), false);
 }
 
+// Issue 24, part 6: symlinks under --scene-root that lead out of it (a scene, a sky) are
+// refused like "..", for LoadScene and SetEnvironment; one that stays inside is followed.
+TEST(ServerProcess, SymlinksOutOfTheSceneRootAreRefused) {
+    namespace fs = std::filesystem;
+    const fs::path dir = testing::TempDir("symlinked-root");
+    const fs::path root = dir / "root", outside = dir / "outside";
+    fs::create_directories(root);
+    fs::create_directories(outside);
+    const fs::path scene = fs::path(PENUMBRA_SOURCE_DIR) / "scenes" / "cornell-box.gltf";
+    fs::copy_file(scene, root / "inside.gltf");
+    fs::copy_file(scene, outside / "secret.gltf");
+    std::ofstream(outside / "sky.exr") << "not read";
+    fs::create_symlink(outside / "secret.gltf", root / "out.gltf");
+    fs::create_symlink(outside / "sky.exr", root / "sky.exr");
+    fs::create_symlink(root / "inside.gltf", root / "alias.gltf");
+    fs::create_directory_symlink(outside, root / "door");
+
+    ServerProcess server("symlinks", "", "penumbra-server", root.string());
+    client::Client c(server.Unix());
+    client::LoadOptions o = Cornell();
+    for (const char* path : {"out.gltf", "door/secret.gltf"}) {
+        o.path = path;
+        std::string message;
+        EXPECT_EQ(ErrorCodeOf([&] { c.Load(o); }, &message), int(fb::ErrorCode::OutsideRoot))
+            << path;
+        EXPECT_NE(message.find("outside the scene root"), std::string::npos) << message;
+    }
+    o.path = "inside.gltf";
+    o.environment = "sky.exr";
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(o); }), int(fb::ErrorCode::OutsideRoot));
+    o.environment.clear();
+    o.path = "alias.gltf";
+    EXPECT_NO_THROW(c.Load(o));
+    client::Client::EnvironmentChange sky;
+    sky.path = "sky.exr";
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(sky); }), int(fb::ErrorCode::OutsideRoot));
+    sky.path = "door/sky.exr";
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(sky); }), int(fb::ErrorCode::OutsideRoot));
+}
+
 TEST(ServerProcess, RequestsBeforeHelloAreRefused) {
     ServerProcess server("hello");
     asio::io_context io;
@@ -563,6 +604,74 @@ TEST(ServerProcess, AClientKilledMidStreamHarmsNoOne) {
     uint64_t edit = viewer.SetLight("ceiling_light", std::nullopt, 12.0f);
     EXPECT_TRUE(watch.Until(edit));
     EXPECT_NO_THROW(viewer.Stats());
+}
+
+// Issue 24: a scene whose link rebuild fails part way, for real: once the scene is loaded
+// the server's address space is capped (prlimit) a little above what it uses, so a move that
+// needs a new solver runs out of memory while building it. The frame says the edit was not
+// applied, the scene keeps streaming as it was to everyone, new clients are served, and once
+// the cap is lifted the next move rebuilds.
+TEST(ServerProcess, ARebuildThatRunsOutOfMemoryKeepsTheSceneServing) {
+    ServerProcess server("rebuild-oom");
+    client::Client editor(server.Unix(), "editor");
+    client::LoadOptions o = Cornell();
+    o.elementSize = 0.03f;  // a solver of some size: its rebuild needs more than the headroom
+    const client::SceneInfo info = editor.Load(o);
+    Watcher watch;
+    editor.Subscribe(std::ref(watch));
+    ASSERT_TRUE(watch.Until(0));
+
+    auto vmKiB = [&] {
+        std::ifstream in("/proc/" + std::to_string(server.Pid()) + "/status");
+        std::string line;
+        while (std::getline(in, line))
+            if (line.rfind("VmSize:", 0) == 0) return std::stol(line.substr(7));
+        return 0L;
+    };
+    const long used = vmKiB();
+    rlimit old{};
+    ASSERT_EQ(prlimit(server.Pid(), RLIMIT_AS, nullptr, &old), 0);
+    rlimit cap = old;
+    cap.rlim_cur = static_cast<rlim_t>(used + 24 * 1024) * 1024;  // 24 MiB of headroom
+    ASSERT_EQ(prlimit(server.Pid(), RLIMIT_AS, &cap, nullptr), 0);
+    std::printf("server address space %.0f MiB, capped at %.0f MiB; %u elements\n", used / 1024.0,
+                double(cap.rlim_cur) / 1048576.0, info.elements);
+
+    std::array<float, 16> m = info.Node("tall_block")->matrix;
+    m[12] += 0.3f;  // outside its motion bounds: the links are rebuilt
+    const uint64_t move = editor.SetTransform("tall_block", m);
+    std::optional<client::Frame> after = watch.Until(move);
+    ASSERT_TRUE(after) << server.Log();
+    bool failed = false;
+    {
+        std::lock_guard lock(watch.m);
+        for (const auto& f : watch.frames)
+            if (f.note.find("link rebuild failed") != std::string::npos) {
+                failed = true;
+                std::printf("%s\n", f.note.c_str());
+            }
+    }
+    EXPECT_TRUE(failed) << "no frame said the rebuild failed; last note: " << after->note;
+
+    // Still serving: the scene as it was, to this client and to a new one.
+    EXPECT_NE(editor.Stats().find("last_error"), std::string::npos);
+    EXPECT_NEAR(editor.Info().Node("tall_block")->matrix[12], info.Node("tall_block")->matrix[12],
+                1e-6f);
+    client::Client late(server.Tcp(), "late");
+    EXPECT_EQ(late.Get().primitives.size(), after->primitives.size());
+
+    ASSERT_EQ(prlimit(server.Pid(), RLIMIT_AS, &old, nullptr), 0);
+    const uint64_t again = editor.SetTransform("tall_block", m);
+    std::optional<client::Frame> moved = watch.Until(again);
+    ASSERT_TRUE(moved) << server.Log();
+    std::string notes;
+    {
+        std::lock_guard lock(watch.m);
+        for (const auto& f : watch.frames)
+            if (f.lastEdit >= again) notes += f.note + "; ";
+    }
+    EXPECT_NE(notes.find("links rebuilt: moved tall_block"), std::string::npos) << notes;
+    EXPECT_NEAR(editor.Info().Node("tall_block")->matrix[12], m[12], 1e-6f);
 }
 
 TEST(ServerProcess, CliCommandsAndScriptAgainstTheServer) {

@@ -8,6 +8,7 @@
 
 #include "clutter_scenes.h"
 #include "gather/gather_stage.h"
+#include "gpu/context.h"
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
 #include "solver/antiradiance/antiradiance_solver.h"
@@ -483,6 +484,55 @@ TEST(Session, DivergedSolutionStopsAndKeepsTheLastBoundedFrame) {
     const nlohmann::json stats = session.StatsJson();
     ASSERT_TRUE(stats.contains("diverged")) << stats.dump();
     EXPECT_NE(stats["solver"]["divergence"].get<std::string>(), "");
+}
+
+// Issue 24: the Vulkan device lost while frames stream. lavapipe cannot lose its device on
+// purpose, so the loss is injected where a driver reports it (a submission answers
+// VK_ERROR_DEVICE_LOST, and every later one on that device); everything else is real. The
+// session goes on with the CPU back end, says so in a frame's note and in stats, answers as a
+// fresh CPU bake does, and takes edits after it.
+TEST(Session, ALostDeviceFallsBackToTheCpu) {
+    SessionSettings settings = Settings();
+    settings.solver.device = DeviceChoice::kLavapipe;
+    const Scene scene = LoadGltf(kBlocker);
+    Session session("blocker", scene, settings);
+    ASSERT_EQ(session.SolverStatistics().device.find("cpu"), std::string::npos)
+        << session.SolverStatistics().device;
+    gpu::SimulateDeviceLoss(0);  // the next submission
+    std::string notes;
+    FramePtr f = WaitFor(session, 0, &notes);
+    gpu::SimulateDeviceLoss(-1);
+    ASSERT_TRUE(f);
+    EXPECT_NE(notes.find("device lost ("), std::string::npos) << notes;
+    EXPECT_NE(notes.find("VK_ERROR_DEVICE_LOST (simulated)"), std::string::npos) << notes;
+    EXPECT_NE(notes.find("goes on with the CPU back end"), std::string::npos) << notes;
+    const nlohmann::json stats = session.StatsJson();
+    EXPECT_EQ(stats["device_fallbacks"], 1) << stats.dump();
+    EXPECT_EQ(stats["solver"]["device"], "cpu") << stats.dump();
+    EXPECT_NE(stats["last_error"].get<std::string>().find("device lost"), std::string::npos);
+
+    SessionSettings cpu = settings;
+    cpu.solver.device = DeviceChoice::kCpu;
+    auto fresh = Fresh(scene, cpu);
+    fresh->Iterate(int(f->iterations));
+    const auto floor =
+        PrimitiveIrradiance(fresh->GetSurfels(), fresh->SurfelIrradiance(), scene, 0);
+    ASSERT_EQ(floor.size(), f->irradiance[0].size());
+    double worst = 0.0, peak = 0.0;
+    for (size_t i = 0; i < floor.size(); ++i) {
+        worst = std::max(worst, double(glm::length(floor[i] - f->irradiance[0][i])));
+        peak = std::max(peak, double(glm::length(floor[i])));
+    }
+    EXPECT_LT(worst, 1e-3 * peak) << "max |session − fresh CPU bake| " << worst << " of " << peak;
+
+    const uint64_t edit = session.Submit(Dim("emitter", 5.0f));  // from 10
+    FramePtr dimmed = WaitFor(session, edit);
+    ASSERT_TRUE(dimmed);
+    for (size_t i = 0; i < f->irradiance[0].size(); i += 7) {
+        const float b = testing::Mean(f->irradiance[0][i]),
+                    a = testing::Mean(dimmed->irradiance[0][i]);
+        EXPECT_NEAR(a, 0.5f * b, 2e-3f * b + 1e-6f) << "floor vertex " << i;
+    }
 }
 
 }  // namespace
