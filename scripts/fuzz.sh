@@ -6,6 +6,8 @@
 # (the input that did it is kept under $SANITIZE_BUILD/artifacts). The executions each target
 # reached go to $FUZZ_OUT/fuzz.json.
 #   FUZZ_SECONDS  seconds a target (default 60)
+#   FUZZ_RUNS     stop a target after this many inputs instead, if sooner (default: no limit;
+#                 the long run of bench/results/fuzz.json used 10000000)
 #   FUZZ_TARGETS  which (default: frame gltf exr script)
 #   SANITIZE_BUILD  the build tree (default build-sanitize, shared with check-asan.sh); its
 #                   corpus/ keeps what was found
@@ -16,6 +18,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${FUZZ_SECONDS:-60}
+runs=${FUZZ_RUNS:--1}
 targets=${FUZZ_TARGETS:-frame gltf exr script}
 # shellcheck source=scripts/sanitize_tree.sh
 source scripts/sanitize_tree.sh
@@ -36,7 +39,7 @@ status=0
 for t in $targets; do
     log="$build/fuzz_$t.log"
     echo "fuzz_$t: $seconds s"
-    if "$build/fuzz/fuzz_$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -seed="$seed" \
+    if "$build/fuzz/fuzz_$t" -max_total_time="$seconds" -runs="$runs" -timeout=10 -rss_limit_mb=2048 -seed="$seed" \
         -print_final_stats=1 -artifact_prefix="$build/artifacts/$t-" "$build/corpus/$t" \
         >"$log" 2>&1; then
         crashes=0
@@ -46,12 +49,13 @@ for t in $targets; do
         echo "fuzz_$t FAILED: the last lines of $log:"
         tail -40 "$log"
     fi
-    runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+    executed=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+    took=$(sed -n 's/^Done [0-9]* runs in \([0-9]*\) second.*/\1/p' "$log" | tail -1)
     corpus=$(find "$build/corpus/$t" -type f | wc -l)
-    echo "  executions: ${runs:-0}, corpus: $corpus inputs, failed: $crashes"
+    echo "  executions: ${executed:-0} in ${took:-?} s, corpus: $corpus inputs, failed: $crashes"
     [ $first -eq 1 ] || json="$json, "
     first=0
-    json="$json\"$t\": {\"executions\": ${runs:-0}, \"corpus\": $corpus, \"failed\": $crashes}"
+    json="$json\"$t\": {\"executions\": ${executed:-0}, \"seconds\": ${took:-$seconds}, \"corpus\": $corpus, \"failed\": $crashes}"
 done
 echo "$json}}" >"$out/fuzz.json"
 echo "wrote $out/fuzz.json"

@@ -1,0 +1,652 @@
+"""A Python client for penumbra-server: the framing and messages of protocol/SPEC.md.
+
+One socket, one reader thread: replies are matched to requests by id, pushed frames (id 0)
+go to a bounded queue that `frames()` and `wait()` read. Every request blocks until its reply
+and raises PenumbraError on an Error reply.
+"""
+import collections
+import json
+import math
+import os
+import socket
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Dict, Iterator, List, Optional, Sequence
+
+import flatbuffers
+import numpy as np
+
+from penumbra_client._fb import (Bye, Channel, EditAck, Error, ErrorCode, Format, Frame as FbFrame,
+                                 GetIrradiance, GetSceneInfo, GetStats, Hello, LoadScene, Ok,
+                                 SceneInfo as FbSceneInfo, SetEnvironment, SetLight, SetMaterial,
+                                 SetTransform, SolverOption, Stats, Step, Subscribe, Unsubscribe,
+                                 Vec3, Welcome)
+
+MAGIC = b"PNBR"
+FRAMING_VERSION = 1
+HEADER = struct.Struct("<4sBBHII")  # magic, framing version, flags, type, length, request id
+PROTOCOL_VERSION = 1
+
+# Message types (protocol/frame.h, SPEC.md "Messages").
+HELLO, WELCOME, ERROR, BYE, OK = 1, 2, 3, 4, 5
+LOAD_SCENE, GET_SCENE_INFO, SCENE_INFO = 10, 11, 12
+SET_TRANSFORM, SET_LIGHT, SET_MATERIAL, EDIT_ACK, SET_ENVIRONMENT = 20, 21, 22, 23, 24
+SUBSCRIBE, UNSUBSCRIBE, GET_IRRADIANCE, FRAME, STEP = 30, 31, 32, 33, 34
+GET_STATS, STATS = 40, 41
+
+CHANNELS = {"indirect": Channel.Channel.Indirect, "direct": Channel.Channel.Direct,
+            "total": Channel.Channel.Total}
+FORMATS = {"f32": Format.Format.Float32, "f16": Format.Format.Float16}
+ERROR_NAMES = {v: k for k, v in vars(ErrorCode.ErrorCode).items() if not k.startswith("_")}
+# Pushed frames kept for a reader that falls behind; older ones are dropped (and counted).
+FRAME_QUEUE = 16
+
+
+class PenumbraError(Exception):
+    """An Error reply: `code` (SPEC.md "Errors"), `name` ("NotFound", ...), the message."""
+
+    def __init__(self, code: int, message: str):
+        self.code = code
+        self.name = ERROR_NAMES.get(code, "Unknown")
+        super().__init__(f"{self.name} ({code}): {message}")
+
+
+@dataclass
+class Primitive:
+    node: str
+    mesh: int
+    primitive: int
+    rgb: np.ndarray  # (vertices, 3) float32, lux, in the primitive's vertex order
+
+
+@dataclass
+class Frame:
+    scene: str
+    frame: int
+    last_edit: int
+    iterations: int
+    frame_ms: float
+    edit_latency_ms: float
+    converged: bool
+    channel: str
+    note: str
+    passes: Dict[str, float]
+    primitives: List[Primitive]
+
+    def primitive(self, node: str, mesh: int = 0, primitive: int = 0) -> np.ndarray:
+        """The (vertices, 3) irradiance of one primitive of `node`."""
+        for p in self.primitives:
+            if p.node == node and p.mesh == mesh and p.primitive == primitive:
+                return p.rgb
+        raise KeyError(f"no primitive {mesh}/{primitive} of node '{node}' in the frame")
+
+
+@dataclass
+class Node:
+    name: str
+    dynamic: bool
+    emissive: bool
+    matrix: np.ndarray  # 4 × 4 local transform (matrix[:, 3] is the translation)
+    primitives: List[dict]
+
+
+@dataclass
+class SceneInfo:
+    scene: str
+    solver: str
+    device: str
+    elements: int
+    links: int
+    build_seconds: float
+    reused: bool
+    environment: str
+    environment_intensity: float
+    divergence: str
+    nodes: Dict[str, Node] = field(default_factory=dict)
+    materials: Dict[str, dict] = field(default_factory=dict)
+    lights: Dict[str, dict] = field(default_factory=dict)
+
+
+def _text(b) -> str:
+    return b.decode("utf-8") if b is not None else ""
+
+
+def _vec(v) -> Optional[List[float]]:
+    return [v.X(), v.Y(), v.Z()] if v is not None else None
+
+
+def _finite(name: str, values: Sequence[float], count: int) -> List[float]:
+    values = [float(x) for x in np.asarray(values, dtype=np.float64).ravel()]
+    if len(values) != count or not all(math.isfinite(x) for x in values):
+        raise ValueError(f"{name} needs {count} finite numbers, got {values}")
+    return values
+
+
+def _matrix_columns(matrix) -> List[float]:
+    """A 4 × 4 matrix (math order: m[row][col]) as glTF's 16 column-major floats; 16 numbers
+    are taken as column-major already."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape == (4, 4):
+        return _finite("matrix", m.T.ravel(), 16)
+    return _finite("matrix", m, 16)
+
+
+class Client:
+    """A connection to penumbra-server.
+
+    `url`: "tcp://HOST:PORT" or "unix:///PATH" (default: $PENUMBRA_CONNECT, else
+    tcp://127.0.0.1:7450); `token`: the server's --token-file token when it asks for one.
+    `scene` arguments default to "" (the server's newest scene, SPEC.md).
+    """
+
+    def __init__(self, url: Optional[str] = None, name: str = "penumbra-python",
+                 token: Optional[str] = None, timeout: float = 300.0):
+        url = url or os.environ.get("PENUMBRA_CONNECT") or "tcp://127.0.0.1:7450"
+        self.url, self.timeout = url, timeout
+        if url.startswith("unix://"):
+            self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            address = url[len("unix://"):]
+        elif url.startswith("tcp://"):
+            host, _, port = url[len("tcp://"):].rpartition(":")
+            if not host or not port.isdigit():
+                raise ValueError(f"'{url}': give tcp://HOST:PORT")
+            self._sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET,
+                                       socket.SOCK_STREAM)
+            address = (host.strip("[]"), int(port))
+        else:
+            raise ValueError(f"'{url}': give tcp://HOST:PORT or unix:///PATH")
+        try:
+            self._sock.connect(address)
+        except OSError as e:
+            self._sock.close()
+            raise ConnectionError(f"cannot connect to {url}: {e.strerror or e}") from None
+        self._lock = threading.Lock()
+        self._send_lock = threading.Lock()
+        self._next_id = 1
+        self._replies: Dict[int, list] = {}
+        self._reply_ready = threading.Condition(self._lock)
+        self._frames: collections.deque = collections.deque(maxlen=FRAME_QUEUE)
+        self.frames_dropped = 0
+        self._subscribed: Dict[str, int] = {}
+        self._closed: Optional[str] = None
+        self._last_edit = 0
+        self._reader = threading.Thread(target=self._read, name="penumbra-client", daemon=True)
+        self._reader.start()
+        b = flatbuffers.Builder(64)
+        client = b.CreateString(name)
+        tok = b.CreateString(token) if token else None
+        Hello.Start(b)
+        Hello.AddClient(b, client)
+        Hello.AddMinVersion(b, PROTOCOL_VERSION)
+        Hello.AddMaxVersion(b, PROTOCOL_VERSION)
+        if tok is not None:
+            Hello.AddToken(b, tok)
+        b.Finish(Hello.End(b))
+        try:
+            _, payload = self._request(HELLO, b, expect=WELCOME)
+        except BaseException:
+            self._shutdown()
+            raise
+        w = Welcome.Welcome.GetRootAs(payload)
+        self.server, self.protocol_version = _text(w.Server()), w.Version()
+        self.max_frame_bytes = w.MaxFrameBytes()
+
+    # --- framing ------------------------------------------------------------------------
+    def _read_exactly(self, n: int) -> bytes:
+        data = bytearray()
+        while len(data) < n:
+            chunk = self._sock.recv(n - len(data))
+            if not chunk:
+                raise ConnectionError("the server closed the connection")
+            data += chunk
+        return bytes(data)
+
+    def _read(self):
+        reason = "the connection closed"
+        try:
+            while True:
+                magic, version, _, kind, length, rid = HEADER.unpack(
+                    self._read_exactly(HEADER.size))
+                if magic != MAGIC or version != FRAMING_VERSION:
+                    raise ConnectionError("not a Penumbra server (bad frame header)")
+                payload = self._read_exactly(length) if length else b""
+                with self._lock:
+                    if rid == 0 and kind == FRAME:
+                        if len(self._frames) == self._frames.maxlen:
+                            self.frames_dropped += 1
+                        self._frames.append(payload)
+                    elif rid == 0 and kind == ERROR:  # the server is closing this connection
+                        e = Error.Error.GetRootAs(payload)
+                        reason = str(PenumbraError(e.Code(), _text(e.Message())))
+                    else:
+                        self._replies[rid] = [kind, payload]
+                    self._reply_ready.notify_all()
+        except (OSError, ConnectionError) as e:
+            if reason == "the connection closed":
+                reason = str(e)
+        with self._lock:
+            self._closed = reason
+            self._reply_ready.notify_all()
+
+    def _send(self, kind: int, builder: Optional[flatbuffers.Builder], rid: int):
+        payload = bytes(builder.Output()) if builder is not None else b""
+        with self._send_lock:
+            self._sock.sendall(HEADER.pack(MAGIC, FRAMING_VERSION, 0, kind, len(payload), rid) +
+                               payload)
+
+    def _request(self, kind: int, builder, expect: int):
+        with self._lock:
+            if self._closed:
+                raise ConnectionError(self._closed)
+            rid = self._next_id
+            self._next_id = self._next_id % 0xFFFFFFFF + 1  # 0 is the id of pushed frames
+        self._send(kind, builder, rid)
+        deadline = time.monotonic() + self.timeout
+        with self._lock:
+            while rid not in self._replies:
+                if self._closed:
+                    raise ConnectionError(self._closed)
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"no reply within {self.timeout} s")
+                self._reply_ready.wait(left)
+            got, payload = self._replies.pop(rid)
+        if got == ERROR:
+            e = Error.Error.GetRootAs(payload)
+            raise PenumbraError(e.Code(), _text(e.Message()))
+        if got != expect:
+            raise ConnectionError(f"unexpected reply type {got} (wanted {expect})")
+        return got, payload
+
+    @staticmethod
+    def _scene_only(module, scene: str) -> flatbuffers.Builder:
+        b = flatbuffers.Builder(64)
+        s = b.CreateString(scene)
+        module.Start(b)
+        module.AddScene(b, s)
+        b.Finish(module.End(b))
+        return b
+
+    def _edit(self, kind: int, builder) -> int:
+        _, payload = self._request(kind, builder, EDIT_ACK)
+        edit = EditAck.EditAck.GetRootAs(payload).EditId()
+        self._last_edit = max(self._last_edit, edit)
+        return edit
+
+    # --- scenes -------------------------------------------------------------------------
+    def load(self, path: Optional[str] = None, *, glb: Optional[bytes] = None,
+             name: str = "", solver: str = "", iterations_per_frame: int = 1,
+             element_size: float = 0.0, device: str = "", reload: bool = False,
+             converged_change: float = 1e-3, environment: str = "",
+             environment_color: Optional[Sequence[float]] = None,
+             environment_intensity: float = 1.0, environment_rotation: float = 0.0,
+             emitter_rays: int = 256, gather_rays: int = 256, **solver_options) -> SceneInfo:
+        """Loads a scene (a path under the server's --scene-root, or `glb` bytes), or joins
+        the session that has it. Other keywords are the solver's own options
+        (`penumbra --help`), `_` for `-`: `load("office.gltf", bins=64, link_oracle="paper")`.
+        """
+        if (path is None) == (glb is None):
+            raise ValueError("give a path or glb bytes")
+        b = flatbuffers.Builder(1024 + (len(glb) if glb else 0))
+        options = []
+        for key, value in solver_options.items():
+            k, v = b.CreateString(key.replace("_", "-")), b.CreateString(str(value))
+            SolverOption.Start(b)
+            SolverOption.AddName(b, k)
+            SolverOption.AddValue(b, v)
+            options.append(SolverOption.End(b))
+        LoadScene.StartOptionsVector(b, len(options))
+        for o in reversed(options):
+            b.PrependUOffsetTRelative(o)
+        opts = b.EndVector()
+        p = b.CreateString(path) if path is not None else None
+        g = b.CreateByteVector(glb) if glb is not None else None
+        n, s, d, env = (b.CreateString(x) for x in (name, solver, device, environment))
+        LoadScene.Start(b)
+        if p is not None:
+            LoadScene.AddPath(b, p)
+        if g is not None:
+            LoadScene.AddGlb(b, g)
+        LoadScene.AddName(b, n)
+        LoadScene.AddSolver(b, s)
+        LoadScene.AddIterationsPerFrame(b, int(iterations_per_frame))
+        LoadScene.AddElementSize(b, float(element_size))
+        LoadScene.AddDevice(b, d)
+        LoadScene.AddReload(b, bool(reload))
+        LoadScene.AddConvergedChange(b, float(converged_change))
+        LoadScene.AddEnvironment(b, env)
+        if environment_color is not None:
+            c = _finite("environment_color", environment_color, 3)
+            LoadScene.AddEnvironmentColor(b, Vec3.CreateVec3(b, *c))
+        LoadScene.AddEnvironmentIntensity(b, float(environment_intensity))
+        LoadScene.AddEnvironmentRotation(b, float(environment_rotation))
+        LoadScene.AddEmitterRays(b, int(emitter_rays))
+        LoadScene.AddGatherRays(b, int(gather_rays))
+        LoadScene.AddOptions(b, opts)
+        b.Finish(LoadScene.End(b))
+        _, payload = self._request(LOAD_SCENE, b, SCENE_INFO)
+        return self._scene_info(payload)
+
+    def info(self, scene: str = "") -> SceneInfo:
+        _, payload = self._request(GET_SCENE_INFO, self._scene_only(GetSceneInfo, scene),
+                                   SCENE_INFO)
+        return self._scene_info(payload)
+
+    @staticmethod
+    def _scene_info(payload: bytes) -> SceneInfo:
+        s = FbSceneInfo.SceneInfo.GetRootAs(payload)
+        info = SceneInfo(scene=_text(s.Scene()), solver=_text(s.Solver()),
+                         device=_text(s.Device()), elements=s.Elements(), links=s.Links(),
+                         build_seconds=s.BuildSeconds(), reused=s.Reused(),
+                         environment=_text(s.Environment()),
+                         environment_intensity=s.EnvironmentIntensity(),
+                         divergence=_text(s.Divergence()))
+        for i in range(s.NodesLength()):
+            n = s.Nodes(i)
+            columns = n.MatrixAsNumpy() if n.MatrixLength() == 16 else np.eye(4).ravel()
+            prims = []
+            for j in range(n.PrimitivesLength()):
+                p = n.Primitives(j)
+                prims.append({"mesh": p.Mesh(), "primitive": p.Primitive(),
+                              "vertices": p.Vertices(), "material": _text(p.Material())})
+            info.nodes[_text(n.Name())] = Node(
+                name=_text(n.Name()), dynamic=n.Dynamic(), emissive=n.Emissive(),
+                matrix=np.asarray(columns, dtype=np.float64).reshape(4, 4).T, primitives=prims)
+        for i in range(s.MaterialsLength()):
+            m = s.Materials(i)
+            info.materials[_text(m.Name())] = {
+                "albedo": _vec(m.Albedo()), "emission": _vec(m.Emission()),
+                "roughness": m.Roughness(), "metallic": m.Metallic()}
+        for i in range(s.LightsLength()):
+            li = s.Lights(i)
+            info.lights[_text(li.Name())] = {
+                "node": _text(li.Node()), "type": _text(li.Type()), "color": _vec(li.Color()),
+                "intensity": li.Intensity(), "range": li.Range(), "inner_cone": li.InnerCone(),
+                "outer_cone": li.OuterCone(), "position": _vec(li.Position()),
+                "direction": _vec(li.Direction())}
+        return info
+
+    # --- edits (each returns its edit id; frames with last_edit ≥ it include it) ---------
+    def move(self, node: str, translate: Optional[Sequence[float]] = None,
+             rotate_y: Optional[float] = None, matrix=None, scene: str = "") -> int:
+        """Moves a dynamic node: new local = translate × current × rotate-y (`rotate_y` in
+        degrees, about the node's own y axis), or `matrix` (4 × 4, or 16 column-major floats)."""
+        if matrix is not None:
+            if translate is not None or rotate_y is not None:
+                raise ValueError("give matrix, or translate and/or rotate_y")
+            columns = _matrix_columns(matrix)
+        else:
+            if translate is None and rotate_y is None:
+                raise ValueError("give translate, rotate_y or matrix")
+            nodes = self.info(scene).nodes
+            if node not in nodes:
+                movable = ", ".join(sorted(n for n, v in nodes.items() if v.dynamic)) or "none"
+                raise PenumbraError(ErrorCode.ErrorCode.NotFound,
+                                    f"no node '{node}' (movable: {movable})")
+            m = nodes[node].matrix.copy()
+            if rotate_y is not None:
+                a = math.radians(_finite("rotate_y", [rotate_y], 1)[0])
+                r = np.eye(4)
+                r[0, 0], r[0, 2], r[2, 0], r[2, 2] = math.cos(a), math.sin(a), -math.sin(a), \
+                    math.cos(a)
+                m = m @ r
+            if translate is not None:
+                t = np.eye(4)
+                t[:3, 3] = _finite("translate", translate, 3)
+                m = t @ m
+            columns = _matrix_columns(m)
+        b = flatbuffers.Builder(256)
+        s, n = b.CreateString(scene), b.CreateString(node)
+        SetTransform.StartMatrixVector(b, 16)
+        for x in reversed(columns):
+            b.PrependFloat32(x)
+        mv = b.EndVector()
+        SetTransform.Start(b)
+        SetTransform.AddScene(b, s)
+        SetTransform.AddNode(b, n)
+        SetTransform.AddMatrix(b, mv)
+        b.Finish(SetTransform.End(b))
+        return self._edit(SET_TRANSFORM, b)
+
+    def light(self, name: str, color: Optional[Sequence[float]] = None,
+              intensity: Optional[float] = None, position: Optional[Sequence[float]] = None,
+              direction: Optional[Sequence[float]] = None, inner_cone: Optional[float] = None,
+              outer_cone: Optional[float] = None, range: Optional[float] = None,
+              scene: str = "") -> int:
+        """Changes a punctual light or an emissive node (SPEC.md SetLight); what is not given
+        stays. Negative numbers are refused here: on the wire they mean "unchanged"."""
+        scalars = {"intensity": intensity, "inner_cone": inner_cone, "outer_cone": outer_cone,
+                   "range": range}
+        for key, value in scalars.items():
+            if value is not None and not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{key} must be a finite number ≥ 0, got {value}")
+        if all(v is None for v in (color, position, direction, *scalars.values())):
+            raise ValueError("give at least one of color, intensity, position, direction, "
+                             "inner_cone, outer_cone, range")
+        b = flatbuffers.Builder(128)
+        s, n = b.CreateString(scene), b.CreateString(name)
+        SetLight.Start(b)
+        SetLight.AddScene(b, s)
+        SetLight.AddLight(b, n)
+        if color is not None:
+            SetLight.AddColor(b, Vec3.CreateVec3(b, *_finite("color", color, 3)))
+        if position is not None:
+            SetLight.AddPosition(b, Vec3.CreateVec3(b, *_finite("position", position, 3)))
+        if direction is not None:
+            SetLight.AddDirection(b, Vec3.CreateVec3(b, *_finite("direction", direction, 3)))
+        if intensity is not None:
+            SetLight.AddIntensity(b, float(intensity))
+        if inner_cone is not None:
+            SetLight.AddInnerCone(b, float(inner_cone))
+        if outer_cone is not None:
+            SetLight.AddOuterCone(b, float(outer_cone))
+        if range is not None:
+            SetLight.AddRange(b, float(range))
+        b.Finish(SetLight.End(b))
+        return self._edit(SET_LIGHT, b)
+
+    def material(self, name: str, albedo: Optional[Sequence[float]] = None,
+                 emission: Optional[Sequence[float]] = None, roughness: Optional[float] = None,
+                 metallic: Optional[float] = None, scene: str = "") -> int:
+        """Changes a material: albedo (base colour), emission (nits), roughness and metallic
+        in [0, 1]; what is not given stays."""
+        for key, value in (("roughness", roughness), ("metallic", metallic)):
+            if value is not None and not (0.0 <= value <= 1.0):
+                raise ValueError(f"{key} must be in [0, 1], got {value}")
+        if albedo is None and emission is None and roughness is None and metallic is None:
+            raise ValueError("give at least one of albedo, emission, roughness, metallic")
+        b = flatbuffers.Builder(128)
+        s, n = b.CreateString(scene), b.CreateString(name)
+        SetMaterial.Start(b)
+        SetMaterial.AddScene(b, s)
+        SetMaterial.AddMaterial(b, n)
+        if albedo is not None:
+            SetMaterial.AddAlbedo(b, Vec3.CreateVec3(b, *_finite("albedo", albedo, 3)))
+        if emission is not None:
+            SetMaterial.AddEmission(b, Vec3.CreateVec3(b, *_finite("emission", emission, 3)))
+        if roughness is not None:
+            SetMaterial.AddRoughness(b, float(roughness))
+        if metallic is not None:
+            SetMaterial.AddMetallic(b, float(metallic))
+        b.Finish(SetMaterial.End(b))
+        return self._edit(SET_MATERIAL, b)
+
+    def sky(self, path: Optional[str] = None, color: Optional[Sequence[float]] = None,
+            off: bool = False, intensity: Optional[float] = None,
+            rotation: Optional[float] = None, scene: str = "") -> int:
+        """A new sky (`path`, an EXR under the server's scene root, or a constant `color` in
+        nits) or `off`; then `intensity` (≥ 0) and `rotation` (radians about +Y) if given."""
+        if sum(x is not None and x is not False for x in (path, color, off or None)) > 1:
+            raise ValueError("give one of path, color, off")
+        if intensity is not None and not (math.isfinite(intensity) and intensity >= 0):
+            raise ValueError(f"intensity must be a finite number ≥ 0, got {intensity}")
+        b = flatbuffers.Builder(128)
+        s, e = b.CreateString(scene), b.CreateString(path or "")
+        SetEnvironment.Start(b)
+        SetEnvironment.AddScene(b, s)
+        SetEnvironment.AddEnvironment(b, e)
+        if color is not None:
+            SetEnvironment.AddEnvironmentColor(b, Vec3.CreateVec3(b, *_finite("color", color, 3)))
+        SetEnvironment.AddOff(b, bool(off))
+        if intensity is not None:
+            SetEnvironment.AddIntensity(b, float(intensity))
+        if rotation is not None:
+            SetEnvironment.AddRotation(b, _finite("rotation", [rotation], 1)[0])
+            SetEnvironment.AddSetRotation(b, True)
+        b.Finish(SetEnvironment.End(b))
+        return self._edit(SET_ENVIRONMENT, b)
+
+    # --- results ------------------------------------------------------------------------
+    def get(self, channel: str = "indirect", format: str = "f32", scene: str = "") -> Frame:
+        """The newest frame: irradiance per primitive as (vertices, 3) float32 arrays."""
+        b = flatbuffers.Builder(64)
+        s = b.CreateString(scene)
+        GetIrradiance.Start(b)
+        GetIrradiance.AddScene(b, s)
+        GetIrradiance.AddChannel(b, self._channel(channel))
+        GetIrradiance.AddFormat(b, self._format(format))
+        b.Finish(GetIrradiance.End(b))
+        _, payload = self._request(GET_IRRADIANCE, b, FRAME)
+        return self._frame(payload)
+
+    def frames(self, channel: str = "indirect", format: str = "f32", scene: str = "",
+               timeout: Optional[float] = None) -> Iterator[Frame]:
+        """Subscribes and yields each frame the server pushes (first the newest so far); ends
+        the subscription when the loop stops. A reader that falls more than 16 frames behind
+        loses the oldest (`frames_dropped`); the server drops frames for a slow connection
+        too: a gap in `frame` numbers is how many were skipped. `timeout`: seconds to wait
+        for a frame before TimeoutError (None: wait as long as it takes)."""
+        self._subscribe(scene, channel, format)
+        try:
+            while True:
+                yield self._next_frame(timeout)
+        finally:
+            self._unsubscribe(scene)
+
+    def wait(self, edit: Optional[int] = None, timeout: float = 60.0, scene: str = "") -> Frame:
+        """Waits until the scene has applied `edit` (default: this client's last edit), has
+        no edit pending or rebuilding, and has converged; returns the newest frame then."""
+        edit = self._last_edit if edit is None else edit
+        deadline = time.monotonic() + timeout
+        while True:
+            stats = self.stats(scene)
+            s = stats["scenes"][-1] if "scenes" in stats else stats
+            if (s["last_applied_edit"] >= edit and s["pending_edits"] == 0 and
+                    not s["rebuilding"] and s["converged"]):
+                return self.get(scene=scene)
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"edit {edit} not applied and converged within {timeout} s")
+            time.sleep(0.02)
+
+    def step(self, iterations: int = 1, scene: str = "") -> int:
+        """Runs `iterations` solver iterations now (even when converged); the frame number."""
+        b = flatbuffers.Builder(64)
+        s = b.CreateString(scene)
+        Step.Start(b)
+        Step.AddScene(b, s)
+        Step.AddIterations(b, int(iterations))
+        b.Finish(Step.End(b))
+        _, payload = self._request(STEP, b, OK)
+        return Ok.Ok.GetRootAs(payload).Frame()
+
+    def stats(self, scene: str = "") -> dict:
+        _, payload = self._request(GET_STATS, self._scene_only(GetStats, scene), STATS)
+        return json.loads(_text(Stats.Stats.GetRootAs(payload).Json()))
+
+    def close(self):
+        """Says Bye and disconnects."""
+        if self._closed is None:
+            try:
+                b = flatbuffers.Builder(16)
+                Bye.Start(b)
+                b.Finish(Bye.End(b))
+                self._request(BYE, b, BYE)
+            except (ConnectionError, OSError, TimeoutError, PenumbraError):
+                pass
+        self._shutdown()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # --- helpers ------------------------------------------------------------------------
+    def _shutdown(self):
+        try:
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self._sock.close()
+        self._reader.join(timeout=5)
+
+    @staticmethod
+    def _channel(channel: str) -> int:
+        if channel not in CHANNELS:
+            raise ValueError(f"channel '{channel}': give one of {', '.join(CHANNELS)}")
+        return CHANNELS[channel]
+
+    @staticmethod
+    def _format(format: str) -> int:
+        if format not in FORMATS:
+            raise ValueError(f"format '{format}': give one of {', '.join(FORMATS)}")
+        return FORMATS[format]
+
+    def _subscribe(self, scene: str, channel: str, format: str):
+        b = flatbuffers.Builder(64)
+        s = b.CreateString(scene)
+        Subscribe.Start(b)
+        Subscribe.AddScene(b, s)
+        Subscribe.AddChannel(b, self._channel(channel))
+        Subscribe.AddFormat(b, self._format(format))
+        b.Finish(Subscribe.End(b))
+        with self._lock:
+            self._frames.clear()
+        self._request(SUBSCRIBE, b, OK)
+
+    def _unsubscribe(self, scene: str):
+        if self._closed is None:
+            try:
+                self._request(UNSUBSCRIBE, self._scene_only(Unsubscribe, scene), OK)
+            except (ConnectionError, OSError, PenumbraError):
+                pass
+
+    def _next_frame(self, timeout: Optional[float]) -> Frame:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self._lock:
+            while not self._frames:
+                if self._closed:
+                    raise ConnectionError(self._closed)
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
+                    raise TimeoutError(f"no frame within {timeout} s")
+                self._reply_ready.wait(left)
+            payload = self._frames.popleft()
+        return self._frame(payload)
+
+    @staticmethod
+    def _frame(payload: bytes) -> Frame:
+        f = FbFrame.Frame.GetRootAs(payload)
+        names = {v: k for k, v in CHANNELS.items()}
+        prims = []
+        for i in range(f.PrimitivesLength()):
+            p = f.Primitives(i)
+            if p.F32Length():
+                rgb = np.array(p.F32AsNumpy(), dtype=np.float32)
+            elif p.F16Length():
+                rgb = np.array(p.F16AsNumpy(), dtype=np.uint16).view(np.float16).astype(
+                    np.float32)
+            else:
+                rgb = np.zeros(0, dtype=np.float32)
+            prims.append(Primitive(node=_text(p.Node()), mesh=p.Mesh(), primitive=p.Primitive(),
+                                   rgb=rgb.reshape(-1, 3)))
+        passes = {}
+        for i in range(f.PassesLength()):
+            passes[_text(f.Passes(i).Name())] = f.Passes(i).Ms()
+        return Frame(scene=_text(f.Scene()), frame=f.Frame(), last_edit=f.LastEdit(),
+                     iterations=f.Iterations(), frame_ms=f.FrameMs(),
+                     edit_latency_ms=f.EditLatencyMs(), converged=f.Converged(),
+                     channel=names.get(f.Channel(), str(f.Channel())), note=_text(f.Note()),
+                     passes=passes, primitives=prims)

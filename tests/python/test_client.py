@@ -1,0 +1,176 @@
+"""The Python client (clients/python, installed by run_tests.sh) against a live penumbra-server
+process on a Unix socket and loopback TCP: loads, edits, frames as numpy arrays, errors."""
+import os
+import pathlib
+import shutil
+import subprocess
+import tempfile
+import time
+import unittest
+
+import numpy as np
+
+import penumbra_client
+from penumbra_client import Client, PenumbraError
+
+BUILD = pathlib.Path(os.environ["PENUMBRA_BUILD"])
+SCENES = pathlib.Path(os.environ["PENUMBRA_SCENES"])
+CORNELL = dict(device="cpu", bins=64, element_size=0.06)
+
+
+class Server:
+    """penumbra-server as a process on a Unix socket and an ephemeral TCP port."""
+
+    def __init__(self):
+        self.dir = tempfile.mkdtemp(prefix="penumbra-python-")
+        ready = os.path.join(self.dir, "ready")
+        self.unix = "unix://" + os.path.join(self.dir, "s.sock")
+        self.log = open(os.path.join(self.dir, "server.log"), "w")
+        self.process = subprocess.Popen(
+            [str(BUILD / "penumbra-server"), "--listen", self.unix, "--listen",
+             "tcp://127.0.0.1:0", "--scene-root", str(SCENES), "--device", "cpu",
+             "--ready-file", ready], stderr=self.log)
+        for _ in range(500):
+            if os.path.exists(ready):
+                break
+            time.sleep(0.02)
+        with open(ready) as f:
+            self.tcp = [line.strip() for line in f if line.startswith("tcp://")][0]
+
+    def stop(self):
+        self.process.terminate()
+        code = self.process.wait(timeout=30)
+        self.log.close()
+        shutil.rmtree(self.dir, ignore_errors=True)
+        return code
+
+
+def mean(frame, node):
+    return float(np.mean(np.concatenate([p.rgb for p in frame.primitives if p.node == node])))
+
+
+class ClientAgainstALiveServer(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.server = Server()
+
+    @classmethod
+    def tearDownClass(cls):
+        # A clean exit on SIGTERM with the clients gone.
+        assert cls.server.stop() == 0
+
+    def test_installed_from_the_package(self):
+        self.assertNotIn(str(pathlib.Path(__file__).resolve().parents[2] / "clients"),
+                         penumbra_client.__file__)
+        self.assertTrue(hasattr(penumbra_client.client, "SetTransform"))  # generated code
+
+    def test_load_get_and_edits(self):
+        with Client(self.server.unix, name="python-test") as c:
+            self.assertEqual(c.protocol_version, 1)
+            info = c.load("cornell-box.gltf", **CORNELL)
+            self.assertEqual(info.solver, "antiradiance")
+            self.assertIn("tall_block", info.nodes)
+            self.assertTrue(info.nodes["tall_block"].dynamic)
+            self.assertGreater(info.elements, 0)
+            first = c.wait(0)
+            self.assertTrue(first.converged)
+            self.assertGreater(len(first.primitives), 0)
+            for p in first.primitives:
+                self.assertEqual(p.rgb.ndim, 2)
+                self.assertEqual(p.rgb.shape[1], 3)
+                self.assertEqual(p.rgb.dtype, np.float32)
+                self.assertTrue(np.all(np.isfinite(p.rgb)) and np.all(p.rgb >= 0))
+            floor = first.primitive("floor")
+            self.assertGreater(float(floor.mean()), 0.0)
+            # f16 is the same answer at half precision.
+            half = c.get(format="f16")
+            self.assertEqual(half.frame, first.frame)
+            np.testing.assert_allclose(half.primitive("floor"), floor, rtol=2e-3, atol=1e-3)
+            # The same vertices, arrays of the counts SceneInfo gives.
+            counts = {(n, p["mesh"], p["primitive"]): p["vertices"]
+                      for n, node in info.nodes.items() for p in node.primitives}
+            for p in first.primitives:
+                self.assertEqual(p.rgb.shape[0], counts[(p.node, p.mesh, p.primitive)])
+
+            # Light is linear in the emission: the ceiling light at half its radiance halves
+            # every floor vertex (to the convergence bound).
+            e = info.materials[info.nodes["ceiling_light"].primitives[0]["material"]]["emission"]
+            edit = c.light("ceiling_light", intensity=max(e) / 2, color=[x / max(e) for x in e])
+            dim = c.wait(edit)
+            self.assertGreaterEqual(dim.last_edit, edit)
+            np.testing.assert_allclose(dim.primitive("floor"), 0.5 * floor, rtol=2e-2,
+                                       atol=1e-3 * float(floor.max()))
+
+            # A move: the node's matrix follows, and frames include the edit.
+            before = info.nodes["tall_block"].matrix
+            moved = c.move("tall_block", translate=[0.05, 0.0, -0.03], rotate_y=10)
+            after = c.wait(moved)
+            self.assertGreaterEqual(after.last_edit, moved)
+            m = c.info().nodes["tall_block"].matrix
+            np.testing.assert_allclose(m[:3, 3], before[:3, 3] + [0.05, 0.0, -0.03], atol=1e-5)
+            # A full matrix puts it back.
+            c.wait(c.move("tall_block", matrix=before))
+            np.testing.assert_allclose(c.info().nodes["tall_block"].matrix, before, atol=1e-6)
+
+            edit = c.material("white", albedo=[0.5, 0.5, 0.5])
+            self.assertGreater(edit, moved)
+            self.assertGreaterEqual(c.wait(edit).last_edit, edit)
+            stats = c.stats()
+            self.assertIn("server", stats)
+            self.assertGreaterEqual(stats["scenes"][0]["last_applied_edit"], edit)
+
+    def test_frames_stream_over_tcp(self):
+        with Client(self.server.tcp) as c:
+            c.load("cornell-box.gltf", **CORNELL)
+            editor = Client(self.server.unix)
+            seen = []
+            for f in c.frames(channel="total", timeout=60):
+                seen.append(f)
+                if len(seen) == 1:
+                    edit = editor.light("ceiling_light", intensity=20.0)
+                if len(seen) > 1 and f.last_edit >= edit and f.converged:
+                    break
+            editor.close()
+            self.assertEqual(seen[0].channel, "total")
+            numbers = [f.frame for f in seen]
+            self.assertEqual(numbers, sorted(numbers))
+            self.assertGreater(mean(seen[-1], "floor"), mean(seen[0], "floor"))
+            # The subscription ended with the loop: no more frames queue up.
+            time.sleep(0.3)
+            c.light("ceiling_light", intensity=10.0)
+            time.sleep(0.5)
+            self.assertEqual(len(c._frames), 0)
+
+    def test_errors(self):
+        with Client(self.server.unix) as c:
+            c.load("cornell-box.gltf", **CORNELL)
+            with self.assertRaises(PenumbraError) as e:
+                c.load("no-such.gltf", device="cpu")
+            self.assertEqual(e.exception.name, "NotFound")
+            with self.assertRaises(PenumbraError) as e:
+                c.load("../CMakeLists.txt")
+            self.assertEqual(e.exception.name, "OutsideRoot")
+            with self.assertRaises(PenumbraError) as e:
+                c.load("cornell-box.gltf", device="cpu", no_such_option=3)
+            self.assertEqual(e.exception.name, "InvalidArgument")
+            with self.assertRaises(PenumbraError) as e:
+                c.move("tall_blok", translate=[0, 1, 0])
+            self.assertIn("tall_block", str(e.exception))  # the movable ones are listed
+            with self.assertRaises(PenumbraError) as e:
+                c.move("floor", matrix=np.eye(4))
+            self.assertEqual(e.exception.name, "StaticNode")
+            with self.assertRaises(ValueError):  # on the wire it would mean "unchanged"
+                c.light("ceiling_light", intensity=-3)
+            with self.assertRaises(ValueError):
+                c.move("tall_block", matrix=[float("nan")] * 16)
+            with self.assertRaises(ValueError):
+                c.get(channel="bounce")
+            self.assertEqual(c.info().solver, "antiradiance")  # the connection stays
+        with self.assertRaises(ConnectionError):
+            Client("unix:///nonexistent/penumbra.sock")
+        with self.assertRaises(ValueError):
+            Client("http://localhost:7450")
+
+
+if __name__ == "__main__":
+    unittest.main(verbosity=2)
