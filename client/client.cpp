@@ -68,6 +68,9 @@ SceneInfo ToSceneInfo(const protocol::Message& m) {
     out.reused = s->reused();
     if (s->environment()) out.environment = s->environment()->str();
     out.environmentIntensity = s->environment_intensity();
+    out.divergence = Str(s->divergence());
+    if (s->warnings())
+        for (const auto* w : *s->warnings()) out.warnings.push_back(w->str());
     if (s->nodes())
         for (const auto* n : *s->nodes()) {
             NodeInfo node;

@@ -63,6 +63,9 @@ struct SceneInfo {
     bool reused = false;
     std::string environment;  // the sky's source; empty: none
     float environmentIntensity = 0.0f;
+    std::string divergence;  // why the session stopped iterating; empty: it did not
+    // What the answer leaves out: input the server ignored or approximated, no light.
+    std::vector<std::string> warnings;
     const NodeInfo* Node(const std::string& name) const;
 };
 

@@ -14,6 +14,13 @@ namespace penumbra::cli {
 
 namespace {
 
+// What the scene's answer leaves out (SceneWarnings), on stderr even with -q: a warning is
+// not progress. The JSON output carries the same list.
+void Warn(const Scene& scene, const std::string& path) {
+    for (const std::string& w : SceneWarnings(scene))
+        std::fprintf(stderr, "penumbra: warning: %s: %s\n", path.c_str(), w.c_str());
+}
+
 bool EndsWith(const std::string& s, const std::string& suffix) {
     return s.size() >= suffix.size() &&
            s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
@@ -59,16 +66,7 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     progress.Update("loading " + scenePath, 0.0);
     Scene scene = LoadGltf(scenePath);
     environment.Apply(scene);
-    // Nothing lights the scene: the answer is zero everywhere; say so rather than write
-    // zeros in silence (even with -q: it is a warning, not progress).
-    const bool emits = std::any_of(
-        scene.materials.begin(), scene.materials.end(),
-        [](const auto& m) { return glm::any(glm::greaterThan(m.emission, glm::vec3(0.0f))); });
-    if (!emits && scene.lights.empty() && !scene.environment.Active())
-        std::fprintf(stderr,
-                     "penumbra: warning: %s has no light (no emissive material, punctual light "
-                     "or sky): its irradiance is zero everywhere\n",
-                     scenePath.c_str());
+    Warn(scene, scenePath);
     std::unique_ptr<Solver> solver =
         gather.Create(scene, settings, scenePath, gatherSettings, quiet, progress);
     iterations.Run(*solver, scenePath, progress, quiet);
@@ -151,6 +149,7 @@ int Reference(const std::string& scenePath, const std::string& outPath, Referenc
     progress.Update("loading " + scenePath, 0.0);
     Scene scene = LoadGltf(scenePath);
     environment.Apply(scene);
+    Warn(scene, scenePath);
     settings.progress = [&](double f, double left) {
         progress.Update("path tracing, " + Duration(left) + " left", f);
     };
@@ -223,6 +222,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
     progress.Update("loading " + o.scene, 0.0);
     Scene scene = LoadGltf(o.scene);
     environment.Apply(scene);
+    Warn(scene, o.scene);
     render::RenderSettings rs;
     rs.width = w;
     rs.height = h;

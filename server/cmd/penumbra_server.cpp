@@ -60,6 +60,7 @@ int main(int argc, char** argv) {
     CLI11_PARSE(app, argc, argv);
     if (listen.empty()) listen.push_back("tcp://127.0.0.1:7450");
     serviceLimits.maxUploadBytes = netLimits.maxFrameBytes;
+    netLimits.log = !quiet;
     if (!tokenFile.empty()) {
         std::ifstream in(tokenFile);
         std::getline(in, netLimits.token);

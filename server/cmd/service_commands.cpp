@@ -101,6 +101,8 @@ int ServiceCommands::State::RunLoad(client::Client& c) {
     if (!quiet)
         std::printf("  movable: %s\n  lights: %s\n", dynamic.empty() ? "(none)" : dynamic.c_str(),
                     lights.empty() ? "(none)" : lights.c_str());
+    for (const auto& w : info.warnings)
+        std::fprintf(stderr, "penumbra: warning: %s: %s\n", info.scene.c_str(), w.c_str());
     return kExitOk;
 }
 
@@ -108,6 +110,7 @@ int ServiceCommands::State::RunInfo(client::Client& c) {
     auto i = c.Info(session);
     std::printf("scene %s: solver %s on %s, %u elements, %llu links\n", i.scene.c_str(),
                 i.solver.c_str(), i.device.c_str(), i.elements, (unsigned long long)i.links);
+    for (const auto& w : i.warnings) std::printf("  warning: %s\n", w.c_str());
     for (const auto& n : i.nodes) {
         uint32_t vertices = 0;
         for (const auto& p : n.primitives) vertices += p.vertices;

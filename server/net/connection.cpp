@@ -142,8 +142,14 @@ void Connection::SendError(uint32_t requestId, fb::ErrorCode code, const std::st
                            bool close) {
     flatbuffers::FlatBufferBuilder b;
     b.Finish(fb::CreateErrorDirect(b, code, message.c_str()));
+    server_.Log(Who() + ": " + fb::EnumNameErrorCode(code) + ": " + message +
+                (close ? " (connection closed)" : ""));
     Send(MessageType::kError, requestId, b);
     if (close) CloseAfterWrites();
+}
+
+std::string Connection::Who() const {
+    return "client " + std::to_string(id_) + (client_.empty() ? "" : " '" + client_ + "'");
 }
 
 void Connection::SendOk(uint32_t requestId, uint64_t frame) {

@@ -53,6 +53,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
     void SendAck(uint32_t requestId, uint64_t edit);
     // Closes once the queue is written.
     void CloseAfterWrites();
+    // "client 7 'name'": this connection in the server's log.
+    std::string Who() const;
     // After a read: with part of a frame buffered, the frame must be whole within the
     // frame timeout of its first byte (a new frame, `decoded` one before it, starts the
     // clock again); a client that stalls mid-frame gets Error Stalled and is closed.

@@ -220,12 +220,14 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
             b, l.name.c_str(), scene.nodes[l.node].name.c_str(), type, &color, l.intensity, l.range,
             l.innerCone, l.outerCone, &position, &direction));
     }
+    std::vector<flatbuffers::Offset<flatbuffers::String>> warnings;
+    for (const std::string& w : SceneWarnings(scene)) warnings.push_back(b.CreateString(w));
     b.Finish(fb::CreateSceneInfoDirect(
         b, session.Name().c_str(), stats.solver.c_str(), stats.device.c_str(), &nodes, &materials,
         static_cast<uint32_t>(stats.elements), stats.links, session.BuildSeconds(), reused, &lights,
         scene.environment.Active() ? scene.environment.source.c_str() : nullptr,
-        scene.environment.intensity,
-        stats.divergence.empty() ? nullptr : stats.divergence.c_str()));
+        scene.environment.intensity, stats.divergence.empty() ? nullptr : stats.divergence.c_str(),
+        &warnings));
 }
 
 void BuildFramePayload(flatbuffers::FlatBufferBuilder& b, const service::FrameData& frame,

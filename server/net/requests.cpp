@@ -1,5 +1,7 @@
 // A client's requests handled against the service (protocol/SPEC.md, "Messages"): fields
 // read and checked by messages.h, slow work on the blocking pool.
+#include <cstdio>
+
 #include "net/connection.h"
 
 namespace penumbra::net {
@@ -123,7 +125,16 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
         [this, id](service::LoadResult& r) {
             flatbuffers::FlatBufferBuilder b;
             BuildSceneInfo(b, *r.session, r.reused);
-            Send(MessageType::kSceneInfo, id, b);
+            const auto* info = flatbuffers::GetRoot<fb::SceneInfo>(b.GetBufferPointer());
+            char built[32];
+            std::snprintf(built, sizeof(built), "%.2f", info->build_seconds());
+            server_.Log(Who() + (r.reused ? ": joined " : ": loaded ") + r.session->Name() +
+                        " (solver " + Str(info->solver()) + " on " + Str(info->device()) + ", " +
+                        std::to_string(info->elements()) + " elements, built in " + built + " s)");
+            if (info->warnings() && !r.reused)
+                for (const auto* w : *info->warnings())
+                    server_.Log("warning: " + r.session->Name() + ": " + w->str());
+            Send(MessageType::kSceneInfo, id, b);  // after the log: a client sees both
         });
 }
 

@@ -153,6 +153,10 @@ void Server::Stop() {
     service_.Shutdown();
 }
 
+void Server::Log(const std::string& line) const {
+    if (limits_.log) std::fprintf(stderr, "penumbra-server: %s\n", line.c_str());
+}
+
 nlohmann::json Server::StatsJson() const {
     nlohmann::json j;
     j["clients"] = connections_.size();

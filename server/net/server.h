@@ -26,6 +26,9 @@ struct NetLimits {
     double frameTimeoutSeconds = 60.0;
     // Every Hello must carry this token (empty: none asked for); --token-file.
     std::string token;
+    // One line on stderr for each load, refusal and protocol error (penumbra-server sets it
+    // unless -q; off for servers inside other programs).
+    bool log = false;
 };
 
 // "tcp://HOST:PORT" or "unix:///PATH".
@@ -59,6 +62,8 @@ class Server {
     asio::thread_pool& Blocking() { return blocking_; }
     bool Stopping() const { return stopping_; }
     nlohmann::json StatsJson() const;
+    // "penumbra-server: " + `line` on stderr, unless NetLimits::log is off.
+    void Log(const std::string& line) const;
 
     // Encoded Frame messages (request id 0), shared by all subscribers asking for the same
     // channel and format of the same frame.

@@ -120,6 +120,7 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
     }
     j["primitives"] = std::move(prims);
     j["stats"] = result.stats;
+    j["warnings"] = SceneWarnings(scene);
     if (path == "-") {  // standard output
         std::cout << j.dump(1) << "\n" << std::flush;
         if (!std::cout) throw Error("standard output: write failed");

@@ -30,7 +30,8 @@ struct IrradianceResult {
 IrradianceResult CollectIrradiance(const Scene& scene, Solver& solver,
                                    Channel channel = Channel::kIndirect);
 
-// `{"units", "solver", "channel", "primitives": [...], "stats": {...}}`; each primitive
+// `{"units", "solver", "channel", "primitives": [...], "stats": {...}, "warnings": [...]}`
+// (warnings: SceneWarnings, possibly none); each primitive
 // `{"node", "mesh", "primitive", "irradiance": [[r,g,b], ...]}` and, with standard
 // errors, `"stderr": [[r,g,b], ...]`. `path` "-" writes to standard output.
 void WriteIrradianceJson(const std::string& path, const Scene& scene,

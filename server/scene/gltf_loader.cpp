@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <functional>
@@ -387,6 +388,71 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
     }
 }
 
+// What LoadGltf read but ignored or approximated, one sentence each (Scene::warnings).
+std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene& scene) {
+    std::vector<std::string> out;
+    auto named = [](const std::string& what, size_t index, const std::string& name) {
+        return what + " " + std::to_string(index) + (name.empty() ? "" : " '" + name + "'");
+    };
+    for (size_t i = 0; i < model.materials.size(); ++i) {
+        const auto& m = model.materials[i];
+        const std::string where = named("material", i, m.name);
+        if (m.pbrMetallicRoughness.baseColorTexture.index >= 0) {
+            const glm::vec3 a = scene.materials[i].baseColor;
+            char colour[96];
+            std::snprintf(colour, sizeof(colour), "(%.3g, %.3g, %.3g)", a.x, a.y, a.z);
+            out.push_back(where + ": baseColorTexture averaged to one base colour " + colour +
+                          " (textures are not sampled per surface)");
+        }
+        if (m.emissiveTexture.index >= 0)
+            out.push_back(where +
+                          ": emissiveTexture ignored (emission is emissiveFactor × "
+                          "strength, uniform over the surface)");
+        std::vector<std::string> maps;
+        if (m.normalTexture.index >= 0) maps.push_back("normalTexture");
+        if (m.occlusionTexture.index >= 0) maps.push_back("occlusionTexture");
+        if (m.pbrMetallicRoughness.metallicRoughnessTexture.index >= 0)
+            maps.push_back("metallicRoughnessTexture");
+        if (!maps.empty()) {
+            std::string list;
+            for (const auto& t : maps) list += (list.empty() ? "" : ", ") + t;
+            out.push_back(where + ": " + list +
+                          " ignored (geometric normals and the factors are used)");
+        }
+        if (m.alphaMode == "BLEND" || m.alphaMode == "MASK")
+            out.push_back(where + ": alphaMode " + m.alphaMode + " ignored (surfaces are opaque)");
+    }
+    if (!model.skins.empty())
+        out.push_back(std::to_string(model.skins.size()) +
+                      " skin(s) ignored: skinned meshes are lit in their rest pose");
+    size_t morphed = 0;
+    for (const auto& mesh : model.meshes)
+        for (const auto& prim : mesh.primitives) morphed += prim.targets.empty() ? 0 : 1;
+    if (morphed > 0)
+        out.push_back(std::to_string(morphed) +
+                      " primitive(s) with morph targets: lit in their rest pose (weights ignored)");
+    if (!model.animations.empty())
+        out.push_back(std::to_string(model.animations.size()) +
+                      " animation(s) ignored: nodes keep their rest transforms");
+    for (const auto& ext : model.extensionsUsed)
+        if (ext != "KHR_materials_emissive_strength" && ext != "KHR_lights_punctual")
+            out.push_back("extension '" + ext + "' ignored (not supported)");
+    size_t unnamed = 0;
+    for (const auto& n : model.nodes) unnamed += n.name.empty() && n.mesh >= 0 ? 1 : 0;
+    if (unnamed > 0)
+        out.push_back(std::to_string(unnamed) +
+                      " node(s) with a mesh but no name: called \"node\" and their index");
+    size_t cameras = 0;
+    for (const auto& n : model.nodes)
+        if (n.camera >= 0 && n.camera < static_cast<int>(model.cameras.size()) &&
+            model.cameras[n.camera].type != "perspective")
+            ++cameras;
+    if (cameras > 0)
+        out.push_back(std::to_string(cameras) +
+                      " orthographic camera(s) skipped (`render` uses perspective ones)");
+    return out;
+}
+
 Scene LoadGltf(const std::string& path, const GltfFiles& files) {
     tinygltf::Model model;
     ReadGltfModel(path, &model, files);
@@ -560,6 +626,7 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
     for (int r : roots) visit(r, -1, 0);
 
     if (scene.TriangleCount() == 0) throw Error(path + ": the scene has no triangles to light");
+    scene.warnings = IgnoredInput(model, scene);
     return scene;
 }
 

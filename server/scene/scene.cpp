@@ -79,6 +79,18 @@ size_t Scene::TriangleCount() const {
     return n;
 }
 
+std::vector<std::string> SceneWarnings(const Scene& scene) {
+    std::vector<std::string> out = scene.warnings;
+    const bool emits = std::any_of(
+        scene.materials.begin(), scene.materials.end(),
+        [](const auto& m) { return glm::any(glm::greaterThan(m.emission, glm::vec3(0.0f))); });
+    if (!emits && scene.lights.empty() && !scene.environment.Active())
+        out.push_back(
+            "no light (no emissive material, punctual light or sky): the irradiance is "
+            "zero everywhere");
+    return out;
+}
+
 int FindNode(const Scene& scene, const std::string& name) {
     for (size_t i = 0; i < scene.nodes.size(); ++i)
         if (scene.nodes[i].name == name) return static_cast<int>(i);

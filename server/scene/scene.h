@@ -139,6 +139,9 @@ struct Scene {
     std::vector<Camera> cameras;        // perspective cameras of the file, in node order
     // Light from infinity (not part of glTF: set by `--environment` or the protocol).
     Environment environment;
+    // What the loader read but ignored or approximated (textures averaged, skins in rest pose,
+    // unsupported extensions, ...), one sentence each; SceneWarnings adds the rest.
+    std::vector<std::string> warnings;
 
     glm::vec3 BoundsMin() const;
     glm::vec3 BoundsMax() const;
@@ -146,6 +149,12 @@ struct Scene {
     size_t VertexCount() const;
     size_t TriangleCount() const;
 };
+
+// Everything a user should be told about `scene` before trusting its answer: the loader's
+// warnings, and a scene with no light at all (no emission, punctual light or sky: its
+// irradiance is zero everywhere). Shown by bake and reference (stderr and the JSON's
+// `warnings`) and by the service (SceneInfo `warnings`, the server's log).
+std::vector<std::string> SceneWarnings(const Scene& scene);
 
 // Index of the node called `name`, or -1.
 int FindNode(const Scene& scene, const std::string& name);

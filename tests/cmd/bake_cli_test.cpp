@@ -204,11 +204,15 @@ TEST(BakeCli, AnUnlitSceneGetsAWarning) {
     ProcessResult r = Execute("bake " + (dir / "dark.gltf").string() + " -o " +
                               (dir / "x.json").string() + " -q");
     EXPECT_EQ(r.exitCode, 0) << r.output;
-    EXPECT_NE(r.output.find("warning: " + (dir / "dark.gltf").string() + " has no light"),
+    EXPECT_NE(r.output.find("warning: " + (dir / "dark.gltf").string() + ": no light"),
               std::string::npos)
         << r.output;
+    const nlohmann::json j = nlohmann::json::parse(std::ifstream(dir / "x.json"));
+    ASSERT_EQ(j["warnings"].size(), 1u) << j["warnings"].dump();
+    EXPECT_NE(j["warnings"][0].get<std::string>().find("no light"), std::string::npos);
     ProcessResult lit = Execute("bake " + kCornell + " -o " + (dir / "y.json").string() + " -q");
     EXPECT_EQ(lit.output.find("warning"), std::string::npos) << lit.output;
+    EXPECT_TRUE(nlohmann::json::parse(std::ifstream(dir / "y.json"))["warnings"].empty());
 }
 
 // Usage errors exit 2 with one line (a typo'd command gets the nearest one); --version.

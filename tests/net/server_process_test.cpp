@@ -87,6 +87,22 @@ struct Watcher {
     }
 };
 
+// A .glb of one JSON chunk holding `doc` (its buffers as data URIs stay in the JSON): header
+// (magic, version 2, length), chunk (length, "JSON").
+std::vector<uint8_t> GlbOf(const nlohmann::json& doc) {
+    std::string json = doc.dump();
+    json.resize((json.size() + 3) / 4 * 4, ' ');
+    std::string glb = "glTF";
+    auto word = [&](uint32_t v) {
+        for (int i = 0; i < 4; ++i) glb.push_back(char(v >> (8 * i)));
+    };
+    word(2);
+    word(uint32_t(12 + 8 + json.size()));
+    word(uint32_t(json.size()));
+    glb += "JSON" + json;
+    return std::vector<uint8_t>(glb.begin(), glb.end());
+}
+
 // Loads the Cornell box through `c`, subscribes `watch` and waits for the first converged
 // frame; false if none came.
 bool LoadAndWatch(client::Client& c, Watcher& watch) {
@@ -459,21 +475,8 @@ TEST(ServerProcess, AnUploadCannotReadTheServersFiles) {
     std::ifstream in(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
     nlohmann::json doc = nlohmann::json::parse(in);
     doc["buffers"][0]["uri"] = "../../../../../../etc/hostname";
-    std::string json = doc.dump();
-    json.resize((json.size() + 3) / 4 * 4, ' ');
-    // A .glb of one JSON chunk: header (magic, version 2, length), chunk (length, "JSON").
-    std::vector<uint8_t> glb;
-    auto word = [&](uint32_t v) {
-        for (int i = 0; i < 4; ++i) glb.push_back(uint8_t(v >> (8 * i)));
-    };
-    glb.insert(glb.end(), {'g', 'l', 'T', 'F'});
-    word(2);
-    word(uint32_t(12 + 8 + json.size()));
-    word(uint32_t(json.size()));
-    glb.insert(glb.end(), {'J', 'S', 'O', 'N'});
-    glb.insert(glb.end(), json.begin(), json.end());
     client::LoadOptions o;
-    o.glb = glb;
+    o.glb = GlbOf(doc);
     o.name = "reader.glb";
     o.device = "cpu";
     client::Client c(server.Unix(), "uploader");
@@ -484,6 +487,39 @@ TEST(ServerProcess, AnUploadCannotReadTheServersFiles) {
         << message;
     // The server goes on serving.
     EXPECT_EQ(c.Load(Cornell()).nodes.empty(), false);
+}
+
+// Issue 23, part 3: what the scene's answer leaves out reaches the client (SceneInfo
+// `warnings`, `penumbra info`) and the server's log, which also has a line for each load and
+// each refusal.
+TEST(ServerProcess, SceneInfoCarriesTheScenesWarnings) {
+    ServerProcess server("warnings");
+    std::ifstream in(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
+    nlohmann::json doc = nlohmann::json::parse(in);
+    doc["extensionsUsed"] = {"KHR_materials_clearcoat"};
+    for (auto& m : doc["materials"]) m.erase("emissiveFactor");
+    client::LoadOptions o = Cornell();
+    o.path.clear();
+    o.glb = GlbOf(doc);
+    o.name = "dark.glb";
+    client::Client c(server.Unix(), "warned");
+    const client::SceneInfo info = c.Load(o);
+    std::string all;
+    for (const auto& w : info.warnings) all += w + "\n";
+    EXPECT_NE(all.find("extension 'KHR_materials_clearcoat' ignored"), std::string::npos) << all;
+    EXPECT_NE(all.find("no light"), std::string::npos) << all;
+    EXPECT_EQ(c.Info().warnings.size(), info.warnings.size());
+    EXPECT_TRUE(c.Load(Cornell()).warnings.empty());
+    o.path = "no-such.gltf";
+    o.glb.clear();
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(o); }), int(fb::ErrorCode::NotFound));
+
+    const std::string log = server.Log();
+    EXPECT_NE(log.find("client 1 'warned': loaded dark.glb (solver antiradiance on cpu"),
+              std::string::npos)
+        << log;
+    EXPECT_NE(log.find("warning: dark.glb: no light"), std::string::npos) << log;
+    EXPECT_NE(log.find("client 1 'warned': NotFound: "), std::string::npos) << log;
 }
 
 // Issue 24, part 6: symlinks under --scene-root that lead out of it (a scene, a sky) are

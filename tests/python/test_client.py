@@ -69,6 +69,7 @@ class ClientAgainstALiveServer(unittest.TestCase):
             self.assertEqual(c.protocol_version, 1)
             info = c.load("cornell-box.gltf", **CORNELL)
             self.assertEqual(info.solver, "antiradiance")
+            self.assertEqual(info.warnings, [])  # nothing in the Cornell box is ignored
             self.assertIn("tall_block", info.nodes)
             self.assertTrue(info.nodes["tall_block"].dynamic)
             self.assertGreater(info.elements, 0)

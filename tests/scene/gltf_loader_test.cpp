@@ -198,6 +198,45 @@ TEST(GltfLoader, ExternalFilesStayInsideTheirRoot) {
         << msg;
 }
 
+// What the loader ignores or approximates is said, one warning each (issue 23): averaged
+// and ignored textures, skins, morph targets, animations, unsupported extensions, unnamed
+// nodes; the bundled Cornell box has none, and a scene without light gets SceneWarnings'.
+TEST(GltfLoader, IgnoredInputIsWarnedAbout) {
+    EXPECT_TRUE(SceneWarnings(LoadGltf(kCornell)).empty());
+    const auto dir = testing::TempDir("gltf-warnings");
+    WritePng((dir / "tex.png").string(), 2, 2, std::vector<uint8_t>(12, 200));
+    nlohmann::json doc = Cornell();
+    doc["images"] = {{{"uri", "tex.png"}}};
+    doc["textures"] = {{{"source", 0}}};
+    doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+    doc["materials"][0]["emissiveTexture"] = {{"index", 0}};
+    doc["materials"][1]["normalTexture"] = {{"index", 0}};
+    doc["skins"] = {{{"joints", {0}}}};
+    doc["animations"] = nlohmann::json::array(
+        {{{"channels", nlohmann::json::array()}, {"samplers", nlohmann::json::array()}}});
+    auto& prim = doc["meshes"][0]["primitives"][0];
+    prim["targets"] = {{{"POSITION", prim["attributes"]["POSITION"]}}};
+    doc["extensionsUsed"] = {"KHR_materials_clearcoat"};
+    doc["nodes"][0].erase("name");
+    std::ofstream(dir / "ignored.gltf") << doc.dump();
+    const Scene scene = LoadGltf((dir / "ignored.gltf").string());
+    std::string all;
+    for (const auto& w : SceneWarnings(scene)) all += w + "\n";
+    for (const char* expected :
+         {"baseColorTexture averaged to one base colour", "emissiveTexture ignored",
+          "normalTexture ignored", "1 skin(s) ignored", "1 primitive(s) with morph targets",
+          "1 animation(s) ignored", "extension 'KHR_materials_clearcoat' ignored",
+          "1 node(s) with a mesh but no name"})
+        EXPECT_NE(all.find(expected), std::string::npos) << expected << " in:\n" << all;
+    EXPECT_EQ(all.find("no light"), std::string::npos) << all;
+    EXPECT_EQ(scene.nodes[0].name, "node0");
+
+    Scene dark = LoadGltf(kCornell);
+    for (auto& m : dark.materials) m.emission = glm::vec3(0.0f);
+    ASSERT_EQ(SceneWarnings(dark).size(), 1u);
+    EXPECT_NE(SceneWarnings(dark)[0].find("no light"), std::string::npos);
+}
+
 TEST(GltfLoader, MissingPositionIsRefused) {
     auto doc = Cornell();
     doc["meshes"][0]["primitives"][0]["attributes"].erase("POSITION");

@@ -104,6 +104,7 @@ class SceneInfo:
     environment: str
     environment_intensity: float
     divergence: str
+    warnings: List[str] = field(default_factory=list)  # input ignored or approximated, no light
     nodes: Dict[str, Node] = field(default_factory=dict)
     materials: Dict[str, dict] = field(default_factory=dict)
     lights: Dict[str, dict] = field(default_factory=dict)
@@ -342,7 +343,8 @@ class Client:
                          build_seconds=s.BuildSeconds(), reused=s.Reused(),
                          environment=_text(s.Environment()),
                          environment_intensity=s.EnvironmentIntensity(),
-                         divergence=_text(s.Divergence()))
+                         divergence=_text(s.Divergence()),
+                         warnings=[_text(s.Warnings(i)) for i in range(s.WarningsLength())])
         for i in range(s.NodesLength()):
             n = s.Nodes(i)
             columns = n.MatrixAsNumpy() if n.MatrixLength() == 16 else np.eye(4).ravel()
