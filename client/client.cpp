@@ -79,6 +79,11 @@ SceneInfo ToSceneInfo(const protocol::Message& m) {
             node.emissive = n->emissive();
             if (n->matrix() && n->matrix()->size() == 16)
                 for (int i = 0; i < 16; ++i) node.matrix[i] = n->matrix()->Get(i);
+            if (n->bounds_min() && n->bounds_max()) {
+                const fb::Vec3 *lo = n->bounds_min(), *hi = n->bounds_max();
+                node.boundsMin = std::array<float, 3>{lo->x(), lo->y(), lo->z()};
+                node.boundsMax = std::array<float, 3>{hi->x(), hi->y(), hi->z()};
+            }
             if (n->primitives())
                 for (const auto* p : *n->primitives())
                     node.primitives.push_back(

@@ -37,6 +37,8 @@ struct NodeInfo {
     std::string name;
     bool dynamic = false, emissive = false;
     std::array<float, 16> matrix{};  // local transform, column-major
+    // Motion bounds (world space): moves inside them update links in place; absent: none.
+    std::optional<std::array<float, 3>> boundsMin, boundsMax;
     std::vector<PrimitiveInfo> primitives;
 };
 struct MaterialInfo {
@@ -121,7 +123,7 @@ class Client {
     Client& operator=(const Client&) = delete;
 
     // Every call below blocks until its reply and throws ClientError on an Error reply.
-    // `scene` "" means the server's newest loaded scene.
+    // `scene` "" means the scene this client loaded or joined last, else the server's newest.
     SceneInfo Load(const LoadOptions& options);
     SceneInfo Info(const std::string& scene = "");
     // Edits return their edit id; frames with lastEdit ≥ id include them.

@@ -147,6 +147,15 @@ std::vector<uint8_t> EncodeFrame(MessageType type, uint32_t requestId,
     return out;
 }
 
+const std::vector<uint8_t>& EmptyTable() {
+    static const std::vector<uint8_t> bytes = [] {
+        flatbuffers::FlatBufferBuilder b;
+        b.Finish(flatbuffers::Offset<void>(b.EndTable(b.StartTable())));
+        return std::vector<uint8_t>(b.GetBufferPointer(), b.GetBufferPointer() + b.GetSize());
+    }();
+    return bytes;
+}
+
 Decoder::Decoder(uint32_t maxPayloadBytes)
     : maxPayload_(maxPayloadBytes < kMaxPayloadCeiling ? maxPayloadBytes : kMaxPayloadCeiling) {}
 
@@ -209,6 +218,9 @@ Decoder::Result Decoder::Next(Message& out) {
     const uint8_t* payload = h + kHeaderBytes;
     out.header = header;
     out.payload.assign(payload, payload + header.length);
+    // An empty payload is the table with every field at its default (a client need not
+    // build a FlatBuffer for Bye or GetStats).
+    if (header.length == 0) out.payload = EmptyTable();
     start_ += kHeaderBytes + header.length;
     if (!VerifyPayload(header.type, out.payload.data(), out.payload.size()))
         return Fail(fb::ErrorCode::BadPayload, std::string(MessageName(header.type)) +

@@ -77,6 +77,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
     void OnGetStats(uint32_t id, const protocol::fb::GetStats& g);
     // "" unsubscribes from every scene.
     void Unsubscribe(const std::string& scene);
+    // The session a request's `scene` names; "" is the one this connection loaded or joined
+    // last, or the server's newest when it has not loaded any. Throws ServiceError.
+    std::shared_ptr<service::Session> SessionOf(const flatbuffers::String* scene);
 
     Server& server_;
     asio::generic::stream_protocol::socket socket_;
@@ -92,6 +95,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     uint64_t stallEpoch_ = 0;   // which arming a firing belongs to
     bool stallArmed_ = false;
     std::string client_;
+    std::string lastScene_;  // the scene this connection loaded or joined last
     std::map<std::string, Subscription> subscriptions_;
 };
 

@@ -198,8 +198,11 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
         }
         std::vector<float> matrix(16);
         for (int i = 0; i < 16; ++i) matrix[i] = n.local[i / 4][i % 4];
-        nodes.push_back(
-            fb::CreateNodeInfoDirect(b, n.name.c_str(), n.dynamic, &matrix, &prims, emissive));
+        const fb::Vec3 lo(n.boundsMin.x, n.boundsMin.y, n.boundsMin.z),
+            hi(n.boundsMax.x, n.boundsMax.y, n.boundsMax.z);
+        nodes.push_back(fb::CreateNodeInfoDirect(b, n.name.c_str(), n.dynamic, &matrix, &prims,
+                                                 emissive, n.hasMotionBounds ? &lo : nullptr,
+                                                 n.hasMotionBounds ? &hi : nullptr));
     }
     std::vector<flatbuffers::Offset<fb::MaterialInfo>> materials;
     for (const auto& m : scene.materials) {

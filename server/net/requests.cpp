@@ -20,6 +20,13 @@ void Connection::Dispatch(const protocol::Message& m) {
                   true);
         return;
     }
+    if (id == 0) {  // 0 marks what the server pushes: a reply to it could not be told apart
+        SendError(0, fb::ErrorCode::InvalidArgument,
+                  std::string(protocol::MessageName(m.header.type)) +
+                      " with request id 0: id 0 is reserved for frames the server pushes; "
+                      "number requests from 1");
+        return;
+    }
     try {
         Handle(m);
     } catch (const ServiceError& e) {
@@ -31,7 +38,6 @@ void Connection::Dispatch(const protocol::Message& m) {
 
 void Connection::Handle(const protocol::Message& m) {
     const uint32_t id = m.header.requestId;
-    service::Service& service = server_.GetService();
     switch (m.header.type) {
         case MessageType::kHello:
             return OnHello(id, *m.As<fb::Hello>());
@@ -44,24 +50,24 @@ void Connection::Handle(const protocol::Message& m) {
         case MessageType::kLoadScene:
             return OnLoadScene(id, *m.As<fb::LoadScene>());
         case MessageType::kGetSceneInfo: {
-            auto session = service.Find(Str(m.As<fb::GetSceneInfo>()->scene()));
+            auto session = SessionOf(m.As<fb::GetSceneInfo>()->scene());
             flatbuffers::FlatBufferBuilder b;
             BuildSceneInfo(b, *session, true);
             return Send(MessageType::kSceneInfo, id, b);
         }
         case MessageType::kSetTransform: {
             const auto* t = m.As<fb::SetTransform>();
-            auto session = service.Find(Str(t->scene()));
+            auto session = SessionOf(t->scene());
             return SendAck(id, session->Submit(ReadSetTransform(*t)));
         }
         case MessageType::kSetLight: {
             const auto* l = m.As<fb::SetLight>();
-            auto session = service.Find(Str(l->scene()));
+            auto session = SessionOf(l->scene());
             return SendAck(id, session->Submit(ReadSetLight(*l)));
         }
         case MessageType::kSetMaterial: {
             const auto* s = m.As<fb::SetMaterial>();
-            auto session = service.Find(Str(s->scene()));
+            auto session = SessionOf(s->scene());
             return SendAck(id, session->Submit(ReadSetMaterial(*s)));
         }
         case MessageType::kSetEnvironment:
@@ -69,7 +75,7 @@ void Connection::Handle(const protocol::Message& m) {
         case MessageType::kSubscribe:
             return OnSubscribe(id, *m.As<fb::Subscribe>());
         case MessageType::kUnsubscribe: {
-            auto session = service.Find(Str(m.As<fb::Unsubscribe>()->scene()));
+            auto session = SessionOf(m.As<fb::Unsubscribe>()->scene());
             Unsubscribe(session->Name());
             return SendOk(id);
         }
@@ -125,6 +131,7 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
         [this, id](service::LoadResult& r) {
             flatbuffers::FlatBufferBuilder b;
             BuildSceneInfo(b, *r.session, r.reused);
+            lastScene_ = r.session->Name();
             const auto* info = flatbuffers::GetRoot<fb::SceneInfo>(b.GetBufferPointer());
             char built[32];
             std::snprintf(built, sizeof(built), "%.2f", info->build_seconds());
@@ -138,9 +145,15 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
         });
 }
 
+std::shared_ptr<service::Session> Connection::SessionOf(const flatbuffers::String* scene) {
+    const std::string name = Str(scene);
+    // "": the scene this connection loaded or joined last; the newest for one that did not.
+    return server_.GetService().Find(name.empty() ? lastScene_ : name);
+}
+
 void Connection::OnSetEnvironment(uint32_t id, const fb::SetEnvironment& s) {
     service::Service& service = server_.GetService();
-    auto session = service.Find(Str(s.scene()));
+    auto session = SessionOf(s.scene());
     EnvironmentRequest r = ReadSetEnvironment(s);
     // Reading a sky map takes a while: on the blocking pool.
     Blocking(
@@ -154,7 +167,7 @@ void Connection::OnSetEnvironment(uint32_t id, const fb::SetEnvironment& s) {
 }
 
 void Connection::OnSubscribe(uint32_t id, const fb::Subscribe& s) {
-    auto session = server_.GetService().Find(Str(s.scene()));
+    auto session = SessionOf(s.scene());
     const service::Channel channel = ChannelOf(s.channel());
     Unsubscribe(session->Name());
     std::weak_ptr<Connection> weak = shared_from_this();
@@ -172,7 +185,7 @@ void Connection::OnSubscribe(uint32_t id, const fb::Subscribe& s) {
 }
 
 void Connection::OnGetIrradiance(uint32_t id, const fb::GetIrradiance& g) {
-    auto session = server_.GetService().Find(Str(g.scene()));
+    auto session = SessionOf(g.scene());
     const service::Channel channel = ChannelOf(g.channel());
     const fb::Format format = g.format();
     Blocking(
@@ -185,7 +198,7 @@ void Connection::OnGetIrradiance(uint32_t id, const fb::GetIrradiance& g) {
 }
 
 void Connection::OnStep(uint32_t id, const fb::Step& s) {
-    auto session = server_.GetService().Find(Str(s.scene()));
+    auto session = SessionOf(s.scene());
     const int n = s.iterations();
     Blocking(
         id, [session, n] { return session->Step(n); },

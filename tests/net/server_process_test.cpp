@@ -583,6 +583,58 @@ TEST(ServerProcess, RequestsBeforeHelloAreRefused) {
     EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::HelloRequired);
 }
 
+// Issue 23, part 7: protocol traps a client written from SPEC.md falls into. A request with
+// id 0 (the id of pushed frames) is refused and the connection stays; an empty payload is
+// the table with its defaults; "" names the scene this connection loaded, not the newest.
+TEST(ServerProcess, ProtocolTrapsAreClosed) {
+    ServerProcess server("traps");
+    asio::io_context io;
+    asio::local::stream_protocol::socket raw(io);
+    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
+    protocol::Decoder d;
+    auto exchange = [&](protocol::MessageType type, uint32_t id,
+                        const std::vector<uint8_t>& payload) {
+        std::vector<uint8_t> bytes;
+        protocol::AppendFrame(bytes, type, id, payload);
+        asio::write(raw, asio::buffer(bytes));
+        protocol::Message m;
+        std::vector<uint8_t> buf(1 << 16);
+        while (d.Next(m) == protocol::Decoder::Result::kNeedMore) {
+            const size_t n = raw.read_some(asio::buffer(buf));
+            d.Feed(buf.data(), n);
+        }
+        return m;
+    };
+    flatbuffers::FlatBufferBuilder hello;
+    hello.Finish(fb::CreateHelloDirect(hello, "raw"));
+    protocol::Message m =
+        exchange(protocol::MessageType::kHello, 0,
+                 {hello.GetBufferPointer(), hello.GetBufferPointer() + hello.GetSize()});
+    ASSERT_EQ(m.header.type, protocol::MessageType::kError);
+    EXPECT_EQ(m.header.requestId, 0u);
+    EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::InvalidArgument);
+    EXPECT_NE(m.As<fb::Error>()->message()->str().find("id 0 is reserved"), std::string::npos);
+    m = exchange(protocol::MessageType::kHello, 1,
+                 {hello.GetBufferPointer(), hello.GetBufferPointer() + hello.GetSize()});
+    EXPECT_EQ(m.header.type, protocol::MessageType::kWelcome);
+    m = exchange(protocol::MessageType::kGetStats, 2, {});  // empty: every scene
+    ASSERT_EQ(m.header.type, protocol::MessageType::kStats);
+    EXPECT_EQ(m.header.requestId, 2u);
+    EXPECT_TRUE(nlohmann::json::parse(m.As<fb::Stats>()->json()->str()).contains("server"));
+
+    client::Client a(server.Unix(), "a"), b(server.Unix(), "b"), watcher(server.Unix(), "w");
+    a.Load(Cornell());
+    client::LoadOptions blocker = Cornell();
+    blocker.path = "blocker.gltf";
+    b.Load(blocker);                                // the newest now
+    EXPECT_EQ(a.Info().scene, "cornell-box.gltf");  // a's own scene, not the newest
+    EXPECT_EQ(b.Info().scene, "blocker.gltf");
+    EXPECT_EQ(watcher.Info().scene, "blocker.gltf");  // loaded nothing: the newest
+    EXPECT_NO_THROW(a.SetTransform("tall_block", a.Info().Node("tall_block")->matrix));
+    EXPECT_TRUE(a.Info().Node("tall_block")->boundsMin.has_value());  // motion bounds given
+    EXPECT_FALSE(a.Info().Node("floor")->boundsMin.has_value());
+}
+
 TEST(ServerProcess, BadRequestsGetClearErrorsAndTheConnectionStays) {
     ServerProcess server("bad-requests");
     client::Client c(server.Tcp());

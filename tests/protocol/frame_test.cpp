@@ -263,10 +263,27 @@ TEST(Decoder, GarbagePayloadFailsVerification) {
     EXPECT_NE(d.error().find("Hello"), std::string::npos) << d.error();
 }
 
-TEST(Decoder, EmptyPayloadIsNotAFlatBuffer) {
+// An empty payload is the table with every field at its default (SPEC.md, Framing): Bye,
+// GetStats of every scene, a Step of 1 on the default scene.
+TEST(Decoder, EmptyPayloadIsTheTableWithItsDefaults) {
+    for (MessageType t : {MessageType::kBye, MessageType::kGetStats, MessageType::kStep}) {
+        std::vector<uint8_t> f;
+        AppendFrame(f, t, 7, {});
+        Decoder d;
+        Message m;
+        d.Feed(f.data(), f.size());
+        ASSERT_EQ(d.Next(m), Result::kMessage) << MessageName(t) << ": " << d.error();
+        EXPECT_EQ(m.header.requestId, 7u);
+        EXPECT_TRUE(VerifyPayload(t, m.payload.data(), m.payload.size()));
+    }
+    std::vector<uint8_t> f;
+    AppendFrame(f, MessageType::kStep, 1, {});
     Decoder d;
-    EXPECT_EQ(DecodeRaw(RawHeader(4, 0), d), Result::kError);
-    EXPECT_EQ(d.errorCode(), fb::ErrorCode::BadPayload);
+    Message m;
+    d.Feed(f.data(), f.size());
+    ASSERT_EQ(d.Next(m), Result::kMessage);
+    EXPECT_EQ(m.As<fb::Step>()->iterations(), 1);
+    EXPECT_EQ(m.As<fb::Step>()->scene(), nullptr);
 }
 
 TEST(Decoder, PayloadOfAnotherTypeThatDoesNotVerify) {

@@ -72,6 +72,9 @@ class ClientAgainstALiveServer(unittest.TestCase):
             self.assertEqual(info.warnings, [])  # nothing in the Cornell box is ignored
             self.assertIn("tall_block", info.nodes)
             self.assertTrue(info.nodes["tall_block"].dynamic)
+            lo, hi = info.nodes["tall_block"].bounds  # extras.penumbra.bounds of the file
+            self.assertLess(lo[0], hi[0])
+            self.assertIsNone(info.nodes["floor"].bounds)
             self.assertGreater(info.elements, 0)
             first = c.wait(0)
             self.assertTrue(first.converged)

@@ -90,6 +90,7 @@ class Node:
     emissive: bool
     matrix: np.ndarray  # 4 × 4 local transform (matrix[:, 3] is the translation)
     primitives: List[dict]
+    bounds: Optional[tuple] = None  # (min, max) motion bounds, world space; None: not given
 
 
 @dataclass
@@ -139,7 +140,8 @@ class Client:
 
     `url`: "tcp://HOST:PORT" or "unix:///PATH" (default: $PENUMBRA_CONNECT, else
     tcp://127.0.0.1:7450); `token`: the server's --token-file token when it asks for one.
-    `scene` arguments default to "" (the server's newest scene, SPEC.md).
+    `scene` arguments default to "": the scene this client loaded or joined last, else the
+    server's newest (SPEC.md, Session).
     """
 
     def __init__(self, url: Optional[str] = None, name: str = "penumbra-python",
@@ -355,7 +357,8 @@ class Client:
                               "vertices": p.Vertices(), "material": _text(p.Material())})
             info.nodes[_text(n.Name())] = Node(
                 name=_text(n.Name()), dynamic=n.Dynamic(), emissive=n.Emissive(),
-                matrix=np.asarray(columns, dtype=np.float64).reshape(4, 4).T, primitives=prims)
+                matrix=np.asarray(columns, dtype=np.float64).reshape(4, 4).T, primitives=prims,
+                bounds=(_vec(n.BoundsMin()), _vec(n.BoundsMax())) if n.BoundsMin() else None)
         for i in range(s.MaterialsLength()):
             m = s.Materials(i)
             info.materials[_text(m.Name())] = {
