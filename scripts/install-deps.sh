@@ -11,7 +11,7 @@ packages=(
     libflatbuffers-dev flatbuffers-compiler libasio-dev libopenexr-dev
     clang-format
     clang libclang-rt-14-dev
-    python3 python3-venv python3-setuptools python3-flatbuffers python3-numpy
+    python3 python3-venv python3-setuptools python3-flatbuffers python3-numpy python3-jsonschema
 )
 
 missing=()

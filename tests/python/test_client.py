@@ -1,5 +1,6 @@
 """The Python client (clients/python, installed by run_tests.sh) against a live penumbra-server
 process on a Unix socket and loopback TCP: loads, edits, frames as numpy arrays, errors."""
+import json
 import os
 import pathlib
 import shutil
@@ -8,6 +9,7 @@ import tempfile
 import time
 import unittest
 
+import jsonschema
 import numpy as np
 
 import penumbra_client
@@ -16,6 +18,7 @@ from penumbra_client import Client, PenumbraError
 BUILD = pathlib.Path(os.environ["PENUMBRA_BUILD"])
 SCENES = pathlib.Path(os.environ["PENUMBRA_SCENES"])
 CORNELL = dict(device="cpu", bins=64, element_size=0.06)
+SCHEMA = json.loads((SCENES.parent / "protocol" / "stats.schema.json").read_text())
 
 
 class Server:
@@ -122,6 +125,13 @@ class ClientAgainstALiveServer(unittest.TestCase):
             stats = c.stats()
             self.assertIn("server", stats)
             self.assertGreaterEqual(stats["scenes"][0]["last_applied_edit"], edit)
+            # Both forms of the Stats JSON follow protocol/stats.schema.json.
+            jsonschema.validate(stats, SCHEMA)
+            jsonschema.validate(c.stats(info.scene), SCHEMA)
+            broken = c.stats(info.scene)
+            del broken["solver"]["elements"]
+            with self.assertRaises(jsonschema.ValidationError):
+                jsonschema.validate(broken, SCHEMA)
 
     def test_frames_stream_over_tcp(self):
         with Client(self.server.tcp) as c:
