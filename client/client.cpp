@@ -136,6 +136,7 @@ struct Client::Impl {
     bool open = true;
     std::string lostReason = "connection closed";
     FrameCallback callback;
+    std::map<uint32_t, ProgressCallback> progressCallbacks;  // by request id
     uint16_t version = 0;
 
     void Connect(const std::string& url) {
@@ -190,6 +191,17 @@ struct Client::Impl {
                     if (cb) cb(ToFrame(m));
                     continue;
                 }
+                if (m.header.type == MessageType::kProgress) {
+                    ProgressCallback cb;
+                    {
+                        std::lock_guard lock(mutex);
+                        auto p = progressCallbacks.find(m.header.requestId);
+                        if (p != progressCallbacks.end()) cb = p->second;
+                    }
+                    const auto* pr = m.As<fb::Progress>();
+                    if (cb) cb(Str(pr->stage()), pr->fraction(), pr->seconds_left());
+                    continue;
+                }
                 std::lock_guard lock(mutex);
                 auto it = waiting.find(m.header.requestId);
                 if (it != waiting.end()) {
@@ -213,12 +225,20 @@ struct Client::Impl {
     }
 
     // Sends one request and waits for its reply; Error replies throw.
-    protocol::Message Call(MessageType type, flatbuffers::FlatBufferBuilder& b,
-                           MessageType expect) {
+    // With `progress`, the Progress messages sent under the request's id go to it (on the
+    // reader thread) until the reply comes.
+    protocol::Message Call(MessageType type, flatbuffers::FlatBufferBuilder& b, MessageType expect,
+                           const ProgressCallback* progress = nullptr) {
         std::unique_lock lock(mutex);
         if (!open) throw ClientError(0, lostReason);
         uint32_t id = nextId++;
         waiting[id];
+        if (progress) progressCallbacks[id] = *progress;
+        struct Forget {
+            Impl* impl;
+            uint32_t id;
+            ~Forget() { impl->progressCallbacks.erase(id); }  // under the lock
+        } forget{this, id};
         auto bytes = protocol::EncodeFrame(type, id, b);
         std::error_code ec;
         asio::write(socket, asio::buffer(bytes), ec);
@@ -314,8 +334,9 @@ SceneInfo Client::Load(const LoadOptions& o) {
         o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload, nullptr, 1.0f,
         o.convergedChange, o.environment.empty() ? nullptr : o.environment.c_str(),
         sky ? &*sky : nullptr, o.environmentIntensity, o.environmentRotation, o.emitterRays,
-        o.gatherRays, options.empty() ? nullptr : &options));
-    return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo));
+        o.gatherRays, options.empty() ? nullptr : &options, bool(o.progress)));
+    return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo,
+                                   o.progress ? &o.progress : nullptr));
 }
 
 SceneInfo Client::Info(const std::string& scene) {

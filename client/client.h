@@ -88,6 +88,11 @@ struct Frame {
     size_t wireBytes = 0;  // size of the message as received
 };
 
+// How a LoadScene's build goes: its stage, the fraction of it done, the seconds it has left
+// (< 0: not known yet). Called on the client's reader thread.
+using ProgressCallback =
+    std::function<void(const std::string& stage, double fraction, double secondsLeft)>;
+
 struct LoadOptions {
     std::string path;          // under the server's scene root
     std::vector<uint8_t> glb;  // or an uploaded binary glTF
@@ -109,6 +114,8 @@ struct LoadOptions {
     std::optional<std::array<float, 3>> environmentColor;
     float environmentIntensity = 1.0f;
     float environmentRotation = 0.0f;  // radians about +Y
+    // Set: the server sends how the build goes (Progress messages) and this gets them.
+    ProgressCallback progress;
 };
 
 class Client {

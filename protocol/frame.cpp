@@ -66,6 +66,8 @@ const char* MessageName(MessageType type) {
             return "Frame";
         case MessageType::kStep:
             return "Step";
+        case MessageType::kProgress:
+            return "Progress";
         case MessageType::kGetStats:
             return "GetStats";
         case MessageType::kStats:
@@ -118,6 +120,8 @@ bool VerifyPayload(MessageType type, const uint8_t* data, size_t size) {
             return Verify<fb::Frame>(data, size);
         case MessageType::kStep:
             return Verify<fb::Step>(data, size);
+        case MessageType::kProgress:
+            return Verify<fb::Progress>(data, size);
         case MessageType::kGetStats:
             return Verify<fb::GetStats>(data, size);
         case MessageType::kStats:

@@ -47,6 +47,7 @@ enum class MessageType : uint16_t {
     kGetIrradiance = 32,
     kFrame = 33,
     kStep = 34,
+    kProgress = 35,
     kGetStats = 40,
     kStats = 41,
 };

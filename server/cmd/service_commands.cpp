@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "base/check.h"
+#include "base/progress.h"
 #include "cmd/service_state.h"
 #include "output/irradiance_writer.h"
 #include "scene/gltf_loader.h"
@@ -84,7 +85,16 @@ int ServiceCommands::State::RunLoad(client::Client& c) {
     } else {
         o.path = loadPath;
     }
+    // The server's build, drawn as it goes (a terminal only, as bake's).
+    Progress progress(!quiet && StderrIsTerminal());
+    if (!quiet && StderrIsTerminal())
+        o.progress = [&progress](const std::string& stage, double fraction, double left) {
+            char text[64] = "";
+            if (left >= 0.0) std::snprintf(text, sizeof(text), ", %.0f s left", left);
+            progress.Update("server: " + stage + text, fraction);
+        };
     auto info = c.Load(o);
+    progress.Done();
     std::string dynamic, lights;
     for (const auto& l : info.lights)
         lights += (lights.empty() ? "" : ", ") + l.name + " (" + l.type + ")";

@@ -77,6 +77,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
     void OnGetStats(uint32_t id, const protocol::fb::GetStats& g);
     // "" unsubscribes from every scene.
     void Unsubscribe(const std::string& scene);
+    // LoadScene's progress callback when the client asked for Progress messages.
+    ProgressFn ProgressSender(uint32_t id);
     // The session a request's `scene` names; "" is the one this connection loaded or joined
     // last, or the server's newest when it has not loaded any. Throws ServiceError.
     std::shared_ptr<service::Session> SessionOf(const flatbuffers::String* scene);

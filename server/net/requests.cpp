@@ -1,5 +1,6 @@
 // A client's requests handled against the service (protocol/SPEC.md, "Messages"): fields
 // read and checked by messages.h, slow work on the blocking pool.
+#include <chrono>
 #include <cstdio>
 
 #include "net/connection.h"
@@ -126,6 +127,7 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
     service::Service& service = server_.GetService();
     // Checked whole here, so a bad request is refused before anything loads.
     service::LoadRequest req = ReadLoadScene(l, service);
+    if (l.progress()) req.progress = ProgressSender(id);
     Blocking(
         id, [&service, req] { return service.Load(req); },
         [this, id](service::LoadResult& r) {
@@ -143,6 +145,36 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
                     server_.Log("warning: " + r.session->Name() + ": " + w->str());
             Send(MessageType::kSceneInfo, id, b);  // after the log: a client sees both
         });
+}
+
+ProgressFn Connection::ProgressSender(uint32_t id) {
+    // Called on the loading thread: at most five messages a second (and every change of
+    // stage), each posted to the I/O thread; the time left is this stage's, from its pace.
+    struct State {
+        std::string stage;
+        std::chrono::steady_clock::time_point stageStart, lastSent;
+    };
+    auto state = std::make_shared<State>();
+    std::weak_ptr<Connection> weak = shared_from_this();
+    Server* server = &server_;
+    return [weak, server, id, state](const std::string& stage, double fraction) {
+        const auto now = std::chrono::steady_clock::now();
+        const bool newStage = stage != state->stage;
+        if (newStage) state->stage = stage, state->stageStart = now;
+        if (!newStage && fraction < 1.0 && now - state->lastSent < std::chrono::milliseconds(200))
+            return;
+        state->lastSent = now;
+        const double spent = std::chrono::duration<double>(now - state->stageStart).count();
+        const double left =
+            fraction > 0.02 && spent > 0.1 ? spent * (1.0 - fraction) / fraction : -1.0;
+        asio::post(server->Io(), [weak, id, stage, fraction, left] {
+            auto c = weak.lock();
+            if (!c) return;
+            flatbuffers::FlatBufferBuilder b;
+            b.Finish(fb::CreateProgressDirect(b, stage.c_str(), fraction, left));
+            c->Send(MessageType::kProgress, id, b);
+        });
+    };
 }
 
 std::shared_ptr<service::Session> Connection::SessionOf(const flatbuffers::String* scene) {

@@ -158,10 +158,19 @@ LoadResult Service::Load(const LoadRequest& request) {
     std::shared_ptr<Session> session;
     try {
         // A shutdown stops the build at its next progress report instead of waiting for it.
-        auto cancel = [this](const std::string&, double) {
+        // The session keeps its callback for work it does later (its first frame's gather):
+        // the request's own reporting ends when Load does.
+        auto loading = std::make_shared<std::atomic<bool>>(true);
+        auto cancel = [this, loading, report = request.progress](const std::string& stage,
+                                                                 double fraction) {
             if (stopping_.load(std::memory_order_relaxed))
                 throw ServiceError(ErrorKind::kShuttingDown, "the server is shutting down");
+            if (report && loading->load()) report(stage, fraction);
         };
+        struct EndReports {
+            std::atomic<bool>& loading;
+            ~EndReports() { loading = false; }
+        } endReports{*loading};
         session = std::make_shared<Session>(name, std::move(scene), request.settings, cancel);
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kInvalidArgument, name + ": " + e.what());

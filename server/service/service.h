@@ -33,6 +33,8 @@ struct LoadRequest {
     glm::vec3 environmentColor{0.0f};
     float environmentIntensity = 1.0f;
     float environmentRotation = 0.0f;  // radians
+    // Told how the build goes (stage, fraction of it), from the loading thread; may be empty.
+    ProgressFn progress;
 };
 
 struct LoadResult {

@@ -17,6 +17,7 @@
 #include <glm/glm.hpp>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -633,6 +634,45 @@ TEST(ServerProcess, ProtocolTrapsAreClosed) {
     EXPECT_NO_THROW(a.SetTransform("tall_block", a.Info().Node("tall_block")->matrix));
     EXPECT_TRUE(a.Info().Node("tall_block")->boundsMin.has_value());  // motion bounds given
     EXPECT_FALSE(a.Info().Node("floor")->boundsMin.has_value());
+}
+
+// Issue 23, part 6: a remote load says how it goes when asked (LoadScene `progress`):
+// Progress messages under the request's id, fractions within [0, 1], before the reply; a
+// load that does not ask gets none.
+TEST(ServerProcess, ARemoteLoadReportsItsProgress) {
+    ServerProcess server("progress");
+    client::Client c(server.Unix(), "progress");
+    struct Report {
+        std::string stage;
+        double fraction, left;
+    };
+    std::mutex m;
+    std::vector<Report> reports;
+    client::LoadOptions o = Cornell();
+    o.elementSize = 0.03f;  // a build of a second or so
+    o.progress = [&](const std::string& stage, double fraction, double left) {
+        std::lock_guard lock(m);
+        reports.push_back({stage, fraction, left});
+    };
+    const client::SceneInfo info = c.Load(o);
+    std::lock_guard lock(m);
+    ASSERT_FALSE(reports.empty()) << "no Progress message during a " << info.buildSeconds
+                                  << " s build";
+    std::set<std::string> stages;
+    for (const Report& r : reports) {
+        EXPECT_GE(r.fraction, 0.0) << r.stage;
+        EXPECT_LE(r.fraction, 1.0) << r.stage;
+        stages.insert(r.stage);
+    }
+    std::string names;
+    for (const auto& st : stages) names += st + "; ";
+    std::printf("%zu progress reports over %zu stages (%s) in a %.2f s build\n", reports.size(),
+                stages.size(), names.c_str(), info.buildSeconds);
+    const size_t before = reports.size();
+    client::LoadOptions quiet = Cornell();
+    quiet.reload = true;
+    c.Load(quiet);
+    EXPECT_EQ(reports.size(), before);
 }
 
 TEST(ServerProcess, BadRequestsGetClearErrorsAndTheConnectionStays) {

@@ -82,6 +82,9 @@ std::vector<uint8_t> Payload(MessageType type) {
         case MessageType::kStep:
             b.Finish(fb::CreateStepDirect(b, "s", 4));
             break;
+        case MessageType::kProgress:
+            b.Finish(fb::CreateProgressDirect(b, "links", 0.5, 2.0));
+            break;
         case MessageType::kGetStats:
             b.Finish(fb::CreateGetStatsDirect(b, "s"));
             break;
@@ -93,26 +96,13 @@ std::vector<uint8_t> Payload(MessageType type) {
 }
 
 const MessageType kAllTypes[] = {
-    MessageType::kHello,
-    MessageType::kWelcome,
-    MessageType::kError,
-    MessageType::kBye,
-    MessageType::kOk,
-    MessageType::kLoadScene,
-    MessageType::kGetSceneInfo,
-    MessageType::kSceneInfo,
-    MessageType::kSetTransform,
-    MessageType::kSetLight,
-    MessageType::kSetMaterial,
-    MessageType::kEditAck,
-    MessageType::kSubscribe,
-    MessageType::kUnsubscribe,
-    MessageType::kGetIrradiance,
-    MessageType::kFrame,
-    MessageType::kStep,
-    MessageType::kGetStats,
-    MessageType::kStats,
-    MessageType::kSetEnvironment,
+    MessageType::kHello,        MessageType::kWelcome,     MessageType::kError,
+    MessageType::kBye,          MessageType::kOk,          MessageType::kLoadScene,
+    MessageType::kGetSceneInfo, MessageType::kSceneInfo,   MessageType::kSetTransform,
+    MessageType::kSetLight,     MessageType::kSetMaterial, MessageType::kEditAck,
+    MessageType::kSubscribe,    MessageType::kUnsubscribe, MessageType::kGetIrradiance,
+    MessageType::kFrame,        MessageType::kStep,        MessageType::kProgress,
+    MessageType::kGetStats,     MessageType::kStats,       MessageType::kSetEnvironment,
 };
 
 TEST(Frame, EveryMessageRoundTripsByteByByte) {

@@ -70,7 +70,11 @@ class ClientAgainstALiveServer(unittest.TestCase):
     def test_load_get_and_edits(self):
         with Client(self.server.unix, name="python-test") as c:
             self.assertEqual(c.protocol_version, 1)
-            info = c.load("cornell-box.gltf", **CORNELL)
+            reports = []
+            info = c.load("cornell-box.gltf", progress=lambda *r: reports.append(r), reload=True,
+                          **CORNELL)
+            self.assertTrue(reports)  # (stage, fraction, seconds left) as the server builds
+            self.assertTrue(all(0.0 <= f <= 1.0 for _, f, _ in reports))
             self.assertEqual(info.solver, "antiradiance")
             self.assertEqual(info.warnings, [])  # nothing in the Cornell box is ignored
             self.assertIn("tall_block", info.nodes)

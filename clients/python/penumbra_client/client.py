@@ -20,6 +20,7 @@ import numpy as np
 
 from penumbra_client._fb import (Bye, Channel, EditAck, Error, ErrorCode, Format, Frame as FbFrame,
                                  GetIrradiance, GetSceneInfo, GetStats, Hello, LoadScene, Ok,
+                                 Progress,
                                  SceneInfo as FbSceneInfo, SetEnvironment, SetLight, SetMaterial,
                                  SetTransform, SolverOption, Stats, Step, Subscribe, Unsubscribe,
                                  Vec3, Welcome)
@@ -33,7 +34,7 @@ PROTOCOL_VERSION = 1
 HELLO, WELCOME, ERROR, BYE, OK = 1, 2, 3, 4, 5
 LOAD_SCENE, GET_SCENE_INFO, SCENE_INFO = 10, 11, 12
 SET_TRANSFORM, SET_LIGHT, SET_MATERIAL, EDIT_ACK, SET_ENVIRONMENT = 20, 21, 22, 23, 24
-SUBSCRIBE, UNSUBSCRIBE, GET_IRRADIANCE, FRAME, STEP = 30, 31, 32, 33, 34
+SUBSCRIBE, UNSUBSCRIBE, GET_IRRADIANCE, FRAME, STEP, PROGRESS = 30, 31, 32, 33, 34, 35
 GET_STATS, STATS = 40, 41
 
 CHANNELS = {"indirect": Channel.Channel.Indirect, "direct": Channel.Channel.Direct,
@@ -169,6 +170,7 @@ class Client:
         self._send_lock = threading.Lock()
         self._next_id = 1
         self._replies: Dict[int, list] = {}
+        self._progress: Dict[int, object] = {}  # request id → LoadScene's progress callback
         self._reply_ready = threading.Condition(self._lock)
         self._frames: collections.deque = collections.deque(maxlen=FRAME_QUEUE)
         self.frames_dropped = 0
@@ -220,6 +222,11 @@ class Client:
                         if len(self._frames) == self._frames.maxlen:
                             self.frames_dropped += 1
                         self._frames.append(payload)
+                    elif kind == PROGRESS:
+                        report = self._progress.get(rid)
+                        if report is not None:
+                            p = Progress.Progress.GetRootAs(payload)
+                            report(_text(p.Stage()), p.Fraction(), p.SecondsLeft())
                     elif rid == 0 and kind == ERROR:  # the server is closing this connection
                         e = Error.Error.GetRootAs(payload)
                         reason = str(PenumbraError(e.Code(), _text(e.Message())))
@@ -239,12 +246,21 @@ class Client:
             self._sock.sendall(HEADER.pack(MAGIC, FRAMING_VERSION, 0, kind, len(payload), rid) +
                                payload)
 
-    def _request(self, kind: int, builder, expect: int):
+    def _request(self, kind: int, builder, expect: int, progress=None):
         with self._lock:
             if self._closed:
                 raise ConnectionError(self._closed)
             rid = self._next_id
             self._next_id = self._next_id % 0xFFFFFFFF + 1  # 0 is the id of pushed frames
+            if progress is not None:
+                self._progress[rid] = progress
+        try:
+            return self._await(kind, builder, expect, rid)
+        finally:
+            with self._lock:
+                self._progress.pop(rid, None)
+
+    def _await(self, kind: int, builder, expect: int, rid: int):
         self._send(kind, builder, rid)
         deadline = time.monotonic() + self.timeout
         with self._lock:
@@ -285,10 +301,13 @@ class Client:
              converged_change: float = 1e-3, environment: str = "",
              environment_color: Optional[Sequence[float]] = None,
              environment_intensity: float = 1.0, environment_rotation: float = 0.0,
-             emitter_rays: int = 256, gather_rays: int = 256, **solver_options) -> SceneInfo:
+             emitter_rays: int = 256, gather_rays: int = 256, progress=None,
+             **solver_options) -> SceneInfo:
         """Loads a scene (a path under the server's --scene-root, or `glb` bytes), or joins
         the session that has it. Other keywords are the solver's own options
         (`penumbra --help`), `_` for `-`: `load("office.gltf", bins=64, link_oracle="paper")`.
+        `progress(stage, fraction, seconds_left)` is called (on the reader thread) as the
+        server builds; `seconds_left` < 0 while not known.
         """
         if (path is None) == (glb is None):
             raise ValueError("give a path or glb bytes")
@@ -328,8 +347,9 @@ class Client:
         LoadScene.AddEmitterRays(b, int(emitter_rays))
         LoadScene.AddGatherRays(b, int(gather_rays))
         LoadScene.AddOptions(b, opts)
+        LoadScene.AddProgress(b, progress is not None)
         b.Finish(LoadScene.End(b))
-        _, payload = self._request(LOAD_SCENE, b, SCENE_INFO)
+        _, payload = self._request(LOAD_SCENE, b, SCENE_INFO, progress)
         return self._scene_info(payload)
 
     def info(self, scene: str = "") -> SceneInfo:
