@@ -421,6 +421,9 @@ void Session::Run() {
             framesSinceEdit_ = 0;
             rebuild_.reset();
         }
+        // A lost device (an edit's update or a rebuild met it): the CPU back end from here,
+        // before any edit reaches the lost solver.
+        if (!deviceLost_.empty()) FallBackToCpu(lock, note);
 
         // Pending edits apply together, atomically, between two iterations (here, or inside
         // ProduceFrame); with a move among them, at this frame boundary, by rebuilding the
@@ -474,9 +477,6 @@ void Session::Run() {
                 r->done = true;
             }
         }
-
-        // A lost device (an edit's update or a rebuild met it): the CPU back end from here.
-        if (!deviceLost_.empty()) FallBackToCpu(lock, note);
 
         // A device failure stops this session's frames, not the server: it is reported in
         // stats and to the step that hit it, and the next edit tries again. A lost device is
