@@ -13,7 +13,9 @@
 # With --quick (what `make check`, and so CI, runs: the whole CI run must stay under 30 min on
 # two cores) also the eleven tests that take 35 s or more sanitized (measured: 39–138 s each,
 # ~750 s of the suite's 1,240 s of CPU); each runs its code paths again at smaller sizes in
-# other tests, and all of them run in the full `make check-asan`.
+# other tests, and all of them run in the full `make check-asan`. Also the README's commands
+# (Docs.ReadmeCommandsRunAsShown: 18 bakes, renders and references, half a minute
+# unsanitized; the same commands' code runs sanitized in the CLI tests).
 #   JOBS  build and test jobs (default: the cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,6 +29,7 @@ if [ "${1:-}" = "--quick" ]; then
     excluded="$excluded|FinalGather\.(Glossy)?EditsMatchAFreshGather|Accuracy\.(MazeUnderASky|MazeCoarse|GlossyBoxCoarse)"
     excluded="$excluded|Stability\.AdaptiveSchemeReachesTheSymmetricFixedPoint"
     excluded="$excluded|DirectLight\.BlockerCastsAShadowFromEveryLightType|BakeCli\.DivergedSolutionExitsSixAndWritesNothing"
+    excluded="$excluded|Docs\.ReadmeCommandsRunAsShown"
 fi
 excluded="$excluded)\$"
 cmake --build "$sanitize_build" -j "$jobs"
