@@ -60,7 +60,7 @@ bench-soak: build
 accuracy: build
 	$(BUILD)/bench/penumbra-bench-accuracy --out bench/results
 
-# The README's pictures: the Cornell box and the office lit by the solver alone and with the
+# The pictures of docs/BAKING.md: the Cornell box and the office lit by the solver alone and with the
 # gather stage (bake's defaults, shaded per input vertex), the path-traced reference, and
 # each answer's error against it as a heat map.
 OFFICE_CAMERA = 0.6,2.2,0.6,8,0.6,6,75

@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# Every `penumbra` command the README shows runs as shown (ctest Docs.ReadmeCommandsRunAsShown):
+# Every `penumbra` command the user docs show runs as shown (ctest Docs.ReadmeCommandsRunAsShown):
 # the indented command lines that start with `build/penumbra` or `penumbra` are taken from
-# README.md in order and run in a scratch folder that has the README's `scenes/` and `build/`,
-# against a penumbra-server started here (the README's server line, on a free port: the
-# address in the commands is replaced by the one it got). Placeholders are filled: SCENE.gltf
-# with the Cornell box. Any command that fails fails the test, with its output.
+# README.md, docs/BAKING.md and docs/SERVICE.md, in that order, and run in a scratch folder that
+# has the repository's `scenes/` and `build/`, against a penumbra-server started here (the
+# first server line the docs show, on a free port: the address in the commands is replaced by
+# the one it got; later server lines use it too). Placeholders are filled: SCENE.gltf with the
+# Cornell box. Any command that fails fails the test, with its output. (`make` and `cmake`
+# lines are the two commands themselves, the benchmarks and the install test's.)
 #   $1  the build folder   $2  the source folder
 set -uo pipefail
 build=$(cd "$1" && pwd)
@@ -20,16 +22,20 @@ ln -s "$source_dir/scenes" "$work/scenes"
 ln -s "$build" "$work/build"
 cd "$work"
 
-mapfile -t lines < <(sed -n 's/^    \(\(build\/\)\{0,1\}penumbra[ -].*\)$/\1/p' "$source_dir/README.md")
-[ ${#lines[@]} -gt 5 ] || { echo "found only ${#lines[@]} commands in README.md"; exit 1; }
+mapfile -t lines < <(for doc in README.md docs/BAKING.md docs/SERVICE.md; do
+    sed -n 's/^    \(\(build\/\)\{0,1\}penumbra[ -].*\)$/\1/p' "$source_dir/$doc"
+done)
+[ ${#lines[@]} -gt 15 ] || { echo "found only ${#lines[@]} commands in the docs"; exit 1; }
 
 url=
 ran=0
 for line in "${lines[@]}"; do
     command=${line%%  #*}  # the README's comments after two spaces and '#'
     command=${command/#penumbra /build/penumbra }
+    command=${command% &}  # started in the background by the docs: this script does that
     if [[ $command == build/penumbra-server* ]]; then
-        # The README's server, on a free port and a private socket.
+        if [ -n "$url" ]; then echo "== $line  (the server on $url)"; continue; fi
+        # The docs' server, on a free port and a private socket.
         command=${command//tcp:\/\/127.0.0.1:7450/tcp://127.0.0.1:0}
         command=${command//unix:\/\/\/tmp\/penumbra.sock/unix://$work/penumbra.sock}
         $command --ready-file "$work/ready" -q --device cpu &
@@ -50,4 +56,4 @@ for line in "${lines[@]}"; do
     fi
     ran=$((ran + 1))
 done
-echo "all $ran commands of the README ran"
+echo "all $ran commands of the docs ran"
