@@ -1,7 +1,7 @@
 // Direct light of punctual lights (Sec. 3.3, "Direct light initialization"): shadow maps
 // of the scene from every light, then the shadowed direct irradiance E_d at every surfel.
 // E_d initialises the incident light of the local pass and makes no antiradiance: the
-// shadow map has already done the occlusion. Shared by every solver (DESIGN.md).
+// shadow map has already done the occlusion. Shared by every solver (docs/ARCHITECTURE.md).
 //
 // Shadow maps are float NDC depth per texel (Vulkan conventions: z in [0, 1], texel
 // (x, y) = ((ndc + 1) / 2) · size). Point lights (and spots wider than 60°) get six cube

@@ -1,4 +1,4 @@
-// The direct-light stage every solver shares (DESIGN.md): the punctual lights' shadowed
+// The direct-light stage every solver shares (docs/ARCHITECTURE.md): the punctual lights' shadowed
 // direct irradiance E_d at a solver's receivers, on the CPU (CpuDirect, direct_light.h) or a
 // Vulkan device (VulkanDirect, vulkan_direct.h) behind one interface, and the sky binned on a
 // solver's directions, redone only when the sky changed. A solver names its receivers (its

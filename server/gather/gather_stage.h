@@ -1,4 +1,4 @@
-// The gather stage (issue 19, DESIGN.md): solver-neutral, between any solver and the output.
+// The gather stage (issue 19, docs/SOLVER.md): solver-neutral, between any solver and the output.
 //
 // 1. The first shot: the emitters' direct light with explicit visibility (emitter_direct.h)
 //    and an environment map's sun (sun_direct.h: the part of the map above its mean, drawn by

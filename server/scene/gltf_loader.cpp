@@ -1,4 +1,4 @@
-// glTF 2.0 → Scene: node transforms, triangle primitives, materials (DESIGN.md, Scene model).
+// glTF 2.0 → Scene: node transforms, triangle primitives, materials (docs/ARCHITECTURE.md).
 // Unsupported features fail loudly rather than being silently ignored.
 #include "scene/gltf_loader.h"
 

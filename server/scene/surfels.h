@@ -1,5 +1,5 @@
 // Surface samples: every triangle is refined until no edge exceeds the element size;
-// the refined mesh's vertices are the surfels (DESIGN.md, Scene model).
+// the refined mesh's vertices are the surfels (docs/SOLVER.md).
 #pragma once
 
 #include <cstdint>

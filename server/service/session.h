@@ -1,4 +1,4 @@
-// One loaded scene shared by every client (DESIGN.md, Protocol principles): the solver on
+// One loaded scene shared by every client (protocol/SPEC.md, Session): the solver on
 // its device, a worker thread that applies edits atomically between frames, produces frames
 // while the scene changes and idles once it has converged.
 #pragma once

@@ -1,4 +1,4 @@
-// The one small interface every GI solver implements (DESIGN.md): build from a scene and
+// The one small interface every GI solver implements (docs/ARCHITECTURE.md): build from a scene and
 // settings, iterate, read per-surfel irradiance, report stats.
 #pragma once
 
@@ -19,7 +19,7 @@
 
 namespace penumbra {
 
-// What a solver reports (DESIGN.md, Channels): `direct` is the shadowed direct light of
+// What a solver reports (protocol/SPEC.md, Channels): `direct` is the shadowed direct light of
 // punctual lights, `indirect` everything else (emitters, environment, every bounce),
 // `total` their sum.
 enum class Channel { kIndirect, kDirect, kTotal };

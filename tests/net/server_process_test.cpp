@@ -563,24 +563,40 @@ TEST(ServerProcess, SymlinksOutOfTheSceneRootAreRefused) {
     EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(sky); }), int(fb::ErrorCode::OutsideRoot));
 }
 
+// A connection that speaks raw frames, for requests the client library would never send.
+struct RawConnection {
+    asio::io_context io;
+    asio::local::stream_protocol::socket socket{io};
+    protocol::Decoder decoder;
+    explicit RawConnection(const ServerProcess& server) {
+        socket.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
+    }
+    // Sends one frame and returns the next message that arrives.
+    protocol::Message Exchange(protocol::MessageType type, uint32_t id,
+                               const std::vector<uint8_t>& payload) {
+        std::vector<uint8_t> bytes;
+        protocol::AppendFrame(bytes, type, id, payload);
+        asio::write(socket, asio::buffer(bytes));
+        protocol::Message m;
+        std::vector<uint8_t> buf(1 << 16);
+        while (decoder.Next(m) == protocol::Decoder::Result::kNeedMore) {
+            const size_t n = socket.read_some(asio::buffer(buf));
+            decoder.Feed(buf.data(), n);
+        }
+        return m;
+    }
+};
+
+std::vector<uint8_t> Bytes(const flatbuffers::FlatBufferBuilder& b) {
+    return {b.GetBufferPointer(), b.GetBufferPointer() + b.GetSize()};
+}
+
 TEST(ServerProcess, RequestsBeforeHelloAreRefused) {
     ServerProcess server("hello");
-    asio::io_context io;
-    asio::local::stream_protocol::socket raw(io);
-    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
+    RawConnection raw(server);
     flatbuffers::FlatBufferBuilder b;
     b.Finish(fb::CreateGetStatsDirect(b, ""));
-    auto bytes = protocol::EncodeFrame(protocol::MessageType::kGetStats, 3, b);
-    asio::write(raw, asio::buffer(bytes));
-    std::vector<uint8_t> reply(4096);
-    size_t n = asio::read(raw, asio::buffer(reply), asio::transfer_at_least(16));
-    protocol::Decoder d;
-    d.Feed(reply.data(), n);
-    protocol::Message m;
-    while (d.Next(m) == protocol::Decoder::Result::kNeedMore) {
-        n = raw.read_some(asio::buffer(reply));
-        d.Feed(reply.data(), n);
-    }
+    const protocol::Message m = raw.Exchange(protocol::MessageType::kGetStats, 3, Bytes(b));
     EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::HelloRequired);
 }
 
@@ -589,36 +605,17 @@ TEST(ServerProcess, RequestsBeforeHelloAreRefused) {
 // the table with its defaults; "" names the scene this connection loaded, not the newest.
 TEST(ServerProcess, ProtocolTrapsAreClosed) {
     ServerProcess server("traps");
-    asio::io_context io;
-    asio::local::stream_protocol::socket raw(io);
-    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
-    protocol::Decoder d;
-    auto exchange = [&](protocol::MessageType type, uint32_t id,
-                        const std::vector<uint8_t>& payload) {
-        std::vector<uint8_t> bytes;
-        protocol::AppendFrame(bytes, type, id, payload);
-        asio::write(raw, asio::buffer(bytes));
-        protocol::Message m;
-        std::vector<uint8_t> buf(1 << 16);
-        while (d.Next(m) == protocol::Decoder::Result::kNeedMore) {
-            const size_t n = raw.read_some(asio::buffer(buf));
-            d.Feed(buf.data(), n);
-        }
-        return m;
-    };
+    RawConnection raw(server);
     flatbuffers::FlatBufferBuilder hello;
     hello.Finish(fb::CreateHelloDirect(hello, "raw"));
-    protocol::Message m =
-        exchange(protocol::MessageType::kHello, 0,
-                 {hello.GetBufferPointer(), hello.GetBufferPointer() + hello.GetSize()});
+    protocol::Message m = raw.Exchange(protocol::MessageType::kHello, 0, Bytes(hello));
     ASSERT_EQ(m.header.type, protocol::MessageType::kError);
     EXPECT_EQ(m.header.requestId, 0u);
     EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::InvalidArgument);
     EXPECT_NE(m.As<fb::Error>()->message()->str().find("id 0 is reserved"), std::string::npos);
-    m = exchange(protocol::MessageType::kHello, 1,
-                 {hello.GetBufferPointer(), hello.GetBufferPointer() + hello.GetSize()});
+    m = raw.Exchange(protocol::MessageType::kHello, 1, Bytes(hello));
     EXPECT_EQ(m.header.type, protocol::MessageType::kWelcome);
-    m = exchange(protocol::MessageType::kGetStats, 2, {});  // empty: every scene
+    m = raw.Exchange(protocol::MessageType::kGetStats, 2, {});  // empty: every scene
     ASSERT_EQ(m.header.type, protocol::MessageType::kStats);
     EXPECT_EQ(m.header.requestId, 2u);
     EXPECT_TRUE(nlohmann::json::parse(m.As<fb::Stats>()->json()->str()).contains("server"));

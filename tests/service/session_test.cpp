@@ -64,6 +64,24 @@ FramePtr WaitFor(Session& session, uint64_t edit, std::string* notes = nullptr) 
     return got;
 }
 
+// The floor (primitive 0) of `frame` against a fresh bake of `scene` at `settings`, iterated
+// as often as the frame's solver: the largest |difference| and the largest |fresh value|.
+std::pair<double, double> FloorAgainstAFreshBake(const Scene& scene,
+                                                 const SessionSettings& settings,
+                                                 const FrameData& frame) {
+    auto fresh = Fresh(scene, settings);
+    fresh->Iterate(int(frame.iterations));
+    const auto floor =
+        PrimitiveIrradiance(fresh->GetSurfels(), fresh->SurfelIrradiance(), scene, 0);
+    EXPECT_EQ(floor.size(), frame.irradiance[0].size());
+    double worst = 0.0, peak = 0.0;
+    for (size_t i = 0; i < floor.size() && i < frame.irradiance[0].size(); ++i) {
+        worst = std::max(worst, double(glm::length(floor[i] - frame.irradiance[0][i])));
+        peak = std::max(peak, double(glm::length(floor[i])));
+    }
+    return {worst, peak};
+}
+
 TEST(Session, FirstFramesConvergeAndIdle) {
     Session session("blocker", LoadGltf(kBlocker), Settings());
     FramePtr f = WaitFor(session, 0);
@@ -92,18 +110,10 @@ TEST(Session, MoveConvergesToAFreshBakeOfTheMovedScene) {
     EXPECT_NE(notes.find("warm start for"), std::string::npos) << notes;
 
     SetNodeTransform(scene, node, moved);
-    auto fresh = Fresh(scene, Settings());
-    fresh->Iterate(int(f->iterations));
     // Same scene, same settings, same iteration count: the rebuilt session (warm-started from
     // the old solution on the surfels that did not move) has converged to what a fresh bake
     // gives.
-    auto floor = PrimitiveIrradiance(fresh->GetSurfels(), fresh->SurfelIrradiance(), scene, 0);
-    ASSERT_EQ(floor.size(), f->irradiance[0].size());
-    double worst = 0.0, peak = 0.0;
-    for (size_t i = 0; i < floor.size(); ++i) {
-        worst = std::max(worst, double(glm::length(floor[i] - f->irradiance[0][i])));
-        peak = std::max(peak, double(glm::length(floor[i])));
-    }
+    const auto [worst, peak] = FloorAgainstAFreshBake(scene, Settings(), *f);
     EXPECT_LT(worst, 1e-3 * peak) << "max |session − fresh| " << worst << " of " << peak;
 }
 
@@ -513,16 +523,7 @@ TEST(Session, ALostDeviceFallsBackToTheCpu) {
 
     SessionSettings cpu = settings;
     cpu.solver.device = DeviceChoice::kCpu;
-    auto fresh = Fresh(scene, cpu);
-    fresh->Iterate(int(f->iterations));
-    const auto floor =
-        PrimitiveIrradiance(fresh->GetSurfels(), fresh->SurfelIrradiance(), scene, 0);
-    ASSERT_EQ(floor.size(), f->irradiance[0].size());
-    double worst = 0.0, peak = 0.0;
-    for (size_t i = 0; i < floor.size(); ++i) {
-        worst = std::max(worst, double(glm::length(floor[i] - f->irradiance[0][i])));
-        peak = std::max(peak, double(glm::length(floor[i])));
-    }
+    const auto [worst, peak] = FloorAgainstAFreshBake(scene, cpu, *f);
     EXPECT_LT(worst, 1e-3 * peak) << "max |session − fresh CPU bake| " << worst << " of " << peak;
 
     const uint64_t edit = session.Submit(Dim("emitter", 5.0f));  // from 10

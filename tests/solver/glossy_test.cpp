@@ -24,7 +24,7 @@ constexpr float kPi = std::numbers::pi_v<float>;
 using testing::CpuSettings;
 
 TEST(GlossyMaterial, MetallicRoughnessMapsToDiffuseAndLobe) {
-    // Rough dielectric: the diffuse path, albedo = base colour (DESIGN.md).
+    // Rough dielectric: the diffuse path, albedo = base colour (docs/MATERIALS.md).
     Material rough = PbrMaterial("rough", glm::vec3(0.5f, 0.4f, 0.3f), 0.0f, 1.0f);
     EXPECT_FALSE(rough.Glossy());
     EXPECT_EQ(rough.albedo, glm::vec3(0.5f, 0.4f, 0.3f));

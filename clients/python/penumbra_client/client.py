@@ -127,6 +127,18 @@ def _finite(name: str, values: Sequence[float], count: int) -> List[float]:
     return values
 
 
+def _add_given(b, table, vectors: dict, scalars: dict):
+    """Adds to the table being built (`table`'s generated module) each field given: vectors
+    as Vec3, scalars as floats; a field left out stays unchanged on the server."""
+    camel = lambda key: "".join(part.capitalize() for part in key.split("_"))
+    for key, value in vectors.items():
+        if value is not None:
+            getattr(table, "Add" + camel(key))(b, Vec3.CreateVec3(b, *_finite(key, value, 3)))
+    for key, value in scalars.items():
+        if value is not None:
+            getattr(table, "Add" + camel(key))(b, _finite(key, [value], 1)[0])
+
+
 def _matrix_columns(matrix) -> List[float]:
     """A 4 × 4 matrix (math order: m[row][col]) as glTF's 16 column-major floats; 16 numbers
     are taken as column-major already."""
@@ -455,20 +467,8 @@ class Client:
         SetLight.Start(b)
         SetLight.AddScene(b, s)
         SetLight.AddLight(b, n)
-        if color is not None:
-            SetLight.AddColor(b, Vec3.CreateVec3(b, *_finite("color", color, 3)))
-        if position is not None:
-            SetLight.AddPosition(b, Vec3.CreateVec3(b, *_finite("position", position, 3)))
-        if direction is not None:
-            SetLight.AddDirection(b, Vec3.CreateVec3(b, *_finite("direction", direction, 3)))
-        if intensity is not None:
-            SetLight.AddIntensity(b, float(intensity))
-        if inner_cone is not None:
-            SetLight.AddInnerCone(b, float(inner_cone))
-        if outer_cone is not None:
-            SetLight.AddOuterCone(b, float(outer_cone))
-        if range is not None:
-            SetLight.AddRange(b, float(range))
+        _add_given(b, SetLight, {"color": color, "position": position, "direction": direction},
+                   scalars)
         b.Finish(SetLight.End(b))
         return self._edit(SET_LIGHT, b)
 
@@ -487,14 +487,8 @@ class Client:
         SetMaterial.Start(b)
         SetMaterial.AddScene(b, s)
         SetMaterial.AddMaterial(b, n)
-        if albedo is not None:
-            SetMaterial.AddAlbedo(b, Vec3.CreateVec3(b, *_finite("albedo", albedo, 3)))
-        if emission is not None:
-            SetMaterial.AddEmission(b, Vec3.CreateVec3(b, *_finite("emission", emission, 3)))
-        if roughness is not None:
-            SetMaterial.AddRoughness(b, float(roughness))
-        if metallic is not None:
-            SetMaterial.AddMetallic(b, float(metallic))
+        _add_given(b, SetMaterial, {"albedo": albedo, "emission": emission},
+                   {"roughness": roughness, "metallic": metallic})
         b.Finish(SetMaterial.End(b))
         return self._edit(SET_MATERIAL, b)
 

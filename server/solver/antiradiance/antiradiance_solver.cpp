@@ -20,7 +20,7 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
     std::string gpuName;
     if (device == DeviceChoice::kAuto) {
         // On a CPU-only machine the native back end beats Vulkan on lavapipe by ~5×
-        // (PERFORMANCE-NOTES.md), so `auto` takes a real GPU only.
+        // (bench/results/office.json), so `auto` takes a real GPU only.
         device = gpu::FindRealGpu(&gpuName) ? DeviceChoice::kGpu : DeviceChoice::kCpu;
     }
     if (own.tables == TablePrecision::kFp16 && device != DeviceChoice::kCpu)

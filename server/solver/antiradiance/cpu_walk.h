@@ -69,7 +69,7 @@ static inline void EnvironmentRows(const AntiradianceModel& m, Rgba* lin) {
 // Eq. 16/17 with the σ spreading of Sec. 3.1), RGB in the first three lanes. A scaled
 // format's rows hold I_ex / senderScale[sender]. The sender reads are random rows of a
 // large table: gather a chunk of F·I_ex values first, prefetching the next chunk, then
-// spread them (PERFORMANCE-NOTES.md).
+// spread them (measured: docs/STATUS.md, issue 2).
 template <class Rows>
 inline void Gather(const AntiradianceModel& m, const typename Rows::Elem* iex,
                    const float* senderScale, uint32_t r, Rgba* acc) {
