@@ -520,13 +520,7 @@ class Client:
     # --- results ------------------------------------------------------------------------
     def get(self, channel: str = "indirect", format: str = "f32", scene: str = "") -> Frame:
         """The newest frame: irradiance per primitive as (vertices, 3) float32 arrays."""
-        b = flatbuffers.Builder(64)
-        s = b.CreateString(scene)
-        GetIrradiance.Start(b)
-        GetIrradiance.AddScene(b, s)
-        GetIrradiance.AddChannel(b, self._channel(channel))
-        GetIrradiance.AddFormat(b, self._format(format))
-        b.Finish(GetIrradiance.End(b))
+        b = self._channel_request(GetIrradiance, scene, channel, format)
         _, payload = self._request(GET_IRRADIANCE, b, FRAME)
         return self._frame(payload)
 
@@ -613,14 +607,20 @@ class Client:
             raise ValueError(f"format '{format}': give one of {', '.join(FORMATS)}")
         return FORMATS[format]
 
-    def _subscribe(self, scene: str, channel: str, format: str):
+    @classmethod
+    def _channel_request(cls, table, scene: str, channel: str, format: str):
+        """GetIrradiance or Subscribe (`table`'s generated module): scene, channel, format."""
         b = flatbuffers.Builder(64)
         s = b.CreateString(scene)
-        Subscribe.Start(b)
-        Subscribe.AddScene(b, s)
-        Subscribe.AddChannel(b, self._channel(channel))
-        Subscribe.AddFormat(b, self._format(format))
-        b.Finish(Subscribe.End(b))
+        table.Start(b)
+        table.AddScene(b, s)
+        table.AddChannel(b, cls._channel(channel))
+        table.AddFormat(b, cls._format(format))
+        b.Finish(table.End(b))
+        return b
+
+    def _subscribe(self, scene: str, channel: str, format: str):
+        b = self._channel_request(Subscribe, scene, channel, format)
         with self._lock:
             self._frames.clear()
         self._request(SUBSCRIBE, b, OK)
