@@ -2,6 +2,7 @@
 // Unsupported features fail loudly rather than being silently ignored.
 #include "scene/gltf_loader.h"
 
+#include <stb/stb_image.h>
 #include <tiny_gltf.h>
 
 #include <algorithm>
@@ -193,16 +194,26 @@ glm::vec3 MeanTextureColor(const Context& ctx, const std::string& where, int tex
     if (tex.source < 0 || tex.source >= static_cast<int>(ctx.model.images.size()))
         ctx.Fail(where, "baseColorTexture has no image");
     const auto& img = ctx.model.images[tex.source];
-    if (img.image.empty() || img.bits != 8 || img.component < 3)
-        ctx.Fail(where,
-                 "baseColorTexture image '" + img.uri + "' could not be decoded as 8-bit RGB(A)");
+    // Decoded here, as 8-bit RGB (ReadGltfModel keeps images encoded).
+    int w = 0, h = 0, channels = 0;
+    unsigned char* rgb =
+        img.image.empty()
+            ? nullptr
+            : stbi_load_from_memory(img.image.data(), static_cast<int>(img.image.size()), &w, &h,
+                                    &channels, 3);
+    if (!rgb)
+        ctx.Fail(where, "baseColorTexture image " + std::to_string(tex.source) +
+                            (img.uri.empty() ? "" : " '" + img.uri + "'") +
+                            " could not be decoded (" +
+                            (img.image.empty() ? "no data" : stbi_failure_reason()) + ")");
     glm::dvec3 sum(0.0);
-    size_t pixels = img.image.size() / img.component;
+    const size_t pixels = static_cast<size_t>(w) * static_cast<size_t>(h);
     for (size_t i = 0; i < pixels; ++i) {
-        const unsigned char* p = img.image.data() + i * img.component;
+        const unsigned char* p = rgb + i * 3;
         sum += glm::dvec3(SrgbToLinear(p[0] / 255.0f), SrgbToLinear(p[1] / 255.0f),
                           SrgbToLinear(p[2] / 255.0f));
     }
+    stbi_image_free(rgb);
     return pixels ? glm::vec3(sum / static_cast<double>(pixels)) : glm::vec3(1.0f);
 }
 
@@ -362,6 +373,17 @@ bool ReadConfinedFile(std::vector<unsigned char>* out, std::string* err,
     return tinygltf::ReadWholeFile(out, err, filepath, nullptr);
 }
 
+// tinygltf's image callback: keeps each image's encoded bytes (PNG, JPEG) as they are, with
+// no size, instead of decoding every image while parsing. What the scene uses is decoded when
+// it is read (MeanTextureColor), so a texture nothing uses, or one that is only warned about
+// (a normal map), cannot fail the load.
+bool KeepEncoded(tinygltf::Image* image, int, std::string*, std::string*, int, int,
+                 const unsigned char* bytes, int size, void*) {
+    image->image.assign(bytes, bytes + size);
+    image->width = image->height = image->component = image->bits = 0;
+    return true;
+}
+
 bool RefuseWrite(std::string* err, const std::string& path, const std::vector<unsigned char>&,
                  void*) {
     if (err) *err += "not writing " + path;
@@ -378,6 +400,7 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
     tinygltf::FsCallbacks fs{&tinygltf::FileExists, &tinygltf::ExpandFilePath, &ReadConfinedFile,
                              &RefuseWrite, &confinement};
     loader.SetFsCallbacks(fs);
+    loader.SetImageLoader(&KeepEncoded, nullptr);
     std::string err, warn;
     bool ok = IsGlbPath(path) ? loader.LoadBinaryFromFile(model, &err, &warn, path)
                               : loader.LoadASCIIFromFile(model, &err, &warn, path);

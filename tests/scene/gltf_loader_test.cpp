@@ -206,11 +206,13 @@ TEST(GltfLoader, IgnoredInputIsWarnedAbout) {
     const auto dir = testing::TempDir("gltf-warnings");
     WritePng((dir / "tex.png").string(), 2, 2, std::vector<uint8_t>(12, 200));
     nlohmann::json doc = Cornell();
-    doc["images"] = {{{"uri", "tex.png"}}};
-    doc["textures"] = {{{"source", 0}}};
+    std::ofstream(dir / "broken.png") << "not a PNG at all";
+    doc["images"] = {{{"uri", "tex.png"}}, {{"uri", "broken.png"}}};
+    doc["textures"] = {{{"source", 0}}, {{"source", 1}}};
     doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
     doc["materials"][0]["emissiveTexture"] = {{"index", 0}};
-    doc["materials"][1]["normalTexture"] = {{"index", 0}};
+    // A texture the answer does not read (a normal map) cannot fail the load, broken or not.
+    doc["materials"][1]["normalTexture"] = {{"index", 1}};
     doc["skins"] = {{{"joints", {0}}}};
     doc["animations"] = nlohmann::json::array(
         {{{"channels", nlohmann::json::array()}, {"samplers", nlohmann::json::array()}}});
@@ -230,6 +232,17 @@ TEST(GltfLoader, IgnoredInputIsWarnedAbout) {
         EXPECT_NE(all.find(expected), std::string::npos) << expected << " in:\n" << all;
     EXPECT_EQ(all.find("no light"), std::string::npos) << all;
     EXPECT_EQ(scene.nodes[0].name, "node0");
+    // One the answer reads, broken, fails it with the image named.
+    doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 1}};
+    std::ofstream(dir / "broken-base.gltf") << doc.dump();
+    try {
+        LoadGltf((dir / "broken-base.gltf").string());
+        ADD_FAILURE() << "a broken base colour texture loaded";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("image 1 'broken.png' could not be decoded"),
+                  std::string::npos)
+            << e.what();
+    }
 
     Scene dark = LoadGltf(kCornell);
     for (auto& m : dark.materials) m.emission = glm::vec3(0.0f);
