@@ -151,6 +151,9 @@ std::vector<uint8_t> EncodeFrame(MessageType type, uint32_t requestId,
     return out;
 }
 
+namespace {
+
+// A FlatBuffer holding one table with no field set: what an empty payload decodes to.
 const std::vector<uint8_t>& EmptyTable() {
     static const std::vector<uint8_t> bytes = [] {
         flatbuffers::FlatBufferBuilder b;
@@ -159,6 +162,8 @@ const std::vector<uint8_t>& EmptyTable() {
     }();
     return bytes;
 }
+
+}  // namespace
 
 Decoder::Decoder(uint32_t maxPayloadBytes)
     : maxPayload_(maxPayloadBytes < kMaxPayloadCeiling ? maxPayloadBytes : kMaxPayloadCeiling) {}

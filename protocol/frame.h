@@ -84,9 +84,6 @@ void AppendFrame(std::vector<uint8_t>& out, MessageType type, uint32_t requestId
 std::vector<uint8_t> EncodeFrame(MessageType type, uint32_t requestId,
                                  const flatbuffers::FlatBufferBuilder& builder);
 
-// A FlatBuffer holding one table with no field set: what an empty payload decodes to.
-const std::vector<uint8_t>& EmptyTable();
-
 // Incremental decoder: feed bytes as they arrive, then call Next() until it answers
 // kNeedMore. After kError the stream is unusable (the peer gets the error, then the
 // connection closes); error() names the code and the reason.
