@@ -66,7 +66,7 @@ std::vector<glm::vec3> EmitterDirect::Trace(const RayScene& rays,
     extra_ = extraCosine.empty() ? std::vector<int>(points.size(), settings_.extraCosineRays)
                                  : extraCosine;
     slots_ = rays.EmitterPrimitives().size() <= kMaxSlots ? rays.EmitterPrimitives().size() : 0;
-    coef_.assign(points.size() * slots_, 0.0f);
+    coef_.assign(points.size() * slots_, glm::vec3(0.0f));
     blocked_.assign(points.size() * words_, 0);
     cosineT_.assign(points.size() * cosineRays_, std::numeric_limits<float>::infinity());
     cosineTri_.assign(points.size() * cosineRays_, ~0u);
@@ -140,7 +140,7 @@ std::vector<glm::vec3> EmitterDirect::Retrace(const RayScene& rays,
                 out[i] = Shoot(rays, i, x, normals[i], &none, n);
                 continue;
             }
-            const float* coef = coef_.data() + i * slots_;
+            const glm::vec3* coef = coef_.data() + i * slots_;
             for (size_t k = 0; k < slots_; ++k) out[i] += le[k] * coef[k];
         }
         total += n;
@@ -169,6 +169,7 @@ bool EmitterDirect::LightRay(const RayScene& rays, uint32_t ti, int r, const glm
     glm::vec2 ab = R2Point(sl, r);
     if (ab.x + ab.y > 1.0f) ab = glm::vec2(1.0f) - ab;
     const glm::vec3 y = t.p0 + ab.x * t.e1 + ab.y * t.e2;
+    out.uv = ab;
     const glm::vec3 d = y - x;
     out.dist2 = glm::dot(d, d);
     if (!(out.dist2 > 0.0f)) return false;
@@ -186,14 +187,15 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
     const auto& tris = rays.Triangles();
     const float eps = rays.Epsilon();
     const int nl = lightRays_, own = cosineRays_, nb = own + extra_[i];
-    // Each contribution is L_e of its triangle times a coefficient, kept per emitting
-    // primitive (Reevaluate).
-    float* coef = slots_ ? coef_.data() + i * slots_ : nullptr;
-    if (coef) std::fill(coef, coef + slots_, 0.0f);
+    // Each contribution is L_e of its triangle's material times a coefficient (the emission
+    // map's tint at the point in it), kept per emitting primitive (Reevaluate).
+    glm::vec3* coef = slots_ ? coef_.data() + i * slots_ : nullptr;
+    if (coef) std::fill(coef, coef + slots_, glm::vec3(0.0f));
     glm::vec3 sum(0.0f);
-    auto add = [&](uint32_t tri, float c) {
-        sum += rays.MaterialOf(tri).emission * c;
-        if (coef) coef[rays.EmitterSlot(tris[tri].primitive)] += c;
+    auto add = [&](uint32_t tri, float c, const glm::vec2& uv) {
+        const glm::vec3 tinted = c * rays.TintsAt(tri, uv.x, uv.y).emission;
+        sum += rays.MaterialOf(tri).emission * tinted;
+        if (coef) coef[rays.EmitterSlot(tris[tri].primitive)] += tinted;
     };
     auto meets = [&](const glm::vec3& o, const glm::vec3& d, float tmax) {
         if (!boxes) return true;
@@ -227,7 +229,7 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
         if (bits[r / 64] & bit) continue;
         const float pdfArea = rays.AreaPdf(ti);
         const float weight = Power(nl, pdfArea * s.dist2 / s.cy, nb, s.cx / kPi);
-        add(ti, weight * s.cx * s.cy / (s.dist2 * pdfArea * nl));
+        add(ti, weight * s.cx * s.cy / (s.dist2 * pdfArea * nl), s.uv);
     }
     for (int r = 0; r < own; ++r) {
         const glm::vec3 w = CosineDirection(nx, R2Point(sb, r));
@@ -240,7 +242,8 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
             tri = hit.hit ? hit.triangle : ~0u;
         }
         if (tri == ~0u || !(rays.AreaPdf(tri) > 0.0f)) continue;
-        add(tri, EmitterHitWeight(rays, settings_, nx, w, tri, dist, nb));
+        add(tri, EmitterHitWeight(rays, settings_, nx, w, tri, dist, nb),
+            rays.Mapped() ? rays.Barycentrics(tri, from, w) : glm::vec2(0.0f));
     }
     return sum;
 }

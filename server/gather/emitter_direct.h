@@ -53,8 +53,9 @@ class EmitterDirect {
                                    const std::vector<uint8_t>& moved,
                                    const std::vector<Bounds>& boxes, size_t* traced = nullptr);
 
-    // E again with the emission the scene has now, from the kept coefficients (a scalar per
-    // point and emitting primitive, RayScene::EmitterSlot), without tracing: valid while the
+    // E again with the emission the scene has now, from the kept coefficients (a colour per
+    // point and emitting primitive, RayScene::EmitterSlot: the emission maps' tints are in
+    // them), without tracing: valid while the
     // emitting primitives are those `rays` was built with. False when none are kept (more
     // than kMaxSlots emitting primitives).
     static constexpr size_t kMaxSlots = 64;
@@ -66,6 +67,7 @@ class EmitterDirect {
     struct Sample {
         glm::vec3 span;
         float dist2, cx, cy;
+        glm::vec2 uv;  // the point on the triangle
     };
     // Light ray r of a point x with normal nx (rotation `sl` of its R2 sequence) to emitting
     // triangle `ti`; false where it adds nothing (either side faces away).
@@ -91,7 +93,7 @@ class EmitterDirect {
     std::vector<float> cosineT_;     // points × cosine rays: the first hit's distance (∞: none)
     std::vector<uint32_t> cosineTri_;  // and its triangle
     size_t slots_ = 0;                 // emitting primitives kept (0: none kept)
-    std::vector<float> coef_;          // points × slots_
+    std::vector<glm::vec3> coef_;      // points × slots_
 };
 
 // The share of E that a cosine-distributed ray from a point with normal n, meeting emitting

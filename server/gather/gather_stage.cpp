@@ -117,11 +117,13 @@ void GatherStage::Evaluate() {
     const Surfels& s = inner_->GetSurfels();
     // The radiance each surfel reflects (and emits, where the solver carries the emission):
     // L = ρ/π · E over the surfel's whole irradiance.
-    std::vector<glm::vec3> radiance(s.size());
+    // Albedo and emission per surfel (their colour maps' tints in them), interpolated at hits.
+    std::vector<glm::vec3> radiance(s.size()), albedo(s.size()), emission(s.size());
     for (uint32_t i = 0; i < s.size(); ++i) {
         const Material& m = scene_.materials[scene_.primitives[surfelPrimitive_[i]].material];
-        radiance[i] = m.albedo / kPi * (indirect_[i] + direct_[i]);
-        if (shot_.empty()) radiance[i] += m.emission;
+        albedo[i] = s.Albedo(m, i), emission[i] = s.Emission(m, i);
+        radiance[i] = albedo[i] / kPi * (indirect_[i] + direct_[i]);
+        if (shot_.empty()) radiance[i] += emission[i];
     }
     // Values per surfel interpolated at a hit.
     auto at = [&](const std::vector<glm::vec3>& f, const Hit& h) {
@@ -138,8 +140,8 @@ void GatherStage::Evaluate() {
         lobeRadiance.resize(s.size());
         for (uint32_t i = 0; i < s.size(); ++i) {
             const Material& m = scene_.materials[scene_.primitives[surfelPrimitive_[i]].material];
-            const glm::vec3 rho = m.albedo + (m.Glossy() ? m.specular : glm::vec3(0.0f));
-            lobeRadiance[i] = rho / kPi * (indirect_[i] + direct_[i]) + m.emission;
+            const glm::vec3 rho = albedo[i] + (m.Glossy() ? m.specular : glm::vec3(0.0f));
+            lobeRadiance[i] = rho / kPi * (indirect_[i] + direct_[i]) + emission[i];
         }
     }
     if (!lightsFresh_ || lobeLight_.size() != targets_.size()) LobeLights();
@@ -165,8 +167,8 @@ void GatherStage::Evaluate() {
                     if (Front(h2)) second += at(radiance, h2);
                 }
                 e += second * (kPi / m);
-                const Material& mat = rays_->MaterialOf(h.triangle & kIndex);
-                sum += mat.albedo / kPi * e + (shot_.empty() ? mat.emission : glm::vec3(0.0f));
+                sum +=
+                    at(albedo, h) / kPi * e + (shot_.empty() ? at(emission, h) : glm::vec3(0.0f));
                 ++k;
             }
             // Glossy hits: what their lobes reflect towards the target, F0 times the lobe

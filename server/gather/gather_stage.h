@@ -235,7 +235,7 @@ class GatherStage : public Solver {
     std::vector<glm::vec3> emitterHits_;
     // The same as a coefficient per target and emitting primitive (RayScene::EmitterSlot),
     // so that an emissive edit re-weights them without tracing (empty: not kept).
-    std::vector<float> emitterCoef_;
+    std::vector<glm::vec3> emitterCoef_;
     std::vector<uint32_t> targets_;    // surfels gathered at
     std::vector<glm::vec2> rotation_;  // per target: its rotation of the ray pattern
     std::vector<Hit> hits_;            // targets × gatherRays

@@ -304,7 +304,8 @@ void GatherStage::Trace(const Moved* moved) {
     const size_t slots = rays_->EmitterPrimitives().size();
     if (!moved) {
         emitterHits_.assign(targets_.size(), glm::vec3(0.0f));
-        emitterCoef_.assign(slots <= EmitterDirect::kMaxSlots ? targets_.size() * slots : 0, 0.0f);
+        emitterCoef_.assign(slots <= EmitterDirect::kMaxSlots ? targets_.size() * slots : 0,
+                            glm::vec3(0.0f));
     }
     if (settings_.emitterRays > 0 && slots > 0) {
         EmitterDirectSettings es;  // the first shot's, for the weights of emitter hits
@@ -317,16 +318,21 @@ void GatherStage::Trace(const Moved* moved) {
                     const uint32_t i = targets_[t];
                     const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
                     emitterHits_[t] = glm::vec3(0.0f);
-                    float* coef = emitterCoef_.empty() ? nullptr : &emitterCoef_[t * slots];
-                    if (coef) std::fill(coef, coef + slots, 0.0f);
+                    glm::vec3* coef = emitterCoef_.empty() ? nullptr : &emitterCoef_[t * slots];
+                    if (coef) std::fill(coef, coef + slots, glm::vec3(0.0f));
                     for (int r = 0; r < n; ++r) {
                         const Hit& h = hits_[t * n + r];
                         if (!Front(h) || !(rays_->AreaPdf(h.triangle & kIndex) > 0.0f)) continue;
                         const uint32_t tri = h.triangle & kIndex;
                         const float c = EmitterHitWeight(*rays_, es, surfels.normals[i],
                                                          Direction(t, r), tri, Distance(o, h));
-                        emitterHits_[t] += rays_->MaterialOf(tri).emission * c;
-                        if (coef) coef[rays_->EmitterSlot(tris[tri].primitive)] += c;
+                        // The emission map's tint at the hit is in the coefficient.
+                        const glm::vec3 tinted =
+                            c *
+                            rays_->TintsAt(tri, h.u * (1.0f / 65535.0f), h.v * (1.0f / 65535.0f))
+                                .emission;
+                        emitterHits_[t] += rays_->MaterialOf(tri).emission * tinted;
+                        if (coef) coef[rays_->EmitterSlot(tris[tri].primitive)] += tinted;
                     }
                 }
             });

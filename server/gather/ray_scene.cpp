@@ -31,19 +31,24 @@ void InitRay(RTCRay& r, const glm::vec3& o, const glm::vec3& d, float tfar) {
 
 }  // namespace
 
-RayScene::RayScene(const Scene& scene) : scene_(scene) {
+RayScene::RayScene(const Scene& scene) : scene_(scene), mapped_(AnyMapped(scene)) {
     for (uint32_t p = 0; p < scene_.primitives.size(); ++p) {
         const Primitive& prim = scene_.primitives[p];
         for (size_t i = 0; i + 2 < prim.indices.size(); i += 3) {
             uint32_t a = prim.indices[i], b = prim.indices[i + 1], c = prim.indices[i + 2];
             AddTriangle(prim.positions[a], prim.positions[b], prim.positions[c],
                         prim.normals[a] + prim.normals[b] + prim.normals[c], p);
+            if (mapped_) vertices_.emplace_back(a, b, c);
         }
     }
     Build();
 }
 
-RayScene::RayScene(const Scene& scene, const Surfels& surfels) : scene_(scene) {
+RayScene::RayScene(const Scene& scene, const Surfels& surfels)
+    : scene_(scene),
+      mapped_(!surfels.albedoTints.empty()),
+      albedoTints_(surfels.albedoTints),
+      emissionTints_(surfels.emissionTints) {
     if (surfels.firstSurfel.size() != scene.primitives.size())
         throw Error("RayScene: the surfels were refined from another scene");
     const auto& t = surfels.refinedTriangles;
@@ -120,11 +125,50 @@ void RayScene::Build() {
     BuildBvh();
 }
 
+Tints RayScene::TintsAt(uint32_t t, float u, float v) const {
+    if (!mapped_) return Tints{};
+    if (!corners_.empty()) {
+        const glm::uvec3& c = corners_[t];
+        const float w = 1.0f - u - v;
+        return {w * albedoTints_[c.x] + u * albedoTints_[c.y] + v * albedoTints_[c.z],
+                w * emissionTints_[c.x] + u * emissionTints_[c.y] + v * emissionTints_[c.z]};
+    }
+    return penumbra::TintsAt(scene_, tris_[t].primitive, vertices_[t], u, v);
+}
+
+glm::vec3 RayScene::MeanEmissionTint(uint32_t t) const {
+    if (!mapped_) return glm::vec3(1.0f);
+    if (!corners_.empty()) {
+        const glm::uvec3& c = corners_[t];
+        return (emissionTints_[c.x] + emissionTints_[c.y] + emissionTints_[c.z]) / 3.0f;
+    }
+    const Primitive& prim = scene_.primitives[tris_[t].primitive];
+    const Material& m = scene_.materials[prim.material];
+    if (m.emissionMap < 0 || m.emissionSet >= static_cast<int>(prim.texcoords.size()) ||
+        prim.texcoords[m.emissionSet].empty())
+        return glm::vec3(1.0f);
+    const std::vector<glm::vec2>& uv = prim.texcoords[m.emissionSet];
+    const glm::uvec3& i = vertices_[t];
+    return scene_.maps[m.emissionMap].Over(uv[i.x], uv[i.y], uv[i.z]);
+}
+
+glm::vec2 RayScene::Barycentrics(uint32_t t, const glm::vec3& origin, const glm::vec3& dir) const {
+    // Möller–Trumbore without the range tests: the hit was found before.
+    const RayTriangle& tri = tris_[t];
+    const glm::vec3 p = glm::cross(dir, tri.e2);
+    const float det = glm::dot(tri.e1, p);
+    if (det == 0.0f) return glm::vec2(1.0f / 3.0f);
+    const glm::vec3 s = origin - tri.p0, q = glm::cross(s, tri.e1);
+    const float u = glm::dot(s, p) / det, v = glm::dot(dir, q) / det;
+    return glm::clamp(glm::vec2(u, v), 0.0f, 1.0f);
+}
+
 void RayScene::Sample() {
-    // Emitters, chosen in proportion to their power (area × summed radiance).
+    // Emitters, chosen in proportion to their power (area × summed radiance, the emission
+    // maps' tints averaged over the triangle).
     double total = 0.0;
     for (uint32_t i = 0; i < tris_.size(); ++i) {
-        const glm::vec3& le = scene_.materials[tris_[i].material].emission;
+        const glm::vec3 le = scene_.materials[tris_[i].material].emission * MeanEmissionTint(i);
         double power = double(tris_[i].area) * (le.x + le.y + le.z);
         if (power <= 0.0) continue;
         total += power;

@@ -129,12 +129,26 @@ class RayScene {
     const Material& MaterialOf(uint32_t t) const {
         return scene_.materials[scene_.primitives[tris_[t].primitive].material];
     }
+    // The tints of triangle t's material at its point p0 + u·e1 + v·e2: from its colour maps
+    // at the point's texture coordinates over the input mesh; over the refined mesh, the
+    // surfels' tints (Surfels::albedoTints, a hat-function average of the maps) interpolated.
+    Tints TintsAt(uint32_t t, float u, float v) const;
+    // Emitted radiance at that point: the material's emission times its tint.
+    glm::vec3 EmissionAt(uint32_t t, float u, float v) const {
+        return MaterialOf(t).emission * TintsAt(t, u, v).emission;
+    }
+    // The (u, v) at which the line origin + s·dir meets triangle t's plane.
+    glm::vec2 Barycentrics(uint32_t t, const glm::vec3& origin, const glm::vec3& dir) const;
+    // Whether any triangle's material has a colour map (else every tint is 1).
+    bool Mapped() const { return mapped_; }
     // Offset that lifts ray origins off their surface: 10⁻⁴ × the scene's diameter.
     float Epsilon() const { return eps_; }
 
   private:
     void AddTriangle(const glm::vec3& a, const glm::vec3& b, const glm::vec3& c,
                      const glm::vec3& normalSum, uint32_t primitive);
+    // Triangle t's emission tint averaged over it, for its power.
+    glm::vec3 MeanEmissionTint(uint32_t t) const;
     void Build();                        // Sample, then BuildBvh
     void Sample();                       // the emitters' choice from tris_
     void BuildBvh();                     // Embree's BVH over tris_
@@ -148,6 +162,9 @@ class RayScene {
     float eps_ = 0.0f;
     std::vector<RayTriangle> tris_;
     std::vector<glm::uvec3> corners_;  // refined mesh only
+    bool mapped_ = false;
+    std::vector<glm::uvec3> vertices_;  // input mesh with maps: the primitive's vertices
+    std::vector<glm::vec3> albedoTints_, emissionTints_;  // refined mesh with maps: per surfel
     std::vector<uint32_t> emitters_;
     std::vector<double> cdf_;
     std::vector<float> areaPdf_;

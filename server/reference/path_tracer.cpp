@@ -57,8 +57,10 @@ struct Bsdf {
     float exponent = 0.0f;
     float pLobe = 0.0f;  // probability of sampling the lobe
 
-    Bsdf(const Material& m, const glm::vec3& normal, const glm::vec3& wo)
-        : n(normal), kd(m.albedo), ks(m.specular), exponent(m.phongExponent) {
+    // `albedoTint`: the base colour map's tint at the point (Tints).
+    Bsdf(const Material& m, const glm::vec3& normal, const glm::vec3& wo,
+         const glm::vec3& albedoTint = glm::vec3(1.0f))
+        : n(normal), kd(m.albedo * albedoTint), ks(m.specular), exponent(m.phongExponent) {
         mirror = 2.0f * glm::dot(n, wo) * n - wo;
         if (m.Glossy()) {
             float d = Luminance(kd), s = Luminance(ks);
@@ -151,7 +153,7 @@ class Tracer {
         if (Occluded(from, to - from)) return glm::vec3(0.0f);
         float pdfArea = rays_.AreaPdf(ti);
         float weight = PowerHeuristic(pdfArea * dist2 / cy, bsdf ? bsdf->Pdf(w) : cx / kPi);
-        glm::vec3 le = scene_.materials[t.material].emission;
+        glm::vec3 le = scene_.materials[t.material].emission * rays_.TintsAt(ti, a, b).emission;
         if (bsdf) le *= bsdf->Eval(w);
         return le * (weight * cx * cy / (dist2 * pdfArea));
     }
@@ -201,14 +203,17 @@ class Tracer {
             float cy = -glm::dot(t.normal, dir);
             if (cy <= 0.0f) break;  // a back side: opaque and black
             const Material& mat = scene_.materials[t.material];
+            // The colour maps' tints at the hit: the texture itself, the truth the solvers'
+            // per-surfel averages approach.
+            const Tints tints = rays_.TintsAt(ti, hit.u, hit.v);
             if (rays_.AreaPdf(ti) > 0.0f) {
                 float dist = hit.t;
                 float pdfLight = rays_.AreaPdf(ti) * dist * dist / cy;
                 float weight = PowerHeuristic(pdfDir, pdfLight);
-                radiance += throughput * weight * mat.emission;
+                radiance += throughput * weight * mat.emission * tints.emission;
             }
             if (depth == s_.maxDepth) break;
-            const Bsdf bsdf(mat, t.normal, -dir);
+            const Bsdf bsdf(mat, t.normal, -dir, tints.albedo);
             if (bsdf.Black()) break;
             x = t.p0 + hit.u * t.e1 + hit.v * t.e2;
             n = t.normal;

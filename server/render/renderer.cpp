@@ -30,9 +30,11 @@ std::span<const uint32_t> Words(const T& array) {
 
 // Radiance towards the camera: (ρ_d + F0) E/π + L_e. A glossy lobe is shown as if it
 // reflected diffusely (its albedo at normal incidence), since per-vertex irradiance carries
-// no direction: metals are not black, but highlights are not drawn.
-glm::vec3 Shade(const Material& m, const glm::vec3& e) {
-    return (m.albedo + m.specular) * glm::max(e, glm::vec3(0.0f)) * kInvPi + m.emission;
+// no direction: metals are not black, but highlights are not drawn. `tints`: the colour
+// maps' at the vertex (shading is per vertex, so a texture shows at the mesh's resolution).
+glm::vec3 Shade(const Material& m, const Tints& tints, const glm::vec3& e) {
+    return (m.albedo * tints.albedo + m.specular) * glm::max(e, glm::vec3(0.0f)) * kInvPi +
+           m.emission * tints.emission;
 }
 
 // Layout of one vertex in shaders/render.vert.
@@ -63,7 +65,10 @@ Mesh ShadedInputMesh(const Scene& scene, const std::vector<std::vector<glm::vec3
         for (size_t i = 0; i < prim.positions.size(); ++i) {
             mesh.positions.push_back(prim.positions[i]);
             mesh.normals.push_back(prim.normals[i]);
-            mesh.colors.push_back(Shade(mat, irradiance[p][i]));
+            const uint32_t v = static_cast<uint32_t>(i);
+            mesh.colors.push_back(
+                Shade(mat, TintsAt(scene, static_cast<uint32_t>(p), glm::uvec3(v), 0.0f, 0.0f),
+                      irradiance[p][i]));
         }
         for (uint32_t i : prim.indices) mesh.indices.push_back(base + i);
     }
@@ -78,7 +83,11 @@ Mesh ShadedRefinedMesh(const Scene& scene, const Surfels& surfels,
     mesh.normals = surfels.normals;
     mesh.colors.resize(surfels.size());
     for (size_t s = 0; s < surfels.size(); ++s)
-        mesh.colors[s] = Shade(scene.materials[surfels.materials[s]], irradiance[s]);
+        mesh.colors[s] = Shade(scene.materials[surfels.materials[s]],
+                               surfels.albedoTints.empty()
+                                   ? Tints{}
+                                   : Tints{surfels.albedoTints[s], surfels.emissionTints[s]},
+                               irradiance[s]);
     mesh.indices = surfels.refinedTriangles;
     return mesh;
 }

@@ -119,6 +119,45 @@ std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, in
     return out;
 }
 
+// Reads a TEXCOORD_n accessor: float, or normalised unsigned byte or short VEC2.
+std::vector<glm::vec2> ReadTexcoords(const Context& ctx, const std::string& where,
+                                     int accessorIndex, const std::string& attribute) {
+    const auto& model = ctx.model;
+    if (accessorIndex < 0 || accessorIndex >= static_cast<int>(model.accessors.size()))
+        ctx.Fail(where, attribute + " names accessor " + std::to_string(accessorIndex) +
+                            ", which does not exist");
+    const auto& acc = model.accessors[accessorIndex];
+    if (acc.sparse.isSparse) ctx.Fail(where, attribute + " uses a sparse accessor (not supported)");
+    const int type = acc.componentType;
+    const size_t size = type == TINYGLTF_COMPONENT_TYPE_FLOAT            ? 4
+                        : type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ? 2
+                        : type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE  ? 1
+                                                                         : 0;
+    if (acc.type != TINYGLTF_TYPE_VEC2 || size == 0 || (size < 4 && !acc.normalized))
+        ctx.Fail(where,
+                 attribute + " must be VEC2 of floats or normalised unsigned bytes or shorts");
+    size_t stride = 0;
+    const unsigned char* bytes = AccessorBytes(ctx, where, acc, size * 2, stride, attribute);
+    std::vector<glm::vec2> out(acc.count);
+    for (size_t i = 0; i < acc.count; ++i) {
+        const unsigned char* p = bytes + stride * i;
+        for (int c = 0; c < 2; ++c) {
+            if (size == 4) {
+                std::memcpy(&out[i][c], p + 4 * c, 4);
+            } else if (size == 2) {
+                uint16_t v;
+                std::memcpy(&v, p + 2 * c, 2);
+                out[i][c] = static_cast<float>(v) / 65535.0f;
+            } else {
+                out[i][c] = static_cast<float>(p[c]) / 255.0f;
+            }
+        }
+        if (!std::isfinite(out[i].x) || !std::isfinite(out[i].y))
+            ctx.Fail(where, attribute + " has NaN or infinity");
+    }
+    return out;
+}
+
 std::vector<uint32_t> ReadIndices(const Context& ctx, const std::string& where, int accessorIndex) {
     const auto& model = ctx.model;
     if (accessorIndex < 0 || accessorIndex >= static_cast<int>(model.accessors.size()))
@@ -186,35 +225,37 @@ std::vector<uint32_t> ToTriangleList(const Context& ctx, const std::string& wher
                         " (points/lines) has no surface to light; only triangles are supported");
 }
 
-glm::vec3 MeanTextureColor(const Context& ctx, const std::string& where, int textureIndex) {
+// The colour map of glTF texture `textureIndex` as Scene::maps[returned index], decoded on
+// first use (ReadGltfModel keeps images encoded) and shared by every material that uses it.
+int ReadMap(const Context& ctx, const std::string& where, const char* what, int textureIndex,
+            Scene& scene, std::vector<int>& mapOfTexture) {
     if (textureIndex < 0 || textureIndex >= static_cast<int>(ctx.model.textures.size()))
-        ctx.Fail(where, "baseColorTexture names texture " + std::to_string(textureIndex) +
+        ctx.Fail(where, std::string(what) + " names texture " + std::to_string(textureIndex) +
                             ", which does not exist");
+    mapOfTexture.resize(ctx.model.textures.size(), -1);
+    if (mapOfTexture[textureIndex] >= 0) return mapOfTexture[textureIndex];
     const auto& tex = ctx.model.textures[textureIndex];
     if (tex.source < 0 || tex.source >= static_cast<int>(ctx.model.images.size()))
-        ctx.Fail(where, "baseColorTexture has no image");
+        ctx.Fail(where, std::string(what) + " has no image");
     const auto& img = ctx.model.images[tex.source];
-    // Decoded here, as 8-bit RGB (ReadGltfModel keeps images encoded).
-    int w = 0, h = 0, channels = 0;
-    unsigned char* rgb =
-        img.image.empty()
-            ? nullptr
-            : stbi_load_from_memory(img.image.data(), static_cast<int>(img.image.size()), &w, &h,
-                                    &channels, 3);
-    if (!rgb)
-        ctx.Fail(where, "baseColorTexture image " + std::to_string(tex.source) +
+    int w = 0, h = 0;
+    std::vector<glm::vec3> linear;
+    const char* why = "";
+    if (!DecodeSrgbImage(img.image, w, h, linear, why))
+        ctx.Fail(where, std::string(what) + " image " + std::to_string(tex.source) +
                             (img.uri.empty() ? "" : " '" + img.uri + "'") +
-                            " could not be decoded (" +
-                            (img.image.empty() ? "no data" : stbi_failure_reason()) + ")");
-    glm::dvec3 sum(0.0);
-    const size_t pixels = static_cast<size_t>(w) * static_cast<size_t>(h);
-    for (size_t i = 0; i < pixels; ++i) {
-        const unsigned char* p = rgb + i * 3;
-        sum += glm::dvec3(SrgbToLinear(p[0] / 255.0f), SrgbToLinear(p[1] / 255.0f),
-                          SrgbToLinear(p[2] / 255.0f));
+                            " could not be decoded (" + why + ")");
+    Wrap wrap[2] = {Wrap::kRepeat, Wrap::kRepeat};
+    if (tex.sampler >= 0 && tex.sampler < static_cast<int>(ctx.model.samplers.size())) {
+        const auto& sampler = ctx.model.samplers[tex.sampler];
+        const int modes[2] = {sampler.wrapS, sampler.wrapT};
+        for (int i = 0; i < 2; ++i)
+            wrap[i] = modes[i] == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE     ? Wrap::kClamp
+                      : modes[i] == TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT ? Wrap::kMirror
+                                                                          : Wrap::kRepeat;
     }
-    stbi_image_free(rgb);
-    return pixels ? glm::vec3(sum / static_cast<double>(pixels)) : glm::vec3(1.0f);
+    scene.maps.emplace_back(w, h, std::move(linear), wrap[0], wrap[1]);
+    return mapOfTexture[textureIndex] = static_cast<int>(scene.maps.size() - 1);
 }
 
 // `extras.penumbra` of a node: {"dynamic": bool, "bounds": {"min": [x,y,z], "max": [x,y,z]}}.
@@ -251,15 +292,21 @@ void ReadPenumbraExtras(const Context& ctx, const std::string& where, const tiny
     out.hasMotionBounds = true;
 }
 
-Material ReadMaterial(const Context& ctx, int index) {
+Material ReadMaterial(const Context& ctx, int index, Scene& scene, std::vector<int>& mapOfTexture) {
     const auto& m = ctx.model.materials[index];
     std::string where = "material " + std::to_string(index) + " '" + m.name + "'";
     const auto& pbr = m.pbrMetallicRoughness;
+    for (int set : {pbr.baseColorTexture.texCoord, m.emissiveTexture.texCoord})
+        if (set < 0 || set > 7) ctx.Fail(where, "a texture's texCoord must be 0 to 7");
     glm::vec3 base(1.0f);
     if (pbr.baseColorFactor.size() >= 3)
         base = glm::vec3(pbr.baseColorFactor[0], pbr.baseColorFactor[1], pbr.baseColorFactor[2]);
-    if (pbr.baseColorTexture.index >= 0)
-        base *= MeanTextureColor(ctx, where, pbr.baseColorTexture.index);
+    int baseMap = -1, emissionMap = -1;
+    if (pbr.baseColorTexture.index >= 0) {
+        baseMap = ReadMap(ctx, where, "baseColorTexture", pbr.baseColorTexture.index, scene,
+                          mapOfTexture);
+        base *= scene.maps[baseMap].Mean();
+    }
     float metallic = static_cast<float>(pbr.metallicFactor);
     float roughness = static_cast<float>(pbr.roughnessFactor);
     glm::vec3 emissive(0.0f);
@@ -270,6 +317,11 @@ Material ReadMaterial(const Context& ctx, int index) {
     if (ext != m.extensions.end() && ext->second.Has("emissiveStrength"))
         strength = static_cast<float>(ext->second.Get("emissiveStrength").GetNumberAsDouble());
     glm::vec3 emission = emissive * strength;
+    if (m.emissiveTexture.index >= 0 && glm::any(glm::greaterThan(emission, glm::vec3(0.0f)))) {
+        emissionMap =
+            ReadMap(ctx, where, "emissiveTexture", m.emissiveTexture.index, scene, mapOfTexture);
+        emission *= scene.maps[emissionMap].Mean();
+    }
     for (int c = 0; c < 3; ++c) {
         if (!std::isfinite(base[c]) || base[c] < 0.0f)
             ctx.Fail(where, "base colour is not a finite non-negative number");
@@ -282,7 +334,10 @@ Material ReadMaterial(const Context& ctx, int index) {
         ctx.Fail(where, "metallicFactor is not a number in [0, 1]");
     if (!(roughness >= 0.0f && roughness <= 1.0f))
         ctx.Fail(where, "roughnessFactor is not a number in [0, 1]");
-    return PbrMaterial(m.name, base, metallic, roughness, emission);
+    Material out = PbrMaterial(m.name, base, metallic, roughness, emission);
+    out.baseColorMap = baseMap, out.baseColorSet = pbr.baseColorTexture.texCoord;
+    out.emissionMap = emissionMap, out.emissionSet = m.emissiveTexture.texCoord;
+    return out;
 }
 
 // KHR_lights_punctual light `index`, checked; placed by the caller.
@@ -420,17 +475,10 @@ std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene&
     for (size_t i = 0; i < model.materials.size(); ++i) {
         const auto& m = model.materials[i];
         const std::string where = named("material", i, m.name);
-        if (m.pbrMetallicRoughness.baseColorTexture.index >= 0) {
-            const glm::vec3 a = scene.materials[i].baseColor;
-            char colour[96];
-            std::snprintf(colour, sizeof(colour), "(%.3g, %.3g, %.3g)", a.x, a.y, a.z);
-            out.push_back(where + ": baseColorTexture averaged to one base colour " + colour +
-                          " (textures are not sampled per surface)");
-        }
-        if (m.emissiveTexture.index >= 0)
+        if (m.pbrMetallicRoughness.baseColorTexture.index >= 0 && scene.materials[i].Glossy())
             out.push_back(where +
-                          ": emissiveTexture ignored (emission is emissiveFactor × "
-                          "strength, uniform over the surface)");
+                          ": baseColorTexture tints the diffuse albedo only; the glossy lobe "
+                          "takes the texture's mean colour");
         std::vector<std::string> maps;
         if (m.normalTexture.index >= 0) maps.push_back("normalTexture");
         if (m.occlusionTexture.index >= 0) maps.push_back("occlusionTexture");
@@ -489,8 +537,9 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
     Scene scene;
     scene.source = path;
     scene.materials.reserve(model.materials.size() + 1);
+    std::vector<int> mapOfTexture;
     for (size_t i = 0; i < model.materials.size(); ++i)
-        scene.materials.push_back(ReadMaterial(ctx, static_cast<int>(i)));
+        scene.materials.push_back(ReadMaterial(ctx, static_cast<int>(i), scene, mapOfTexture));
     // glTF's default material: baseColor 1, metallic 1, hence black diffuse.
     uint32_t defaultMaterial = static_cast<uint32_t>(scene.materials.size());
     // Kept black (no light reflected) rather than glTF's rough white metal, so that
@@ -512,6 +561,7 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
             if (!isChild[i]) roots.push_back(static_cast<int>(i));
     }
 
+    std::vector<std::string> untextured;  // warnings: primitives without the coordinates
     std::vector<int> visits(model.nodes.size(), 0);
     scene.nodes.resize(model.nodes.size());
     for (size_t i = 0; i < model.nodes.size(); ++i)
@@ -631,6 +681,26 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
                 } else {
                     ComputeVertexNormals(out);  // in the mesh's own space
                 }
+                // The texture coordinates the material's maps read.
+                const Material& material = scene.materials[out.material];
+                for (auto [map, set] : {std::pair{material.baseColorMap, material.baseColorSet},
+                                        {material.emissionMap, material.emissionSet}}) {
+                    if (map < 0) continue;
+                    const std::string name = "TEXCOORD_" + std::to_string(set);
+                    auto uv = prim.attributes.find(name);
+                    if (uv == prim.attributes.end()) {
+                        untextured.push_back(where + ": no " + name +
+                                             " for its material's texture: the texture's mean "
+                                             "colour is used over it");
+                        continue;
+                    }
+                    if (static_cast<int>(out.texcoords.size()) <= set)
+                        out.texcoords.resize(set + 1);
+                    if (!out.texcoords[set].empty()) continue;
+                    out.texcoords[set] = ReadTexcoords(ctx, where, uv->second, name);
+                    if (out.texcoords[set].size() != out.positions.size())
+                        ctx.Fail(where, name + " and POSITION counts differ");
+                }
                 // Keep the mesh-space vertices (moves re-place them), then go to world space.
                 out.objectPositions = out.positions;
                 out.objectNormals = out.normals;
@@ -650,6 +720,7 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
 
     if (scene.TriangleCount() == 0) throw Error(path + ": the scene has no triangles to light");
     scene.warnings = IgnoredInput(model, scene);
+    scene.warnings.insert(scene.warnings.end(), untextured.begin(), untextured.end());
     return scene;
 }
 

@@ -79,6 +79,29 @@ size_t Scene::TriangleCount() const {
     return n;
 }
 
+bool AnyMapped(const Scene& scene) {
+    return std::any_of(scene.materials.begin(), scene.materials.end(),
+                       [](const Material& m) { return m.Mapped(); });
+}
+
+Tints TintsAt(const Scene& scene, uint32_t p, const glm::uvec3& abc, float u, float v) {
+    const Primitive& prim = scene.primitives[p];
+    const Material& m = scene.materials[prim.material];
+    Tints out;
+    auto at = [&](int map, int set) {
+        if (map < 0 || set >= static_cast<int>(prim.texcoords.size()) ||
+            prim.texcoords[set].empty())
+            return glm::vec3(1.0f);
+        const std::vector<glm::vec2>& uv = prim.texcoords[set];
+        const glm::vec2 x = uv[abc.x] + u * (uv[abc.y] - uv[abc.x]) + v * (uv[abc.z] - uv[abc.x]);
+        return scene.maps[map].At(x);
+    };
+    if (!m.Mapped()) return out;
+    out.albedo = at(m.baseColorMap, m.baseColorSet);
+    out.emission = at(m.emissionMap, m.emissionSet);
+    return out;
+}
+
 std::vector<std::string> SceneWarnings(const Scene& scene) {
     std::vector<std::string> out = scene.warnings;
     const bool emits = std::any_of(

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "scene/environment.h"
+#include "scene/texture.h"
 
 namespace penumbra {
 
@@ -28,9 +29,16 @@ struct Material {
     glm::vec3 albedo{0.8f};      // diffuse reflectance ρ_d (derived)
     glm::vec3 specular{0.0f};    // F0 of the glossy lobe; zero: no lobe (derived)
     float phongExponent = 0.0f;  // n of the lobe; 0 when there is none (derived)
-    glm::vec3 emission{0.0f};    // emitted radiance (nits), emissiveFactor × strength
+    glm::vec3 emission{0.0f};    // emitted radiance (nits), emissiveFactor × strength × mean
+    // Colour maps (indices into Scene::maps, −1: none) and the texture coordinate set each
+    // reads (Primitive::texcoords): the base colour's tints the diffuse albedo, the emissive
+    // one the emission, point by point (TintsAt); albedo and emission above hold the maps'
+    // means. The glossy lobe's colour (specular) takes the base colour map's mean only.
+    int baseColorMap = -1, baseColorSet = 0;
+    int emissionMap = -1, emissionSet = 0;
 
     bool Glossy() const { return phongExponent > 0.0f; }
+    bool Mapped() const { return baseColorMap >= 0 || emissionMap >= 0; }
 };
 
 // Whether any of `materials` is glossy.
@@ -67,6 +75,8 @@ struct Primitive {
     // The same vertices in the node's own (mesh) space, so a move re-places them exactly.
     std::vector<glm::vec3> objectPositions;
     std::vector<glm::vec3> objectNormals;
+    // TEXCOORD_n, one per position, for the sets its material's maps read (others empty).
+    std::vector<std::vector<glm::vec2>> texcoords;
 };
 
 // One glTF node: its transform, whether it may move, and the primitives it places.
@@ -137,6 +147,8 @@ struct Scene {
     std::vector<SceneNode> nodes;       // indexed like the file's nodes (Primitive::nodeIndex)
     std::vector<PunctualLight> lights;  // KHR_lights_punctual, one per node that places one
     std::vector<Camera> cameras;        // perspective cameras of the file, in node order
+    // The materials' colour maps (Material::baseColorMap, emissionMap).
+    std::vector<TintMap> maps;
     // Light from infinity (not part of glTF: set by `--environment` or the protocol).
     Environment environment;
     // What the loader read but ignored or approximated (textures averaged, skins in rest pose,
@@ -150,6 +162,15 @@ struct Scene {
     size_t TriangleCount() const;
 };
 
+// How a material's maps change its albedo and emission at a point: multiply by these.
+struct Tints {
+    glm::vec3 albedo{1.0f}, emission{1.0f};
+};
+// Whether any material of `scene` has a map (else every tint is 1).
+bool AnyMapped(const Scene& scene);
+// The tints at the point a + u·(b − a) + v·(c − a) of primitive p's triangle with vertices
+// a, b, c (indices into its positions), under its current material.
+Tints TintsAt(const Scene& scene, uint32_t p, const glm::uvec3& abc, float u, float v);
 // Everything a user should be told about `scene` before trusting its answer: the loader's
 // warnings, and a scene with no light at all (no emission, punctual light or sky: its
 // irradiance is zero everywhere). Shown by bake and reference (stderr and the JSON's

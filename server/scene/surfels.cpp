@@ -17,7 +17,13 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
     std::vector<float> ownAreas;
     bool anyOwn = false;
     const float maxEdge2 = elementSize * elementSize;
-    for (const auto& prim : scene.primitives) {
+    // Colour maps: each surfel's texture coordinates in its base colour and emission maps'
+    // sets (interpolated at midpoints like positions) and its tints' area integrals.
+    const bool mapped = AnyMapped(scene);
+    std::vector<glm::vec2> baseUv, emissionUv;
+    std::vector<glm::vec3> albedoSums, emissionSums;
+    for (uint32_t pi = 0; pi < scene.primitives.size(); ++pi) {
+        const Primitive& prim = scene.primitives[pi];
         const uint32_t base = static_cast<uint32_t>(out.positions.size());
         out.firstSurfel.push_back(base);
         // A dynamic node's primitives are split by their own-space edges, measured with the
@@ -27,7 +33,22 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
         const bool own = prim.nodeIndex >= 0 && scene.nodes[prim.nodeIndex].dynamic &&
                          prim.objectPositions.size() == prim.positions.size();
         anyOwn = anyOwn || own;
+        const Material& material = scene.materials[prim.material];
+        // The map each tint reads here, if the primitive has its coordinates.
+        auto mapOf = [&](int map, int set) -> const std::vector<glm::vec2>* {
+            if (map < 0 || set >= static_cast<int>(prim.texcoords.size()) ||
+                prim.texcoords[set].size() != prim.positions.size())
+                return nullptr;
+            return &prim.texcoords[set];
+        };
+        const std::vector<glm::vec2>* baseSet = mapOf(material.baseColorMap, material.baseColorSet);
+        const std::vector<glm::vec2>* emissionSet =
+            mapOf(material.emissionMap, material.emissionSet);
         for (size_t i = 0; i < prim.positions.size(); ++i) {
+            if (mapped) {
+                baseUv.push_back(baseSet ? (*baseSet)[i] : glm::vec2(0.0f));
+                emissionUv.push_back(emissionSet ? (*emissionSet)[i] : glm::vec2(0.0f));
+            }
             out.positions.push_back(prim.positions[i]);
             out.normals.push_back(prim.normals[i]);
             out.areas.push_back(0.0f);
@@ -56,6 +77,10 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             if (it != midpoints.end()) return it->second;
             uint32_t m = static_cast<uint32_t>(out.positions.size());
             moments.emplace_back(0.0f);
+            if (mapped) {
+                baseUv.push_back(0.5f * (baseUv[a] + baseUv[b]));
+                emissionUv.push_back(0.5f * (emissionUv[a] + emissionUv[b]));
+            }
             out.positions.push_back(0.5f * (out.positions[a] + out.positions[b]));
             ownMoments.emplace_back(0.0f);
             ownAreas.push_back(0.0f);
@@ -106,6 +131,23 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             }
             float area = 0.5f * glm::length(glm::cross(p[1] - p[0], p[2] - p[0]));
             glm::vec3 sum = p[0] + p[1] + p[2];
+            if (mapped) {
+                // The tints over this triangle, a third of its area to each corner (the
+                // integral of a corner's hat function over it, with the tint taken constant).
+                albedoSums.resize(out.positions.size(), glm::vec3(0.0f));
+                emissionSums.resize(out.positions.size(), glm::vec3(0.0f));
+                glm::vec3 albedo(1.0f), emission(1.0f);
+                if (baseSet)
+                    albedo = scene.maps[material.baseColorMap].Over(baseUv[tri[0]], baseUv[tri[1]],
+                                                                    baseUv[tri[2]]);
+                if (emissionSet)
+                    emission = scene.maps[material.emissionMap].Over(
+                        emissionUv[tri[0]], emissionUv[tri[1]], emissionUv[tri[2]]);
+                for (int k = 0; k < 3; ++k) {
+                    albedoSums[tri[k]] += area / 3.0f * albedo;
+                    emissionSums[tri[k]] += area / 3.0f * emission;
+                }
+            }
             for (int k = 0; k < 3; ++k) {
                 out.areas[tri[k]] += area / 3.0f;
                 // ∫ φ_k x dA over the triangle = A (2 p_k + p_i + p_j) / 12.
@@ -130,6 +172,17 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
         for (size_t i = 0; i < out.size(); ++i)
             out.ownCentroids[i] =
                 ownAreas[i] > 0.0f ? ownMoments[i] / ownAreas[i] : glm::vec3(0.0f);
+    }
+    if (mapped) {
+        albedoSums.resize(out.size(), glm::vec3(0.0f));
+        emissionSums.resize(out.size(), glm::vec3(0.0f));
+        out.albedoTints.resize(out.size());
+        out.emissionTints.resize(out.size());
+        for (size_t i = 0; i < out.size(); ++i) {
+            const bool some = out.areas[i] > 0.0f;
+            out.albedoTints[i] = some ? albedoSums[i] / out.areas[i] : glm::vec3(1.0f);
+            out.emissionTints[i] = some ? emissionSums[i] / out.areas[i] : glm::vec3(1.0f);
+        }
     }
     out.centroids.resize(out.size());
     for (size_t i = 0; i < out.size(); ++i)

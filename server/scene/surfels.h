@@ -19,6 +19,11 @@ struct Surfels {
     // where the position itself sees neighbouring surfaces only at grazing angles.
     std::vector<glm::vec3> centroids;
     std::vector<uint32_t> materials;
+    // Per surfel (empty: the scene has no colour maps): its material's maps averaged over its
+    // hat function (Tints): its albedo is the material's times albedoTints[i], its emission
+    // the material's times emissionTints[i]. Fixed by the texture coordinates, so a move
+    // keeps them.
+    std::vector<glm::vec3> albedoTints, emissionTints;
     // Primitive p's input vertex i is surfel firstSurfel[p] + i (input vertices come first).
     std::vector<uint32_t> firstSurfel;
     std::vector<uint32_t> refinedTriangles;  // triangle list over surfel indices
@@ -36,6 +41,13 @@ struct Surfels {
     std::vector<glm::vec3> ownCentroids, ownNormals;
 
     size_t size() const { return positions.size(); }
+    // Surfel i's diffuse albedo and emission under material m (its own or one it may get).
+    glm::vec3 Albedo(const Material& m, size_t i) const {
+        return albedoTints.empty() ? m.albedo : m.albedo * albedoTints[i];
+    }
+    glm::vec3 Emission(const Material& m, size_t i) const {
+        return emissionTints.empty() ? m.emission : m.emission * emissionTints[i];
+    }
     // Primitive p's surfels are [firstSurfel[p], End(p)).
     size_t End(size_t p) const { return p + 1 < firstSurfel.size() ? firstSurfel[p + 1] : size(); }
 };

@@ -225,7 +225,7 @@ TEST(GltfLoader, IgnoredInputIsWarnedAbout) {
     std::string all;
     for (const auto& w : SceneWarnings(scene)) all += w + "\n";
     for (const char* expected :
-         {"baseColorTexture averaged to one base colour", "emissiveTexture ignored",
+         {"no TEXCOORD_0 for its material's texture: the texture's mean colour is used",
           "normalTexture ignored", "1 skin(s) ignored", "1 primitive(s) with morph targets",
           "1 animation(s) ignored", "extension 'KHR_materials_clearcoat' ignored",
           "1 node(s) with a mesh but no name"})
@@ -248,6 +248,79 @@ TEST(GltfLoader, IgnoredInputIsWarnedAbout) {
     for (auto& m : dark.materials) m.emission = glm::vec3(0.0f);
     ASSERT_EQ(SceneWarnings(dark).size(), 1u);
     EXPECT_NE(SceneWarnings(dark)[0].find("no light"), std::string::npos);
+}
+
+// Base colour and emissive textures are read as colour maps (one per texture, shared by
+// the materials that use it) with the texture coordinates their primitives give; the
+// material's colour holds the factor times the texture's mean.
+TEST(GltfLoader, ReadsColourMapsAndTheirCoordinates) {
+    const auto dir = testing::TempDir("gltf-maps");
+    // 64 × 1 texels: white on the left half, black on the right.
+    std::vector<uint8_t> rgb(64 * 3, 0);
+    std::fill(rgb.begin(), rgb.begin() + 32 * 3, 255);
+    WritePng((dir / "halves.png").string(), 64, 1, rgb);
+    nlohmann::json doc = Cornell();
+    const int count = doc["accessors"][0]["count"];  // the floor's POSITION
+    // TEXCOORD_0 of the floor: u = ¼ for its first half of vertices, ¾ for the rest.
+    std::vector<float> uv;
+    for (int i = 0; i < count; ++i) uv.insert(uv.end(), {i < count / 2 ? 0.25f : 0.75f, 0.5f});
+    std::ofstream(dir / "uv.bin", std::ios::binary)
+        .write(reinterpret_cast<const char*>(uv.data()), uv.size() * sizeof(float));
+    const int buffer = static_cast<int>(doc["buffers"].size());
+    doc["buffers"].push_back({{"uri", "uv.bin"}, {"byteLength", uv.size() * sizeof(float)}});
+    doc["bufferViews"].push_back({{"buffer", buffer}, {"byteLength", uv.size() * sizeof(float)}});
+    doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
+                                {"componentType", 5126},
+                                {"count", count},
+                                {"type", "VEC2"}});
+    doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = doc["accessors"].size() - 1;
+    doc["images"] = {{{"uri", "halves.png"}}};
+    doc["textures"] = {{{"source", 0}, {"sampler", 0}}};
+    doc["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33071}}};  // clamp to edge
+    doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+    doc["materials"][0]["emissiveTexture"] = {{"index", 0}};
+    doc["materials"][0]["emissiveFactor"] = {2.0, 2.0, 2.0};
+    std::ofstream(dir / "maps.gltf") << doc.dump();
+    const Scene scene = LoadGltf((dir / "maps.gltf").string());
+    ASSERT_EQ(scene.maps.size(), 1u);  // one texture, read once
+    const Material& white = scene.materials[0];
+    EXPECT_EQ(white.baseColorMap, 0);
+    EXPECT_EQ(white.emissionMap, 0);
+    EXPECT_NEAR(scene.maps[0].Mean().x, 0.5f, 1e-6f);
+    EXPECT_NEAR(white.baseColor.x, 0.725f * 0.5f, 1e-5f);
+    EXPECT_NEAR(white.emission.x, 2.0f * 0.5f, 1e-5f);
+    const int floor = FindNode(scene, "floor");
+    const uint32_t p = scene.nodes[floor].primitives[0];
+    ASSERT_EQ(scene.primitives[p].texcoords.size(), 1u);
+    ASSERT_EQ(scene.primitives[p].texcoords[0].size(), static_cast<size_t>(count));
+    // At a vertex of the first half the texture is white: twice its mean; at the last, black.
+    const Tints first = TintsAt(scene, p, glm::uvec3(0), 0.0f, 0.0f);
+    const Tints last = TintsAt(scene, p, glm::uvec3(count - 1), 0.0f, 0.0f);
+    EXPECT_NEAR(first.albedo.x, 2.0f, 1e-5f);
+    EXPECT_NEAR(first.emission.x, 2.0f, 1e-5f);
+    EXPECT_NEAR(last.albedo.x, 0.0f, 1e-6f);
+    // The other primitives with the material have no coordinates: warned, the mean used.
+    std::string all;
+    for (const auto& w : scene.warnings) all += w + "\n";
+    EXPECT_NE(all.find("no TEXCOORD_0"), std::string::npos) << all;
+    EXPECT_EQ(all.find("'floor' mesh 0"), std::string::npos) << all;
+    const uint32_t wall = scene.nodes[FindNode(scene, "back_wall")].primitives[0];
+    EXPECT_EQ(TintsAt(scene, wall, glm::uvec3(0), 0.0f, 0.0f).albedo, glm::vec3(1.0f));
+
+    // A texCoord out of range is refused.
+    doc["materials"][0]["emissiveTexture"]["texCoord"] = 9;
+    std::ofstream(dir / "texcoord.gltf") << doc.dump();
+    EXPECT_THROW(
+        {
+            try {
+                LoadGltf((dir / "texcoord.gltf").string());
+            } catch (const Error& e) {
+                EXPECT_NE(std::string(e.what()).find("texCoord must be 0 to 7"), std::string::npos)
+                    << e.what();
+                throw;
+            }
+        },
+        Error);
 }
 
 TEST(GltfLoader, MissingPositionIsRefused) {

@@ -227,9 +227,10 @@ void AntiradianceSolver::UpdateMaterials(const Scene& scene) {
     }
     for (LeafAttributes& leaf : model_.leaves) {
         const Material& mat = scene.materials[model_.surfels.materials[leaf.surfel]];
-        leaf.albedo = mat.albedo;
+        leaf.albedo = model_.surfels.Albedo(mat, leaf.surfel);
         // With a first shot from outside the emitters' light is not carried here.
-        leaf.emission = emitterDirect_.empty() ? mat.emission : glm::vec3(0.0f);
+        leaf.emission =
+            emitterDirect_.empty() ? model_.surfels.Emission(mat, leaf.surfel) : glm::vec3(0.0f);
     }
     // Which leaves are glossy, and their lobes, may have changed with the materials (most
     // edits, a dimmed emitter say, leave them as they are).
@@ -336,9 +337,11 @@ void AntiradianceSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfe
     if (wasOn != !emitterDirect_.empty()) {
         // Emission off in the transport, or back on from the materials as last read.
         for (LeafAttributes& leaf : model_.leaves)
-            leaf.emission = emitterDirect_.empty()
-                                ? materials_[model_.surfels.materials[leaf.surfel]].emission
-                                : glm::vec3(0.0f);
+            leaf.emission =
+                emitterDirect_.empty()
+                    ? model_.surfels.Emission(materials_[model_.surfels.materials[leaf.surfel]],
+                                              leaf.surfel)
+                    : glm::vec3(0.0f);
     }
     backend_->InputsChanged(AntiradianceBackend::kLeaves | AntiradianceBackend::kDirect);
     Rebound();

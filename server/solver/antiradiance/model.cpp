@@ -88,8 +88,8 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
         LeafAttributes leaf{};
         leaf.normal = model.surfels.normals[s];
         leaf.area = model.surfels.areas[s];
-        leaf.albedo = mat.albedo;
-        leaf.emission = mat.emission;
+        leaf.albedo = model.surfels.Albedo(mat, s);
+        leaf.emission = model.surfels.Emission(mat, s);
         leaf.cosNormIn = norms.in[node];
         leaf.cosNormOut = norms.out[node];
         leaf.node = node;

@@ -112,11 +112,11 @@ void ImplicitSolver::Rematerial() {
     albedo_.resize(leaves);
     emission_.resize(leaves);
     for (size_t i = 0; i < leaves; ++i) {
-        const Material& m =
-            materials_[surfels_.materials[hierarchy_.nodes[hierarchy_.leaves[i]].surfel]];
-        albedo_[i] = m.albedo;
+        const uint32_t s = hierarchy_.nodes[hierarchy_.leaves[i]].surfel;
+        const Material& m = materials_[surfels_.materials[s]];
+        albedo_[i] = surfels_.Albedo(m, s);
         // With a first shot from outside (SetEmitterDirect) the emitters' light is not carried.
-        emission_[i] = emitterDirect_.empty() ? m.emission : glm::vec3(0.0f);
+        emission_[i] = emitterDirect_.empty() ? surfels_.Emission(m, s) : glm::vec3(0.0f);
     }
     Reradiate();
 }
