@@ -62,7 +62,8 @@ accuracy: build
 
 # The pictures of docs/BAKING.md: the Cornell box and the office lit by the solver alone and with the
 # gather stage (bake's defaults, shaded per input vertex), the path-traced reference, and
-# each answer's error against it as a heat map.
+# each answer's error against it as a heat map; each answer's `compare` against the reference
+# goes to bench/results/images.json.
 OFFICE_CAMERA = 0.6,2.2,0.6,8,0.6,6,75
 images: build
 	@mkdir -p docs/images
@@ -82,6 +83,13 @@ images: build
 	$(BUILD)/penumbra render scenes/office.gltf --camera $(OFFICE_CAMERA) --lighting $(BUILD)/office-gather.json -o docs/images/office.png --size 640x400
 	$(BUILD)/penumbra render scenes/office.gltf --camera $(OFFICE_CAMERA) --lighting $(BUILD)/office-alone.json --compare $(BUILD)/office-reference.json -o docs/images/office-alone-error.png --size 640x400 --error-scale 0.5
 	$(BUILD)/penumbra render scenes/office.gltf --camera $(OFFICE_CAMERA) --lighting $(BUILD)/office-gather.json --compare $(BUILD)/office-reference.json -o docs/images/office-error.png --size 640x400 --error-scale 0.5
+	@{ printf '{"date": "%s", "machine": "%s, %s cores (CPU back end)", "reference": "penumbra reference --samples 4096", "compare": {' \
+	     "$$(date -u +%F)" "$$(uname -m)" "$$(nproc)"; sep=''; \
+	   for a in cornell-alone cornell-gather office-alone office-gather; do \
+	     printf '%s"%s": ' "$$sep" "$$a"; sep=', '; \
+	     $(BUILD)/penumbra compare --json $(BUILD)/$$a.json $(BUILD)/$${a%%-*}-reference.json; \
+	   done; echo '}}'; } > bench/results/images.json
+	@echo "wrote bench/results/images.json"
 	$(BUILD)/penumbra render scenes/glossy-box.gltf -o docs/images/glossy-box.png --size 512x384 --channel total --bins 256 --element-size 0.08 --iterations 8
 	$(BUILD)/penumbra reference scenes/glossy-box.gltf -o $(BUILD)/glossy-reference.json --channel total --samples 4096 -q
 	$(BUILD)/penumbra render scenes/glossy-box.gltf --lighting $(BUILD)/glossy-reference.json -o docs/images/glossy-box-reference.png --size 512x384
