@@ -1,8 +1,9 @@
 // Writes the fuzz targets' seed corpora (scripts/fuzz.sh runs it before the fuzzers): a frame
-// of each request the server reads, a sky map with a sun, the bundled scenes as .glb, and the
-// CLI's script lines. Usage: fuzz_seeds SOURCE_DIR CORPUS_DIR.
+// of each request the server reads, a sky map with a sun, the bundled scenes as .glb (one
+// textured), and the CLI's script lines. Usage: fuzz_seeds SOURCE_DIR CORPUS_DIR.
 #include <tiny_gltf.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -115,6 +116,59 @@ void Scenes(const fs::path& source, const fs::path& dir) {
     }
 }
 
+// The Cornell box with a base colour and an emissive texture on its first material (a 4 × 4
+// checker PNG, clamped) and TEXCOORD_0 on its first mesh, as .glb: the colour maps' path.
+void TexturedScene(const fs::path& source, const fs::path& dir) {
+    tinygltf::TinyGLTF loader;
+    tinygltf::Model model;
+    std::string err, warn;
+    const fs::path in = source / "scenes" / "cornell-box.gltf";
+    if (!loader.LoadASCIIFromFile(&model, &err, &warn, in.string()))
+        throw Error(in.string() + ": " + err);
+    const fs::path images = dir / "images";
+    fs::create_directories(images);
+    std::vector<uint8_t> rgb(4 * 4 * 3);
+    for (size_t i = 0; i < rgb.size(); ++i) rgb[i] = ((i / 3) % 4 + (i / 12)) % 2 ? 230 : 20;
+    WritePng((images / "checker.png").string(), 4, 4, rgb);
+    tinygltf::Primitive& prim = model.meshes.at(0).primitives.at(0);
+    const size_t count = model.accessors.at(prim.attributes.at("POSITION")).count;
+    std::vector<unsigned char>& data = model.buffers.at(0).data;
+    tinygltf::BufferView view;
+    view.buffer = 0;
+    view.byteOffset = data.size();
+    view.byteLength = count * 2 * sizeof(float);
+    for (size_t i = 0; i < count; ++i) {
+        const float uv[2] = {static_cast<float>(i % 5) * 0.25f, static_cast<float>(i % 3) * 0.5f};
+        const auto* bytes = reinterpret_cast<const unsigned char*>(uv);
+        data.insert(data.end(), bytes, bytes + sizeof(uv));
+    }
+    model.bufferViews.push_back(view);
+    tinygltf::Accessor uv;
+    uv.bufferView = static_cast<int>(model.bufferViews.size()) - 1;
+    uv.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+    uv.type = TINYGLTF_TYPE_VEC2;
+    uv.count = count;
+    model.accessors.push_back(uv);
+    prim.attributes["TEXCOORD_0"] = static_cast<int>(model.accessors.size()) - 1;
+    tinygltf::Image image;
+    image.uri = "checker.png";
+    model.images.push_back(image);
+    tinygltf::Sampler sampler;
+    sampler.wrapS = sampler.wrapT = TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE;
+    model.samplers.push_back(sampler);
+    tinygltf::Texture texture;
+    texture.source = 0;
+    texture.sampler = 0;
+    model.textures.push_back(texture);
+    tinygltf::Material& material =
+        model.materials.at(static_cast<size_t>(std::max(prim.material, 0)));
+    material.pbrMetallicRoughness.baseColorTexture.index = 0;
+    material.emissiveTexture.index = 0;
+    material.emissiveFactor = {1.0, 1.0, 1.0};
+    WriteGltfModel(model, (dir / "textured-cornell-box.glb").string(), images.string());
+    fs::remove_all(images);
+}
+
 void Scripts(const fs::path& source, const fs::path& dir) {
     fs::copy_file(source / "scenes" / "demo-edits.txt", dir / "demo-edits.txt",
                   fs::copy_options::overwrite_existing);
@@ -144,6 +198,7 @@ int main(int argc, char** argv) {
         Frames(corpus / "frame");
         Sky(corpus / "exr");
         Scenes(source, corpus / "gltf");
+        TexturedScene(source, corpus / "gltf");
         Scripts(source, corpus / "script");
     } catch (const std::exception& e) {
         std::fprintf(stderr, "fuzz_seeds: %s\n", e.what());

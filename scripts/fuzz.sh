@@ -11,6 +11,10 @@
 #   FUZZ_TARGETS  which (default: frame gltf exr script)
 #   SANITIZE_BUILD  the build tree (default build-sanitize, shared with check-asan.sh); its
 #                   corpus/ keeps what was found
+#   SANITIZE_FLAGS  compiler flags of a new tree (scripts/sanitize_tree.sh). For a long run of
+#                   the EXR target: without ASan (OpenEXR allocates what an attribute's declared
+#                   size says and ASan poisons each allocation, 230 inputs/s), e.g.
+#                   SANITIZE_BUILD=build-fuzz-ubsan SANITIZE_FLAGS="-O1 -g -fsanitize=fuzzer-no-link,undefined,leak -fno-sanitize-recover=all"
 #   FUZZ_OUT      where fuzz.json goes (default: the build tree; bench/results to record)
 #   FUZZ_SEED     libFuzzer's random seed (default: a new one each run; make check sets 1,
 #                 so that a CI run does the same work every time)

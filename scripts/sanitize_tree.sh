@@ -2,7 +2,9 @@
 # AddressSanitizer, UndefinedBehaviorSanitizer (every report fatal) and libFuzzer's coverage
 # instrumentation (harmless to programs that are not fuzz targets).
 sanitize_build=${SANITIZE_BUILD:-build-sanitize}
-sanitize_flags="-O1 -g -fno-omit-frame-pointer -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all"
+# SANITIZE_FLAGS replaces the flags for a tree of its own (a fuzz run without ASan, say:
+# scripts/fuzz.sh says when that is worth it); a tree keeps the flags it was configured with.
+sanitize_flags=${SANITIZE_FLAGS:-"-O1 -g -fno-omit-frame-pointer -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all"}
 if [ ! -f "$sanitize_build/CMakeCache.txt" ]; then
     cmake -S . -B "$sanitize_build" -DCMAKE_BUILD_TYPE= -DCMAKE_CXX_COMPILER=clang++ \
         -DCMAKE_CXX_FLAGS="$sanitize_flags" -DPENUMBRA_FUZZ=ON >/dev/null

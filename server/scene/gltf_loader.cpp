@@ -430,10 +430,28 @@ bool ReadConfinedFile(std::vector<unsigned char>* out, std::string* err,
 
 // tinygltf's image callback: keeps each image's encoded bytes (PNG, JPEG) as they are, with
 // no size, instead of decoding every image while parsing. What the scene uses is decoded when
-// it is read (MeanTextureColor), so a texture nothing uses, or one that is only warned about
-// (a normal map), cannot fail the load.
-bool KeepEncoded(tinygltf::Image* image, int, std::string*, std::string*, int, int,
-                 const unsigned char* bytes, int size, void*) {
+// it is read (ReadMap), so a texture nothing uses, or one that is only warned about (a normal
+// map), cannot fail the load. `model` is the model being read: tinygltf hands over an image's
+// buffer view as byteLength bytes from its byteOffset without checking that they lie inside
+// the buffer (a fuzzed .glb read past it), so that is checked here.
+bool KeepEncoded(tinygltf::Image* image, int index, std::string* err, std::string*, int, int,
+                 const unsigned char* bytes, int size, void* model) {
+    const auto& m = *static_cast<const tinygltf::Model*>(model);
+    bool inside = size >= 0;
+    if (image->bufferView >= 0) {
+        // tinygltf checked both indices before calling.
+        const auto& view = m.bufferViews.at(static_cast<size_t>(image->bufferView));
+        const auto& buffer = m.buffers.at(static_cast<size_t>(view.buffer));
+        inside = inside && view.byteOffset <= buffer.data.size() &&
+                 view.byteLength <= buffer.data.size() - view.byteOffset &&
+                 view.byteLength == static_cast<size_t>(size);
+    }
+    if (!inside) {
+        if (err)
+            *err += "image " + std::to_string(index) + "'s buffer view " +
+                    std::to_string(image->bufferView) + " lies outside its buffer";
+        return false;
+    }
     image->image.assign(bytes, bytes + size);
     image->width = image->height = image->component = image->bits = 0;
     return true;
@@ -455,7 +473,7 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
     tinygltf::FsCallbacks fs{&tinygltf::FileExists, &tinygltf::ExpandFilePath, &ReadConfinedFile,
                              &RefuseWrite, &confinement};
     loader.SetFsCallbacks(fs);
-    loader.SetImageLoader(&KeepEncoded, nullptr);
+    loader.SetImageLoader(&KeepEncoded, model);
     std::string err, warn;
     bool ok = IsGlbPath(path) ? loader.LoadBinaryFromFile(model, &err, &warn, path)
                               : loader.LoadASCIIFromFile(model, &err, &warn, path);

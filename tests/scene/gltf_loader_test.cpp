@@ -323,6 +323,30 @@ TEST(GltfLoader, ReadsColourMapsAndTheirCoordinates) {
         Error);
 }
 
+// An image in a buffer view that reaches past its buffer is refused with why: tinygltf hands
+// the view's bytes over unchecked (the fuzzer read past a .glb's buffer that way).
+TEST(GltfLoader, AnImageOutsideItsBufferIsRefused) {
+    const auto dir = testing::TempDir("gltf-image-view");
+    std::ofstream(dir / "img.bin", std::ios::binary) << std::string(16, 'x');
+    nlohmann::json doc = Cornell();
+    const int buffer = static_cast<int>(doc["buffers"].size());
+    doc["buffers"].push_back({{"uri", "img.bin"}, {"byteLength", 16}});
+    doc["bufferViews"].push_back({{"buffer", buffer}, {"byteOffset", 8}, {"byteLength", 4096}});
+    doc["images"] = {{{"bufferView", doc["bufferViews"].size() - 1}, {"mimeType", "image/png"}}};
+    doc["textures"] = {{{"source", 0}}};
+    doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+    std::ofstream(dir / "view.gltf") << doc.dump();
+    try {
+        LoadGltf((dir / "view.gltf").string());
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("image 0's buffer view"), std::string::npos)
+            << e.what();
+        EXPECT_NE(std::string(e.what()).find("lies outside its buffer"), std::string::npos)
+            << e.what();
+    }
+}
+
 TEST(GltfLoader, MissingPositionIsRefused) {
     auto doc = Cornell();
     doc["meshes"][0]["primitives"][0]["attributes"].erase("POSITION");
