@@ -14,7 +14,8 @@
 #   SANITIZE_FLAGS  compiler flags of a new tree (scripts/sanitize_tree.sh). For a long run of
 #                   the EXR target: without ASan (OpenEXR allocates what an attribute's declared
 #                   size says and ASan poisons each allocation, 230 inputs/s), e.g.
-#                   SANITIZE_BUILD=build-fuzz-ubsan SANITIZE_FLAGS="-O1 -g -fsanitize=fuzzer-no-link,undefined,leak -fno-sanitize-recover=all"
+#                   SANITIZE_BUILD=build-fuzz-ubsan SANITIZE_FLAGS="-O1 -g -fsanitize=fuzzer-no-link,undefined -fno-sanitize-recover=all"
+#                   (clang 14 cannot link LeakSanitizer beside UBSan alone: leaks go unchecked there)
 #   FUZZ_OUT      where fuzz.json goes (default: the build tree; bench/results to record)
 #   FUZZ_SEED     libFuzzer's random seed (default: a new one each run; make check sets 1,
 #                 so that a CI run does the same work every time)
