@@ -46,11 +46,12 @@ TintMap::TintMap(int width, int height, std::vector<glm::vec3> linear, Wrap s, W
     glm::vec3 scale;
     for (int c = 0; c < 3; ++c) scale[c] = mean_[c] > 0.0f ? 1.0f / mean_[c] : 0.0f;
     for (glm::vec3& c : linear) c *= scale;
-    levels_.push_back({width, height, std::move(linear)});
+    std::vector<Level> levels;
+    levels.push_back({width, height, std::move(linear)});
     // Box-filtered halvings down to one texel; an odd last row or column folds into the one
     // before it.
-    while (levels_.back().w > 1 || levels_.back().h > 1) {
-        const Level& a = levels_.back();
+    while (levels.back().w > 1 || levels.back().h > 1) {
+        const Level& a = levels.back();
         Level b;
         b.w = std::max(1, a.w / 2), b.h = std::max(1, a.h / 2);
         b.texels.assign(static_cast<size_t>(b.w) * b.h, glm::vec3(0.0f));
@@ -63,8 +64,9 @@ TintMap::TintMap(int width, int height, std::vector<glm::vec3> linear, Wrap s, W
                 count[j] += 1.0f;
             }
         for (size_t j = 0; j < b.texels.size(); ++j) b.texels[j] /= count[j];
-        levels_.push_back(std::move(b));
+        levels.push_back(std::move(b));
     }
+    levels_ = std::make_shared<const std::vector<Level>>(std::move(levels));
 }
 
 glm::vec3 TintMap::Bilinear(const Level& level, const glm::vec2& uv) const {
@@ -89,7 +91,7 @@ glm::vec3 TintMap::Bilinear(const Level& level, const glm::vec2& uv) const {
                     glm::mix(at(x0, y0 + 1), at(x0 + 1, y0 + 1), ax), ay);
 }
 
-glm::vec3 TintMap::At(const glm::vec2& uv) const { return Bilinear(levels_[0], uv); }
+glm::vec3 TintMap::At(const glm::vec2& uv) const { return Bilinear((*levels_)[0], uv); }
 
 glm::vec3 TintMap::Over(const glm::vec2& a, const glm::vec2& b, const glm::vec2& c) const {
     // The level at which the triangle covers about 16 texels, then the bilinear tints at the
@@ -97,11 +99,11 @@ glm::vec3 TintMap::Over(const glm::vec2& a, const glm::vec2& b, const glm::vec2&
     const glm::vec2 e1 = b - a, e2 = c - a;
     const double texels =
         0.5 * std::abs(static_cast<double>(e1.x) * e2.y - static_cast<double>(e1.y) * e2.x) *
-        levels_[0].w * levels_[0].h;
+        (*levels_)[0].w * (*levels_)[0].h;
     if (!std::isfinite(texels)) return glm::vec3(1.0f);
     int level = texels > 16.0 ? static_cast<int>(std::floor(0.5 * std::log2(texels / 16.0))) : 0;
-    level = std::min(level, static_cast<int>(levels_.size()) - 1);
-    const Level& l = levels_[level];
+    level = std::min(level, static_cast<int>(levels_->size()) - 1);
+    const Level& l = (*levels_)[level];
     constexpr int kSide = 4;
     glm::vec3 sum(0.0f);
     for (int i = 0; i < kSide; ++i)

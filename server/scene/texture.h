@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <glm/glm.hpp>
+#include <memory>
 #include <vector>
 
 namespace penumbra {
@@ -16,6 +17,8 @@ enum class Wrap : uint8_t { kRepeat, kClamp, kMirror };
 // the map is not sampled), times the tint at a point is the colour at that point. A channel
 // whose mean is 0 is 0 everywhere. Sampled bilinearly; averaged over a triangle of texture
 // coordinates from a mip level (box-filtered halvings) at which it spans a few texels.
+// Immutable once made, and cheap to copy: copies share the texels (a Scene, maps and all, is
+// copied by every edit batch of the service).
 class TintMap {
   public:
     // `linear`: width × height texels, row by row from the top (v = 0), linear colour.
@@ -24,8 +27,8 @@ class TintMap {
 
     // The texture's mean linear colour (what the tints are relative to).
     const glm::vec3& Mean() const { return mean_; }
-    int Width() const { return levels_[0].w; }
-    int Height() const { return levels_[0].h; }
+    int Width() const { return (*levels_)[0].w; }
+    int Height() const { return (*levels_)[0].h; }
     // The tint at texture coordinate `uv` (bilinear, the sampler's wrap modes).
     glm::vec3 At(const glm::vec2& uv) const;
     // The tint averaged over the triangle a, b, c of texture coordinates.
@@ -38,7 +41,7 @@ class TintMap {
     };
     glm::vec3 Bilinear(const Level& level, const glm::vec2& uv) const;
 
-    std::vector<Level> levels_;
+    std::shared_ptr<const std::vector<Level>> levels_;
     glm::vec3 mean_{0.0f};
     Wrap s_, t_;
 };
