@@ -144,10 +144,9 @@ glm::vec3 RayScene::MeanEmissionTint(uint32_t t) const {
     }
     const Primitive& prim = scene_.primitives[tris_[t].primitive];
     const Material& m = scene_.materials[prim.material];
-    if (m.emissionMap < 0 || m.emissionSet >= static_cast<int>(prim.texcoords.size()) ||
-        prim.texcoords[m.emissionSet].empty())
-        return glm::vec3(1.0f);
-    const std::vector<glm::vec2>& uv = prim.texcoords[m.emissionSet];
+    const std::vector<glm::vec2>* coordinates = MapCoordinates(prim, m.emissionMap, m.emissionSet);
+    if (!coordinates) return glm::vec3(1.0f);
+    const std::vector<glm::vec2>& uv = *coordinates;
     const glm::uvec3& i = vertices_[t];
     return scene_.maps[m.emissionMap].Over(uv[i.x], uv[i.y], uv[i.z]);
 }

@@ -133,10 +133,6 @@ class RayScene {
     // at the point's texture coordinates over the input mesh; over the refined mesh, the
     // surfels' tints (Surfels::albedoTints, a hat-function average of the maps) interpolated.
     Tints TintsAt(uint32_t t, float u, float v) const;
-    // Emitted radiance at that point: the material's emission times its tint.
-    glm::vec3 EmissionAt(uint32_t t, float u, float v) const {
-        return MaterialOf(t).emission * TintsAt(t, u, v).emission;
-    }
     // The (u, v) at which the line origin + s·dir meets triangle t's plane.
     glm::vec2 Barycentrics(uint32_t t, const glm::vec3& origin, const glm::vec3& dir) const;
     // Whether any triangle's material has a colour map (else every tint is 1).

@@ -84,15 +84,21 @@ bool AnyMapped(const Scene& scene) {
                        [](const Material& m) { return m.Mapped(); });
 }
 
+const std::vector<glm::vec2>* MapCoordinates(const Primitive& prim, int map, int set) {
+    if (map < 0 || set < 0 || set >= static_cast<int>(prim.texcoords.size()) ||
+        prim.texcoords[set].size() != prim.positions.size())
+        return nullptr;
+    return &prim.texcoords[set];
+}
+
 Tints TintsAt(const Scene& scene, uint32_t p, const glm::uvec3& abc, float u, float v) {
     const Primitive& prim = scene.primitives[p];
     const Material& m = scene.materials[prim.material];
     Tints out;
     auto at = [&](int map, int set) {
-        if (map < 0 || set >= static_cast<int>(prim.texcoords.size()) ||
-            prim.texcoords[set].empty())
-            return glm::vec3(1.0f);
-        const std::vector<glm::vec2>& uv = prim.texcoords[set];
+        const std::vector<glm::vec2>* coordinates = MapCoordinates(prim, map, set);
+        if (!coordinates) return glm::vec3(1.0f);
+        const std::vector<glm::vec2>& uv = *coordinates;
         const glm::vec2 x = uv[abc.x] + u * (uv[abc.y] - uv[abc.x]) + v * (uv[abc.z] - uv[abc.x]);
         return scene.maps[map].At(x);
     };

@@ -168,6 +168,10 @@ struct Tints {
 };
 // Whether any material of `scene` has a map (else every tint is 1).
 bool AnyMapped(const Scene& scene);
+// The texture coordinates by which primitive `prim` reads map `map` (a Material's
+// baseColorMap or emissionMap) through set `set`: null where there is no map or the primitive
+// lacks the coordinates (the map's mean then holds over it).
+const std::vector<glm::vec2>* MapCoordinates(const Primitive& prim, int map, int set);
 // The tints at the point a + u·(b − a) + v·(c − a) of primitive p's triangle with vertices
 // a, b, c (indices into its positions), under its current material.
 Tints TintsAt(const Scene& scene, uint32_t p, const glm::uvec3& abc, float u, float v);

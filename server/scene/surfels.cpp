@@ -34,16 +34,11 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
                          prim.objectPositions.size() == prim.positions.size();
         anyOwn = anyOwn || own;
         const Material& material = scene.materials[prim.material];
-        // The map each tint reads here, if the primitive has its coordinates.
-        auto mapOf = [&](int map, int set) -> const std::vector<glm::vec2>* {
-            if (map < 0 || set >= static_cast<int>(prim.texcoords.size()) ||
-                prim.texcoords[set].size() != prim.positions.size())
-                return nullptr;
-            return &prim.texcoords[set];
-        };
-        const std::vector<glm::vec2>* baseSet = mapOf(material.baseColorMap, material.baseColorSet);
+        // The coordinates each tint reads here, if the primitive has them.
+        const std::vector<glm::vec2>* baseSet =
+            MapCoordinates(prim, material.baseColorMap, material.baseColorSet);
         const std::vector<glm::vec2>* emissionSet =
-            mapOf(material.emissionMap, material.emissionSet);
+            MapCoordinates(prim, material.emissionMap, material.emissionSet);
         for (size_t i = 0; i < prim.positions.size(); ++i) {
             if (mapped) {
                 baseUv.push_back(baseSet ? (*baseSet)[i] : glm::vec2(0.0f));
