@@ -3,7 +3,7 @@
 # UndefinedBehaviorSanitizer (every report fatal, leaks included) in the sanitizer tree that
 # fuzz.sh uses, run with ctest. A test fails on any report. The tests left out, and why:
 #   Stability.ClutterScenesConvergeWithinTheirFurnaceBoundsOnTheCpu,
-#   Stability.ClutterScenesConvergeOnLavapipe: the clutter suite runs 3–8 minutes unsanitized;
+#   Stability.ClutterScenesConvergeOnLavapipe: the clutter suite runs 2–3 minutes unsanitized;
 #     the same solver code runs sanitized in every other solver test;
 #   Install.ExampleRendererBuildsAgainstTheInstalledClient: installs and builds the example
 #     with the system compiler; nothing sanitized runs in it.
