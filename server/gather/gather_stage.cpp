@@ -16,6 +16,8 @@
 #include "base/pcg.h"
 #include "gather/gather_detail.h"
 #include "gather/sampling.h"
+#include "gpu/context.h"
+#include "gpu/ray_tracer.h"
 
 namespace penumbra {
 
@@ -59,6 +61,7 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
     diameter_ = scene_.Diameter();
     Place();
     const Surfels& s = inner_->GetSurfels();
+    if (settings_.gatherRays > 0) StartTracer();
     if (settings_.gatherRays > 0) {
         if (settings_.allSurfels) {
             for (uint32_t i = 0; i < s.size(); ++i) targets_.push_back(i);
@@ -81,6 +84,30 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
     }
     Shoot();
     HandSky(false);
+}
+
+GatherStage::~GatherStage() = default;
+
+void GatherStage::StartTracer() {
+    gpu::DeviceKind kind;
+    switch (settings_.device) {
+        case DeviceChoice::kCpu:
+            return;
+        case DeviceChoice::kLavapipe:
+            kind = gpu::DeviceKind::kLavapipe;
+            break;
+        case DeviceChoice::kAuto:
+            if (!gpu::FindRealGpu(nullptr)) return;
+            kind = gpu::DeviceKind::kRealGpu;
+            break;
+        default:
+            kind = gpu::DeviceKind::kRealGpu;
+    }
+    try {
+        tracer_ = std::make_unique<gpu::RayTracer>(kind, settings_.validation);
+    } catch (const Error& e) {
+        tracerNote_ = e.what();
+    }
 }
 
 SkyParts GatherStage::Parts(const Environment& sky) const {
@@ -383,7 +410,9 @@ SolverStats GatherStage::Stats() const {
     s.msGatherEvaluate = msEvaluate_;
     s.gatherRaysRetraced = raysRetraced_;
     s.gatherTraces = traces_;
-    s.gatherDevice = "cpu (Embree)";
+    s.gatherDevice =
+        tracer_ ? "vulkan:" + tracer_->DeviceName() + " (ray tracing pipeline)" : "cpu (Embree)";
+    if (!tracer_ && !tracerNote_.empty()) s.gatherDevice += "; no GPU ray tracing: " + tracerNote_;
     return s;
 }
 
@@ -435,7 +464,9 @@ std::unique_ptr<Solver> CreateGatheredSolver(const Scene& scene, SolverSettings 
                                              const GatherSettings& gather,
                                              const ProgressFn& progress,
                                              std::vector<std::string>* notes) {
-    const GatherSettings parts = GatherParts(scene, gather, notes);
+    GatherSettings parts = GatherParts(scene, gather, notes);
+    parts.device = settings.device;
+    parts.validation = settings.validation;
     settings.behindGather = parts.gatherRays > 0 && !AnyGlossy(scene.materials);
     std::unique_ptr<Solver> solver = CreateSolver(scene, settings, progress);
     if (progress && (parts.emitterRays > 0 || parts.gatherRays > 0))

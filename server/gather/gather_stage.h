@@ -30,6 +30,10 @@
 
 namespace penumbra {
 
+namespace gpu {
+class RayTracer;
+}
+
 struct GatherSettings {
     // First shot: rays a surfel to the emitters (half of them to a sky map's sun); 0: the
     // solver carries the emission and the whole sky.
@@ -39,6 +43,14 @@ struct GatherSettings {
     // (what bake and the service write).
     bool allSurfels = false;
     uint64_t seed = 1;
+    // Where the final gather's rays are traced when all of them are (at the start, after an
+    // emitter moved). kCpu: Embree. kGpu, and kAuto where a GPU is found: the GPU's hardware
+    // ray tracing (gpu/ray_tracer.h), Embree where it has none, with why in the stats
+    // (SolverStats::gatherDevice). kLavapipe: tried there (Mesa 22.3 has none). The first
+    // shot, the secondary gathers and the rays a move traces again stay on Embree.
+    // CreateGatheredSolver takes both from the solver's settings.
+    DeviceChoice device = DeviceChoice::kCpu;
+    bool validation = false;  // Vulkan validation layers on the ray tracer's device
 };
 
 // The most rays a surfel either part takes; CheckGatherRays throws penumbra::Error for a
@@ -51,6 +63,7 @@ class GatherStage : public Solver {
     // Traces the first shot and the gather's hits for `inner`, built from `scene`. Throws
     // penumbra::Error when the inner solver cannot take the shot (Solver::SetEmitterDirect).
     GatherStage(std::unique_ptr<Solver> inner, const Scene& scene, const GatherSettings& settings);
+    ~GatherStage() override;
 
     void Iterate(int n) override;
     // With the final gather: `indirect` = first shot + gathered light at the output surfels,
@@ -265,6 +278,13 @@ class GatherStage : public Solver {
     std::vector<glm::vec3> secondSky_;
     bool fresh_ = false;                        // indirect_, direct_ hold the current answer
     std::vector<glm::vec3> indirect_, direct_;  // per surfel, after Evaluate
+    // The GPU that traces full gathers (null: Embree), or why there is none (empty: not asked).
+    std::unique_ptr<gpu::RayTracer> tracer_;
+    std::string tracerNote_;
+    void StartTracer();
+    // The gather rays of every target traced on tracer_ (its acceleration structures built
+    // over the refined mesh as it is now): hits_ and the distances along the rays.
+    bool TraceOnGpu(std::vector<float>& distances);
     double msShot_ = 0.0, msTrace_ = 0.0, msEvaluate_ = 0.0;
     size_t raysRetraced_ = 0;  // by the last move, both parts
     size_t traces_ = 0;        // tracings of either part, whole or after a move

@@ -15,6 +15,7 @@
 #include "gather/gather_detail.h"
 #include "gather/gather_stage.h"
 #include "gather/sampling.h"
+#include "gpu/ray_tracer.h"
 
 namespace penumbra {
 
@@ -129,6 +130,53 @@ GatherStage::Hit GatherStage::Cast(const glm::vec3& o, const glm::vec3& d, float
     return Hit{h.triangle | back, Quantise(h.u), Quantise(h.v)};
 }
 
+bool GatherStage::TraceOnGpu(std::vector<float>& distances) {
+    const int n = settings_.gatherRays;
+    const Surfels& surfels = inner_->GetSurfels();
+    const auto& tris = rays_->Triangles();
+    std::vector<gpu::TraceRay> rays(targets_.size() * n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
+        for (size_t t = range.begin(); t != range.end(); ++t) {
+            const uint32_t i = targets_[t];
+            const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
+            for (int r = 0; r < n; ++r) {
+                gpu::TraceRay& ray = rays[t * n + r];
+                ray.origin = o;
+                ray.dir = Direction(t, r);
+            }
+        }
+    });
+    std::vector<gpu::TraceHit> found;
+    try {
+        std::vector<glm::vec3> corners(3 * tris.size());
+        for (size_t k = 0; k < tris.size(); ++k) {
+            corners[3 * k] = tris[k].p0;
+            corners[3 * k + 1] = tris[k].p0 + tris[k].e1;
+            corners[3 * k + 2] = tris[k].p0 + tris[k].e2;
+        }
+        tracer_->Build(corners);
+        found = tracer_->Trace(rays);
+    } catch (const Error& e) {
+        // A device that fails mid-way (lost, out of memory): Embree from now on, and why.
+        tracerNote_ = e.what();
+        tracer_.reset();
+        return false;
+    }
+    distances.resize(found.size());
+    tbb::parallel_for(size_t(0), found.size(), [&](size_t k) {
+        const gpu::TraceHit& h = found[k];
+        if (h.triangle == gpu::TraceHit::kMissed || h.triangle >= tris.size()) {
+            hits_[k] = Hit{kEscaped, 0, 0};
+            distances[k] = std::numeric_limits<float>::infinity();
+            return;
+        }
+        const uint32_t back = glm::dot(tris[h.triangle].normal, rays[k].dir) >= 0.0f ? kBack : 0u;
+        hits_[k] = Hit{h.triangle | back, Quantise(h.u), Quantise(h.v)};
+        distances[k] = h.t;
+    });
+    return true;
+}
+
 void GatherStage::Trace(const Moved* moved) {
     auto start = std::chrono::steady_clock::now();
     ++traces_;
@@ -182,6 +230,9 @@ void GatherStage::Trace(const Moved* moved) {
         return false;
     };
     hits_.resize(targets_.size() * n);  // in place: a target's hits are read, then written
+    // All of them at once on the GPU where there is one (then only the secondaries below).
+    std::vector<float> gpuDistances;
+    const bool onGpu = !moved && tracer_ && TraceOnGpu(gpuDistances);
     second_.resize(targets_.size());
     // Per target: a gather ray was traced again (its emitter hits are weighed again).
     std::vector<uint8_t> touched(targets_.size(), moved ? 0 : 1);
@@ -210,7 +261,10 @@ void GatherStage::Trace(const Moved* moved) {
                                        o, cones, [&] { return Direction(t, r); }, before));
                 if (kept[r]) continue;
                 float dist = inf;
-                hit = trace(o, Direction(t, r), dist);
+                if (onGpu)
+                    dist = gpuDistances[t * n + r];
+                else
+                    hit = trace(o, Direction(t, r), dist);
                 ++count;
                 touched[t] = 1;
                 const bool isShort = Front(hit) && dist < shortHit;

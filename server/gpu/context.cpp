@@ -2,6 +2,7 @@
 #include "gpu/context.h"
 
 #include <algorithm>
+#include <array>
 #include <cstring>
 
 #include "base/check.h"
@@ -41,7 +42,42 @@ void ThrowVulkan(const char* call, vk::Result result) {
     throw Error(std::string(call) + " failed: " + vk::to_string(result));
 }
 
-Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<Messages>()) {
+namespace {
+
+constexpr std::array<const char*, 3> kRayTracingExtensions = {
+    VK_KHR_ACCELERATION_STRUCTURE_EXTENSION_NAME, VK_KHR_RAY_TRACING_PIPELINE_EXTENSION_NAME,
+    VK_KHR_DEFERRED_HOST_OPERATIONS_EXTENSION_NAME};
+
+// What `device` lacks for ray tracing ("" when nothing): API version, extensions, features.
+std::string RayTracingGaps(const vk::raii::PhysicalDevice& device) {
+    const auto props = device.getProperties();
+    if (props.apiVersion < VK_API_VERSION_1_2) return "Vulkan 1.2";
+    std::string missing;
+    const auto have = device.enumerateDeviceExtensionProperties();
+    for (const char* want : kRayTracingExtensions)
+        if (std::none_of(have.begin(), have.end(), [&](const vk::ExtensionProperties& e) {
+                return std::strcmp(e.extensionName, want) == 0;
+            }))
+            missing += (missing.empty() ? "" : ", ") + std::string(want);
+    if (!missing.empty()) return missing;
+    const auto chain =
+        device.getFeatures2<vk::PhysicalDeviceFeatures2, vk::PhysicalDeviceVulkan12Features,
+                            vk::PhysicalDeviceAccelerationStructureFeaturesKHR,
+                            vk::PhysicalDeviceRayTracingPipelineFeaturesKHR>();
+    if (!chain.get<vk::PhysicalDeviceVulkan12Features>().bufferDeviceAddress)
+        return "the bufferDeviceAddress feature";
+    if (!chain.get<vk::PhysicalDeviceAccelerationStructureFeaturesKHR>().accelerationStructure)
+        return "the accelerationStructure feature";
+    if (!chain.get<vk::PhysicalDeviceRayTracingPipelineFeaturesKHR>().rayTracingPipeline)
+        return "the rayTracingPipeline feature";
+    return "";
+}
+
+}  // namespace
+
+Context::Context(DeviceKind kind, bool validation, Capability need)
+    : messages_(std::make_unique<Messages>()) {
+    const bool rayTracing = need == Capability::kRayTracing;
     try {
         context_ = std::make_unique<vk::raii::Context>();
     } catch (const std::exception& e) {
@@ -60,7 +96,8 @@ Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<
         extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
         validation_ = true;
     }
-    vk::ApplicationInfo app("penumbra", 1, "penumbra", 1, VK_API_VERSION_1_1);
+    vk::ApplicationInfo app("penumbra", 1, "penumbra", 1,
+                            rayTracing ? VK_API_VERSION_1_2 : VK_API_VERSION_1_1);
     vk::InstanceCreateInfo info({}, &app, layers, extensions);
     try {
         instance_ = std::make_unique<vk::raii::Instance>(*context_, info);
@@ -79,13 +116,27 @@ Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<
         // Device choice: discrete > integrated > virtual > CPU, or lavapipe when asked.
         vk::raii::PhysicalDevices all(*instance_);
         int best = -1, bestRank = -1;
+        std::string gaps;  // with `need`: the devices of `kind` that lack it, and what
         for (size_t i = 0; i < all.size(); ++i) {
             auto props = all[i].getProperties();
             bool isCpu = props.deviceType == vk::PhysicalDeviceType::eCpu;
             if (kind == DeviceKind::kLavapipe && !isCpu) continue;
             if (kind == DeviceKind::kRealGpu && isCpu) continue;
+            if (rayTracing) {
+                const std::string gap = RayTracingGaps(all[i]);
+                if (!gap.empty()) {
+                    gaps += (gaps.empty() ? "" : "; ") + std::string(props.deviceName.data()) +
+                            " lacks " + gap;
+                    continue;
+                }
+            }
             if (Rank(props) > bestRank) bestRank = Rank(props), best = static_cast<int>(i);
         }
+        if (best < 0 && !gaps.empty())
+            throw Error(
+                "no Vulkan device can trace rays (VK_KHR_acceleration_structure and "
+                "VK_KHR_ray_tracing_pipeline): " +
+                gaps);
         if (best < 0) {
             throw Error(kind == DeviceKind::kLavapipe
                             ? "no CPU Vulkan device (lavapipe) found; install mesa-vulkan-drivers"
@@ -117,8 +168,26 @@ Context::Context(DeviceKind kind, bool validation) : messages_(std::make_unique<
         float priority = 1.0f;
         vk::DeviceQueueCreateInfo qi({}, family_, 1, &priority);
         vk::PhysicalDeviceFeatures features;
-        vk::DeviceCreateInfo di({}, qi, {}, {}, &features);
-        device_ = std::make_unique<vk::raii::Device>(*physical_, di);
+        if (rayTracing) {
+            vk::StructureChain<vk::DeviceCreateInfo, vk::PhysicalDeviceVulkan12Features,
+                               vk::PhysicalDeviceAccelerationStructureFeaturesKHR,
+                               vk::PhysicalDeviceRayTracingPipelineFeaturesKHR>
+                chain;
+            chain.get<vk::DeviceCreateInfo>()
+                .setQueueCreateInfos(qi)
+                .setPEnabledExtensionNames(kRayTracingExtensions)
+                .setPEnabledFeatures(&features);
+            chain.get<vk::PhysicalDeviceVulkan12Features>().bufferDeviceAddress = VK_TRUE;
+            chain.get<vk::PhysicalDeviceAccelerationStructureFeaturesKHR>().accelerationStructure =
+                VK_TRUE;
+            chain.get<vk::PhysicalDeviceRayTracingPipelineFeaturesKHR>().rayTracingPipeline =
+                VK_TRUE;
+            device_ =
+                std::make_unique<vk::raii::Device>(*physical_, chain.get<vk::DeviceCreateInfo>());
+        } else {
+            vk::DeviceCreateInfo di({}, qi, {}, {}, &features);
+            device_ = std::make_unique<vk::raii::Device>(*physical_, di);
+        }
         queue_ = std::make_unique<vk::raii::Queue>(*device_, family_, 0);
         pool_ = std::make_unique<vk::raii::CommandPool>(
             *device_,

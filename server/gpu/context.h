@@ -15,10 +15,16 @@ namespace penumbra::gpu {
 
 enum class DeviceKind { kAnyPreferGpu, kRealGpu, kLavapipe };
 
+// What the device must do beyond compute. kRayTracing: hardware ray tracing through
+// VK_KHR_acceleration_structure and VK_KHR_ray_tracing_pipeline (Vulkan 1.2's buffer device
+// addresses with them); gpu/ray_tracer.h uses it.
+enum class Capability { kCompute, kRayTracing };
+
 class Context {
   public:
-    // Throws penumbra::Error naming what is missing (no Vulkan, no such device).
-    Context(DeviceKind kind, bool validation);
+    // Throws penumbra::Error naming what is missing (no Vulkan, no such device, no device of
+    // `kind` with `need`, and which devices lack what).
+    Context(DeviceKind kind, bool validation, Capability need = Capability::kCompute);
     ~Context();
     Context(const Context&) = delete;
     Context& operator=(const Context&) = delete;
