@@ -1,6 +1,7 @@
 // Acceleration structures, the ray-tracing pipeline and its shader binding table
-// (gpu/ray_tracer.h). Build inputs, rays and hits live in host-visible memory (written or
-// read once a call); the acceleration structures and their scratch in device-local memory.
+// (gpu/ray_tracer.h). Build inputs and rays live in host-visible memory, hits in host-visible
+// cached memory (each written or read once a call); the acceleration structures and their
+// scratch in device-local memory.
 #include "gpu/ray_tracer.h"
 
 #include <algorithm>
@@ -27,6 +28,11 @@ double MsSince(std::chrono::steady_clock::time_point start) {
         .count();
 }
 
+// Where a buffer's memory lies: the device's own; host-visible for the host to write
+// (uncached, write-combined where the device offers it); host-visible and cached for the host
+// to read (reading uncached memory runs at a few hundred MB/s).
+enum class Memory { kDevice, kUpload, kReadback };
+
 // A buffer with a device address, bound to memory of its own.
 struct AddressedBuffer {
     vk::raii::Buffer buffer{nullptr};
@@ -37,20 +43,25 @@ struct AddressedBuffer {
 
     AddressedBuffer() = default;
     AddressedBuffer(const Context& ctx, vk::DeviceSize size, vk::BufferUsageFlags usage,
-                    bool hostVisible) {
+                    Memory where) {
         bytes = std::max<vk::DeviceSize>(size, 16);
         buffer = vk::raii::Buffer(
             ctx.Device(),
             vk::BufferCreateInfo({}, bytes, usage | vk::BufferUsageFlagBits::eShaderDeviceAddress));
         const auto req = buffer.getMemoryRequirements();
-        const vk::MemoryPropertyFlags want =
-            hostVisible ? vk::MemoryPropertyFlagBits::eHostVisible |
-                              vk::MemoryPropertyFlagBits::eHostCoherent
-                        : vk::MemoryPropertyFlags(vk::MemoryPropertyFlagBits::eDeviceLocal);
-        const uint32_t type = FindMemory(ctx, req.memoryTypeBits, want);
+        const vk::MemoryPropertyFlags host =
+            vk::MemoryPropertyFlagBits::eHostVisible | vk::MemoryPropertyFlagBits::eHostCoherent;
+        uint32_t type = UINT32_MAX;
+        if (where == Memory::kDevice)
+            type = FindMemory(ctx, req.memoryTypeBits, vk::MemoryPropertyFlagBits::eDeviceLocal);
+        if (where == Memory::kReadback)
+            type =
+                FindMemory(ctx, req.memoryTypeBits, host | vk::MemoryPropertyFlagBits::eHostCached);
+        if (where != Memory::kDevice && type == UINT32_MAX)
+            type = FindMemory(ctx, req.memoryTypeBits, host);
         if (type == UINT32_MAX)
             throw Error("Vulkan device " + ctx.DeviceName() + " has no " +
-                        (hostVisible ? "host-visible" : "device-local") +
+                        (where == Memory::kDevice ? "device-local" : "host-visible") +
                         " memory for a ray-tracing buffer");
         vk::MemoryAllocateFlagsInfo flags(vk::MemoryAllocateFlagBits::eDeviceAddress);
         vk::MemoryAllocateInfo ai(req.size, type);
@@ -58,7 +69,7 @@ struct AddressedBuffer {
         memory = vk::raii::DeviceMemory(ctx.Device(), ai);
         buffer.bindMemory(*memory, 0);
         address = ctx.Device().getBufferAddress(vk::BufferDeviceAddressInfo(*buffer));
-        if (hostVisible) mapped = memory.mapMemory(0, bytes);
+        if (where != Memory::kDevice) mapped = memory.mapMemory(0, bytes);
     }
 };
 
@@ -153,7 +164,7 @@ struct RayTracer::Impl {
             0, 3, static_cast<size_t>(3 * handle));
         // One base alignment more, so that the first region can start on one.
         table = AddressedBuffer(ctx, 3 * region + rtProps.shaderGroupBaseAlignment,
-                                vk::BufferUsageFlagBits::eShaderBindingTableKHR, true);
+                                vk::BufferUsageFlagBits::eShaderBindingTableKHR, Memory::kUpload);
         const vk::DeviceSize base =
             Align(table.address, rtProps.shaderGroupBaseAlignment) - table.address;
         auto* bytes = static_cast<uint8_t*>(table.mapped);
@@ -175,13 +186,14 @@ struct RayTracer::Impl {
         const auto sizes = ctx.Device().getAccelerationStructureBuildSizesKHR(
             vk::AccelerationStructureBuildTypeKHR::eDevice, info, count);
         storage = AddressedBuffer(ctx, sizes.accelerationStructureSize,
-                                  vk::BufferUsageFlagBits::eAccelerationStructureStorageKHR, false);
+                                  vk::BufferUsageFlagBits::eAccelerationStructureStorageKHR,
+                                  Memory::kDevice);
         as = vk::raii::AccelerationStructureKHR(
             ctx.Device(), vk::AccelerationStructureCreateInfoKHR(
                               {}, *storage.buffer, 0, sizes.accelerationStructureSize, type));
         const vk::DeviceSize align = asProps.minAccelerationStructureScratchOffsetAlignment;
         scratchBuffer = AddressedBuffer(ctx, sizes.buildScratchSize + align,
-                                        vk::BufferUsageFlagBits::eStorageBuffer, false);
+                                        vk::BufferUsageFlagBits::eStorageBuffer, Memory::kDevice);
         info.dstAccelerationStructure = *as;
         info.scratchData.deviceAddress = Align(scratchBuffer.address, align);
         const vk::AccelerationStructureBuildRangeInfoKHR range(count, 0, 0, 0);
@@ -198,7 +210,7 @@ struct RayTracer::Impl {
         ctx.Device().waitIdle();
         tlas = vk::raii::AccelerationStructureKHR(nullptr);
         blas = vk::raii::AccelerationStructureKHR(nullptr);
-        corners = AddressedBuffer(ctx, points.size_bytes(), kBuildInput, true);
+        corners = AddressedBuffer(ctx, points.size_bytes(), kBuildInput, Memory::kUpload);
         std::memcpy(corners.mapped, points.data(), points.size_bytes());
 
         vk::AccelerationStructureGeometryTrianglesDataKHR tri(
@@ -220,7 +232,7 @@ struct RayTracer::Impl {
             vk::GeometryInstanceFlagBitsKHR::eTriangleFacingCullDisable);
         instance.accelerationStructureReference = ctx.Device().getAccelerationStructureAddressKHR(
             vk::AccelerationStructureDeviceAddressInfoKHR(*blas));
-        instances = AddressedBuffer(ctx, sizeof instance, kBuildInput, true);
+        instances = AddressedBuffer(ctx, sizeof instance, kBuildInput, Memory::kUpload);
         std::memcpy(instances.mapped, &instance, sizeof instance);
         vk::AccelerationStructureGeometryInstancesDataKHR data(VK_FALSE, instances.address);
         vk::AccelerationStructureGeometryKHR top(vk::GeometryTypeKHR::eInstances, data,
@@ -240,9 +252,9 @@ struct RayTracer::Impl {
         const size_t batch = std::min<size_t>(in.size(), kBatch);
         if (rays.bytes < batch * sizeof(TraceRay)) {
             rays = AddressedBuffer(ctx, batch * sizeof(TraceRay),
-                                   vk::BufferUsageFlagBits::eStorageBuffer, true);
+                                   vk::BufferUsageFlagBits::eStorageBuffer, Memory::kUpload);
             hits = AddressedBuffer(ctx, batch * sizeof(TraceHit),
-                                   vk::BufferUsageFlagBits::eStorageBuffer, true);
+                                   vk::BufferUsageFlagBits::eStorageBuffer, Memory::kReadback);
         }
         vk::DescriptorSetLayout raw = *setLayout;
         vk::raii::DescriptorSets sets(ctx.Device(), vk::DescriptorSetAllocateInfo(*pool, raw));
