@@ -1,13 +1,14 @@
 # Sourced by fuzz.sh and check-asan.sh: the build tree both use, compiled with clang,
 # AddressSanitizer, UndefinedBehaviorSanitizer (every report fatal) and libFuzzer's coverage
-# instrumentation (harmless to programs that are not fuzz targets).
+# instrumentation (harmless to programs that are not fuzz targets). No benchmarks: no test
+# runs them, and building them sanitized cost CI a minute.
 sanitize_build=${SANITIZE_BUILD:-build-sanitize}
 # SANITIZE_FLAGS replaces the flags for a tree of its own (a fuzz run without ASan, say:
 # scripts/fuzz.sh says when that is worth it); a tree keeps the flags it was configured with.
 sanitize_flags=${SANITIZE_FLAGS:-"-O1 -g -fno-omit-frame-pointer -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all"}
 if [ ! -f "$sanitize_build/CMakeCache.txt" ]; then
     cmake -S . -B "$sanitize_build" -DCMAKE_BUILD_TYPE= -DCMAKE_CXX_COMPILER=clang++ \
-        -DCMAKE_CXX_FLAGS="$sanitize_flags" -DPENUMBRA_FUZZ=ON >/dev/null
+        -DCMAKE_CXX_FLAGS="$sanitize_flags" -DPENUMBRA_FUZZ=ON -DPENUMBRA_BENCH=OFF >/dev/null
 fi
 # Leaks in the system's own libraries (the Vulkan loader and Mesa's drivers keep what they
 # load for the life of the process) are not ours.
