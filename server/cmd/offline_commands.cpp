@@ -123,7 +123,11 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
                      outPath == "-" ? "standard output" : outPath.c_str(), result.channel.c_str(),
                      kIrradianceUnits);
     }
-    return 0;
+    // As render: a Vulkan validation message is a bug of ours, reported and exit 3.
+    const std::vector<std::string> messages = solver->ValidationMessages();
+    for (const auto& m : messages)
+        std::fprintf(stderr, "penumbra bake: validation: %s\n", m.c_str());
+    return messages.empty() ? 0 : 3;
 }
 
 namespace {

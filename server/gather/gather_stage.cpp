@@ -88,6 +88,13 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
 
 GatherStage::~GatherStage() = default;
 
+std::vector<std::string> GatherStage::ValidationMessages() const {
+    std::vector<std::string> all = inner_->ValidationMessages();
+    if (tracer_)
+        for (std::string& m : tracer_->ValidationMessages()) all.push_back(std::move(m));
+    return all;
+}
+
 void GatherStage::StartTracer() {
     gpu::DeviceKind kind;
     switch (settings_.device) {

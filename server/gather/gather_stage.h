@@ -64,6 +64,8 @@ class GatherStage : public Solver {
     // penumbra::Error when the inner solver cannot take the shot (Solver::SetEmitterDirect).
     GatherStage(std::unique_ptr<Solver> inner, const Scene& scene, const GatherSettings& settings);
     ~GatherStage() override;
+    // The inner solver's, then the ray tracer's.
+    std::vector<std::string> ValidationMessages() const override;
 
     void Iterate(int n) override;
     // With the final gather: `indirect` = first shot + gathered light at the output surfels,

@@ -194,6 +194,9 @@ class Solver {
     // so that an edit need not wait for a whole bounce. A solver whose iterations cannot be
     // cut ignores it.
     virtual void SetInterrupt(const std::atomic<bool>* flag) { (void)flag; }
+    // Vulkan validation-layer messages (warnings and errors) seen so far, where the solver
+    // or a stage around it runs on a Vulkan device with SolverSettings::validation.
+    virtual std::vector<std::string> ValidationMessages() const { return {}; }
 };
 
 using ProgressFn = std::function<void(const std::string& stage, double fraction)>;

@@ -46,7 +46,7 @@ class AntiradianceSolver : public Solver {
 
     const AntiradianceModel& Model() const { return model_; }
     // Vulkan validation messages so far (settings.validation; none on the CPU back end).
-    std::vector<std::string> ValidationMessages() const;
+    std::vector<std::string> ValidationMessages() const override;
 
   private:
     // Whether moves recompute links on the Vulkan device (AntiradianceSettings::linkUpdate).
