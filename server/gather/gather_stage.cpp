@@ -61,8 +61,8 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
     diameter_ = scene_.Diameter();
     Place();
     const Surfels& s = inner_->GetSurfels();
-    if (settings_.gatherRays > 0) StartTracer();
     if (settings_.gatherRays > 0) {
+        StartTracer();
         if (settings_.allSurfels) {
             for (uint32_t i = 0; i < s.size(); ++i) targets_.push_back(i);
         } else {

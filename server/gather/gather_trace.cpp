@@ -126,8 +126,12 @@ GatherStage::Hit GatherStage::Cast(const glm::vec3& o, const glm::vec3& d, float
     const RayHit h = rays_->Intersect(o, d, inf);
     if (t) *t = h.hit ? h.t : inf;
     if (!h.hit) return Hit{kEscaped, 0, 0};
-    const uint32_t back = glm::dot(rays_->Triangles()[h.triangle].normal, d) >= 0.0f ? kBack : 0u;
-    return Hit{h.triangle | back, Quantise(h.u), Quantise(h.v)};
+    return Found(h.triangle, h.u, h.v, d);
+}
+
+GatherStage::Hit GatherStage::Found(uint32_t tri, float u, float v, const glm::vec3& d) const {
+    const uint32_t back = glm::dot(rays_->Triangles()[tri].normal, d) >= 0.0f ? kBack : 0u;
+    return Hit{tri | back, Quantise(u), Quantise(v)};
 }
 
 bool GatherStage::TraceOnGpu(std::vector<float>& distances) {
@@ -148,13 +152,7 @@ bool GatherStage::TraceOnGpu(std::vector<float>& distances) {
     });
     std::vector<gpu::TraceHit> found;
     try {
-        std::vector<glm::vec3> corners(3 * tris.size());
-        for (size_t k = 0; k < tris.size(); ++k) {
-            corners[3 * k] = tris[k].p0;
-            corners[3 * k + 1] = tris[k].p0 + tris[k].e1;
-            corners[3 * k + 2] = tris[k].p0 + tris[k].e2;
-        }
-        tracer_->Build(corners);
+        tracer_->Build(rays_->Vertices());
         found = tracer_->Trace(rays);
     } catch (const Error& e) {
         // A device that fails mid-way (lost, out of memory): Embree from now on, and why.
@@ -170,8 +168,7 @@ bool GatherStage::TraceOnGpu(std::vector<float>& distances) {
             distances[k] = std::numeric_limits<float>::infinity();
             return;
         }
-        const uint32_t back = glm::dot(tris[h.triangle].normal, rays[k].dir) >= 0.0f ? kBack : 0u;
-        hits_[k] = Hit{h.triangle | back, Quantise(h.u), Quantise(h.v)};
+        hits_[k] = Found(h.triangle, h.u, h.v, rays[k].dir);
         distances[k] = h.t;
     });
     return true;

@@ -263,6 +263,13 @@ size_t RayScene::PickEmitter(float u) const {
     return std::min(k, emitters_.size() - 1);
 }
 
+std::vector<glm::vec3> RayScene::Vertices() const {
+    std::vector<glm::vec3> v;
+    v.reserve(3 * tris_.size());
+    for (const RayTriangle& t : tris_) v.insert(v.end(), {t.p0, t.p0 + t.e1, t.p0 + t.e2});
+    return v;
+}
+
 bool RayScene::Occluded(const glm::vec3& from, const glm::vec3& span) const {
     RTCRay r;
     InitRay(r, from, span, 1.0f - 1e-4f);

@@ -106,6 +106,9 @@ class RayScene {
 
     const Scene& GetScene() const { return scene_; }
     const std::vector<RayTriangle>& Triangles() const { return tris_; }
+    // Three a triangle, in Triangles()' order: p0, p0 + e1, p0 + e2 (for another tracer's
+    // build, gpu/ray_tracer.h).
+    std::vector<glm::vec3> Vertices() const;
     // Built over a refined mesh: the surfels at triangle t's p0, p0 + e1 and p0 + e2.
     const glm::uvec3& Corners(uint32_t t) const { return corners_[t]; }
     bool HasCorners() const { return !corners_.empty(); }  // built over the refined mesh

@@ -36,13 +36,6 @@ std::unique_ptr<gpu::RayTracer> GpuTracer(std::string* why) {
     }
 }
 
-std::vector<glm::vec3> Corners(const RayScene& rays) {
-    std::vector<glm::vec3> corners;
-    for (const RayTriangle& t : rays.Triangles())
-        corners.insert(corners.end(), {t.p0, t.p0 + t.e1, t.p0 + t.e2});
-    return corners;
-}
-
 TEST(RayTracing, LavapipeSaysWhatItLacks) {
     try {
         gpu::RayTracer tracer(gpu::DeviceKind::kLavapipe, true);
@@ -66,7 +59,7 @@ TEST(RayTracing, HitsMatchEmbree) {
     if (!tracer) GTEST_SKIP() << "no device traces rays here: " << why;
     const Scene scene = Load("office.gltf");
     const RayScene embree(scene);
-    tracer->Build(Corners(embree));
+    tracer->Build(embree.Vertices());
     const glm::vec3 lo = scene.BoundsMin(), hi = scene.BoundsMax();
     Pcg32 rng(7, 0);
     std::vector<gpu::TraceRay> rays(200000);
