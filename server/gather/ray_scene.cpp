@@ -29,6 +29,28 @@ void InitRay(RTCRay& r, const glm::vec3& o, const glm::vec3& d, float tfar) {
     r.flags = 0;
 }
 
+// The context of RayScene::AllHits: Embree's, then where the filter puts what it meets.
+struct AllHitsContext {
+    RTCIntersectContext ctx;
+    std::vector<RayHit>* hits;
+};
+
+// Records each hit the traversal finds and rejects it, so that the ray goes on to the next.
+void RecordHit(const RTCFilterFunctionNArguments* args) {
+    auto* context = reinterpret_cast<AllHitsContext*>(args->context);
+    for (unsigned i = 0; i < args->N; ++i) {
+        if (args->valid[i] == 0) continue;
+        RayHit h;
+        h.hit = true;
+        h.triangle = RTCHitN_primID(args->hit, args->N, i);
+        h.t = RTCRayN_tfar(args->ray, args->N, i);
+        h.u = RTCHitN_u(args->hit, args->N, i);
+        h.v = RTCHitN_v(args->hit, args->N, i);
+        context->hits->push_back(h);
+        args->valid[i] = 0;
+    }
+}
+
 }  // namespace
 
 RayScene::RayScene(const Scene& scene) : scene_(scene), mapped_(AnyMapped(scene)) {
@@ -120,6 +142,8 @@ void RayScene::Build() {
     if (!device_) throw Error("Embree: cannot create a device");
     rtcSetDeviceErrorFunction(device_, &OnError, &error_);
     rtcScene_ = rtcNewScene(device_);
+    // AllHits' filter runs from its own context only (other queries pass none).
+    rtcSetSceneFlags(rtcScene_, RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
     eps_ = 1e-4f * std::max(scene_.Diameter(), 1e-6f);
     Sample();
     BuildBvh();
@@ -294,6 +318,29 @@ RayHit RayScene::Intersect(const glm::vec3& origin, const glm::vec3& dir, float 
     hit.u = rh.hit.u;
     hit.v = rh.hit.v;
     return hit;
+}
+
+void RayScene::AllHits(const glm::vec3& origin, const glm::vec3& dir, float tfar,
+                       std::vector<RayHit>& hits) const {
+    hits.clear();
+    AllHitsContext context;
+    rtcInitIntersectContext(&context.ctx);
+    context.ctx.filter = &RecordHit;
+    context.hits = &hits;
+    RTCRayHit rh;
+    InitRay(rh.ray, origin, dir, tfar);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(rtcScene_, &context.ctx, &rh);
+    if (hits.size() < 2) return;
+    // Nearest first; a triangle met in two BVH leaves (spatial splits) at the same t once.
+    std::sort(hits.begin(), hits.end(), [](const RayHit& a, const RayHit& b) {
+        return a.t < b.t || (a.t == b.t && a.triangle < b.triangle);
+    });
+    hits.erase(std::unique(hits.begin(), hits.end(),
+                           [](const RayHit& a, const RayHit& b) {
+                               return a.triangle == b.triangle && a.t == b.t;
+                           }),
+               hits.end());
 }
 
 std::vector<std::vector<glm::vec3>> VertexEstimatePoints(const Scene& scene) {

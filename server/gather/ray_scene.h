@@ -103,6 +103,12 @@ class RayScene {
     bool Occluded(const glm::vec3& from, const glm::vec3& span) const;
     // The nearest triangle along origin + t·dir, t in (0, tfar).
     RayHit Intersect(const glm::vec3& origin, const glm::vec3& dir, float tfar) const;
+    // Every triangle along origin + t·dir, t in (0, tfar), nearest first, in one traversal (a
+    // filter that records each hit and lets the ray go on); a triangle Embree meets twice
+    // (its spatial splits) counted once. For the light field's lines (solver/lightfield/).
+    // Clears `hits` first.
+    void AllHits(const glm::vec3& origin, const glm::vec3& dir, float tfar,
+                 std::vector<RayHit>& hits) const;
 
     const Scene& GetScene() const { return scene_; }
     const std::vector<RayTriangle>& Triangles() const { return tris_; }

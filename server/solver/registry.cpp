@@ -6,13 +6,15 @@
 #include "base/check.h"
 #include "solver/antiradiance/settings.h"
 #include "solver/implicit/settings.h"
+#include "solver/lightfield/settings.h"
 
 namespace penumbra {
 namespace {
 
 std::vector<SolverEntry>& Registry() {
     // Built in: one line a solver.
-    static std::vector<SolverEntry> solvers = {AntiradianceEntry(), ImplicitEntry()};
+    static std::vector<SolverEntry> solvers = {AntiradianceEntry(), ImplicitEntry(),
+                                               LightfieldEntry()};
     return solvers;
 }
 

@@ -1,0 +1,239 @@
+// The light-field solver's batches and bounces (lightfield_solver.h).
+#include "solver/lightfield/lightfield_solver.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include "base/check.h"
+
+namespace penumbra {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+bool Finite(const glm::vec3& v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+// The ball the lines cover: around the refined mesh's bounding box.
+LineGrid MakeGrid(const Surfels& surfels, float elementSize, int cells) {
+    Bounds box;
+    for (const glm::vec3& p : surfels.positions) box.Add(p);
+    LineGrid g;
+    if (box.Empty()) return g;
+    g.centre = 0.5f * (box.lo + box.hi);
+    g.radius = std::max(0.5f * glm::length(box.hi - box.lo) * 1.001f, 1e-4f);
+    // Cells half an element wide: a surfel (about an element across) meets a few lines of
+    // every direction it faces.
+    g.cells = cells > 0
+                  ? cells
+                  : std::clamp(int(std::ceil(2.0f * g.radius / (0.5f * elementSize))), 16, 1024);
+    return g;
+}
+
+}  // namespace
+
+LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& settings,
+                                   const LightfieldSettings& own, const ProgressFn& progress)
+    : settings_(settings), own_(own), progress_(progress), scene_(scene) {
+    const auto start = Clock::now();
+    if (settings.device == DeviceChoice::kGpu || settings.device == DeviceChoice::kLavapipe)
+        throw Error(
+            "the light-field solver runs on the CPU only for now (its Vulkan back end is not "
+            "built yet): use --device cpu or auto");
+    ValidateEnvironment(scene.environment);
+    const float h = settings.elementSize > 0.0f ? settings.elementSize
+                                                : scene.Diameter() * kDefaultElementFraction;
+    if (!(h > 0.0f) || !std::isfinite(h))
+        throw Error("element size must be a positive number of metres");
+    elementSize_ = h;
+    if (progress) progress("refining", 0.0);
+    surfels_ = RefineScene(scene_, h);
+    rays_ = std::make_unique<RayScene>(scene_, surfels_);
+    facets_ = std::make_unique<SurfelFacets>(*rays_, surfels_.size());
+    grid_ = MakeGrid(surfels_, h, own.cells);
+    base_ = HemisphereDirections(own.directions);
+    sky_.Binned(scene.environment);
+    const size_t n = surfels_.size();
+    gathered_.assign(n, glm::vec3(0.0f));
+    coverage_.assign(n, 0.0f);
+    direct_.assign(n, glm::vec3(0.0f));
+    if (!scene.lights.empty()) {
+        if (progress) progress("shadow maps", 0.0);
+        mapSize_ = settings.shadowMapSize > 0 ? settings.shadowMapSize
+                                              : direct::AutoMapSize(scene.Diameter(), h);
+        lights_ = static_cast<int>(scene.lights.size());
+        std::vector<uint32_t> order(n);
+        for (uint32_t i = 0; i < n; ++i) order[i] = i;
+        directStage_ =
+            direct::MakeDirectStage(scene_, direct::MakeReceivers(surfels_, order), mapSize_);
+        CopyDirect();
+    }
+    Rematerial();
+    setupSeconds_ = std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+void LightfieldSolver::CopyDirect() {
+    const std::vector<float> e = directStage_->Irradiance();
+    for (size_t i = 0; i < direct_.size(); ++i)
+        direct_[i] = glm::vec3(e[i * 4], e[i * 4 + 1], e[i * 4 + 2]);
+}
+
+void LightfieldSolver::Rematerial() {
+    const size_t n = surfels_.size();
+    albedo_.resize(n);
+    emission_.resize(n);
+    for (size_t s = 0; s < n; ++s) {
+        const Material& m = scene_.materials[surfels_.materials[s]];
+        albedo_[s] = surfels_.Albedo(m, s);
+        // With a first shot from outside (SetEmitterDirect) the emitters' light is not carried.
+        emission_[s] = emitterDirect_.empty() ? surfels_.Emission(m, s) : glm::vec3(0.0f);
+    }
+    Reradiate();
+}
+
+void LightfieldSolver::Reradiate() {
+    const float invPi = 1.0f / std::numbers::pi_v<float>;
+    radiance_.resize(gathered_.size());
+    for (size_t i = 0; i < radiance_.size(); ++i) {
+        glm::vec3 arriving = gathered_[i] + direct_[i];
+        if (!emitterDirect_.empty()) arriving += emitterDirect_[i];
+        radiance_[i] = emission_[i] + albedo_[i] * invPi * arriving;
+    }
+}
+
+void LightfieldSolver::Bounce() {
+    const auto t = Clock::now();
+    const Environment& env = sky_.Last();
+    const Environment* sky = env.Active() ? &env : nullptr;
+    std::vector<glm::vec3> weighted(surfels_.size(), glm::vec3(0.0f));
+    for (const LineBatch& b : batches_)
+        WalkBatch(b, *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted);
+    // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled (lines.h).
+    const float pi = std::numbers::pi_v<float>;
+    for (size_t s = 0; s < weighted.size(); ++s)
+        gathered_[s] = coverage_[s] > 0.0f ? (pi / coverage_[s]) * weighted[s] : glm::vec3(0.0f);
+    Reradiate();
+    msWalk_ = MsSince(t);
+    for (const glm::vec3& l : radiance_)
+        if (divergence_.empty() && !Finite(l))
+            divergence_ = "diverged at iteration " + std::to_string(iterations_ + 1) +
+                          ": a surfel's light is not finite";
+}
+
+void LightfieldSolver::Iterate(int n) {
+    if (n < 0) throw Error("iteration count must not be negative");
+    const auto start = Clock::now();
+    for (int i = 0; i < n && divergence_.empty(); ++i) {
+        if (batches_.size() < size_t(own_.batches)) {
+            const auto t = Clock::now();
+            batches_.push_back(TraceBatch(*rays_, grid_, base_, own_.seed,
+                                          static_cast<uint32_t>(batches_.size())));
+            facets_->Coverage(batches_.back().directions, coverage_);
+            msTrace_ += MsSince(t);
+        }
+        Bounce();
+        if (divergence_.empty()) ++iterations_;
+        if (progress_) progress_("iterating", static_cast<double>(i + 1) / n);
+    }
+    msTotal_ += MsSince(start);
+}
+
+std::vector<glm::vec3> LightfieldSolver::SurfelIrradiance(Channel channel) {
+    std::vector<glm::vec3> out(surfels_.size());
+    for (size_t s = 0; s < out.size(); ++s) {
+        glm::vec3 indirect = gathered_[s];
+        if (!emitterDirect_.empty()) indirect += emitterDirect_[s];
+        out[s] = channel == Channel::kDirect  ? direct_[s]
+                 : channel == Channel::kTotal ? indirect + direct_[s]
+                                              : indirect;
+    }
+    return out;
+}
+
+void LightfieldSolver::UpdateMaterials(const Scene& scene) {
+    PENUMBRA_CHECK_EQ(scene.primitives.size(), surfels_.firstSurfel.size());
+    scene_.materials = scene.materials;
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        scene_.primitives[p].material = scene.primitives[p].material;
+        for (size_t s = surfels_.firstSurfel[p]; s < surfels_.End(p); ++s)
+            surfels_.materials[s] = scene.primitives[p].material;
+    }
+    Rematerial();
+}
+
+void LightfieldSolver::UpdateLights(const Scene& scene) {
+    ValidateEnvironment(scene.environment);
+    sky_.Binned(scene.environment);  // the walks read it: nothing to re-bin
+    scene_.environment = scene.environment;
+    scene_.lights = scene.lights;
+    if (!direct::UpdateDirectStage(directStage_.get(), lights_, scene)) return;
+    CopyDirect();
+    Reradiate();
+}
+
+void LightfieldSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) {
+    if (!perSurfel.empty() && perSurfel.size() != surfels_.size())
+        throw Error("emitter direct light for " + std::to_string(perSurfel.size()) +
+                    " surfels; the solver has " + std::to_string(surfels_.size()));
+    emitterDirect_ = perSurfel;
+    Rematerial();
+}
+
+std::string LightfieldSolver::WarmStart(Solver& previous, const SurfelCarry& carry) {
+    auto* before = dynamic_cast<LightfieldSolver*>(&previous);
+    if (!before) return "cold start (the solver before was not a light-field solver)";
+    if (carry.from.size() != surfels_.size() || !carry.kept) return "cold start";
+    size_t kept = 0;
+    for (size_t s = 0; s < surfels_.size(); ++s) {
+        if (carry.from[s] == SurfelCarry::kNone) continue;
+        gathered_[s] = before->gathered_[size_t(carry.from[s])];
+        ++kept;
+    }
+    Reradiate();
+    return "warm start for " + std::to_string(kept) + " of " + std::to_string(surfels_.size()) +
+           " surfels";
+}
+
+SolverStats LightfieldSolver::Stats() const {
+    SolverStats s;
+    s.solver = "lightfield";
+    s.device = "cpu";
+    s.elements = surfels_.size();
+    s.nodes = surfels_.size();
+    size_t lines = 0, hits = 0, bytes = 0;
+    for (const LineBatch& b : batches_)
+        lines += b.Lines(), hits += b.hits.size(), bytes += b.Bytes();
+    s.links = hits;  // a line's hits are what carries light
+    s.iterations = iterations_;
+    s.gathers = iterations_;
+    s.bounces = iterations_;
+    s.elementSize = elementSize_;
+    s.linkBuildSeconds = msTrace_ / 1000.0;
+    s.setupSeconds = setupSeconds_;
+    s.msTotal = msTotal_;
+    s.passes = {{"trace", msTrace_}, {"walk", msWalk_}};
+    s.tableBytes = radiance_.size() * sizeof(glm::vec3) * 6;
+    s.linkBytes = bytes;
+    s.lights = lights_;
+    direct::DescribeLighting(directStage_.get(), mapSize_, sky_, s);
+    s.divergence = divergence_;
+    // No furnace bound is computed; only that the light stays finite is checked.
+    s.irradianceBound = std::numeric_limits<float>::infinity();
+    s.SetDetail("directions_per_batch", double(own_.directions));
+    s.SetDetail("batches", double(batches_.size()));
+    s.SetDetail("batches_kept_at_most", double(own_.batches));
+    s.SetDetail("cells", double(grid_.cells));
+    s.SetDetail("lines", double(lines));
+    s.SetDetail("line_hits", double(hits));
+    return s;
+}
+
+}  // namespace penumbra

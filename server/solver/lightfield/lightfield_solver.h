@@ -1,0 +1,72 @@
+// The light-field solver (Mortensen, Khanna, Slater 2008: virtual light field propagation)
+// behind the Solver interface, CPU back end. Light travels along batches of parallel lines
+// (lines.h): each line's surfaces in order, walked with a radiance interface both ways, so
+// visibility is exact along every line (no leak through a wall of any thickness). Surfels
+// stand for the paper's diffuse texels: each keeps one radiance, and a line's hit reads and
+// feeds its three surfels by their hat weights.
+//
+// An iteration traces one more batch while fewer than `batches` are kept, then walks every
+// kept batch with the radiance of the iteration before (one bounce, Jacobi: the paper's
+// propagation iterations, Sec. 3), E_s from every kept batch's lines (WalkBatch). Once every batch
+// is kept, iterations only bounce: edits of lights, materials and the sky walk the same lines
+// again with no new rays.
+#pragma once
+
+#include <memory>
+
+#include "direct/direct_stage.h"
+#include "gather/ray_scene.h"
+#include "solver/lightfield/lines.h"
+#include "solver/lightfield/settings.h"
+#include "solver/solver.h"
+
+namespace penumbra {
+
+class LightfieldSolver : public Solver {
+  public:
+    LightfieldSolver(const Scene& scene, const SolverSettings& settings,
+                     const LightfieldSettings& own, const ProgressFn& progress);
+
+    void Iterate(int n) override;
+    std::vector<glm::vec3> SurfelIrradiance(Channel channel = Channel::kIndirect) override;
+    const Surfels& GetSurfels() const override { return surfels_; }
+    void UpdateMaterials(const Scene& scene) override;
+    void UpdateLights(const Scene& scene) override;
+    SolverStats Stats() const override;
+    void SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) override;
+    bool TakesEmitterDirect() const override { return true; }
+    std::string WarmStart(Solver& previous, const SurfelCarry& carry) override;
+
+    const std::vector<LineBatch>& Batches() const { return batches_; }
+    const LineGrid& Grid() const { return grid_; }
+
+  private:
+    void Bounce();      // one walk of every kept batch, then Reradiate
+    void Rematerial();  // albedo and emission per surfel, then Reradiate
+    void Reradiate();   // the light leaving each surfel from the light arriving there now
+    void CopyDirect();  // E_d per surfel from the direct stage
+
+    SolverSettings settings_;
+    LightfieldSettings own_;
+    ProgressFn progress_;
+    Scene scene_;  // the ray scene reads it
+    float elementSize_ = 0.0f;
+    Surfels surfels_;
+    std::unique_ptr<RayScene> rays_;
+    std::unique_ptr<SurfelFacets> facets_;
+    LineGrid grid_;
+    std::vector<glm::vec3> base_;  // the batches' direction set before its rotation
+    std::vector<LineBatch> batches_;
+    std::vector<float> coverage_;  // per surfel: Σ P_s over the kept batches' directions
+    // Per surfel: albedo, emission carried, irradiance gathered, the punctual lights' E_d,
+    // the gather stage's first shot (empty: none), radiance leaving.
+    std::vector<glm::vec3> albedo_, emission_, gathered_, direct_, emitterDirect_, radiance_;
+    std::unique_ptr<direct::DirectStage> directStage_;
+    direct::SkyBins sky_;  // the sky the walks read (only its Last() is used)
+    int lights_ = 0, mapSize_ = 0;
+    int iterations_ = 0;
+    double setupSeconds_ = 0.0, msTotal_ = 0.0, msTrace_ = 0.0, msWalk_ = 0.0;
+    std::string divergence_;
+};
+
+}  // namespace penumbra

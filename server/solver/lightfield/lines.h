@@ -1,0 +1,104 @@
+// The light field's parallel subfields (Mortensen, Khanna, Slater 2008, Sec. 2.1): per
+// direction a grid of parallel lines over the plane orthogonal to it, covering the scene's
+// bounding sphere, and every surface each line meets in order along it. The paper sorts faces
+// along each direction (Sec. 3.2) and rasterises; here Embree collects a line's hits in one
+// traversal (RayScene::AllHits) on the refined mesh, so a hit names the three surfels around
+// it. Batches of directions are new random rotations of one near-uniform set (global ray
+// bundles, Szirmay-Kalos 1998), so that the fixed directions' artefacts turn into noise that
+// averages out.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <vector>
+
+#include "gather/ray_scene.h"
+#include "scene/environment.h"
+
+namespace penumbra {
+
+// One surface a line meets: 8 bytes.
+struct LineHit {
+    uint32_t triangle;  // RayScene triangle; the top bit: its front faces along the line
+    uint16_t u, v;      // barycentrics × 65535 (the hat weights of Corners' y and z)
+};
+inline constexpr uint32_t kFacesAlong = 0x80000000u;
+
+// The lines of one batch of directions: per direction its lines that meet something, per
+// line its hits nearest first (along +direction).
+struct LineBatch {
+    std::vector<glm::vec3> directions;     // unit
+    std::vector<uint32_t> directionLines;  // per direction its first line; directions + 1
+    std::vector<uint32_t> lineHits;        // per line its first hit; lines + 1
+    std::vector<LineHit> hits;
+    size_t Lines() const { return lineHits.empty() ? 0 : lineHits.size() - 1; }
+    size_t Bytes() const {
+        return hits.size() * sizeof(LineHit) + lineHits.size() * 4 + directionLines.size() * 4 +
+               directions.size() * sizeof(glm::vec3);
+    }
+};
+
+// `count` line directions spread evenly over a hemisphere (a spherical Fibonacci set in
+// cos θ), so that they and their opposites cover the sphere evenly.
+std::vector<glm::vec3> HemisphereDirections(int count);
+
+// A uniformly random rotation (Shoemake's unit quaternion from three uniforms).
+glm::mat3 RandomRotation(uint32_t seed, uint64_t stream);
+
+// The grid of lines every direction uses: `cells` a side over the square around the ball
+// (centre, radius), a line jittered in each cell.
+struct LineGrid {
+    glm::vec3 centre{0.0f};
+    float radius = 1.0f;
+    int cells = 64;
+    float CellArea() const {
+        const float side = 2.0f * radius / float(cells);
+        return side * side;
+    }
+};
+
+// Traces batch `batch` of the field: `base` rotated by RandomRotation(seed, batch), every
+// line of every direction through `rays` (built over the refined mesh). Deterministic for a
+// (seed, batch) whatever the thread count.
+LineBatch TraceBatch(const RayScene& rays, const LineGrid& grid, const std::vector<glm::vec3>& base,
+                     uint32_t seed, uint32_t batch);
+
+// Each surfel's share of its triangles, for the projected area of its hat function towards a
+// direction: facets[offsets[s] … offsets[s + 1]) are normal × area / 3 of the refined
+// triangles around surfel s (RayScene's, built over the refined mesh).
+struct SurfelFacets {
+    std::vector<uint32_t> offsets;
+    std::vector<glm::vec3> facets;
+    explicit SurfelFacets(const RayScene& rays, size_t surfels);
+    // ∫ φ_s cos⁺ dA towards light arriving along `travel`: Σ max(0, −f · travel).
+    float Projected(uint32_t s, const glm::vec3& travel) const {
+        float p = 0.0f;
+        for (uint32_t k = offsets[s]; k < offsets[s + 1]; ++k)
+            p += std::max(0.0f, -glm::dot(facets[k], travel));
+        return p;
+    }
+    // Σ over `directions`, each both ways, of P_s: adds to `coverage` (per surfel).
+    void Coverage(const std::vector<glm::vec3>& directions, std::vector<float>& coverage) const;
+};
+
+// The radiance interface's walk (Sec. 3.2, Fig. 5) along every line of `b`, both ways: the
+// interface starts as the sky's radiance along the line (black without one: Sec. 3.3's reset);
+// a surface whose front faces the light arriving receives the interface and hides what lies
+// behind it (back sides are black); a surface whose front faces along the travel replaces the
+// interface with its own exitant radiance, interpolated from its three surfels'.
+// What a front receives goes to its surfels by their hat weights φ_s at the hit. The
+// global-lines estimator adds Σ φ_s L_I · A_cell per direction of travel ω: its mean is
+// P_s(ω) L̄_s(ω), with P_s(ω) = ∫ φ_s cos⁺ dA the hat's projected area towards ω and L̄_s(ω)
+// the mean radiance arriving over it, and E_s = π Σ_ω (that) / Σ_ω P_s(ω) (∫ P_s dω = π A_s;
+// the sum over the directions sampled, met or not: SurfelFacets::Coverage). Where the hat's
+// footprint spans a few cells (P_s ≥ kRatioCells · A_cell) the walk adds P_s · Σ φ L_I / Σ φ
+// instead: the same mean, without the noise of how many lines met the surfel (an open plane
+// under a constant sky gets π exactly); where it spans fewer, a direction may meet the surfel
+// or not, and only the first form keeps the mean. Adds to `weighted` (per surfel, RGB).
+inline constexpr float kRatioCells = 2.0f;
+void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& facets, float cellArea,
+               const std::vector<glm::vec3>& radiance, const Environment* sky,
+               std::vector<glm::vec3>& weighted);
+
+}  // namespace penumbra

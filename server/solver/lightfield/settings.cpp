@@ -1,0 +1,65 @@
+// The light-field solver's registry entry and options (solver/lightfield/settings.h).
+#include "solver/lightfield/settings.h"
+
+#include "solver/lightfield/lightfield_solver.h"
+
+namespace penumbra {
+namespace {
+
+std::vector<OptionSpec> Options() {
+    using K = OptionKind;
+    return {
+        {"directions",
+         K::kInt,
+         "64",
+         "line directions a batch, each used both ways (a new random rotation a batch)",
+         4,
+         4096,
+         {}},
+        {"cells",
+         K::kInt,
+         "0",
+         "lines a side of each direction's grid over the scene; 0: cells half an element wide",
+         0,
+         4096,
+         {}},
+        {"batches",
+         K::kInt,
+         "8",
+         "batches of directions traced and kept; iterations past them bounce without new rays",
+         1,
+         4096,
+         {}},
+        {"seed", K::kInt, "1", "random rotations and jitter of the lines", 0, 2147483647, {}},
+    };
+}
+
+}  // namespace
+
+SolverEntry LightfieldEntry() {
+    return {"lightfield",
+            "virtual light field (Mortensen et al. 2008), in progress: parallel lines in "
+            "batches of rotated directions, exact visibility along each; diffuse surfaces, "
+            "CPU only (docs/SOLVER.md)",
+            Options(),
+            [](const Scene& scene, const SolverSettings& settings,
+               const ProgressFn& progress) -> std::unique_ptr<Solver> {
+                return std::make_unique<LightfieldSolver>(
+                    scene, settings, ReadLightfieldSettings(settings), progress);
+            },
+            [](const SolverSettings& settings) { ReadLightfieldSettings(settings); }};
+}
+
+LightfieldSettings ReadLightfieldSettings(const SolverSettings& settings) {
+    const OptionReader r("lightfield", Options(), settings.options);
+    LightfieldSettings s;
+    s.directions = r.Int("directions");
+    s.cells = r.Int("cells");
+    if (s.cells != 0 && s.cells < 4)
+        throw Error("lightfield: --cells must be 0 (from the element size) or at least 4");
+    s.batches = r.Int("batches");
+    s.seed = static_cast<uint32_t>(r.Int("seed"));
+    return s;
+}
+
+}  // namespace penumbra
