@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
 #include <numbers>
 
 #include "base/pcg.h"
@@ -201,6 +202,53 @@ TEST(Lightfield, ThinWallKeepsTheDarkRoomDark) {
     std::printf("thin wall (5 mm): dark floor %.6f of the lit floor's light\n", dark / lit);
     EXPECT_GT(lit, 0.0);
     EXPECT_LT(dark, 0.01 * lit);
+}
+
+// A box moved inside a room (the lines' ball unchanged): the lines that can meet it, where it
+// was or is, are traced again; the answer matches a fresh build's, which traces the same lines.
+TEST(Lightfield, AMoveTracesAgainWhatAFreshBuildTraces) {
+    SceneBuilder b;
+    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.6f));
+    uint32_t lamp = b.AddMaterial("lamp", glm::vec3(0.0f), glm::vec3(10.0f));
+    testing::AddUnitRoom(b, grey, grey, 4);
+    b.AddQuad("lamp", lamp, {0.4f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.6f},
+              {0.4f, 0.99f, 0.6f}, {0.5f, 0, 0.5f});
+    b.AddBox("box", grey, {0.35f, 0.15f, 0.35f}, {0.2f, 0.3f, 0.2f}, 0.0f, false);
+    b.SetDynamic("box", {0, 0, 0});
+    Scene scene = b.Build();
+    const SolverSettings settings = Lightfield(0.08f, 32, 4);
+    auto solver = CreateSolver(scene, settings);
+    solver->Iterate(20);
+    const std::vector<glm::vec3> before = testing::AllVertices(*solver, scene, Channel::kIndirect);
+    const int node = FindNode(scene, "box");
+    const glm::mat4 moved = glm::translate(glm::mat4(1.0f), glm::vec3(0.3f, 0.0f, 0.25f)) *
+                            scene.nodes[node].local *
+                            glm::rotate(glm::mat4(1.0f), glm::radians(25.0f), glm::vec3(0, 1, 0));
+    SetNodeTransform(scene, node, moved);
+    ASSERT_EQ(solver->GeometryMismatch(scene), "");
+    const std::string note = solver->UpdateGeometry(scene);
+    std::printf("%s\n", note.c_str());
+    EXPECT_NE(note.find("lines traced again in place"), std::string::npos) << note;
+    solver->Iterate(20);
+    auto fresh = CreateSolver(scene, settings);
+    fresh->Iterate(24);
+    const std::vector<glm::vec3> now = testing::AllVertices(*fresh, scene, Channel::kIndirect);
+    const double rel =
+        testing::RelativeRms(testing::AllVertices(*solver, scene, Channel::kIndirect), now);
+    const double moves = testing::RelativeRms(before, now);
+    std::printf("moved in place against a fresh build: %.6f relative RMS (the move: %.4f)\n", rel,
+                moves);
+    EXPECT_LT(rel, 1e-3);
+    EXPECT_GT(moves, 0.02);
+    const SolverStats st = solver->Stats();
+    EXPECT_GT(st.Number("lines_retraced"), 0.0);
+    EXPECT_LT(st.Number("lines_retraced"), 0.5 * st.Number("lines"));
+    // Out of the lines' ball, or with other primitives: refused with the reason.
+    SetNodeTransform(scene, node, glm::translate(glm::mat4(1.0f), glm::vec3(5, 0, 0)) * moved);
+    EXPECT_NE(solver->GeometryMismatch(scene).find("outside the ball"), std::string::npos);
+    Scene fewer = scene;
+    fewer.primitives.pop_back();
+    EXPECT_NE(solver->GeometryMismatch(fewer).find("other primitives"), std::string::npos);
 }
 
 // Through the registry: listed, options checked, stats named.

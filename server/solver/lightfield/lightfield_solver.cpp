@@ -179,6 +179,68 @@ void LightfieldSolver::UpdateLights(const Scene& scene) {
     Reradiate();
 }
 
+std::string LightfieldSolver::Mismatch(const Scene& scene, Surfels& now) const {
+    if (scene.lights.size() != static_cast<size_t>(lights_))
+        return "the number of punctual lights changed";
+    if (scene.primitives.size() != surfels_.firstSurfel.size())
+        return "the scene has other primitives than the solver was built for";
+    now = RefineScene(scene, elementSize_);
+    if (now.size() != surfels_.size() || now.refinedTriangles != surfels_.refinedTriangles)
+        return "the moved surfaces refine into other elements";
+    // The lines cover the ball they were made for; a surface moved out of it would be missed.
+    for (size_t s = 0; s < now.size(); ++s)
+        if (now.positions[s] != surfels_.positions[s] &&
+            glm::length(now.positions[s] - grid_.centre) > grid_.radius)
+            return "a surface moved outside the ball the light field's lines cover";
+    return {};
+}
+
+std::string LightfieldSolver::GeometryMismatch(const Scene& scene) const {
+    Surfels now;
+    return Mismatch(scene, now);
+}
+
+std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
+    const auto start = Clock::now();
+    Surfels now;  // refined once: checked, then taken
+    if (std::string why = Mismatch(scene, now); !why.empty()) throw Error(why);
+    // Where the moved surfels were and are: every line that can meet them is traced again.
+    Bounds box;
+    size_t moved = 0;
+    for (size_t s = 0; s < now.size(); ++s) {
+        if (now.positions[s] == surfels_.positions[s] && now.normals[s] == surfels_.normals[s])
+            continue;
+        box.Add(surfels_.positions[s]), box.Add(now.positions[s]);
+        ++moved;
+    }
+    surfels_.positions = std::move(now.positions);
+    surfels_.normals = std::move(now.normals);
+    surfels_.areas = std::move(now.areas);
+    surfels_.centroids = std::move(now.centroids);
+    size_t retraced = 0;
+    if (moved > 0) {
+        rays_->Update(surfels_);
+        facets_ = std::make_unique<SurfelFacets>(*rays_, surfels_.size());
+        coverage_.assign(surfels_.size(), 0.0f);
+        for (LineBatch& b : batches_) {
+            retraced += RetraceBatch(*rays_, grid_, own_.seed, box, b);
+            facets_->Coverage(b.directions, coverage_);
+        }
+    }
+    if (directStage_) {
+        std::vector<uint32_t> order(surfels_.size());
+        for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+        directStage_->Move(scene, direct::MakeReceivers(surfels_, order));
+        CopyDirect();
+        Reradiate();
+    }
+    ++geometryUpdates_;
+    linesRetraced_ += retraced;
+    msGeometry_ = MsSince(start);
+    return "lines traced again in place (" + std::to_string(retraced) + " lines, " +
+           std::to_string(int(msGeometry_ + 0.5)) + " ms)";
+}
+
 void LightfieldSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) {
     if (!perSurfel.empty() && perSurfel.size() != surfels_.size())
         throw Error("emitter direct light for " + std::to_string(perSurfel.size()) +
@@ -224,6 +286,8 @@ SolverStats LightfieldSolver::Stats() const {
     s.linkBytes = bytes;
     s.lights = lights_;
     direct::DescribeLighting(directStage_.get(), mapSize_, sky_, s);
+    s.geometryUpdates = geometryUpdates_;
+    s.msGeometry = msGeometry_;
     s.divergence = divergence_;
     // No furnace bound is computed; only that the light stays finite is checked.
     s.irradianceBound = std::numeric_limits<float>::infinity();
@@ -233,6 +297,7 @@ SolverStats LightfieldSolver::Stats() const {
     s.SetDetail("cells", double(grid_.cells));
     s.SetDetail("lines", double(lines));
     s.SetDetail("line_hits", double(hits));
+    s.SetDetail("lines_retraced", double(linesRetraced_));
     return s;
 }
 

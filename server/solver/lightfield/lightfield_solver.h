@@ -33,6 +33,11 @@ class LightfieldSolver : public Solver {
     void UpdateMaterials(const Scene& scene) override;
     void UpdateLights(const Scene& scene) override;
     SolverStats Stats() const override;
+    // Any move or deformation that keeps the primitives, their refinement and the number of
+    // punctual lights (no motion bounds needed): UpdateGeometry traces again the lines that
+    // can meet the moved surfaces, where they were or are now.
+    std::string GeometryMismatch(const Scene& scene) const override;
+    std::string UpdateGeometry(const Scene& scene) override;
     void SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) override;
     bool TakesEmitterDirect() const override { return true; }
     std::string WarmStart(Solver& previous, const SurfelCarry& carry) override;
@@ -41,6 +46,9 @@ class LightfieldSolver : public Solver {
     const LineGrid& Grid() const { return grid_; }
 
   private:
+    // GeometryMismatch's reasons, with `now` the surfels refined from `scene` when it gets
+    // that far (UpdateGeometry takes them instead of refining again).
+    std::string Mismatch(const Scene& scene, Surfels& now) const;
     void Bounce();      // one walk of every kept batch, then Reradiate
     void Rematerial();  // albedo and emission per surfel, then Reradiate
     void Reradiate();   // the light leaving each surfel from the light arriving there now
@@ -49,7 +57,7 @@ class LightfieldSolver : public Solver {
     SolverSettings settings_;
     LightfieldSettings own_;
     ProgressFn progress_;
-    Scene scene_;  // the ray scene reads it
+    Scene scene_;  // the ray scene reads its materials (a move updates surfels, not this)
     float elementSize_ = 0.0f;
     Surfels surfels_;
     std::unique_ptr<RayScene> rays_;
@@ -66,6 +74,8 @@ class LightfieldSolver : public Solver {
     int lights_ = 0, mapSize_ = 0;
     int iterations_ = 0;
     double setupSeconds_ = 0.0, msTotal_ = 0.0, msTrace_ = 0.0, msWalk_ = 0.0;
+    double msGeometry_ = 0.0;
+    size_t geometryUpdates_ = 0, linesRetraced_ = 0;
     std::string divergence_;
 };
 

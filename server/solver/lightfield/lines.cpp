@@ -16,47 +16,86 @@ namespace {
 
 constexpr float kPi = std::numbers::pi_v<float>;
 
-// The lines of one direction: hits per line (lines that meet nothing left out).
+// The lines of one direction that meet something: per line its cell and hit count, in cell
+// order, and their hits.
 struct DirectionLines {
+    std::vector<uint32_t> cells;
     std::vector<uint32_t> counts;
     std::vector<LineHit> hits;
 };
 
-DirectionLines TraceDirection(const RayScene& rays, const LineGrid& grid, const glm::vec3& d,
-                              uint32_t seed, uint64_t stream) {
-    DirectionLines out;
-    glm::vec3 t, s;
-    Basis(d, t, s);
-    const int n = grid.cells;
-    const float side = 2.0f * grid.radius / float(n);
-    // Lines start outside the ball and run through it.
-    const float back = 1.01f * grid.radius;
-    const glm::vec3 corner = grid.centre - grid.radius * (t + s) - back * d;
+// One direction's grid: cell (i, j)'s line starts at corner + (i + a)·side·t + (j + b)·side·s
+// and runs along d, (a, b) its jitter.
+struct DirectionGrid {
+    glm::vec3 d, t, s, corner;
+    float side, length;
+    int n;
+    DirectionGrid(const LineGrid& grid, const glm::vec3& direction) : d(direction) {
+        Basis(d, t, s);
+        n = grid.cells;
+        side = 2.0f * grid.radius / float(n);
+        // Lines start outside the ball and run through it.
+        const float back = 1.01f * grid.radius;
+        corner = grid.centre - grid.radius * (t + s) - back * d;
+        length = 2.0f * back;
+    }
+    // Whether cell (i, j) lies wholly outside the ball's disc (its lines meet nothing).
+    bool Outside(int i, int j) const {
+        const float r = 0.5f * side * float(n);
+        const float x0 = -r + i * side, y0 = -r + j * side;
+        const float nx = std::clamp(0.0f, x0, x0 + side), ny = std::clamp(0.0f, y0, y0 + side);
+        return nx * nx + ny * ny > r * r;
+    }
+};
+
+// The jitter stream of a cell: its own, so that a re-trace draws the same line.
+uint64_t CellStream(uint32_t batch, size_t direction, uint32_t cell) {
+    return (uint64_t(batch) << 40) | (uint64_t(direction) << 24) | cell;
+}
+
+// Traces cell `cell`'s line into `out` (nothing when it meets nothing).
+void TraceCell(const RayScene& rays, const DirectionGrid& g, uint32_t seed, uint64_t stream,
+               uint32_t cell, std::vector<RayHit>& scratch, DirectionLines& out) {
+    const int i = int(cell % uint32_t(g.n)), j = int(cell / uint32_t(g.n));
+    if (g.Outside(i, j)) return;
     Pcg32 rng(seed, stream);
-    std::vector<RayHit> hits;
+    const float a = rng.Uniform(), b = rng.Uniform();
+    const glm::vec3 origin = g.corner + ((i + a) * g.side) * g.t + ((j + b) * g.side) * g.s;
+    rays.AllHits(origin, g.d, g.length, scratch);
+    if (scratch.empty()) return;
+    out.cells.push_back(cell);
+    out.counts.push_back(static_cast<uint32_t>(scratch.size()));
     const std::vector<RayTriangle>& tris = rays.Triangles();
-    const float r2 = grid.radius * grid.radius;
-    for (int j = 0; j < n; ++j)
-        for (int i = 0; i < n; ++i) {
-            const float a = rng.Uniform(), b = rng.Uniform();  // drawn for every cell
-            // Cells wholly outside the ball's disc meet nothing.
-            const float x0 = -grid.radius + i * side, y0 = -grid.radius + j * side;
-            const float nx = std::clamp(0.0f, x0, x0 + side), ny = std::clamp(0.0f, y0, y0 + side);
-            if (nx * nx + ny * ny > r2) continue;
-            const glm::vec3 origin = corner + ((i + a) * side) * t + ((j + b) * side) * s;
-            rays.AllHits(origin, d, 2.0f * back, hits);
-            if (hits.empty()) continue;
-            out.counts.push_back(static_cast<uint32_t>(hits.size()));
-            for (const RayHit& h : hits) {
-                LineHit l;
-                l.triangle = h.triangle;
-                if (glm::dot(tris[h.triangle].normal, d) > 0.0f) l.triangle |= kFacesAlong;
-                l.u = static_cast<uint16_t>(std::lround(std::clamp(h.u, 0.0f, 1.0f) * 65535.0f));
-                l.v = static_cast<uint16_t>(std::lround(std::clamp(h.v, 0.0f, 1.0f) * 65535.0f));
-                out.hits.push_back(l);
-            }
-        }
-    return out;
+    for (const RayHit& h : scratch) {
+        LineHit l;
+        l.triangle = h.triangle;
+        if (glm::dot(tris[h.triangle].normal, g.d) > 0.0f) l.triangle |= kFacesAlong;
+        l.u = static_cast<uint16_t>(std::lround(std::clamp(h.u, 0.0f, 1.0f) * 65535.0f));
+        l.v = static_cast<uint16_t>(std::lround(std::clamp(h.v, 0.0f, 1.0f) * 65535.0f));
+        out.hits.push_back(l);
+    }
+}
+
+// The batch's arrays from its directions' lines, in direction order.
+void Assemble(std::vector<DirectionLines>& parts, LineBatch& b) {
+    size_t lines = 0, hits = 0;
+    for (const DirectionLines& p : parts) lines += p.counts.size(), hits += p.hits.size();
+    b.directionLines.clear();
+    b.lineHits.clear();
+    b.lineCells.clear();
+    b.hits.clear();
+    b.lineHits.reserve(lines + 1);
+    b.lineCells.reserve(lines);
+    b.hits.reserve(hits);
+    b.lineHits.push_back(0);
+    for (DirectionLines& p : parts) {
+        b.directionLines.push_back(static_cast<uint32_t>(b.lineCells.size()));
+        for (uint32_t c : p.counts) b.lineHits.push_back(b.lineHits.back() + c);
+        b.lineCells.insert(b.lineCells.end(), p.cells.begin(), p.cells.end());
+        b.hits.insert(b.hits.end(), p.hits.begin(), p.hits.end());
+        p = {};
+    }
+    b.directionLines.push_back(static_cast<uint32_t>(b.lineCells.size()));
 }
 
 }  // namespace
@@ -86,27 +125,74 @@ glm::mat3 RandomRotation(uint32_t seed, uint64_t stream) {
 LineBatch TraceBatch(const RayScene& rays, const LineGrid& grid, const std::vector<glm::vec3>& base,
                      uint32_t seed, uint32_t batch) {
     LineBatch b;
-    // Rotation streams apart from the jitter streams (one a direction).
-    const glm::mat3 rotation = RandomRotation(seed, (uint64_t(1) << 40) + batch);
+    b.batch = batch;
+    // Rotation streams apart from the jitter streams (CellStream's top bits stay below 2^40
+    // a batch).
+    const glm::mat3 rotation = RandomRotation(seed, (uint64_t(1) << 62) + batch);
     for (const glm::vec3& d : base) b.directions.push_back(glm::normalize(rotation * d));
     std::vector<DirectionLines> parts(b.directions.size());
     tbb::parallel_for(size_t(0), b.directions.size(), [&](size_t k) {
-        parts[k] = TraceDirection(rays, grid, b.directions[k], seed,
-                                  (uint64_t(batch) << 20) + uint64_t(k));
+        const DirectionGrid g(grid, b.directions[k]);
+        std::vector<RayHit> scratch;
+        const uint32_t cells = uint32_t(g.n) * uint32_t(g.n);
+        for (uint32_t c = 0; c < cells; ++c)
+            TraceCell(rays, g, seed, CellStream(batch, k, c), c, scratch, parts[k]);
     });
-    size_t lines = 0, hits = 0;
-    for (const DirectionLines& p : parts) lines += p.counts.size(), hits += p.hits.size();
-    b.lineHits.reserve(lines + 1);
-    b.hits.reserve(hits);
-    b.lineHits.push_back(0);
-    for (DirectionLines& p : parts) {
-        b.directionLines.push_back(static_cast<uint32_t>(b.lineHits.size() - 1));
-        for (uint32_t c : p.counts) b.lineHits.push_back(b.lineHits.back() + c);
-        b.hits.insert(b.hits.end(), p.hits.begin(), p.hits.end());
-        p = {};
-    }
-    b.directionLines.push_back(static_cast<uint32_t>(b.lineHits.size() - 1));
+    Assemble(parts, b);
     return b;
+}
+
+size_t RetraceBatch(const RayScene& rays, const LineGrid& grid, uint32_t seed, const Bounds& box,
+                    LineBatch& b) {
+    if (box.Empty()) return 0;
+    std::vector<DirectionLines> parts(b.directions.size());
+    std::vector<size_t> traced(b.directions.size(), 0);
+    tbb::parallel_for(size_t(0), b.directions.size(), [&](size_t k) {
+        const DirectionGrid g(grid, b.directions[k]);
+        // The box's shadow on the direction's grid, in cells (its corners projected).
+        float lo[2] = {1e30f, 1e30f}, hi[2] = {-1e30f, -1e30f};
+        for (int c = 0; c < 8; ++c) {
+            const glm::vec3 p((c & 1) ? box.hi.x : box.lo.x, (c & 2) ? box.hi.y : box.lo.y,
+                              (c & 4) ? box.hi.z : box.lo.z);
+            const glm::vec3 q = p - g.corner;
+            const float x = glm::dot(q, g.t) / g.side, y = glm::dot(q, g.s) / g.side;
+            lo[0] = std::min(lo[0], x), hi[0] = std::max(hi[0], x);
+            lo[1] = std::min(lo[1], y), hi[1] = std::max(hi[1], y);
+        }
+        const int i0 = std::max(0, int(std::floor(lo[0]))), i1 = std::min(g.n - 1, int(hi[0]));
+        const int j0 = std::max(0, int(std::floor(lo[1]))), j1 = std::min(g.n - 1, int(hi[1]));
+        auto inside = [&](uint32_t cell) {
+            const int i = int(cell % uint32_t(g.n)), j = int(cell / uint32_t(g.n));
+            return i >= i0 && i <= i1 && j >= j0 && j <= j1;
+        };
+        // Keep the lines outside the shadow, trace the cells inside it again, in cell order.
+        DirectionLines& out = parts[k];
+        std::vector<RayHit> scratch;
+        uint32_t line = b.directionLines[k];
+        const uint32_t end = b.directionLines[k + 1];
+        auto keep = [&](uint32_t until) {
+            for (; line < end && b.lineCells[line] < until; ++line) {
+                if (inside(b.lineCells[line])) continue;
+                out.cells.push_back(b.lineCells[line]);
+                out.counts.push_back(b.lineHits[line + 1] - b.lineHits[line]);
+                out.hits.insert(out.hits.end(), b.hits.begin() + b.lineHits[line],
+                                b.hits.begin() + b.lineHits[line + 1]);
+            }
+        };
+        for (int j = j0; j <= j1; ++j)
+            for (int i = i0; i <= i1; ++i) {
+                const uint32_t c = uint32_t(j) * uint32_t(g.n) + uint32_t(i);
+                keep(c);
+                if (line < end && b.lineCells[line] == c) ++line;
+                TraceCell(rays, g, seed, CellStream(b.batch, k, c), c, scratch, out);
+                ++traced[k];
+            }
+        keep(~0u);
+    });
+    Assemble(parts, b);
+    size_t n = 0;
+    for (size_t t : traced) n += t;
+    return n;
 }
 
 SurfelFacets::SurfelFacets(const RayScene& rays, size_t surfels) {

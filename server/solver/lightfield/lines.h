@@ -28,14 +28,16 @@ inline constexpr uint32_t kFacesAlong = 0x80000000u;
 // The lines of one batch of directions: per direction its lines that meet something, per
 // line its hits nearest first (along +direction).
 struct LineBatch {
+    uint32_t batch = 0;                    // its number: its rotation's and jitter's streams
     std::vector<glm::vec3> directions;     // unit
     std::vector<uint32_t> directionLines;  // per direction its first line; directions + 1
     std::vector<uint32_t> lineHits;        // per line its first hit; lines + 1
+    std::vector<uint32_t> lineCells;       // per line its cell (j · cells + i), ascending
     std::vector<LineHit> hits;
     size_t Lines() const { return lineHits.empty() ? 0 : lineHits.size() - 1; }
     size_t Bytes() const {
-        return hits.size() * sizeof(LineHit) + lineHits.size() * 4 + directionLines.size() * 4 +
-               directions.size() * sizeof(glm::vec3);
+        return hits.size() * sizeof(LineHit) + (lineHits.size() + lineCells.size()) * 4 +
+               directionLines.size() * 4 + directions.size() * sizeof(glm::vec3);
     }
 };
 
@@ -63,6 +65,12 @@ struct LineGrid {
 // (seed, batch) whatever the thread count.
 LineBatch TraceBatch(const RayScene& rays, const LineGrid& grid, const std::vector<glm::vec3>& base,
                      uint32_t seed, uint32_t batch);
+
+// Traces again the lines of batch `b` (traced by TraceBatch with `seed` and `grid`) whose
+// cells the box's shadow covers along each direction: after surfaces inside `box` moved (the
+// box holding where they were and where they are), `rays` updated. Returns the lines traced.
+size_t RetraceBatch(const RayScene& rays, const LineGrid& grid, uint32_t seed, const Bounds& box,
+                    LineBatch& b);
 
 // Each surfel's share of its triangles, for the projected area of its hat function towards a
 // direction: facets[offsets[s] … offsets[s + 1]) are normal × area / 3 of the refined
