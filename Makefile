@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check check-asan fuzz bench bench-service bench-direct bench-glossy bench-stability bench-soak accuracy images format clean
+.PHONY: all deps build demo check check-asan fuzz bench bench-service bench-direct bench-glossy bench-stability bench-soak bench-lightfield accuracy images format clean
 
 all: build
 
@@ -41,6 +41,9 @@ bench: build
 
 bench-service: build
 	$(BUILD)/bench/penumbra-bench-service --out bench/results
+
+bench-lightfield: build
+	$(BUILD)/bench/penumbra-bench-lightfield --out bench/results
 
 bench-direct: build
 	$(BUILD)/bench/penumbra-bench-direct --out bench/results

@@ -93,6 +93,7 @@ struct Case {
     float elementSize;
     float oracleValue;
     std::string light, mover;
+    std::string solver = "antiradiance";  // the antiradiance oracle settings apply to it only
 };
 
 nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int edits, int moves,
@@ -102,8 +103,11 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
     o.path = c.path;
     o.device = c.device;
     o.elementSize = c.elementSize;
-    if (!c.oracle.empty()) o.solverOptions["link-oracle"] = c.oracle;
-    SetOption(o.solverOptions, "oracle", c.oracleValue);
+    o.solver = c.solver;
+    if (c.solver == "antiradiance") {
+        if (!c.oracle.empty()) o.solverOptions["link-oracle"] = c.oracle;
+        SetOption(o.solverOptions, "oracle", c.oracleValue);
+    }
     o.convergedChange = 0.0f;  // stream continuously: every frame is a frame to deliver
     o.reload = true;
     o.gatherRays = gatherRays;
@@ -117,6 +121,7 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
     nlohmann::json out;
     out["scene"] = c.name;
     out["device"] = info.device;
+    out["solver"] = c.solver;
     out["gather_rays"] = gatherRays;
     out["direct_rays"] = directRays;
     out["elements"] = info.elements;
@@ -278,10 +283,14 @@ int main(int argc, char** argv) {
     using namespace penumbra;
     CLI::App app{"penumbra-bench-service: streaming fps, overhead and edit latency"};
     std::string outDir = "bench/results", devices = "lavapipe,cpu", scenes = "cornell,office";
+    std::string solver = "antiradiance";
     double seconds = 4.0;
     int edits = 30, moves = 5, samples = 1024, gatherRays = 256, directRays = 256;
     std::string name = "service";
     app.add_option("--out", outDir, "results folder")->capture_default_str();
+    app.add_option("--solver", solver,
+                   "the solver (the office's oracle settings apply to antiradiance only)")
+        ->capture_default_str();
     app.add_option("--devices", devices, "comma list of lavapipe, cpu, gpu")->capture_default_str();
     app.add_option("--scenes", scenes, "comma list of cornell, office")->capture_default_str();
     app.add_option("--seconds", seconds, "streaming window per subscriber count")
@@ -319,6 +328,7 @@ int main(int argc, char** argv) {
     report["cases"] = nlohmann::json::array();
     try {
         for (auto c : cases) {
+            c.solver = solver;
             // A server of its own per case: no other session competes for the cores.
             InProcessServer srv(fs::path(PENUMBRA_SOURCE_DIR) / "scenes");
             if (c.light.empty()) {

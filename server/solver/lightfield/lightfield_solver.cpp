@@ -121,7 +121,8 @@ void LightfieldSolver::Bounce() {
     for (size_t s = 0; s < weighted.size(); ++s)
         gathered_[s] = coverage_[s] > 0.0f ? (pi / coverage_[s]) * weighted[s] : glm::vec3(0.0f);
     Reradiate();
-    msWalk_ = MsSince(t);
+    msLastWalk_ = MsSince(t);
+    msWalk_ += msLastWalk_;
     for (const glm::vec3& l : radiance_)
         if (divergence_.empty() && !Finite(l))
             divergence_ = "diverged at iteration " + std::to_string(iterations_ + 1) +
@@ -298,6 +299,7 @@ SolverStats LightfieldSolver::Stats() const {
     s.SetDetail("lines", double(lines));
     s.SetDetail("line_hits", double(hits));
     s.SetDetail("lines_retraced", double(linesRetraced_));
+    s.SetDetail("last_walk_ms", msLastWalk_);
     return s;
 }
 

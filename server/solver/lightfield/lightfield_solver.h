@@ -74,7 +74,7 @@ class LightfieldSolver : public Solver {
     int lights_ = 0, mapSize_ = 0;
     int iterations_ = 0;
     double setupSeconds_ = 0.0, msTotal_ = 0.0, msTrace_ = 0.0, msWalk_ = 0.0;
-    double msGeometry_ = 0.0;
+    double msGeometry_ = 0.0, msLastWalk_ = 0.0;
     size_t geometryUpdates_ = 0, linesRetraced_ = 0;
     std::string divergence_;
 };
