@@ -100,6 +100,7 @@ void LightfieldSolver::Rematerial() {
 }
 
 void LightfieldSolver::Reradiate() {
+    stale_ = true;  // the next iteration walks every kept batch
     const float invPi = 1.0f / std::numbers::pi_v<float>;
     radiance_.resize(gathered_.size());
     for (size_t i = 0; i < radiance_.size(); ++i) {
@@ -109,17 +110,17 @@ void LightfieldSolver::Reradiate() {
     }
 }
 
-void LightfieldSolver::Bounce() {
+void LightfieldSolver::Bounce(bool newestOnly) {
     const auto t = Clock::now();
     const Environment& env = sky_.Last();
     const Environment* sky = env.Active() ? &env : nullptr;
-    std::vector<glm::vec3> weighted(surfels_.size(), glm::vec3(0.0f));
-    for (const LineBatch& b : batches_)
-        WalkBatch(b, *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted);
+    if (!newestOnly) weighted_.assign(surfels_.size(), glm::vec3(0.0f));
+    for (size_t b = newestOnly ? batches_.size() - 1 : 0; b < batches_.size(); ++b)
+        WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_);
     // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled (lines.h).
     const float pi = std::numbers::pi_v<float>;
-    for (size_t s = 0; s < weighted.size(); ++s)
-        gathered_[s] = coverage_[s] > 0.0f ? (pi / coverage_[s]) * weighted[s] : glm::vec3(0.0f);
+    for (size_t s = 0; s < weighted_.size(); ++s)
+        gathered_[s] = coverage_[s] > 0.0f ? (pi / coverage_[s]) * weighted_[s] : glm::vec3(0.0f);
     Reradiate();
     msLastWalk_ = MsSince(t);
     msWalk_ += msLastWalk_;
@@ -133,14 +134,20 @@ void LightfieldSolver::Iterate(int n) {
     if (n < 0) throw Error("iteration count must not be negative");
     const auto start = Clock::now();
     for (int i = 0; i < n && divergence_.empty(); ++i) {
+        bool newestOnly = false;
         if (batches_.size() < size_t(own_.batches)) {
             const auto t = Clock::now();
             batches_.push_back(TraceBatch(*rays_, grid_, base_, own_.seed,
                                           static_cast<uint32_t>(batches_.size())));
             facets_->Coverage(batches_.back().directions, coverage_);
             msTrace_ += MsSince(t);
+            // While batches land, each is walked once with the light of its time (the
+            // earlier ones carry a bounce or more fewer); an edit since, or the last batch,
+            // walks all of them with today's light.
+            newestOnly = !stale_ && batches_.size() > 1 && batches_.size() < size_t(own_.batches);
         }
-        Bounce();
+        Bounce(newestOnly);
+        stale_ = false;
         if (divergence_.empty()) ++iterations_;
         if (progress_) progress_("iterating", static_cast<double>(i + 1) / n);
     }
@@ -173,6 +180,7 @@ void LightfieldSolver::UpdateMaterials(const Scene& scene) {
 void LightfieldSolver::UpdateLights(const Scene& scene) {
     ValidateEnvironment(scene.environment);
     sky_.Binned(scene.environment);  // the walks read it: nothing to re-bin
+    stale_ = true;
     scene_.environment = scene.environment;
     scene_.lights = scene.lights;
     if (!direct::UpdateDirectStage(directStage_.get(), lights_, scene)) return;
@@ -219,6 +227,7 @@ std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
     surfels_.areas = std::move(now.areas);
     surfels_.centroids = std::move(now.centroids);
     size_t retraced = 0;
+    stale_ = true;
     if (moved > 0) {
         rays_->Update(surfels_);
         facets_ = std::make_unique<SurfelFacets>(*rays_, surfels_.size());

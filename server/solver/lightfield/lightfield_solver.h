@@ -5,10 +5,11 @@
 // stand for the paper's diffuse texels: each keeps one radiance, and a line's hit reads and
 // feeds its three surfels by their hat weights.
 //
-// An iteration traces one more batch while fewer than `batches` are kept, then walks every
-// kept batch with the radiance of the iteration before (one bounce, Jacobi: the paper's
-// propagation iterations, Sec. 3), E_s from every kept batch's lines (WalkBatch). Once every batch
-// is kept, iterations only bounce: edits of lights, materials and the sky walk the same lines
+// An iteration traces one more batch while fewer than `batches` are kept and walks it with the
+// radiance of the iteration before (one bounce, Jacobi: the paper's propagation iterations,
+// Sec. 3), adding to what the earlier batches gave (E_s from every kept batch's lines,
+// WalkBatch); the last batch, and any iteration after an edit, walks every kept batch. Once every
+// batch is kept, iterations only bounce: edits of lights, materials and the sky walk the same lines
 // again with no new rays.
 #pragma once
 
@@ -49,7 +50,9 @@ class LightfieldSolver : public Solver {
     // GeometryMismatch's reasons, with `now` the surfels refined from `scene` when it gets
     // that far (UpdateGeometry takes them instead of refining again).
     std::string Mismatch(const Scene& scene, Surfels& now) const;
-    void Bounce();      // one walk of every kept batch, then Reradiate
+    // A walk of every kept batch (or of the newest only, added to the others' sums), then
+    // Reradiate.
+    void Bounce(bool newestOnly);
     void Rematerial();  // albedo and emission per surfel, then Reradiate
     void Reradiate();   // the light leaving each surfel from the light arriving there now
     void CopyDirect();  // E_d per surfel from the direct stage
@@ -65,7 +68,9 @@ class LightfieldSolver : public Solver {
     LineGrid grid_;
     std::vector<glm::vec3> base_;  // the batches' direction set before its rotation
     std::vector<LineBatch> batches_;
-    std::vector<float> coverage_;  // per surfel: Σ P_s over the kept batches' directions
+    std::vector<float> coverage_;      // per surfel: Σ P_s over the kept batches' directions
+    std::vector<glm::vec3> weighted_;  // per surfel: Σ P L̄ of the last walks (WalkBatch)
+    bool stale_ = true;                // the light changed since the last walk of every batch
     // Per surfel: albedo, emission carried, irradiance gathered, the punctual lights' E_d,
     // the gather stage's first shot (empty: none), radiance leaving.
     std::vector<glm::vec3> albedo_, emission_, gathered_, direct_, emitterDirect_, radiance_;
