@@ -9,6 +9,7 @@
 
 #include "base/pcg.h"
 #include "bundled_scenes.h"
+#include "output/compare.h"
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
 #include "scene/scene_builder.h"
@@ -343,6 +344,57 @@ TEST(Lightfield, SmallDistantEmitterSmoothsWithBatches) {
     // carry (the gather stage), not the lines'.
     EXPECT_LT(error[1], 0.35 * error[0]);
     EXPECT_LT(rough[1], 0.35 * rough[0]);
+}
+
+// A mirror-and-diffuse box: a room lit by a ceiling lamp, one wall a metal mirror (roughness
+// 0.15: a Phong exponent near 1,000, narrower than the directions' spacing) and a glossy
+// floor (roughness 0.4): the light the walls get by way of the mirror and the floor's lobe,
+// against the path-traced reference, and against the same room with the lobes left out.
+TEST(Lightfield, MirrorAndGlossyFloorAgainstTheReference) {
+    auto room = [](bool lobes) {
+        SceneBuilder b;
+        uint32_t white = b.AddMaterial("white", glm::vec3(0.6f));
+        uint32_t lamp = b.AddMaterial("lamp", glm::vec3(0.0f), glm::vec3(5.0f));
+        uint32_t mirror = lobes ? b.AddPbrMaterial("mirror", glm::vec3(0.9f), 1.0f, 0.15f)
+                                : b.AddMaterial("mirror", glm::vec3(0.0f));
+        uint32_t floor = lobes ? b.AddPbrMaterial("floor", glm::vec3(0.5f), 0.0f, 0.4f)
+                               : b.AddMaterial("floor", glm::vec3(0.5f));
+        const glm::vec3 inside(1.0f, 0.5f, 0.5f);
+        b.AddQuad("floor", floor, {0, 0, 0}, {2, 0, 0}, {2, 0, 1}, {0, 0, 1}, inside, 8);
+        b.AddQuad("ceiling", white, {0, 1, 0}, {2, 1, 0}, {2, 1, 1}, {0, 1, 1}, inside, 8);
+        b.AddQuad("south", white, {0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {0, 1, 0}, inside, 8);
+        b.AddQuad("north", white, {0, 0, 1}, {2, 0, 1}, {2, 1, 1}, {0, 1, 1}, inside, 8);
+        b.AddQuad("west", mirror, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 8);
+        b.AddQuad("east", white, {2, 0, 0}, {2, 0, 1}, {2, 1, 1}, {2, 1, 0}, inside, 8);
+        b.AddQuad("lamp", lamp, {0.2f, 0.99f, 0.2f}, {0.8f, 0.99f, 0.2f}, {0.8f, 0.99f, 0.8f},
+                  {0.2f, 0.99f, 0.8f}, {0.5f, 0, 0.5f});
+        return b.Build();
+    };
+    const Scene scene = room(true);
+    ReferenceSettings rs;
+    rs.samples = 1024;
+    const IrradianceFile truth = ToIrradianceFile(scene, [&] {
+        IrradianceResult r;
+        r.primitives = RenderReference(scene, rs).irradiance;
+        return r;
+    }());
+    double errors[2];
+    for (int lobes = 1; lobes >= 0; --lobes) {
+        const Scene solved = room(lobes == 1);
+        auto solver = CreateSolver(solved, Lightfield(0.06f, 64, 16));
+        IterateUntilConverged(*solver, 1e-3, 100);
+        const double rel =
+            Compare(ToIrradianceFile(solved, CollectIrradiance(solved, *solver)), truth)
+                .overall.relRmse;
+        errors[lobes] = rel;
+        std::printf("%s: %.2f%% relative RMSE against the reference\n",
+                    lobes ? "mirror and glossy floor" : "metals read as diffuse", 100 * rel);
+    }
+    // Measured 6.6% with the lobes against 19% without (16 batches, 1,024 paths). A lamp a
+    // tenth the size gave 20% against 29%: then the lamp seen along the lines is most of
+    // the error (a glossy scene's solver carries the emission itself, no first shot).
+    EXPECT_LT(errors[1], 0.10);
+    EXPECT_LT(errors[1], 0.5 * errors[0]);
 }
 
 // Through the registry: listed, options checked, stats named.

@@ -1,11 +1,15 @@
 // The light-field solver's batches and bounces (lightfield_solver.h).
 #include "solver/lightfield/lightfield_solver.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numbers>
+#include <tuple>
 
 #include "base/check.h"
 
@@ -86,7 +90,56 @@ void LightfieldSolver::CopyDirect() {
         direct_[i] = glm::vec3(e[i * 4], e[i * 4 + 1], e[i * 4 + 2]);
 }
 
+void LightfieldSolver::ReadGlossy() {
+    std::vector<int32_t> slot(surfels_.size(), -1);
+    std::vector<uint32_t> glossy;
+    for (uint32_t s = 0; s < surfels_.size(); ++s)
+        if (scene_.materials[surfels_.materials[s]].Glossy()) {
+            slot[s] = static_cast<int32_t>(glossy.size());
+            glossy.push_back(s);
+        }
+    if (glossy != glossy_) {
+        slot_ = std::move(slot);
+        glossy_ = std::move(glossy);
+        incoming_.assign(batches_.size(), {});
+        exitant_.assign(batches_.size(), {});
+        for (size_t b = 0; b < batches_.size(); ++b) {
+            const size_t cells = glossy_.size() * 2 * batches_[b].directions.size();
+            incoming_[b].assign(cells, glm::vec3(0.0f));
+            exitant_[b].assign(cells, glm::vec3(0.0f));
+        }
+    }
+    lobes_.assign(batches_.size(), {});
+    lobeOf_.assign(batches_.size(), {});
+    for (size_t b = 0; b < batches_.size(); ++b) PrepareLobes(b);
+}
+
+void LightfieldSolver::PrepareLobes(size_t b) {
+    lobes_.resize(batches_.size());
+    lobeOf_.resize(batches_.size());
+    lobes_[b].clear();
+    lobeOf_[b].assign(glossy_.size(), 0);
+    if (glossy_.empty()) return;
+    // One table per distinct (normal, exponent): a flat face's surfels share theirs.
+    std::map<std::tuple<float, float, float, float>, uint32_t> tables;
+    std::vector<std::pair<glm::vec3, float>> keys;
+    for (size_t g = 0; g < glossy_.size(); ++g) {
+        const glm::vec3 n = surfels_.normals[glossy_[g]];
+        const float e = scene_.materials[surfels_.materials[glossy_[g]]].phongExponent;
+        auto [it, added] = tables.emplace(std::make_tuple(n.x, n.y, n.z, e), uint32_t(keys.size()));
+        if (added) keys.emplace_back(n, e);
+        lobeOf_[b][g] = it->second;
+    }
+    std::vector<std::unique_ptr<LobeTable>> made(keys.size());
+    tbb::parallel_for(size_t(0), keys.size(), [&](size_t k) {
+        made[k] =
+            std::make_unique<LobeTable>(batches_[b].directions, keys[k].first, keys[k].second);
+    });
+    for (auto& t : made) lobes_[b].push_back(std::move(*t));
+}
+
 void LightfieldSolver::Rematerial() {
+    ReadGlossy();
     const size_t n = surfels_.size();
     albedo_.resize(n);
     emission_.resize(n);
@@ -115,8 +168,23 @@ void LightfieldSolver::Bounce(bool newestOnly) {
     const Environment& env = sky_.Last();
     const Environment* sky = env.Active() ? &env : nullptr;
     if (!newestOnly) weighted_.assign(surfels_.size(), glm::vec3(0.0f));
-    for (size_t b = newestOnly ? batches_.size() - 1 : 0; b < batches_.size(); ++b)
-        WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_);
+    for (size_t b = newestOnly ? batches_.size() - 1 : 0; b < batches_.size(); ++b) {
+        if (glossy_.empty()) {
+            WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_);
+            continue;
+        }
+        // The glossy surfels send what they reflected in the walk before (a Jacobi bounce),
+        // then reflect what arrived in this one.
+        GlossyLines lines{&slot_, exitant_[b].data(), incoming_[b].data()};
+        WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_,
+                  &lines);
+        const size_t columns = 2 * batches_[b].directions.size();
+        tbb::parallel_for(size_t(0), glossy_.size(), [&](size_t g) {
+            const glm::vec3 f0 = scene_.materials[surfels_.materials[glossy_[g]]].specular;
+            lobes_[b][lobeOf_[b][g]].Reflect(f0, incoming_[b].data() + g * columns,
+                                             exitant_[b].data() + g * columns);
+        });
+    }
     // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled (lines.h).
     const float pi = std::numbers::pi_v<float>;
     for (size_t s = 0; s < weighted_.size(); ++s)
@@ -140,6 +208,10 @@ void LightfieldSolver::Iterate(int n) {
             batches_.push_back(TraceBatch(*rays_, grid_, base_, own_.seed,
                                           static_cast<uint32_t>(batches_.size())));
             facets_->Coverage(batches_.back().directions, coverage_);
+            const size_t cells = glossy_.size() * 2 * batches_.back().directions.size();
+            incoming_.emplace_back(cells, glm::vec3(0.0f));
+            exitant_.emplace_back(cells, glm::vec3(0.0f));
+            PrepareLobes(batches_.size() - 1);
             msTrace_ += MsSince(t);
             // While batches land, each is walked once with the light of its time (the
             // earlier ones carry a bounce or more fewer); an edit since, or the last batch,
@@ -236,6 +308,7 @@ std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
             retraced += RetraceBatch(*rays_, grid_, own_.seed, box, b);
             facets_->Coverage(b.directions, coverage_);
         }
+        for (size_t b = 0; b < batches_.size(); ++b) PrepareLobes(b);
     }
     if (directStage_) {
         std::vector<uint32_t> order(surfels_.size());

@@ -53,7 +53,11 @@ class LightfieldSolver : public Solver {
     // A walk of every kept batch (or of the newest only, added to the others' sums), then
     // Reradiate.
     void Bounce(bool newestOnly);
-    void Rematerial();  // albedo and emission per surfel, then Reradiate
+    void Rematerial();  // albedo and emission per surfel, the glossy slots, then Reradiate
+    // The glossy surfels' slots and, for every kept batch, their tables (zeroed where the
+    // slots changed) and lobes.
+    void ReadGlossy();
+    void PrepareLobes(size_t batch);  // batch's lobe tables for the glossy slots
     void Reradiate();   // the light leaving each surfel from the light arriving there now
     void CopyDirect();  // E_d per surfel from the direct stage
 
@@ -70,7 +74,15 @@ class LightfieldSolver : public Solver {
     std::vector<LineBatch> batches_;
     std::vector<float> coverage_;      // per surfel: Σ P_s over the kept batches' directions
     std::vector<glm::vec3> weighted_;  // per surfel: Σ P L̄ of the last walks (WalkBatch)
-    bool stale_ = true;                // the light changed since the last walk of every batch
+    // Glossy surfels (Sec. 3.4): per surfel its slot or −1, per slot its surfel; per kept
+    // batch, per slot and direction of travel, the light arriving and leaving (GlossyLines),
+    // and the lobe tables (one per normal and exponent) with each slot's.
+    std::vector<int32_t> slot_;
+    std::vector<uint32_t> glossy_;
+    std::vector<std::vector<glm::vec3>> incoming_, exitant_;
+    std::vector<std::vector<LobeTable>> lobes_;
+    std::vector<std::vector<uint32_t>> lobeOf_;
+    bool stale_ = true;  // the light changed since the last walk of every batch
     // Per surfel: albedo, emission carried, irradiance gathered, the punctual lights' E_d,
     // the gather stage's first shot (empty: none), radiance leaving.
     std::vector<glm::vec3> albedo_, emission_, gathered_, direct_, emitterDirect_, radiance_;

@@ -241,9 +241,13 @@ struct TravelSums {
     }
     // Adds each met surfel's share for light travelling along `travel` (WalkBatch).
     void Flush(const SurfelFacets& facets, const glm::vec3& travel, float cellArea,
-               std::vector<glm::vec3>& weighted) {
+               std::vector<glm::vec3>& weighted, const GlossyLines* glossy, size_t column,
+               size_t columns) {
         for (uint32_t s : met) {
             const float p = facets.Projected(s, travel);
+            if (glossy && (*glossy->slot)[s] >= 0 && p > 0.0f)
+                glossy->incoming[size_t((*glossy->slot)[s]) * columns + column] =
+                    p >= kRatioCells * cellArea ? light[s] / weight[s] : (cellArea / p) * light[s];
             weighted[s] +=
                 p >= kRatioCells * cellArea ? (p / weight[s]) * light[s] : cellArea * light[s];
             light[s] = glm::vec3(0.0f), weight[s] = 0.0f;
@@ -263,8 +267,15 @@ struct WalkSums {
 
 void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& facets, float cellArea,
                const std::vector<glm::vec3>& radiance, const Environment* sky,
-               std::vector<glm::vec3>& weighted) {
+               std::vector<glm::vec3>& weighted, const GlossyLines* glossy) {
     const size_t surfels = weighted.size();
+    const size_t columns = 2 * b.directions.size();
+    if (glossy) {
+        // Directions no line met a glossy surfel from keep 0.
+        size_t slots = 0;
+        for (int32_t g : *glossy->slot) slots = std::max(slots, size_t(g + 1));
+        std::fill(glossy->incoming, glossy->incoming + slots * columns, glm::vec3(0.0f));
+    }
     tbb::combinable<WalkSums> local([&] { return WalkSums(surfels); });
     tbb::parallel_for(size_t(0), b.directions.size(), [&](size_t k) {
         WalkSums& sums = local.local();
@@ -282,11 +293,18 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
             corners(h, c, w);
             travel.Receive(c.x, w.x, l), travel.Receive(c.y, w.y, l), travel.Receive(c.z, w.z, l);
         };
-        auto exitant = [&](const LineHit& h) {
+        // A sender's radiance towards travel column `column`: diffuse, plus its glossy
+        // surfels' exitant light that way.
+        auto exitant = [&](const LineHit& h, size_t column) {
             glm::uvec3 c;
             glm::vec3 w;
             corners(h, c, w);
-            return w.x * radiance[c.x] + w.y * radiance[c.y] + w.z * radiance[c.z];
+            glm::vec3 l = w.x * radiance[c.x] + w.y * radiance[c.y] + w.z * radiance[c.z];
+            if (glossy)
+                for (int k = 0; k < 3; ++k)
+                    if (const int32_t g = (*glossy->slot)[c[k]]; g >= 0)
+                        l += w[k] * glossy->exitant[size_t(g) * columns + column];
+            return l;
         };
         const uint32_t lines0 = b.directionLines[k], lines1 = b.directionLines[k + 1];
         // The sky's light travelling along +d arrives from −d, and along −d from +d.
@@ -298,14 +316,14 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
             for (uint32_t i = b.lineHits[line]; i < b.lineHits[line + 1]; ++i) {
                 const LineHit& h = b.hits[i];
                 if (h.triangle & kFacesAlong) {
-                    l = exitant(h);  // a sender overwrites the interface
+                    l = exitant(h, k);  // a sender overwrites the interface
                 } else {
                     receive(h, l);  // a receiver takes it; its black back follows
                     l = glm::vec3(0.0f);
                 }
             }
         }
-        travel.Flush(facets, d, cellArea, sums.weighted);
+        travel.Flush(facets, d, cellArea, sums.weighted, glossy, k, columns);
         // Back to front, along −d: the roles swap.
         for (uint32_t line = lines0; line < lines1; ++line) {
             glm::vec3 l = skyAgainst;
@@ -315,15 +333,68 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
                     receive(h, l);
                     l = glm::vec3(0.0f);
                 } else {
-                    l = exitant(h);
+                    l = exitant(h, b.directions.size() + k);
                 }
             }
         }
-        travel.Flush(facets, -d, cellArea, sums.weighted);
+        travel.Flush(facets, -d, cellArea, sums.weighted, glossy, b.directions.size() + k, columns);
     });
     local.combine_each([&](const WalkSums& part) {
         for (size_t s = 0; s < surfels; ++s) weighted[s] += part.weighted[s];
     });
+}
+
+LobeTable::LobeTable(const std::vector<glm::vec3>& directions, const glm::vec3& normal,
+                     float exponent) {
+    const size_t d = directions.size();
+    columns_ = 2 * d;
+    auto travel = [&](size_t j) { return j < d ? directions[j] : -directions[j - d]; };
+    // Below this cosine the lobe is under 10⁻⁴ of its peak: left out.
+    const float floor = std::pow(1e-4f, 1.0f / std::max(exponent, 1e-3f));
+    std::vector<float> lobe(columns_);
+    for (size_t k = 0; k < columns_; ++k) {
+        const glm::vec3 t = travel(k);
+        const float cosIn = -glm::dot(normal, t);
+        if (cosIn <= 0.0f) continue;
+        const glm::vec3 r = t + 2.0f * cosIn * normal;  // the mirror image of the travel
+        float sum = 0.0f;
+        int inside = 0;
+        for (size_t j = 0; j < columns_; ++j) {
+            const float c = glm::dot(r, travel(j));
+            lobe[j] = c > floor ? std::pow(c, exponent) : 0.0f;
+            sum += lobe[j];
+            inside += lobe[j] > 0.0f;
+        }
+        if (inside < 3) {
+            // A lobe narrower than the directions' spacing: the three directions nearest the
+            // mirror image, weighted by how much nearer each is than the fourth (the paper's
+            // barycentric weights of the three nearest PSFs, Sec. 3.4).
+            float best[4] = {-2.0f, -2.0f, -2.0f, -2.0f};
+            for (size_t j = 0; j < columns_; ++j) {
+                float c = glm::dot(r, travel(j));
+                for (float& b : best)
+                    if (c > b) std::swap(c, b);
+            }
+            sum = 0.0f;
+            for (size_t j = 0; j < columns_; ++j) {
+                const float c = glm::dot(r, travel(j));
+                lobe[j] = c >= best[2] ? c - best[3] : 0.0f;
+                sum += lobe[j];
+            }
+        }
+        if (!(sum > 0.0f)) continue;
+        // p̃ = lobe / (sum Δω); the incoming L cos θ Δω brings the Δω back.
+        const float scale = (exponent + 2.0f) / (exponent + 1.0f) * cosIn / sum;
+        for (size_t j = 0; j < columns_; ++j)
+            if (lobe[j] > 0.0f && glm::dot(normal, travel(j)) > 0.0f)
+                entries_.push_back({uint32_t(k), uint32_t(j), lobe[j] * scale});
+    }
+}
+
+void LobeTable::Reflect(const glm::vec3& f0, const glm::vec3* incoming, glm::vec3* exitant) const {
+    for (size_t j = 0; j < columns_; ++j) exitant[j] = glm::vec3(0.0f);
+    for (const Entry& e : entries_) exitant[e.to] += e.weight * incoming[e.from];
+    for (size_t j = 0; j < columns_; ++j) exitant[j] *= f0;
 }
 
 }  // namespace penumbra

@@ -104,9 +104,45 @@ struct SurfelFacets {
 // instead: the same mean, without the noise of how many lines met the surfel (an open plane
 // under a constant sky gets π exactly); where it spans fewer, a direction may meet the surfel
 // or not, and only the first form keeps the mean. Adds to `weighted` (per surfel, RGB).
+//
+// Glossy surfels (`glossy`, null: none) have radiance per direction of travel as well (the
+// paper's non-diffuse tiles, Sec. 3.4): a sender adds its surfels' `glossy->exitant` towards
+// the travel to the diffuse radiance, and a receiver records per direction of travel the
+// mean radiance arriving over the hat (`glossy->incoming`; 0 where no line met it: the
+// global-lines form keeps the mean there too) for Reflect.
 inline constexpr float kRatioCells = 2.0f;
+struct GlossyLines {
+    const std::vector<int32_t>* slot = nullptr;  // per surfel: its glossy slot, or −1
+    // Per slot, per direction of travel of the batch (direction k along +d_k is k, along −d_k
+    // is directions + k): RGB.
+    const glm::vec3* exitant = nullptr;
+    glm::vec3* incoming = nullptr;
+};
 void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& facets, float cellArea,
                const std::vector<glm::vec3>& radiance, const Environment* sky,
-               std::vector<glm::vec3>& weighted);
+               std::vector<glm::vec3>& weighted, const GlossyLines* glossy = nullptr);
+
+// The glossy lobe of Sec. 3.4 over one batch's directions of travel: for each direction the
+// light arrived along (travel t_k, cos θ_k = −n·t_k > 0, Δω = 2π / directions), its mirror
+// image r_k, the normalised Phong lobe F0 (n + 2)/(2π) cosⁿ(r_k · t_j) (docs/MATERIALS.md)
+// sampled at the batch's own directions t_j and normalised over them (Σ_j p̃ Δω = 1, so a lobe
+// narrower than the directions' spacing goes to its nearest ones, the paper's "three
+// nearest PSFs", with its energy kept): exitant_j = F0 Σ_k (n + 2)/(n + 1) p̃(k → j) L_k
+// cos θ_k Δω, towards the front only (n·t_j > 0). One table of weights serves every surfel
+// with the same normal and exponent (a flat face's).
+class LobeTable {
+  public:
+    LobeTable(const std::vector<glm::vec3>& directions, const glm::vec3& normal, float exponent);
+    // exitant (2 × directions) = F0 × the lobe over incoming (2 × directions).
+    void Reflect(const glm::vec3& f0, const glm::vec3* incoming, glm::vec3* exitant) const;
+
+  private:
+    struct Entry {
+        uint32_t from, to;
+        float weight;
+    };
+    std::vector<Entry> entries_;
+    size_t columns_ = 0;
+};
 
 }  // namespace penumbra
