@@ -39,8 +39,8 @@ std::vector<OptionSpec> Options() {
 SolverEntry LightfieldEntry() {
     return {"lightfield",
             "virtual light field (Mortensen et al. 2008), in progress: parallel lines in "
-            "batches of rotated directions, exact visibility along each; diffuse surfaces, "
-            "CPU only (docs/SOLVER.md)",
+            "batches of rotated directions, exact visibility along each; diffuse and glossy "
+            "surfaces, CPU only (docs/SOLVER.md)",
             Options(),
             [](const Scene& scene, const SolverSettings& settings,
                const ProgressFn& progress) -> std::unique_ptr<Solver> {
