@@ -85,6 +85,26 @@ double RelativeChange(const std::vector<glm::vec3>& now, const std::vector<glm::
     return total > 0.0 ? changed / total : 0.0;
 }
 
+float ElementSize(const Scene& scene, const SolverSettings& settings) {
+    const float h = settings.elementSize > 0.0f ? settings.elementSize
+                                                : scene.Diameter() * kDefaultElementFraction;
+    if (!(h > 0.0f) || !std::isfinite(h))
+        throw Error("element size must be a positive number of metres");
+    return h;
+}
+
+std::string RefinementMismatch(const Scene& scene, int lights, const Surfels& surfels,
+                               float elementSize, Surfels& now) {
+    if (scene.lights.size() != static_cast<size_t>(lights))
+        return "the number of punctual lights changed";
+    if (scene.primitives.size() != surfels.firstSurfel.size())
+        return "the scene has other primitives than the solver was built for";
+    now = RefineScene(scene, elementSize);
+    if (now.size() != surfels.size() || now.refinedTriangles != surfels.refinedTriangles)
+        return "the moved surfaces refine into other elements";
+    return {};
+}
+
 Convergence IterateUntilConverged(Solver& solver, double tolerance, int maxIterations,
                                   const ProgressFn& progress) {
     Convergence c;

@@ -46,6 +46,17 @@ struct SolverSettings {
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
 
+// The element size a solver refines `scene` at: settings.elementSize, or
+// kDefaultElementFraction × the scene's diameter when 0. Throws penumbra::Error when that is
+// not a positive number of metres.
+float ElementSize(const Scene& scene, const SolverSettings& settings);
+// For a solver that takes any move keeping its refinement: why `scene` (edited) cannot be
+// taken by one built with `lights` punctual lights over `surfels` refined at `elementSize`
+// (the light count changed, other primitives, surfaces refining into other elements), or
+// empty; `now` gets the surfels refined from `scene` when it gets that far.
+std::string RefinementMismatch(const Scene& scene, int lights, const Surfels& surfels,
+                               float elementSize, Surfels& now);
+
 struct PassTiming {
     std::string name;
     double msTotal = 0.0;

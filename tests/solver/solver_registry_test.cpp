@@ -77,7 +77,8 @@ TEST(SolverRegistry, AFixtureSolverIsListedByHelp) {
     const auto wrong =
         Execute("bake " + kCornell + " -o x.json --solver nosuch", "", "penumbra-constant");
     EXPECT_EQ(wrong.exitCode, 2) << wrong.output;
-    EXPECT_NE(wrong.output.find("available: antiradiance, implicit, constant"), std::string::npos)
+    EXPECT_NE(wrong.output.find("available: antiradiance, implicit, lightfield, constant"),
+              std::string::npos)
         << wrong.output;
     // The plain program has no such solver.
     const auto plain = Execute("bake " + kCornell + " -o x.json --solver constant");
@@ -151,7 +152,7 @@ TEST(SolverRegistry, AFixtureSolverIsServed) {
          {std::tuple<std::string, client::LoadOptions::Options, int, std::string>{
               "constant", {{"value", "-1"}}, 20, "option 'value' of solver 'constant' is -1"},
           {"constant", {{"bins", "64"}}, 20, "solver 'constant' has no option 'bins'"},
-          {"nosuch", {}, 26, "available: antiradiance, implicit, constant"}}) {
+          {"nosuch", {}, 26, "available: antiradiance, implicit, lightfield, constant"}}) {
         o.solver = solver;
         o.solverOptions = options;
         try {

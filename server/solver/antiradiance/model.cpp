@@ -18,10 +18,7 @@ AntiradianceModel BuildAntiradianceModel(const Scene& scene, const SolverSetting
                                          const ProgressFn& progress) {
     AntiradianceModel model;
     model.dirs = Directions(own.bins);
-    float h = settings.elementSize > 0.0f ? settings.elementSize
-                                          : scene.Diameter() * kDefaultElementFraction;
-    if (!(h > 0.0f) || !std::isfinite(h))
-        throw Error("element size must be a positive number of metres");
+    const float h = ElementSize(scene, settings);
     model.elementSize = h;
     if (progress) progress("refining", 0.0);
     model.surfels = RefineScene(scene, h);

@@ -56,10 +56,7 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
             "the implicit solver runs on the CPU only for now (its Vulkan back end is not "
             "built yet): use --device cpu or auto");
     ValidateEnvironment(scene.environment);
-    const float h = settings.elementSize > 0.0f ? settings.elementSize
-                                                : scene.Diameter() * kDefaultElementFraction;
-    if (!(h > 0.0f) || !std::isfinite(h))
-        throw Error("element size must be a positive number of metres");
+    const float h = ElementSize(scene, settings);
     elementSize_ = h;
     if (progress) progress("refining", 0.0);
     surfels_ = RefineScene(scene, h);
@@ -244,14 +241,7 @@ void ImplicitSolver::UpdateLights(const Scene& scene) {
 }
 
 std::string ImplicitSolver::Mismatch(const Scene& scene, Surfels& now) const {
-    if (scene.lights.size() != static_cast<size_t>(lights_))
-        return "the number of punctual lights changed";
-    if (scene.primitives.size() != surfels_.firstSurfel.size())
-        return "the scene has other primitives than the solver was built for";
-    now = RefineScene(scene, elementSize_);
-    if (now.size() != surfels_.size() || now.refinedTriangles != surfels_.refinedTriangles)
-        return "the moved surfaces refine into other elements";
-    return {};
+    return RefinementMismatch(scene, lights_, surfels_, elementSize_, now);
 }
 
 std::string ImplicitSolver::GeometryMismatch(const Scene& scene) const {

@@ -53,10 +53,7 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
             "the light-field solver runs on the CPU only for now (its Vulkan back end is not "
             "built yet): use --device cpu or auto");
     ValidateEnvironment(scene.environment);
-    const float h = settings.elementSize > 0.0f ? settings.elementSize
-                                                : scene.Diameter() * kDefaultElementFraction;
-    if (!(h > 0.0f) || !std::isfinite(h))
-        throw Error("element size must be a positive number of metres");
+    const float h = ElementSize(scene, settings);
     elementSize_ = h;
     if (progress) progress("refining", 0.0);
     surfels_ = RefineScene(scene_, h);
@@ -261,13 +258,9 @@ void LightfieldSolver::UpdateLights(const Scene& scene) {
 }
 
 std::string LightfieldSolver::Mismatch(const Scene& scene, Surfels& now) const {
-    if (scene.lights.size() != static_cast<size_t>(lights_))
-        return "the number of punctual lights changed";
-    if (scene.primitives.size() != surfels_.firstSurfel.size())
-        return "the scene has other primitives than the solver was built for";
-    now = RefineScene(scene, elementSize_);
-    if (now.size() != surfels_.size() || now.refinedTriangles != surfels_.refinedTriangles)
-        return "the moved surfaces refine into other elements";
+    if (std::string why = RefinementMismatch(scene, lights_, surfels_, elementSize_, now);
+        !why.empty())
+        return why;
     // The lines cover the ball they were made for; a surface moved out of it would be missed.
     for (size_t s = 0; s < now.size(); ++s)
         if (now.positions[s] != surfels_.positions[s] &&
