@@ -147,6 +147,27 @@ inline void AddUnitRoom(SceneBuilder& b, uint32_t walls, uint32_t ceiling, int t
     b.AddQuad("w3", walls, {1, 0, 0}, {1, 0, 1}, {1, 1, 1}, {1, 1, 0}, inside, tiles);
 }
 
+// Two 1 m rooms side by side (a 2 × 1 × 1 m box, faces in, floors "floor_lit" and
+// "floor_dark"), split at x = 1 by a closed wall `wall` thick, a 20-nit lamp under the lit
+// room's ceiling: what the dark floor gets is what leaks through the wall.
+inline Scene ThinWallRooms(float wall) {
+    SceneBuilder b;
+    uint32_t white = b.AddMaterial("white", glm::vec3(0.7f));
+    uint32_t lamp = b.AddMaterial("lamp", glm::vec3(0.0f), glm::vec3(20.0f));
+    const glm::vec3 inside(1.0f, 0.5f, 0.5f);
+    b.AddQuad("floor_lit", white, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside, 4);
+    b.AddQuad("floor_dark", white, {1, 0, 0}, {2, 0, 0}, {2, 0, 1}, {1, 0, 1}, inside, 4);
+    b.AddQuad("ceiling", white, {0, 1, 0}, {2, 1, 0}, {2, 1, 1}, {0, 1, 1}, inside, 4);
+    b.AddQuad("south", white, {0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {0, 1, 0}, inside, 4);
+    b.AddQuad("north", white, {0, 0, 1}, {2, 0, 1}, {2, 1, 1}, {0, 1, 1}, inside, 4);
+    b.AddQuad("west", white, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 4);
+    b.AddQuad("east", white, {2, 0, 0}, {2, 0, 1}, {2, 1, 1}, {2, 1, 0}, inside, 4);
+    b.AddBox("wall", white, {1, 0.5f, 0.5f}, {wall, 1, 1});
+    b.AddQuad("lamp", lamp, {0.4f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.6f},
+              {0.4f, 0.99f, 0.6f}, {0.5f, 0, 0.5f});
+    return b.Build();
+}
+
 // A square emitter of side `side` centred at (0, height, 0) whose normal is −y tilted by
 // `tiltDegrees` about +z; returns that normal.
 inline glm::vec3 AddTiltedEmitter(SceneBuilder& b, uint32_t material, float tiltDegrees, float side,

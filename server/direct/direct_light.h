@@ -32,6 +32,11 @@ inline constexpr int kDefaultMapSize = 1024;
 // than half the diameter), as a power of two in 256…2048. The 16-tap footprint filter
 // averages over the element anyway; finer maps only cost time.
 int AutoMapSize(float diameter, float elementSize);
+// The map size a solver uses: `given` (SolverSettings::shadowMapSize) when positive, else
+// AutoMapSize.
+inline int MapSize(int given, float diameter, float elementSize) {
+    return given > 0 ? given : AutoMapSize(diameter, elementSize);
+}
 inline constexpr int kTaps = 16;
 // Spots with a wider outer cone than this get a cube map like a point light.
 inline constexpr float kMaxSpotViewCone = 1.0471976f;  // 60°

@@ -148,22 +148,7 @@ TEST(Implicit, CoaxialDiscFillsItsBins) {
 // a light. No light reaches the other room through the wall (the closest-layer rule hides
 // the lit room behind the wall's near face): its floor gets at most 1% of the lit floor's.
 TEST(Implicit, ThinWallKeepsTheDarkRoomDark) {
-    SceneBuilder b;
-    uint32_t white = b.AddMaterial("white", glm::vec3(0.7f));
-    uint32_t lamp = b.AddMaterial("lamp", glm::vec3(0.0f), glm::vec3(20.0f));
-    const glm::vec3 inside(1.0f, 0.5f, 0.5f);
-    // A 2 × 1 × 1 m box of two rooms, faces in.
-    b.AddQuad("floor_lit", white, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside, 4);
-    b.AddQuad("floor_dark", white, {1, 0, 0}, {2, 0, 0}, {2, 0, 1}, {1, 0, 1}, inside, 4);
-    b.AddQuad("ceiling", white, {0, 1, 0}, {2, 1, 0}, {2, 1, 1}, {0, 1, 1}, inside, 4);
-    b.AddQuad("south", white, {0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {0, 1, 0}, inside, 4);
-    b.AddQuad("north", white, {0, 0, 1}, {2, 0, 1}, {2, 1, 1}, {0, 1, 1}, inside, 4);
-    b.AddQuad("west", white, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 4);
-    b.AddQuad("east", white, {2, 0, 0}, {2, 0, 1}, {2, 1, 1}, {2, 1, 0}, inside, 4);
-    b.AddBox("wall", white, {1, 0.5f, 0.5f}, {0.02f, 1, 1});
-    b.AddQuad("lamp", lamp, {0.4f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.6f},
-              {0.4f, 0.99f, 0.6f}, {0.5f, 0, 0.5f});
-    Scene scene = b.Build();
+    const Scene scene = testing::ThinWallRooms(0.02f);
     auto solver = CreateSolver(scene, Implicit(0.1f));
     solver->Iterate(20);
     const std::vector<glm::vec3> e = solver->SurfelIrradiance(Channel::kIndirect);

@@ -184,21 +184,7 @@ TEST(Lightfield, WhiteFurnaceWithOccluders) {
 // A wall thinner than an element between a lit and a dark room: every line meets both of its
 // faces, so the dark room gets nothing through it.
 TEST(Lightfield, ThinWallKeepsTheDarkRoomDark) {
-    SceneBuilder b;
-    uint32_t white = b.AddMaterial("white", glm::vec3(0.7f));
-    uint32_t lamp = b.AddMaterial("lamp", glm::vec3(0.0f), glm::vec3(20.0f));
-    const glm::vec3 inside(1.0f, 0.5f, 0.5f);
-    b.AddQuad("floor_lit", white, {0, 0, 0}, {1, 0, 0}, {1, 0, 1}, {0, 0, 1}, inside, 4);
-    b.AddQuad("floor_dark", white, {1, 0, 0}, {2, 0, 0}, {2, 0, 1}, {1, 0, 1}, inside, 4);
-    b.AddQuad("ceiling", white, {0, 1, 0}, {2, 1, 0}, {2, 1, 1}, {0, 1, 1}, inside, 4);
-    b.AddQuad("south", white, {0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {0, 1, 0}, inside, 4);
-    b.AddQuad("north", white, {0, 0, 1}, {2, 0, 1}, {2, 1, 1}, {0, 1, 1}, inside, 4);
-    b.AddQuad("west", white, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 4);
-    b.AddQuad("east", white, {2, 0, 0}, {2, 0, 1}, {2, 1, 1}, {2, 1, 0}, inside, 4);
-    b.AddBox("wall", white, {1, 0.5f, 0.5f}, {0.005f, 1, 1});
-    b.AddQuad("lamp", lamp, {0.4f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.4f}, {0.6f, 0.99f, 0.6f},
-              {0.4f, 0.99f, 0.6f}, {0.5f, 0, 0.5f});
-    Scene scene = b.Build();
+    const Scene scene = testing::ThinWallRooms(0.005f);
     auto solver = CreateSolver(scene, Lightfield(0.1f));
     solver->Iterate(20);
     const double lit = NodeMean(*solver, scene, "floor_lit");

@@ -44,9 +44,7 @@ AntiradianceSolver::AntiradianceSolver(const Scene& scene, const SolverSettings&
     }
     if (!scene.lights.empty()) {
         if (progress) progress("shadow maps", 0.0);
-        mapSize_ = settings.shadowMapSize > 0
-                       ? settings.shadowMapSize
-                       : direct::AutoMapSize(scene.Diameter(), model_.elementSize);
+        mapSize_ = direct::MapSize(settings.shadowMapSize, scene.Diameter(), model_.elementSize);
         lights_ = static_cast<int>(scene.lights.size());
         MakeDirect(scene);
     }

@@ -71,8 +71,7 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
     ReadMaterials(scene);
     if (!scene.lights.empty()) {
         if (progress) progress("shadow maps", 0.0);
-        mapSize_ = settings.shadowMapSize > 0 ? settings.shadowMapSize
-                                              : direct::AutoMapSize(scene.Diameter(), h);
+        mapSize_ = direct::MapSize(settings.shadowMapSize, scene.Diameter(), h);
         lights_ = static_cast<int>(scene.lights.size());
         directStage_ = direct::MakeDirectStage(scene, LeafReceivers(), mapSize_);
         CopyDirect();

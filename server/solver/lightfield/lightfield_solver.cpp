@@ -9,6 +9,7 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <numeric>
 #include <tuple>
 
 #include "base/check.h"
@@ -46,7 +47,7 @@ LineGrid MakeGrid(const Surfels& surfels, float elementSize, int cells) {
 
 LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& settings,
                                    const LightfieldSettings& own, const ProgressFn& progress)
-    : settings_(settings), own_(own), progress_(progress), scene_(scene) {
+    : own_(own), progress_(progress), scene_(scene) {
     const auto start = Clock::now();
     if (settings.device == DeviceChoice::kGpu || settings.device == DeviceChoice::kLavapipe)
         throw Error(
@@ -68,17 +69,19 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
     direct_.assign(n, glm::vec3(0.0f));
     if (!scene.lights.empty()) {
         if (progress) progress("shadow maps", 0.0);
-        mapSize_ = settings.shadowMapSize > 0 ? settings.shadowMapSize
-                                              : direct::AutoMapSize(scene.Diameter(), h);
+        mapSize_ = direct::MapSize(settings.shadowMapSize, scene.Diameter(), h);
         lights_ = static_cast<int>(scene.lights.size());
-        std::vector<uint32_t> order(n);
-        for (uint32_t i = 0; i < n; ++i) order[i] = i;
-        directStage_ =
-            direct::MakeDirectStage(scene_, direct::MakeReceivers(surfels_, order), mapSize_);
+        directStage_ = direct::MakeDirectStage(scene_, Receivers(), mapSize_);
         CopyDirect();
     }
     Rematerial();
     setupSeconds_ = std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+std::vector<direct::GpuReceiver> LightfieldSolver::Receivers() const {
+    std::vector<uint32_t> order(surfels_.size());
+    std::iota(order.begin(), order.end(), 0u);
+    return direct::MakeReceivers(surfels_, order);
 }
 
 void LightfieldSolver::CopyDirect() {
@@ -90,10 +93,12 @@ void LightfieldSolver::CopyDirect() {
 void LightfieldSolver::ReadGlossy() {
     std::vector<int32_t> slot(surfels_.size(), -1);
     std::vector<uint32_t> glossy;
+    std::vector<float> exponents;
     for (uint32_t s = 0; s < surfels_.size(); ++s)
-        if (scene_.materials[surfels_.materials[s]].Glossy()) {
+        if (const Material& m = scene_.materials[surfels_.materials[s]]; m.Glossy()) {
             slot[s] = static_cast<int32_t>(glossy.size());
             glossy.push_back(s);
+            exponents.push_back(m.phongExponent);
         }
     if (glossy != glossy_) {
         slot_ = std::move(slot);
@@ -105,9 +110,10 @@ void LightfieldSolver::ReadGlossy() {
             incoming_[b].assign(cells, glm::vec3(0.0f));
             exitant_[b].assign(cells, glm::vec3(0.0f));
         }
+    } else if (exponents == exponents_) {
+        return;  // the same lobes (an edit of colours or emission)
     }
-    lobes_.assign(batches_.size(), {});
-    lobeOf_.assign(batches_.size(), {});
+    exponents_ = std::move(exponents);
     for (size_t b = 0; b < batches_.size(); ++b) PrepareLobes(b);
 }
 
@@ -122,7 +128,7 @@ void LightfieldSolver::PrepareLobes(size_t b) {
     std::vector<std::pair<glm::vec3, float>> keys;
     for (size_t g = 0; g < glossy_.size(); ++g) {
         const glm::vec3 n = surfels_.normals[glossy_[g]];
-        const float e = scene_.materials[surfels_.materials[glossy_[g]]].phongExponent;
+        const float e = exponents_[g];
         auto [it, added] = tables.emplace(std::make_tuple(n.x, n.y, n.z, e), uint32_t(keys.size()));
         if (added) keys.emplace_back(n, e);
         lobeOf_[b][g] = it->second;
@@ -172,7 +178,7 @@ void LightfieldSolver::Bounce(bool newestOnly) {
         }
         // The glossy surfels send what they reflected in the walk before (a Jacobi bounce),
         // then reflect what arrived in this one.
-        GlossyLines lines{&slot_, exitant_[b].data(), incoming_[b].data()};
+        GlossyLines lines{&slot_, glossy_.size(), exitant_[b].data(), incoming_[b].data()};
         WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_,
                   &lines);
         const size_t columns = 2 * batches_[b].directions.size();
@@ -250,8 +256,6 @@ void LightfieldSolver::UpdateLights(const Scene& scene) {
     ValidateEnvironment(scene.environment);
     sky_.Binned(scene.environment);  // the walks read it: nothing to re-bin
     stale_ = true;
-    scene_.environment = scene.environment;
-    scene_.lights = scene.lights;
     if (!direct::UpdateDirectStage(directStage_.get(), lights_, scene)) return;
     CopyDirect();
     Reradiate();
@@ -304,9 +308,7 @@ std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
         for (size_t b = 0; b < batches_.size(); ++b) PrepareLobes(b);
     }
     if (directStage_) {
-        std::vector<uint32_t> order(surfels_.size());
-        for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
-        directStage_->Move(scene, direct::MakeReceivers(surfels_, order));
+        directStage_->Move(scene, Receivers());
         CopyDirect();
         Reradiate();
     }
@@ -358,7 +360,11 @@ SolverStats LightfieldSolver::Stats() const {
     s.setupSeconds = setupSeconds_;
     s.msTotal = msTotal_;
     s.passes = {{"trace", msTrace_}, {"walk", msWalk_}};
-    s.tableBytes = radiance_.size() * sizeof(glm::vec3) * 6;
+    // Per surfel six RGB arrays and the coverage; per glossy slot and batch two RGB rows.
+    size_t glossyBytes = 0;
+    for (size_t b = 0; b < incoming_.size(); ++b)
+        glossyBytes += (incoming_[b].size() + exitant_[b].size()) * sizeof(glm::vec3);
+    s.tableBytes = surfels_.size() * (6 * sizeof(glm::vec3) + sizeof(float)) + glossyBytes;
     s.linkBytes = bytes;
     s.lights = lights_;
     direct::DescribeLighting(directStage_.get(), mapSize_, sky_, s);

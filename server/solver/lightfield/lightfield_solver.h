@@ -60,8 +60,8 @@ class LightfieldSolver : public Solver {
     void PrepareLobes(size_t batch);  // batch's lobe tables for the glossy slots
     void Reradiate();   // the light leaving each surfel from the light arriving there now
     void CopyDirect();  // E_d per surfel from the direct stage
+    std::vector<direct::GpuReceiver> Receivers() const;  // the surfels, in their order
 
-    SolverSettings settings_;
     LightfieldSettings own_;
     ProgressFn progress_;
     Scene scene_;  // the ray scene reads its materials (a move updates surfels, not this)
@@ -79,6 +79,7 @@ class LightfieldSolver : public Solver {
     // and the lobe tables (one per normal and exponent) with each slot's.
     std::vector<int32_t> slot_;
     std::vector<uint32_t> glossy_;
+    std::vector<float> exponents_;  // per slot: its Phong exponent when the lobes were made
     std::vector<std::vector<glm::vec3>> incoming_, exitant_;
     std::vector<std::vector<LobeTable>> lobes_;
     std::vector<std::vector<uint32_t>> lobeOf_;

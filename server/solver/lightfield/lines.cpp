@@ -270,12 +270,9 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
                std::vector<glm::vec3>& weighted, const GlossyLines* glossy) {
     const size_t surfels = weighted.size();
     const size_t columns = 2 * b.directions.size();
-    if (glossy) {
-        // Directions no line met a glossy surfel from keep 0.
-        size_t slots = 0;
-        for (int32_t g : *glossy->slot) slots = std::max(slots, size_t(g + 1));
-        std::fill(glossy->incoming, glossy->incoming + slots * columns, glm::vec3(0.0f));
-    }
+    // Directions no line met a glossy surfel from keep 0.
+    if (glossy)
+        std::fill(glossy->incoming, glossy->incoming + glossy->slots * columns, glm::vec3(0.0f));
     tbb::combinable<WalkSums> local([&] { return WalkSums(surfels); });
     tbb::parallel_for(size_t(0), b.directions.size(), [&](size_t k) {
         WalkSums& sums = local.local();

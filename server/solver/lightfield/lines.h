@@ -113,6 +113,7 @@ struct SurfelFacets {
 inline constexpr float kRatioCells = 2.0f;
 struct GlossyLines {
     const std::vector<int32_t>* slot = nullptr;  // per surfel: its glossy slot, or −1
+    size_t slots = 0;
     // Per slot, per direction of travel of the batch (direction k along +d_k is k, along −d_k
     // is directions + k): RGB.
     const glm::vec3* exitant = nullptr;
