@@ -383,6 +383,69 @@ TEST(Lightfield, MirrorAndGlossyFloorAgainstTheReference) {
     EXPECT_LT(errors[1], 0.5 * errors[0]);
 }
 
+// A spot light's glossy reflection: a room whose floor is a glossy metal (no diffuse part)
+// lit by a spot straight down whose cone stays on the floor, so the ceiling and the walls get
+// only what the floor's lobe reflects of the spot (and its bounces). The direct stage gives
+// the floor irradiance; the glossy surfels send it along their lobes (PreparePunctual).
+TEST(Lightfield, ASpotsGlossyReflectionAgainstTheReference) {
+    SceneBuilder b;
+    uint32_t white = b.AddMaterial("white", glm::vec3(0.6f));
+    uint32_t metal = b.AddPbrMaterial("floor", glm::vec3(0.9f), 1.0f, 0.6f);
+    const glm::vec3 inside(1.0f, 0.5f, 0.5f);
+    b.AddQuad("floor", metal, {0, 0, 0}, {2, 0, 0}, {2, 0, 1}, {0, 0, 1}, inside, 8);
+    b.AddQuad("ceiling", white, {0, 1, 0}, {2, 1, 0}, {2, 1, 1}, {0, 1, 1}, inside, 8);
+    b.AddQuad("south", white, {0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {0, 1, 0}, inside, 8);
+    b.AddQuad("north", white, {0, 0, 1}, {2, 0, 1}, {2, 1, 1}, {0, 1, 1}, inside, 8);
+    b.AddQuad("west", white, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 8);
+    b.AddQuad("east", white, {2, 0, 0}, {2, 0, 1}, {2, 1, 1}, {2, 1, 0}, inside, 8);
+    b.AddLight(
+        testing::MakeLight("spot", LightType::kSpot, {1.0f, 0.95f, 0.5f}, {0, -1, 0}, 2.0f, 0.4f));
+    const Scene scene = b.Build();
+    ReferenceSettings rs;
+    rs.samples = 8192;
+    const IrradianceFile truth = ToIrradianceFile(scene, [&] {
+        IrradianceResult r;
+        r.primitives = RenderReference(scene, rs).irradiance;
+        return r;
+    }());
+    auto solver = CreateSolver(scene, Lightfield(0.1f, 64, 16));
+    IterateUntilConverged(*solver, 1e-3, 100);
+    const IrradianceFile solved = ToIrradianceFile(scene, CollectIrradiance(scene, *solver));
+    const double rel = Compare(solved, truth).overall.relRmse;
+    // The ceiling's light is the reflection alone: its mean against the reference's.
+    auto mean = [&](const IrradianceFile& f) {
+        double sum = 0.0;
+        size_t n = 0;
+        for (const IrradianceRecord& r : f.primitives)
+            if (r.node == "ceiling")
+                for (const glm::vec3& e : r.irradiance) sum += e.x, ++n;
+        return sum / double(n);
+    };
+    const double ceiling = mean(solved), expected = mean(truth);
+    std::printf("%.2f%% relative RMSE; ceiling mean %.4f against %.4f\n", 100 * rel, ceiling,
+                expected);
+    // Measured 6.8% and the ceiling 0.4% high (16 batches, 8,192 paths; at 1,024 paths the
+    // reference itself was the larger error: a wall vertex sees the spot through the floor's
+    // lobe). Without the lights' reflections the ceiling would get nothing.
+    EXPECT_GT(expected, 0.0);
+    EXPECT_NEAR(ceiling, expected, 0.05 * expected);
+    EXPECT_LT(rel, 0.10);
+
+    // A light edit (the spot moved and dimmed) re-aims the reflections: as a fresh solve.
+    Scene edited = scene;
+    edited.lights[0].position = {0.6f, 0.9f, 0.4f};
+    edited.lights[0].intensity = 1.0f;
+    solver->UpdateLights(edited);
+    IterateUntilConverged(*solver, 1e-3, 100);
+    auto fresh = CreateSolver(edited, Lightfield(0.1f, 64, 16));
+    IterateUntilConverged(*fresh, 1e-3, 100);
+    const double edit = Compare(ToIrradianceFile(edited, CollectIrradiance(edited, *solver)),
+                                ToIrradianceFile(edited, CollectIrradiance(edited, *fresh)))
+                            .overall.relRmse;
+    std::printf("after the edit %.4f%% from a fresh solve\n", 100 * edit);
+    EXPECT_LT(edit, 0.01);
+}
+
 // Through the registry: listed, options checked, stats named.
 TEST(Lightfield, RegisteredWithItsOptions) {
     EXPECT_NE(SolverNames().find("lightfield"), std::string::npos);

@@ -88,6 +88,53 @@ void LightfieldSolver::CopyDirect() {
     const std::vector<float> e = directStage_->Irradiance();
     for (size_t i = 0; i < direct_.size(); ++i)
         direct_[i] = glm::vec3(e[i * 4], e[i * 4 + 1], e[i * 4 + 2]);
+    perLight_ = directStage_->PerLight();
+    for (size_t b = 0; b < batches_.size(); ++b) {
+        PreparePunctual(b);
+        Reflect(b);
+    }
+}
+
+void LightfieldSolver::PreparePunctual(size_t b) {
+    punctual_.resize(batches_.size());
+    punctual_[b].clear();
+    if (glossy_.empty() || perLight_.empty()) return;
+    const std::vector<glm::vec3>& dirs = batches_[b].directions;
+    const size_t columns = 2 * dirs.size(), surfels = surfels_.size();
+    const float dOmega = 2.0f * std::numbers::pi_v<float> / float(dirs.size());
+    punctual_[b].assign(glossy_.size() * columns, glm::vec3(0.0f));
+    tbb::parallel_for(size_t(0), glossy_.size(), [&](size_t g) {
+        const uint32_t s = glossy_[g];
+        const glm::vec3 p = surfels_.positions[s], n = surfels_.normals[s];
+        glm::vec3* row = punctual_[b].data() + g * columns;
+        std::vector<float> scratch;
+        std::vector<std::pair<uint32_t, float>> weights;
+        for (size_t k = 0; k < scene_.lights.size(); ++k) {
+            const float* e = perLight_.data() + (k * surfels + s) * 4;
+            if (e[0] <= 0.0f && e[1] <= 0.0f && e[2] <= 0.0f) continue;
+            const PunctualLight& light = scene_.lights[k];
+            const glm::vec3 travel = light.type == LightType::kDirectional
+                                         ? light.direction
+                                         : glm::normalize(p - light.position);
+            // E = L cos θ Δω of a light too small to sample with lines: exitant_j = B_j E / Δω.
+            LobeWeights(dirs, n, exponents_[g], travel, scratch, weights);
+            const glm::vec3 scaled = glm::vec3(e[0], e[1], e[2]) / dOmega;
+            for (const auto& [j, w] : weights) row[j] += w * scaled;
+        }
+    });
+}
+
+void LightfieldSolver::Reflect(size_t b) {
+    if (glossy_.empty()) return;
+    const size_t columns = 2 * batches_[b].directions.size();
+    const bool lit = !punctual_[b].empty();
+    tbb::parallel_for(size_t(0), glossy_.size(), [&](size_t g) {
+        const glm::vec3 f0 = scene_.materials[surfels_.materials[glossy_[g]]].specular;
+        glm::vec3* out = exitant_[b].data() + g * columns;
+        lobes_[b][lobeOf_[b][g]].Reflect(f0, incoming_[b].data() + g * columns, out);
+        if (lit)
+            for (size_t j = 0; j < columns; ++j) out[j] += f0 * punctual_[b][g * columns + j];
+    });
 }
 
 void LightfieldSolver::ReadGlossy() {
@@ -114,7 +161,10 @@ void LightfieldSolver::ReadGlossy() {
         return;  // the same lobes (an edit of colours or emission)
     }
     exponents_ = std::move(exponents);
-    for (size_t b = 0; b < batches_.size(); ++b) PrepareLobes(b);
+    for (size_t b = 0; b < batches_.size(); ++b) {
+        PrepareLobes(b);
+        PreparePunctual(b);
+    }
 }
 
 void LightfieldSolver::PrepareLobes(size_t b) {
@@ -181,12 +231,7 @@ void LightfieldSolver::Bounce(bool newestOnly) {
         GlossyLines lines{&slot_, glossy_.size(), exitant_[b].data(), incoming_[b].data()};
         WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_,
                   &lines);
-        const size_t columns = 2 * batches_[b].directions.size();
-        tbb::parallel_for(size_t(0), glossy_.size(), [&](size_t g) {
-            const glm::vec3 f0 = scene_.materials[surfels_.materials[glossy_[g]]].specular;
-            lobes_[b][lobeOf_[b][g]].Reflect(f0, incoming_[b].data() + g * columns,
-                                             exitant_[b].data() + g * columns);
-        });
+        Reflect(b);
     }
     // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled (lines.h).
     const float pi = std::numbers::pi_v<float>;
@@ -215,6 +260,8 @@ void LightfieldSolver::Iterate(int n) {
             incoming_.emplace_back(cells, glm::vec3(0.0f));
             exitant_.emplace_back(cells, glm::vec3(0.0f));
             PrepareLobes(batches_.size() - 1);
+            PreparePunctual(batches_.size() - 1);
+            Reflect(batches_.size() - 1);  // the lights' glossy reflections go out at once
             msTrace_ += MsSince(t);
             // While batches land, each is walked once with the light of its time (the
             // earlier ones carry a bounce or more fewer); an edit since, or the last batch,
@@ -256,6 +303,7 @@ void LightfieldSolver::UpdateLights(const Scene& scene) {
     ValidateEnvironment(scene.environment);
     sky_.Binned(scene.environment);  // the walks read it: nothing to re-bin
     stale_ = true;
+    scene_.lights = scene.lights;  // where the glossy surfels see them
     if (!direct::UpdateDirectStage(directStage_.get(), lights_, scene)) return;
     CopyDirect();
     Reradiate();
@@ -307,6 +355,7 @@ std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
         }
         for (size_t b = 0; b < batches_.size(); ++b) PrepareLobes(b);
     }
+    scene_.lights = scene.lights;
     if (directStage_) {
         directStage_->Move(scene, Receivers());
         CopyDirect();
@@ -360,10 +409,14 @@ SolverStats LightfieldSolver::Stats() const {
     s.setupSeconds = setupSeconds_;
     s.msTotal = msTotal_;
     s.passes = {{"trace", msTrace_}, {"walk", msWalk_}};
-    // Per surfel six RGB arrays and the coverage; per glossy slot and batch two RGB rows.
+    // Per surfel six RGB arrays and the coverage; per glossy slot and batch three RGB rows; the
+    // lights' E_d per surfel.
     size_t glossyBytes = 0;
     for (size_t b = 0; b < incoming_.size(); ++b)
         glossyBytes += (incoming_[b].size() + exitant_[b].size()) * sizeof(glm::vec3);
+    for (const std::vector<glm::vec3>& rows : punctual_)
+        glossyBytes += rows.size() * sizeof(glm::vec3);
+    glossyBytes += perLight_.size() * sizeof(float);
     s.tableBytes = surfels_.size() * (6 * sizeof(glm::vec3) + sizeof(float)) + glossyBytes;
     s.linkBytes = bytes;
     s.lights = lights_;

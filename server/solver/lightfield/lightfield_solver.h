@@ -58,6 +58,10 @@ class LightfieldSolver : public Solver {
     // slots changed) and lobes.
     void ReadGlossy();
     void PrepareLobes(size_t batch);  // batch's lobe tables for the glossy slots
+    // Batch's punctual_ rows from the lights' direct light at the glossy surfels (perLight_).
+    void PreparePunctual(size_t batch);
+    // Batch's exitant rows: F0 × (the lobes over the light that arrived + punctual_).
+    void Reflect(size_t batch);
     void Reradiate();   // the light leaving each surfel from the light arriving there now
     void CopyDirect();  // E_d per surfel from the direct stage
     std::vector<direct::GpuReceiver> Receivers() const;  // the surfels, in their order
@@ -81,6 +85,11 @@ class LightfieldSolver : public Solver {
     std::vector<uint32_t> glossy_;
     std::vector<float> exponents_;  // per slot: its Phong exponent when the lobes were made
     std::vector<std::vector<glm::vec3>> incoming_, exitant_;
+    // Per kept batch, per slot and direction of travel: the punctual lights' light the lobe
+    // sends that way before F0 (the direct stage gives irradiance; a glossy surfel reflects
+    // each light along its mirror direction). Empty: no light or no glossy surfel.
+    std::vector<std::vector<glm::vec3>> punctual_;
+    std::vector<float> perLight_;  // the direct stage's E_d per light and surfel (stride 4)
     std::vector<std::vector<LobeTable>> lobes_;
     std::vector<std::vector<uint32_t>> lobeOf_;
     bool stale_ = true;  // the light changed since the last walk of every batch

@@ -341,50 +341,63 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
     });
 }
 
+void LobeWeights(const std::vector<glm::vec3>& directions, const glm::vec3& normal, float exponent,
+                 const glm::vec3& t, std::vector<float>& lobe,
+                 std::vector<std::pair<uint32_t, float>>& out) {
+    out.clear();
+    const size_t d = directions.size(), columns = 2 * d;
+    auto travel = [&](size_t j) { return j < d ? directions[j] : -directions[j - d]; };
+    const float cosIn = -glm::dot(normal, t);
+    if (cosIn <= 0.0f) return;
+    // Below this cosine the lobe is under 10⁻⁴ of its peak: left out.
+    const float floor = std::pow(1e-4f, 1.0f / std::max(exponent, 1e-3f));
+    const glm::vec3 r = t + 2.0f * cosIn * normal;  // the mirror image of the travel
+    lobe.assign(columns, 0.0f);
+    float sum = 0.0f;
+    int inside = 0;
+    for (size_t j = 0; j < columns; ++j) {
+        const float c = glm::dot(r, travel(j));
+        lobe[j] = c > floor ? std::pow(c, exponent) : 0.0f;
+        sum += lobe[j];
+        inside += lobe[j] > 0.0f;
+    }
+    if (inside < 3) {
+        // A lobe narrower than the directions' spacing: the three directions nearest the
+        // mirror image, weighted by how much nearer each is than the fourth (the paper's
+        // barycentric weights of the three nearest PSFs, Sec. 3.4).
+        float best[4] = {-2.0f, -2.0f, -2.0f, -2.0f};
+        for (size_t j = 0; j < columns; ++j) {
+            float c = glm::dot(r, travel(j));
+            for (float& b : best)
+                if (c > b) std::swap(c, b);
+        }
+        sum = 0.0f;
+        for (size_t j = 0; j < columns; ++j) {
+            const float c = glm::dot(r, travel(j));
+            lobe[j] = c >= best[2] ? c - best[3] : 0.0f;
+            sum += lobe[j];
+        }
+    }
+    if (!(sum > 0.0f)) return;
+    // p̃ Δω = lobe / sum.
+    const float scale = (exponent + 2.0f) / (exponent + 1.0f) / sum;
+    for (size_t j = 0; j < columns; ++j)
+        if (lobe[j] > 0.0f && glm::dot(normal, travel(j)) > 0.0f)
+            out.emplace_back(uint32_t(j), lobe[j] * scale);
+}
+
 LobeTable::LobeTable(const std::vector<glm::vec3>& directions, const glm::vec3& normal,
                      float exponent) {
     const size_t d = directions.size();
     columns_ = 2 * d;
-    auto travel = [&](size_t j) { return j < d ? directions[j] : -directions[j - d]; };
-    // Below this cosine the lobe is under 10⁻⁴ of its peak: left out.
-    const float floor = std::pow(1e-4f, 1.0f / std::max(exponent, 1e-3f));
-    std::vector<float> lobe(columns_);
+    std::vector<float> scratch;
+    std::vector<std::pair<uint32_t, float>> row;
     for (size_t k = 0; k < columns_; ++k) {
-        const glm::vec3 t = travel(k);
+        const glm::vec3 t = k < d ? directions[k] : -directions[k - d];
+        LobeWeights(directions, normal, exponent, t, scratch, row);
+        // The incoming L cos θ Δω: the Δω is in B_j.
         const float cosIn = -glm::dot(normal, t);
-        if (cosIn <= 0.0f) continue;
-        const glm::vec3 r = t + 2.0f * cosIn * normal;  // the mirror image of the travel
-        float sum = 0.0f;
-        int inside = 0;
-        for (size_t j = 0; j < columns_; ++j) {
-            const float c = glm::dot(r, travel(j));
-            lobe[j] = c > floor ? std::pow(c, exponent) : 0.0f;
-            sum += lobe[j];
-            inside += lobe[j] > 0.0f;
-        }
-        if (inside < 3) {
-            // A lobe narrower than the directions' spacing: the three directions nearest the
-            // mirror image, weighted by how much nearer each is than the fourth (the paper's
-            // barycentric weights of the three nearest PSFs, Sec. 3.4).
-            float best[4] = {-2.0f, -2.0f, -2.0f, -2.0f};
-            for (size_t j = 0; j < columns_; ++j) {
-                float c = glm::dot(r, travel(j));
-                for (float& b : best)
-                    if (c > b) std::swap(c, b);
-            }
-            sum = 0.0f;
-            for (size_t j = 0; j < columns_; ++j) {
-                const float c = glm::dot(r, travel(j));
-                lobe[j] = c >= best[2] ? c - best[3] : 0.0f;
-                sum += lobe[j];
-            }
-        }
-        if (!(sum > 0.0f)) continue;
-        // p̃ = lobe / (sum Δω); the incoming L cos θ Δω brings the Δω back.
-        const float scale = (exponent + 2.0f) / (exponent + 1.0f) * cosIn / sum;
-        for (size_t j = 0; j < columns_; ++j)
-            if (lobe[j] > 0.0f && glm::dot(normal, travel(j)) > 0.0f)
-                entries_.push_back({uint32_t(k), uint32_t(j), lobe[j] * scale});
+        for (const auto& [j, w] : row) entries_.push_back({uint32_t(k), j, w * cosIn});
     }
 }
 

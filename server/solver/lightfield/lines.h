@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <glm/glm.hpp>
+#include <utility>
 #include <vector>
 
 #include "gather/ray_scene.h"
@@ -131,6 +132,15 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
 // nearest PSFs", with its energy kept): exitant_j = F0 Σ_k (n + 2)/(n + 1) p̃(k → j) L_k
 // cos θ_k Δω, towards the front only (n·t_j > 0). One table of weights serves every surfel
 // with the same normal and exponent (a flat face's).
+//
+// LobeWeights gives one incoming direction's row: for light arriving along `travel` (cos θ =
+// −n·travel > 0), per direction of travel j towards the front the weight B_j = (n + 2)/(n + 1)
+// p̃(travel → j) Δω, so that exitant_j = F0 B_j E / Δω for the irradiance E it brings (a
+// punctual light's; Δω = 2π / directions) and F0 B_j cos θ L for a radiance L. Empty when
+// the light arrives from behind.
+void LobeWeights(const std::vector<glm::vec3>& directions, const glm::vec3& normal, float exponent,
+                 const glm::vec3& travel, std::vector<float>& scratch,
+                 std::vector<std::pair<uint32_t, float>>& out);
 class LobeTable {
   public:
     LobeTable(const std::vector<glm::vec3>& directions, const glm::vec3& normal, float exponent);
