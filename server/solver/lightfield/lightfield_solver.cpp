@@ -13,6 +13,7 @@
 #include <tuple>
 
 #include "base/check.h"
+#include "gpu/context.h"
 
 namespace penumbra {
 namespace {
@@ -49,10 +50,6 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
                                    const LightfieldSettings& own, const ProgressFn& progress)
     : own_(own), progress_(progress), scene_(scene) {
     const auto start = Clock::now();
-    if (settings.device == DeviceChoice::kGpu || settings.device == DeviceChoice::kLavapipe)
-        throw Error(
-            "the light-field solver runs on the CPU only for now (its Vulkan back end is not "
-            "built yet): use --device cpu or auto");
     ValidateEnvironment(scene.environment);
     const float h = ElementSize(scene, settings);
     elementSize_ = h;
@@ -61,6 +58,16 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
     rays_ = std::make_unique<RayScene>(scene_, surfels_);
     facets_ = std::make_unique<SurfelFacets>(*rays_, surfels_.size());
     grid_ = MakeGrid(surfels_, h, own.cells);
+    if (settings.device == DeviceChoice::kGpu || settings.device == DeviceChoice::kLavapipe) {
+        // A rasteriser samples pixel centres: one jitter a direction (the CPU's re-traces
+        // after a move use the same grid).
+        grid_.jitter = LineJitter::kPerDirection;
+        device_ = std::make_unique<gpu::Context>(settings.device == DeviceChoice::kLavapipe
+                                                     ? gpu::DeviceKind::kLavapipe
+                                                     : gpu::DeviceKind::kRealGpu,
+                                                 settings.validation);
+        vulkanLines_ = std::make_unique<VulkanLines>(*device_, *rays_, grid_, own.layers);
+    }
     base_ = HemisphereDirections(own.directions);
     sky_.Binned(scene.environment);
     const size_t n = surfels_.size();
@@ -77,6 +84,8 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
     Rematerial();
     setupSeconds_ = std::chrono::duration<double>(Clock::now() - start).count();
 }
+
+LightfieldSolver::~LightfieldSolver() = default;
 
 std::vector<direct::GpuReceiver> LightfieldSolver::Receivers() const {
     std::vector<uint32_t> order(surfels_.size());
@@ -253,8 +262,9 @@ void LightfieldSolver::Iterate(int n) {
         bool newestOnly = false;
         if (batches_.size() < size_t(own_.batches)) {
             const auto t = Clock::now();
-            batches_.push_back(TraceBatch(*rays_, grid_, base_, own_.seed,
-                                          static_cast<uint32_t>(batches_.size())));
+            const uint32_t next = static_cast<uint32_t>(batches_.size());
+            batches_.push_back(vulkanLines_ ? vulkanLines_->TraceBatch(base_, own_.seed, next)
+                                            : TraceBatch(*rays_, grid_, base_, own_.seed, next));
             facets_->Coverage(batches_.back().directions, coverage_);
             const size_t cells = glossy_.size() * 2 * batches_.back().directions.size();
             incoming_.emplace_back(cells, glm::vec3(0.0f));
@@ -347,6 +357,7 @@ std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
     stale_ = true;
     if (moved > 0) {
         rays_->Update(surfels_);
+        if (vulkanLines_) vulkanLines_->Update(*rays_);  // for the batches still to come
         facets_ = std::make_unique<SurfelFacets>(*rays_, surfels_.size());
         coverage_.assign(surfels_.size(), 0.0f);
         for (LineBatch& b : batches_) {
@@ -391,10 +402,14 @@ std::string LightfieldSolver::WarmStart(Solver& previous, const SurfelCarry& car
            " surfels";
 }
 
+std::vector<std::string> LightfieldSolver::ValidationMessages() const {
+    return device_ ? device_->ValidationMessages() : std::vector<std::string>{};
+}
+
 SolverStats LightfieldSolver::Stats() const {
     SolverStats s;
     s.solver = "lightfield";
-    s.device = "cpu";
+    s.device = device_ ? device_->DeviceName() : "cpu";
     s.elements = surfels_.size();
     s.nodes = surfels_.size();
     size_t lines = 0, hits = 0, bytes = 0;
@@ -434,6 +449,11 @@ SolverStats LightfieldSolver::Stats() const {
     s.SetDetail("line_hits", double(hits));
     s.SetDetail("lines_retraced", double(linesRetraced_));
     s.SetDetail("last_walk_ms", msLastWalk_);
+    if (vulkanLines_) {
+        // The lines rasterised on the device; the walk runs on the CPU.
+        s.SetDetail("device_trace_ms", vulkanLines_->msDevice);
+        s.SetDetail("most_layers", double(vulkanLines_->MostLayers()));
+    }
     return s;
 }
 

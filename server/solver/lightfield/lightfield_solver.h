@@ -1,5 +1,6 @@
 // The light-field solver (Mortensen, Khanna, Slater 2008: virtual light field propagation)
-// behind the Solver interface, CPU back end. Light travels along batches of parallel lines
+// behind the Solver interface; lines traced by Embree on the CPU, or rasterised on a Vulkan
+// device (vulkan_lines.h), walked on the CPU. Light travels along batches of parallel lines
 // (lines.h): each line's surfaces in order, walked with a radiance interface both ways, so
 // visibility is exact along every line (no leak through a wall of any thickness). Surfels
 // stand for the paper's diffuse texels: each keeps one radiance, and a line's hit reads and
@@ -19,6 +20,7 @@
 #include "gather/ray_scene.h"
 #include "solver/lightfield/lines.h"
 #include "solver/lightfield/settings.h"
+#include "solver/lightfield/vulkan_lines.h"
 #include "solver/solver.h"
 
 namespace penumbra {
@@ -27,6 +29,7 @@ class LightfieldSolver : public Solver {
   public:
     LightfieldSolver(const Scene& scene, const SolverSettings& settings,
                      const LightfieldSettings& own, const ProgressFn& progress);
+    ~LightfieldSolver() override;
 
     void Iterate(int n) override;
     std::vector<glm::vec3> SurfelIrradiance(Channel channel = Channel::kIndirect) override;
@@ -42,6 +45,7 @@ class LightfieldSolver : public Solver {
     void SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) override;
     bool TakesEmitterDirect() const override { return true; }
     std::string WarmStart(Solver& previous, const SurfelCarry& carry) override;
+    std::vector<std::string> ValidationMessages() const override;
 
     const std::vector<LineBatch>& Batches() const { return batches_; }
     const LineGrid& Grid() const { return grid_; }
@@ -72,6 +76,10 @@ class LightfieldSolver : public Solver {
     float elementSize_ = 0.0f;
     Surfels surfels_;
     std::unique_ptr<RayScene> rays_;
+    // With --device gpu or lavapipe: the device and the lines rasterised on it (a batch's
+    // trace; moves re-trace their few lines on Embree, the walk runs on the CPU).
+    std::unique_ptr<gpu::Context> device_;
+    std::unique_ptr<VulkanLines> vulkanLines_;
     std::unique_ptr<SurfelFacets> facets_;
     LineGrid grid_;
     std::vector<glm::vec3> base_;  // the batches' direction set before its rotation

@@ -24,43 +24,13 @@ struct DirectionLines {
     std::vector<LineHit> hits;
 };
 
-// One direction's grid: cell (i, j)'s line starts at corner + (i + a)·side·t + (j + b)·side·s
-// and runs along d, (a, b) its jitter.
-struct DirectionGrid {
-    glm::vec3 d, t, s, corner;
-    float side, length;
-    int n;
-    DirectionGrid(const LineGrid& grid, const glm::vec3& direction) : d(direction) {
-        Basis(d, t, s);
-        n = grid.cells;
-        side = 2.0f * grid.radius / float(n);
-        // Lines start outside the ball and run through it.
-        const float back = 1.01f * grid.radius;
-        corner = grid.centre - grid.radius * (t + s) - back * d;
-        length = 2.0f * back;
-    }
-    // Whether cell (i, j) lies wholly outside the ball's disc (its lines meet nothing).
-    bool Outside(int i, int j) const {
-        const float r = 0.5f * side * float(n);
-        const float x0 = -r + i * side, y0 = -r + j * side;
-        const float nx = std::clamp(0.0f, x0, x0 + side), ny = std::clamp(0.0f, y0, y0 + side);
-        return nx * nx + ny * ny > r * r;
-    }
-};
-
-// The jitter stream of a cell: its own, so that a re-trace draws the same line.
-uint64_t CellStream(uint32_t batch, size_t direction, uint32_t cell) {
-    return (uint64_t(batch) << 40) | (uint64_t(direction) << 24) | cell;
-}
-
 // Traces cell `cell`'s line into `out` (nothing when it meets nothing).
-void TraceCell(const RayScene& rays, const DirectionGrid& g, uint32_t seed, uint64_t stream,
-               uint32_t cell, std::vector<RayHit>& scratch, DirectionLines& out) {
+void TraceCell(const RayScene& rays, const DirectionGrid& g, const glm::vec2& jitter, uint32_t cell,
+               std::vector<RayHit>& scratch, DirectionLines& out) {
     const int i = int(cell % uint32_t(g.n)), j = int(cell / uint32_t(g.n));
     if (g.Outside(i, j)) return;
-    Pcg32 rng(seed, stream);
-    const float a = rng.Uniform(), b = rng.Uniform();
-    const glm::vec3 origin = g.corner + ((i + a) * g.side) * g.t + ((j + b) * g.side) * g.s;
+    const glm::vec3 origin =
+        g.corner + ((i + jitter.x) * g.side) * g.t + ((j + jitter.y) * g.side) * g.s;
     rays.AllHits(origin, g.d, g.length, scratch);
     if (scratch.empty()) return;
     out.cells.push_back(cell);
@@ -100,6 +70,34 @@ void Assemble(std::vector<DirectionLines>& parts, LineBatch& b) {
 
 }  // namespace
 
+DirectionGrid::DirectionGrid(const LineGrid& grid, const glm::vec3& direction) : d(direction) {
+    Basis(d, t, s);
+    n = grid.cells;
+    side = 2.0f * grid.radius / float(n);
+    // Lines start outside the ball and run through it.
+    const float back = 1.01f * grid.radius;
+    corner = grid.centre - grid.radius * (t + s) - back * d;
+    length = 2.0f * back;
+}
+
+bool DirectionGrid::Outside(int i, int j) const {
+    const float r = 0.5f * side * float(n);
+    const float x0 = -r + i * side, y0 = -r + j * side;
+    const float nx = std::clamp(0.0f, x0, x0 + side), ny = std::clamp(0.0f, y0, y0 + side);
+    return nx * nx + ny * ny > r * r;
+}
+
+glm::vec2 DirectionGrid::Jitter(LineJitter mode, uint32_t seed, uint32_t batch, size_t direction,
+                                uint32_t cell) {
+    // A cell's stream below 2^40 a batch, a direction's in a range of its own.
+    const uint64_t stream = mode == LineJitter::kPerCell
+                                ? (uint64_t(batch) << 40) | (uint64_t(direction) << 24) | cell
+                                : (uint64_t(1) << 61) + (uint64_t(batch) << 24) + direction;
+    Pcg32 rng(seed, stream);
+    const float a = rng.Uniform();
+    return {a, rng.Uniform()};
+}
+
 std::vector<glm::vec3> HemisphereDirections(int count) {
     // Equal areas in cos θ ∈ (0, 1], golden-angle steps in φ.
     const float golden = kPi * (3.0f - std::sqrt(5.0f));
@@ -122,21 +120,28 @@ glm::mat3 RandomRotation(uint32_t seed, uint64_t stream) {
     return glm::mat3_cast(glm::normalize(q));
 }
 
+std::vector<glm::vec3> RotatedDirections(const std::vector<glm::vec3>& base, uint32_t seed,
+                                         uint32_t batch) {
+    // Rotation streams apart from the jitter streams (DirectionGrid::Jitter's).
+    const glm::mat3 rotation = RandomRotation(seed, (uint64_t(1) << 62) + batch);
+    std::vector<glm::vec3> out;
+    for (const glm::vec3& d : base) out.push_back(glm::normalize(rotation * d));
+    return out;
+}
+
 LineBatch TraceBatch(const RayScene& rays, const LineGrid& grid, const std::vector<glm::vec3>& base,
                      uint32_t seed, uint32_t batch) {
     LineBatch b;
     b.batch = batch;
-    // Rotation streams apart from the jitter streams (CellStream's top bits stay below 2^40
-    // a batch).
-    const glm::mat3 rotation = RandomRotation(seed, (uint64_t(1) << 62) + batch);
-    for (const glm::vec3& d : base) b.directions.push_back(glm::normalize(rotation * d));
+    b.directions = RotatedDirections(base, seed, batch);
     std::vector<DirectionLines> parts(b.directions.size());
     tbb::parallel_for(size_t(0), b.directions.size(), [&](size_t k) {
         const DirectionGrid g(grid, b.directions[k]);
         std::vector<RayHit> scratch;
         const uint32_t cells = uint32_t(g.n) * uint32_t(g.n);
         for (uint32_t c = 0; c < cells; ++c)
-            TraceCell(rays, g, seed, CellStream(batch, k, c), c, scratch, parts[k]);
+            TraceCell(rays, g, DirectionGrid::Jitter(grid.jitter, seed, batch, k, c), c, scratch,
+                      parts[k]);
     });
     Assemble(parts, b);
     return b;
@@ -184,7 +189,8 @@ size_t RetraceBatch(const RayScene& rays, const LineGrid& grid, uint32_t seed, c
                 const uint32_t c = uint32_t(j) * uint32_t(g.n) + uint32_t(i);
                 keep(c);
                 if (line < end && b.lineCells[line] == c) ++line;
-                TraceCell(rays, g, seed, CellStream(b.batch, k, c), c, scratch, out);
+                TraceCell(rays, g, DirectionGrid::Jitter(grid.jitter, seed, b.batch, k, c), c,
+                          scratch, out);
                 ++traced[k];
             }
         keep(~0u);

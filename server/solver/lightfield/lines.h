@@ -49,17 +49,43 @@ std::vector<glm::vec3> HemisphereDirections(int count);
 // A uniformly random rotation (Shoemake's unit quaternion from three uniforms).
 glm::mat3 RandomRotation(uint32_t seed, uint64_t stream);
 
+// How a direction's lines sit in their cells: each jittered on its own (the CPU back end's:
+// stratified), or the whole grid shifted by one jitter (a rasteriser's pixel centres: the
+// Vulkan back end's, vulkan_lines.h).
+enum class LineJitter { kPerCell, kPerDirection };
+
 // The grid of lines every direction uses: `cells` a side over the square around the ball
 // (centre, radius), a line jittered in each cell.
 struct LineGrid {
     glm::vec3 centre{0.0f};
     float radius = 1.0f;
     int cells = 64;
+    LineJitter jitter = LineJitter::kPerCell;
     float CellArea() const {
         const float side = 2.0f * radius / float(cells);
         return side * side;
     }
 };
+
+// One direction's grid: cell (i, j)'s line starts at corner + (i + a)·side·t + (j + b)·side·s
+// and runs `length` along d, (a, b) its jitter (Jitter).
+struct DirectionGrid {
+    glm::vec3 d, t, s, corner;
+    float side, length;
+    int n;
+    DirectionGrid(const LineGrid& grid, const glm::vec3& direction);
+    // Whether cell (i, j) lies wholly outside the ball's disc (its lines meet nothing).
+    bool Outside(int i, int j) const;
+    // The jitter (a, b) in [0, 1)² of cell `cell` of direction `direction` of batch `batch`:
+    // its own stream, so that a re-trace draws the same line (per cell), or one for the
+    // whole direction.
+    static glm::vec2 Jitter(LineJitter mode, uint32_t seed, uint32_t batch, size_t direction,
+                            uint32_t cell);
+};
+
+// Batch `batch`'s directions: `base` rotated by RandomRotation(seed, batch's stream).
+std::vector<glm::vec3> RotatedDirections(const std::vector<glm::vec3>& base, uint32_t seed,
+                                         uint32_t batch);
 
 // Traces batch `batch` of the field: `base` rotated by RandomRotation(seed, batch), every
 // line of every direction through `rays` (built over the refined mesh). Deterministic for a

@@ -31,6 +31,14 @@ std::vector<OptionSpec> Options() {
          4096,
          {}},
         {"seed", K::kInt, "1", "random rotations and jitter of the lines", 0, 2147483647, {}},
+        {"layers",
+         K::kInt,
+         "8",
+         "on a Vulkan device: surfaces peeled a submission along the lines (more follow while "
+         "a line has any left)",
+         1,
+         256,
+         {}},
     };
 }
 
@@ -40,7 +48,8 @@ SolverEntry LightfieldEntry() {
     return {"lightfield",
             "virtual light field (Mortensen et al. 2008), in progress: parallel lines in "
             "batches of rotated directions, exact visibility along each; diffuse and glossy "
-            "surfaces, CPU only (docs/SOLVER.md)",
+            "surfaces; lines traced by Embree, or rasterised and depth-peeled on a Vulkan "
+            "device (the walk on the CPU) (docs/SOLVER.md)",
             Options(),
             [](const Scene& scene, const SolverSettings& settings,
                const ProgressFn& progress) -> std::unique_ptr<Solver> {
@@ -59,6 +68,7 @@ LightfieldSettings ReadLightfieldSettings(const SolverSettings& settings) {
         throw Error("lightfield: --cells must be 0 (from the element size) or at least 4");
     s.batches = r.Int("batches");
     s.seed = static_cast<uint32_t>(r.Int("seed"));
+    s.layers = r.Int("layers");
     return s;
 }
 

@@ -21,6 +21,9 @@ struct LightfieldSettings {
     // the kept lines without new rays.
     int batches = 8;
     uint32_t seed = 1;  // the rotations' and the lines' jitter
+    // On a Vulkan device (--device gpu or lavapipe): surfaces peeled a submission along each
+    // direction's lines; more submissions follow while a line has surfaces left.
+    int layers = 8;
 };
 
 SolverEntry LightfieldEntry();
