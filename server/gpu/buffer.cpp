@@ -106,15 +106,15 @@ void Buffer::Upload(const void* data, size_t bytes, size_t offset) {
     });
 }
 
-void Buffer::Download(void* data, size_t bytes) const {
-    PENUMBRA_CHECK_LE(bytes, bytes_);
+void Buffer::Download(void* data, size_t bytes, size_t offset) const {
+    PENUMBRA_CHECK_LE(offset + bytes, bytes_);
     if (mapped_) {
-        std::memcpy(data, mapped_, bytes);
+        std::memcpy(data, static_cast<const char*>(mapped_) + offset, bytes);
         return;
     }
     Staging staging(ctx_, bytes);
     ctx_.RunNow([&](const vk::raii::CommandBuffer& cb) {
-        cb.copyBuffer(*buffer_, *staging.buffer, vk::BufferCopy(0, 0, bytes));
+        cb.copyBuffer(*buffer_, *staging.buffer, vk::BufferCopy(offset, 0, bytes));
     });
     std::memcpy(data, staging.mapped, bytes);
 }

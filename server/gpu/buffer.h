@@ -27,7 +27,8 @@ class Buffer {
 
     // Copies `bytes` from `data` to the buffer at byte `offset`.
     void Upload(const void* data, size_t bytes, size_t offset = 0);
-    void Download(void* data, size_t bytes) const;
+    // Copies `bytes` of the buffer from byte `offset` to `data`.
+    void Download(void* data, size_t bytes, size_t offset = 0) const;
 
     template <typename T>
     void Upload(const std::vector<T>& v) {

@@ -101,7 +101,6 @@ struct VulkanLines::Impl {
         const float clear[4] = {1.0f, 0.0f, 0.0f, 0.0f};  // nothing met: depth 1, triangle 0
         const size_t slotBytes = texels * sizeof(glm::vec4);
         out.clear();
-        std::vector<glm::vec4> slots((size_t(chunk) + 1) * texels);
         for (int done = 0;; done += chunk) {
             const auto start = std::chrono::steady_clock::now();
             ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
@@ -126,15 +125,17 @@ struct VulkanLines::Impl {
                                  vk::PipelineStageFlagBits::eFragmentShader);
                 }
             });
-            layers.Download(slots.data(), slots.size() * sizeof(glm::vec4));
+            // Slots 1 … chunk, after the layers before.
+            const size_t before = out.size();
+            out.resize(before + size_t(chunk) * texels);
+            layers.Download(out.data() + before, size_t(chunk) * slotBytes, slotBytes);
             ms +=
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
                     .count();
-            out.insert(out.end(), slots.begin() + texels, slots.end());
             // Go on while some line met a surface in the last layer (it may have more).
-            const auto last = slots.end() - std::ptrdiff_t(texels);
+            const auto last = out.end() - std::ptrdiff_t(texels);
             const bool more =
-                std::any_of(last, slots.end(), [](const glm::vec4& t) { return t.y != 0.0f; });
+                std::any_of(last, out.end(), [](const glm::vec4& t) { return t.y != 0.0f; });
             if (!more || done + chunk > int(rays.Triangles().size())) break;
         }
         return int(out.size() / texels);
