@@ -185,8 +185,34 @@ Context::Context(DeviceKind kind, bool validation, Capability need)
             device_ =
                 std::make_unique<vk::raii::Device>(*physical_, chain.get<vk::DeviceCreateInfo>());
         } else {
-            vk::DeviceCreateInfo di({}, qi, {}, {}, &features);
-            device_ = std::make_unique<vk::raii::Device>(*physical_, di);
+            // Float atomics in storage buffers where the device has them (the light field's
+            // walk adds what each line brings to its surfels with them).
+            const auto have = physical_->enumerateDeviceExtensionProperties();
+            const bool extension =
+                std::any_of(have.begin(), have.end(), [](const vk::ExtensionProperties& e) {
+                    return std::strcmp(e.extensionName,
+                                       VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME) == 0;
+                });
+            if (extension)
+                floatAtomics_ = physical_
+                                    ->getFeatures2<vk::PhysicalDeviceFeatures2,
+                                                   vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
+                                    .get<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
+                                    .shaderBufferFloat32AtomicAdd;
+            vk::StructureChain<vk::DeviceCreateInfo, vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>
+                chain;
+            const char* atomicFloat = VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME;
+            chain.get<vk::DeviceCreateInfo>().setQueueCreateInfos(qi).setPEnabledFeatures(
+                &features);
+            if (floatAtomics_) {
+                chain.get<vk::DeviceCreateInfo>().setPEnabledExtensionNames(atomicFloat);
+                chain.get<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
+                    .shaderBufferFloat32AtomicAdd = VK_TRUE;
+            } else {
+                chain.unlink<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>();
+            }
+            device_ =
+                std::make_unique<vk::raii::Device>(*physical_, chain.get<vk::DeviceCreateInfo>());
         }
         queue_ = std::make_unique<vk::raii::Queue>(*device_, family_, 0);
         pool_ = std::make_unique<vk::raii::CommandPool>(

@@ -35,6 +35,9 @@ class Context {
     const vk::PhysicalDeviceLimits& Limits() const { return limits_; }
     // The queue rasterises (the shadow pass and `penumbra render` need it).
     bool Graphics() const { return graphics_; }
+    // atomicAdd on floats in storage buffers (VK_EXT_shader_atomic_float), enabled where the
+    // device has it (not on a ray-tracing context).
+    bool FloatAtomics() const { return floatAtomics_; }
 
     const vk::raii::Device& Device() const { return *device_; }
     const vk::raii::PhysicalDevice& Physical() const { return *physical_; }
@@ -78,6 +81,7 @@ class Context {
     uint32_t family_ = 0;
     float timestampPeriod_ = 1.0f;
     bool lavapipe_ = false;
+    bool floatAtomics_ = false;
     bool graphics_ = false;
     bool validation_ = false;
     mutable std::atomic<bool> lost_{false};

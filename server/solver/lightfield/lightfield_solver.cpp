@@ -67,6 +67,10 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
                                                      : gpu::DeviceKind::kRealGpu,
                                                  settings.validation);
         vulkanLines_ = std::make_unique<VulkanLines>(*device_, *rays_, grid_, own.layers);
+        if (device_->FloatAtomics()) {
+            vulkanWalk_ = std::make_unique<VulkanWalk>(*device_, *rays_, surfels_.size());
+            vulkanWalk_->SetFacets(*facets_);
+        }
     }
     base_ = HemisphereDirections(own.directions);
     sky_.Binned(scene.environment);
@@ -232,14 +236,13 @@ void LightfieldSolver::Bounce(bool newestOnly) {
     if (!newestOnly) weighted_.assign(surfels_.size(), glm::vec3(0.0f));
     for (size_t b = newestOnly ? batches_.size() - 1 : 0; b < batches_.size(); ++b) {
         if (glossy_.empty()) {
-            WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_);
+            Walk(b, sky, nullptr);
             continue;
         }
         // The glossy surfels send what they reflected in the walk before (a Jacobi bounce),
         // then reflect what arrived in this one.
         GlossyLines lines{&slot_, glossy_.size(), exitant_[b].data(), incoming_[b].data()};
-        WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_,
-                  &lines);
+        Walk(b, sky, &lines);
         Reflect(b);
     }
     // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled (lines.h).
@@ -253,6 +256,14 @@ void LightfieldSolver::Bounce(bool newestOnly) {
         if (divergence_.empty() && !Finite(l))
             divergence_ = "diverged at iteration " + std::to_string(iterations_ + 1) +
                           ": a surfel's light is not finite";
+}
+
+void LightfieldSolver::Walk(size_t b, const Environment* sky, const GlossyLines* glossy) {
+    if (vulkanWalk_)
+        vulkanWalk_->Walk(b, batches_[b], grid_.CellArea(), radiance_, sky, weighted_, glossy);
+    else
+        WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_,
+                  glossy);
 }
 
 void LightfieldSolver::Iterate(int n) {
@@ -360,10 +371,12 @@ std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
         if (vulkanLines_) vulkanLines_->Update(*rays_);  // for the batches still to come
         facets_ = std::make_unique<SurfelFacets>(*rays_, surfels_.size());
         coverage_.assign(surfels_.size(), 0.0f);
-        for (LineBatch& b : batches_) {
-            retraced += RetraceBatch(*rays_, grid_, own_.seed, box, b);
-            facets_->Coverage(b.directions, coverage_);
+        for (size_t b = 0; b < batches_.size(); ++b) {
+            retraced += RetraceBatch(*rays_, grid_, own_.seed, box, batches_[b]);
+            facets_->Coverage(batches_[b].directions, coverage_);
+            if (vulkanWalk_) vulkanWalk_->Invalidate(b);
         }
+        if (vulkanWalk_) vulkanWalk_->SetFacets(*facets_);
         for (size_t b = 0; b < batches_.size(); ++b) PrepareLobes(b);
     }
     scene_.lights = scene.lights;
@@ -450,9 +463,11 @@ SolverStats LightfieldSolver::Stats() const {
     s.SetDetail("lines_retraced", double(linesRetraced_));
     s.SetDetail("last_walk_ms", msLastWalk_);
     if (vulkanLines_) {
-        // The lines rasterised on the device; the walk runs on the CPU.
+        // The lines rasterised on the device; the walk there too where it has float atomics.
         s.SetDetail("device_trace_ms", vulkanLines_->msDevice);
         s.SetDetail("most_layers", double(vulkanLines_->MostLayers()));
+        s.SetDetail("walk_device", vulkanWalk_ ? device_->DeviceName() : std::string("cpu"));
+        if (vulkanWalk_) s.SetDetail("device_walk_ms", vulkanWalk_->msDevice);
     }
     return s;
 }

@@ -21,6 +21,7 @@
 #include "solver/lightfield/lines.h"
 #include "solver/lightfield/settings.h"
 #include "solver/lightfield/vulkan_lines.h"
+#include "solver/lightfield/vulkan_walk.h"
 #include "solver/solver.h"
 
 namespace penumbra {
@@ -76,10 +77,14 @@ class LightfieldSolver : public Solver {
     float elementSize_ = 0.0f;
     Surfels surfels_;
     std::unique_ptr<RayScene> rays_;
-    // With --device gpu or lavapipe: the device and the lines rasterised on it (a batch's
-    // trace; moves re-trace their few lines on Embree, the walk runs on the CPU).
+    // With --device gpu or lavapipe: the device, the lines rasterised on it (a batch's trace;
+    // moves re-trace their few lines on Embree) and the walk there (null on a device without
+    // float atomics: the walk runs on the CPU).
     std::unique_ptr<gpu::Context> device_;
     std::unique_ptr<VulkanLines> vulkanLines_;
+    std::unique_ptr<VulkanWalk> vulkanWalk_;
+    // The walk of kept batch b (on the device or the CPU).
+    void Walk(size_t b, const Environment* sky, const GlossyLines* glossy);
     std::unique_ptr<SurfelFacets> facets_;
     LineGrid grid_;
     std::vector<glm::vec3> base_;  // the batches' direction set before its rotation

@@ -48,8 +48,8 @@ SolverEntry LightfieldEntry() {
     return {"lightfield",
             "virtual light field (Mortensen et al. 2008), in progress: parallel lines in "
             "batches of rotated directions, exact visibility along each; diffuse and glossy "
-            "surfaces; lines traced by Embree, or rasterised and depth-peeled on a Vulkan "
-            "device (the walk on the CPU) (docs/SOLVER.md)",
+            "surfaces; lines traced by Embree and walked on the CPU, or rasterised, "
+            "depth-peeled and walked on a Vulkan device (docs/SOLVER.md)",
             Options(),
             [](const Scene& scene, const SolverSettings& settings,
                const ProgressFn& progress) -> std::unique_ptr<Solver> {
