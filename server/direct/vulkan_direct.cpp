@@ -21,11 +21,6 @@
 namespace penumbra::direct {
 namespace {
 
-template <typename T>
-std::span<const uint32_t> Words(const T& array) {
-    return {array, sizeof(array) / sizeof(uint32_t)};
-}
-
 struct ShadowPush {
     glm::mat4 viewProj;
     uint32_t mapOffset;
@@ -73,9 +68,10 @@ struct VulkanDirect::Impl {
           triangleVertices(static_cast<uint32_t>(triangles.size())),
           out(o),
           receivers(c, std::max<size_t>(1, receiverList.size()) * sizeof(GpuReceiver)),
-          shadow(c, Words(kSpirv_shadow_vert), Words(kSpirv_shadow_frag), 1, sizeof(ShadowPush),
-                 static_cast<uint32_t>(s), static_cast<uint32_t>(s), vk::Format::eR32Sfloat),
-          directPass(c, Words(kSpirv_direct),
+          shadow(c, gpu::Words(kSpirv_shadow_vert), gpu::Words(kSpirv_shadow_frag), 1,
+                 sizeof(ShadowPush), static_cast<uint32_t>(s), static_cast<uint32_t>(s),
+                 vk::Format::eR32Sfloat),
+          directPass(c, gpu::Words(kSpirv_direct),
                      {gpu::Slot::kStorage, gpu::Slot::kStorage, gpu::Slot::kTexelFloat,
                       gpu::Slot::kTexelFloat, gpu::Slot::kStorage, gpu::Slot::kStorage},
                      std::span<const uint32_t>{}, sizeof(DirectPush)),

@@ -13,6 +13,12 @@
 
 namespace penumbra::gpu {
 
+// The words of an embedded SPIR-V array (shaders/: kSpirv_<name>).
+template <typename T>
+std::span<const uint32_t> Words(const T& array) {
+    return {array, sizeof(array) / sizeof(uint32_t)};
+}
+
 // What one binding of set 0 holds: a storage buffer, or a buffer read through a uniform
 // texel buffer view of 32-bit floats or uints (`samplerBuffer` / `usamplerBuffer`). lavapipe
 // (Mesa 22.3) loads a storage buffer lane by lane behind a branch per lane and component,

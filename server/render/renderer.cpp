@@ -23,11 +23,6 @@ namespace {
 
 constexpr float kInvPi = 1.0f / std::numbers::pi_v<float>;
 
-template <typename T>
-std::span<const uint32_t> Words(const T& array) {
-    return {array, sizeof(array) / sizeof(uint32_t)};
-}
-
 // Radiance towards the camera: (ρ_d + F0) E/π + L_e. A glossy lobe is shown as if it
 // reflected diffusely (its albedo at normal incidence), since per-vertex irradiance carries
 // no direction: metals are not black, but highlights are not drawn. `tints`: the colour
@@ -208,7 +203,7 @@ RenderOutput Rasterize(const Mesh& mesh, const Camera& camera, const RenderSetti
     vertexBuffer.Upload(vertices);
     const uint32_t w = settings.width, h = settings.height;
     gpu::Buffer pixels(ctx, size_t(w) * h * sizeof(glm::vec4));
-    gpu::RenderTarget target(ctx, Words(kSpirv_render_vert), Words(kSpirv_render_frag), 1,
+    gpu::RenderTarget target(ctx, gpu::Words(kSpirv_render_vert), gpu::Words(kSpirv_render_frag), 1,
                              sizeof(GpuPush), w, h);
     const gpu::Buffer* buffers[] = {&vertexBuffer};
     vk::raii::DescriptorSet set = target.MakeSet(buffers);

@@ -14,11 +14,6 @@ inline uint32_t Groups(uint64_t invocations) {
     return static_cast<uint32_t>((invocations + kWorkgroup - 1) / kWorkgroup);
 }
 
-template <typename T>
-std::span<const uint32_t> Words(const T& array) {
-    return {array, sizeof(array) / sizeof(uint32_t)};
-}
-
 // The passes' specialisation constants (shaders/common.glsl): workgroup size, bins.
 inline std::vector<uint32_t> Spec(int bins) { return {kWorkgroup, static_cast<uint32_t>(bins)}; }
 

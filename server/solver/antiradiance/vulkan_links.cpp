@@ -92,7 +92,7 @@ VulkanLinkUpdate::VulkanLinkUpdate(gpu::Context& ctx, const AntiradianceModel& m
         gpu::Buffer(ctx, size(m.near.offsets)),
         gpu::Buffer(ctx, size(m.near.triangles)),
         gpu::Buffer(ctx, size(sf.refinedTriangles)),
-        gpu::Pipeline(ctx, Words(kSpirv_links), 13, Spec(m.Bins()), sizeof(LinkPush)),
+        gpu::Pipeline(ctx, gpu::Words(kSpirv_links), 13, Spec(m.Bins()), sizeof(LinkPush)),
         {nullptr},
         gpu::Timestamps(ctx, 2),
     });

@@ -111,15 +111,16 @@ struct VulkanAntiradiance::Impl {
           lin(ctx, (m.TableFloats() + m.Bins() * 3) * 4),
           irradiance(ctx, m.leaves.size() * 12),
           direct(ctx, m.leaves.size() * sizeof(glm::vec4)),
-          global(ctx, Words(kSpirv_global), GatherSlots({gpu::Slot::kStorage, gpu::Slot::kStorage}),
-                 Spec(), sizeof(RangePush)),
-          local(ctx, Words(kSpirv_local),
+          global(ctx, gpu::Words(kSpirv_global),
+                 GatherSlots({gpu::Slot::kStorage, gpu::Slot::kStorage}), Spec(),
+                 sizeof(RangePush)),
+          local(ctx, gpu::Words(kSpirv_local),
                 GatherSlots({gpu::Slot::kStorage, gpu::Slot::kTexelFloat, gpu::Slot::kStorage,
                              gpu::Slot::kStorage, gpu::Slot::kTexelFloat, gpu::Slot::kStorage,
                              gpu::Slot::kTexelUint, gpu::Slot::kStorage, gpu::Slot::kTexelUint,
                              gpu::Slot::kTexelFloat, gpu::Slot::kStorage}),
                 LocalVariants(), sizeof(LocalPush)),
-          pull(ctx, Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
+          pull(ctx, gpu::Words(kSpirv_pull), 3, Spec(), sizeof(RangePush)) {
         Upload();
         const gpu::Buffer* g0[] = {&linkOffsets, &links, &spreadLevels, &neighbours,
                                    &iex0,        &lin,   &lin,          &clusterOrder};

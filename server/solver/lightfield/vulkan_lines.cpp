@@ -17,11 +17,6 @@
 namespace penumbra {
 namespace {
 
-template <typename T>
-std::span<const uint32_t> Words(const T& array) {
-    return {array, sizeof(array) / sizeof(uint32_t)};
-}
-
 struct PeelPush {
     glm::mat4 view;
     uint32_t layer;
@@ -78,7 +73,7 @@ struct VulkanLines::Impl {
           texels(size_t(g.cells) * g.cells),
           vertices(c, std::max<size_t>(1, vertexCount) * sizeof(glm::vec4)),
           layers(c, (size_t(chunk) + 1) * texels * sizeof(glm::vec4)),
-          target(c, Words(kSpirv_peel_vert), Words(kSpirv_peel_frag), 2, sizeof(PeelPush),
+          target(c, gpu::Words(kSpirv_peel_vert), gpu::Words(kSpirv_peel_frag), 2, sizeof(PeelPush),
                  uint32_t(g.cells), uint32_t(g.cells), vk::Format::eR32G32B32A32Sfloat) {
         Upload(r);
         const gpu::Buffer* b[] = {&vertices, &layers};

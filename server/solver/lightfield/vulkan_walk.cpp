@@ -15,11 +15,6 @@
 namespace penumbra {
 namespace {
 
-template <typename T>
-std::span<const uint32_t> Words(const T& array) {
-    return {array, sizeof(array) / sizeof(uint32_t)};
-}
-
 struct WalkPush {
     uint32_t firstLine, lineCount, directions, surfels, firstDirection, group, glossy;
 };
@@ -71,8 +66,8 @@ struct VulkanWalk::Impl {
         : ctx(c),
           surfels(n),
           sumBytes(budget),
-          walk(c, Words(kSpirv_lf_walk), 9, std::span<const uint32_t>{}, sizeof(WalkPush)),
-          flush(c, Words(kSpirv_lf_flush), 7, std::span<const uint32_t>{}, sizeof(FlushPush)),
+          walk(c, gpu::Words(kSpirv_lf_walk), 9, std::span<const uint32_t>{}, sizeof(WalkPush)),
+          flush(c, gpu::Words(kSpirv_lf_flush), 7, std::span<const uint32_t>{}, sizeof(FlushPush)),
           corners(c, std::max<size_t>(1, rays.Triangles().size()) * sizeof(glm::uvec4)) {
         std::vector<glm::uvec4> cs(rays.Triangles().size());
         for (uint32_t t = 0; t < cs.size(); ++t) cs[t] = glm::uvec4(rays.Corners(t), 0u);
