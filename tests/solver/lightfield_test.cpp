@@ -46,6 +46,28 @@ double NodeMean(Solver& solver, const Scene& scene, const std::string& node) {
     return area > 0.0 ? sum / area : 0.0;
 }
 
+// A 2 × 1 × 1 m room, faces in, 8 × 8 tiles a face: `floor` and `west` their own
+// materials, the rest `walls`.
+void AddLongRoom(SceneBuilder& b, uint32_t floor, uint32_t west, uint32_t walls) {
+    const glm::vec3 inside(1.0f, 0.5f, 0.5f);
+    b.AddQuad("floor", floor, {0, 0, 0}, {2, 0, 0}, {2, 0, 1}, {0, 0, 1}, inside, 8);
+    b.AddQuad("ceiling", walls, {0, 1, 0}, {2, 1, 0}, {2, 1, 1}, {0, 1, 1}, inside, 8);
+    b.AddQuad("south", walls, {0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {0, 1, 0}, inside, 8);
+    b.AddQuad("north", walls, {0, 0, 1}, {2, 0, 1}, {2, 1, 1}, {0, 1, 1}, inside, 8);
+    b.AddQuad("west", west, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 8);
+    b.AddQuad("east", walls, {2, 0, 0}, {2, 0, 1}, {2, 1, 1}, {2, 1, 0}, inside, 8);
+}
+
+// A unit room with a box and a thin slab in it: lines meet two to eight surfaces.
+Scene BoxesInARoom() {
+    SceneBuilder b;
+    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.5f));
+    testing::AddUnitRoom(b, grey, grey, 2);
+    b.AddBox("box", grey, {0.3f, 0.3f, 0.3f}, {0.2f, 0.3f, 0.2f});
+    b.AddBox("thin", grey, {0.6f, 0.5f, 0.5f}, {0.01f, 0.8f, 0.8f});
+    return b.Build();
+}
+
 // Σ over a batch's directions, both ways, of cos⁺θ · Δω is the cosine integral π over the
 // hemisphere of any normal: within 3% a batch of 64 line directions and 1% over 8 batches
 // (each a new rotation: the mean is exact in expectation).
@@ -72,12 +94,7 @@ TEST(Lightfield, DirectionsIntegrateTheCosine) {
 // A line's hits are every surface along it in order: each one Embree's nearest hit from
 // just past the one before.
 TEST(Lightfield, LinesMeetWhatEmbreeMeetsInOrder) {
-    SceneBuilder b;
-    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.5f));
-    testing::AddUnitRoom(b, grey, grey, 2);
-    b.AddBox("box", grey, {0.3f, 0.3f, 0.3f}, {0.2f, 0.3f, 0.2f});
-    b.AddBox("thin", grey, {0.6f, 0.5f, 0.5f}, {0.01f, 0.8f, 0.8f});
-    Scene scene = b.Build();
+    const Scene scene = BoxesInARoom();
     const Surfels surfels = RefineScene(scene, 0.1f);
     const RayScene rays(scene, surfels);
     Pcg32 rng(7, 3);
@@ -111,12 +128,7 @@ TEST(Lightfield, LinesMeetWhatEmbreeMeetsInOrder) {
 // the same barycentrics. Two layers a submission, so lines with more surfaces are peeled on
 // in later submissions.
 TEST(Lightfield, PeeledLayersOnLavapipeMatchEmbree) {
-    SceneBuilder b;
-    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.5f));
-    testing::AddUnitRoom(b, grey, grey, 2);
-    b.AddBox("box", grey, {0.3f, 0.3f, 0.3f}, {0.2f, 0.3f, 0.2f});
-    b.AddBox("thin", grey, {0.6f, 0.5f, 0.5f}, {0.01f, 0.8f, 0.8f});
-    Scene scene = b.Build();
+    const Scene scene = BoxesInARoom();
     const Surfels surfels = RefineScene(scene, 0.1f);
     const RayScene rays(scene, surfels);
     LineGrid grid;
@@ -533,13 +545,7 @@ TEST(Lightfield, MirrorAndGlossyFloorAgainstTheReference) {
                                 : b.AddMaterial("mirror", glm::vec3(0.0f));
         uint32_t floor = lobes ? b.AddPbrMaterial("floor", glm::vec3(0.5f), 0.0f, 0.4f)
                                : b.AddMaterial("floor", glm::vec3(0.5f));
-        const glm::vec3 inside(1.0f, 0.5f, 0.5f);
-        b.AddQuad("floor", floor, {0, 0, 0}, {2, 0, 0}, {2, 0, 1}, {0, 0, 1}, inside, 8);
-        b.AddQuad("ceiling", white, {0, 1, 0}, {2, 1, 0}, {2, 1, 1}, {0, 1, 1}, inside, 8);
-        b.AddQuad("south", white, {0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {0, 1, 0}, inside, 8);
-        b.AddQuad("north", white, {0, 0, 1}, {2, 0, 1}, {2, 1, 1}, {0, 1, 1}, inside, 8);
-        b.AddQuad("west", mirror, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 8);
-        b.AddQuad("east", white, {2, 0, 0}, {2, 0, 1}, {2, 1, 1}, {2, 1, 0}, inside, 8);
+        AddLongRoom(b, floor, mirror, white);
         b.AddQuad("lamp", lamp, {0.2f, 0.99f, 0.2f}, {0.8f, 0.99f, 0.2f}, {0.8f, 0.99f, 0.8f},
                   {0.2f, 0.99f, 0.8f}, {0.5f, 0, 0.5f});
         return b.Build();
@@ -579,13 +585,7 @@ TEST(Lightfield, ASpotsGlossyReflectionAgainstTheReference) {
     SceneBuilder b;
     uint32_t white = b.AddMaterial("white", glm::vec3(0.6f));
     uint32_t metal = b.AddPbrMaterial("floor", glm::vec3(0.9f), 1.0f, 0.6f);
-    const glm::vec3 inside(1.0f, 0.5f, 0.5f);
-    b.AddQuad("floor", metal, {0, 0, 0}, {2, 0, 0}, {2, 0, 1}, {0, 0, 1}, inside, 8);
-    b.AddQuad("ceiling", white, {0, 1, 0}, {2, 1, 0}, {2, 1, 1}, {0, 1, 1}, inside, 8);
-    b.AddQuad("south", white, {0, 0, 0}, {2, 0, 0}, {2, 1, 0}, {0, 1, 0}, inside, 8);
-    b.AddQuad("north", white, {0, 0, 1}, {2, 0, 1}, {2, 1, 1}, {0, 1, 1}, inside, 8);
-    b.AddQuad("west", white, {0, 0, 0}, {0, 0, 1}, {0, 1, 1}, {0, 1, 0}, inside, 8);
-    b.AddQuad("east", white, {2, 0, 0}, {2, 0, 1}, {2, 1, 1}, {2, 1, 0}, inside, 8);
+    AddLongRoom(b, metal, white, white);
     b.AddLight(
         testing::MakeLight("spot", LightType::kSpot, {1.0f, 0.95f, 0.5f}, {0, -1, 0}, 2.0f, 0.4f));
     const Scene scene = b.Build();

@@ -151,7 +151,8 @@ void VulkanWalk::Walk(size_t index, const LineBatch& b, float cellArea,
             skyUp[k] = glm::vec4(sky->Radiance(-b.directions[k]), 0.0f);  // travel along +d
             skyUp[d + k] = glm::vec4(sky->Radiance(b.directions[k]), 0.0f);
         }
-    s.sky = MakeBuffer(s.ctx, columns * sizeof(glm::vec4));
+    if (!s.sky || s.sky->Bytes() < columns * sizeof(glm::vec4))
+        s.sky = MakeBuffer(s.ctx, columns * sizeof(glm::vec4));
     s.sky->Upload(skyUp);
     const bool gloss = glossy && glossy->slots > 0;
     const size_t glossyTexels = gloss ? glossy->slots * columns : 1;
