@@ -40,19 +40,25 @@ std::vector<std::string> Split(const std::string& s) {
 
 int main(int argc, char** argv) {
     CLI::App app{"Stability and accuracy of the solver on cluttered scenes"};
-    std::string out, devices = "cpu", scenes, scheme = "adaptive";
+    std::string out, devices = "cpu", scenes, scheme = "adaptive", solverName = "antiradiance";
     int iterations = 500, samples = 2048, bins = 128;
     float elementSize = 0.0f;
-    app.add_option("--out", out, "folder for stability.json (none: print only)");
+    app.add_option("--out", out,
+                   "folder for stability.json, or stability-SOLVER.json for another solver "
+                   "(none: print only)");
+    app.add_option("--solver", solverName, "antiradiance, implicit or lightfield")
+        ->capture_default_str();
     app.add_option("--devices", devices, "comma-separated: cpu, lavapipe, gpu")
         ->capture_default_str();
     app.add_option("--scenes", scenes, "comma-separated scene names (default: the whole suite)");
-    app.add_option("--scheme", scheme, "adaptive, symmetric or asymmetric")->capture_default_str();
+    app.add_option("--scheme", scheme, "adaptive, symmetric or asymmetric (antiradiance)")
+        ->capture_default_str();
     app.add_option("--iterations", iterations, "iterations (bounces) per scene (>= 101)")
         ->capture_default_str();
     app.add_option("--samples", samples, "reference samples per vertex (0: no reference)")
         ->capture_default_str();
-    app.add_option("--bins", bins, "direction bins")->capture_default_str();
+    app.add_option("--bins", bins, "direction bins (antiradiance, implicit)")
+        ->capture_default_str();
     app.add_option("--element-size", elementSize, "metres (0: the scene's default)");
     CLI11_PARSE(app, argc, argv);
     if (iterations < 101) {
@@ -63,11 +69,10 @@ int main(int argc, char** argv) {
 
     nlohmann::json report;
     report["machine"] = {{"cpu", bench::CpuModel()}};
-    report["settings"] = {{"iterations", iterations},
-                          {"bins", bins},
-                          {"scheme", scheme},
-                          {"reference_samples", samples},
-                          {"element_size", elementSize}};
+    const bool antiradiance = solverName == "antiradiance";
+    report["settings"] = {
+        {"solver", solverName}, {"iterations", iterations},     {"bins", bins},
+        {"scheme", scheme},     {"reference_samples", samples}, {"element_size", elementSize}};
     std::printf(
         "| scene | device | elements | links | max |E| / bound | change last 100 | passes "
         "| AR steps (last) | ms/pass | rel. RMSE |\n|---|---|---|---|---|---|---|---|---|---|\n");
@@ -80,12 +85,17 @@ int main(int argc, char** argv) {
             samples > 0 ? bench::Reference(scene, samples) : IrradianceFile{};
         for (const std::string& device : Split(devices)) {
             SolverSettings settings;
+            settings.solver = solverName;
             settings.device = ParseDevice(device);
-            SetOption(settings.options, "scheme", scheme);
-            SetOption(settings.options, "bins", bins);
+            if (antiradiance) SetOption(settings.options, "scheme", scheme);
+            if (antiradiance || solverName == "implicit") SetOption(settings.options, "bins", bins);
             settings.elementSize = elementSize;
             auto solver = CreateSolver(scene, settings);
-            const float bound = solver->Stats().irradianceBound;
+            // The solver's own bound where it states one (antiradiance: the furnace bound with
+            // its lights, sky and gloss), else the scene's furnace bound (emitters only: the
+            // clutter scenes have no other light).
+            float bound = solver->Stats().irradianceBound;
+            if (!(bound > 0.0f) || !std::isfinite(bound)) bound = scenes::FurnaceBound(scene);
             float largest = 0.0f;
             std::vector<glm::vec3> before;
             auto start = Clock::now();
@@ -138,6 +148,8 @@ int main(int argc, char** argv) {
             report["runs"].push_back(row);
         }
     }
-    if (!out.empty()) bench::WriteReport(report, out, "stability.json");
+    if (!out.empty())
+        bench::WriteReport(report, out,
+                           antiradiance ? "stability.json" : "stability-" + solverName + ".json");
     return 0;
 }

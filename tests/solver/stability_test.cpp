@@ -6,6 +6,9 @@
 // catches it.
 #include <gtest/gtest.h>
 
+#include <cctype>
+#include <string>
+
 #include "clutter_scenes.h"
 #include "solver/stability_util.h"
 #include "test_util.h"
@@ -16,10 +19,26 @@ namespace {
 using testing::ClutterSettings;
 using testing::ExpectConverges;
 
-TEST(Stability, ClutterScenesConvergeWithinTheirFurnaceBoundsOnTheCpu) {
-    for (auto& entry : scenes::ClutterSuite())
-        ExpectConverges(entry.name, entry.builder.Build(), DeviceChoice::kCpu);
+// One test a scene, so that ctest spreads the suite over the cores.
+class ClutterScene : public ::testing::TestWithParam<int> {};
+
+TEST_P(ClutterScene, ConvergesWithinItsFurnaceBoundOnTheCpu) {
+    const auto suite = scenes::ClutterSuite();
+    const auto& entry = suite.at(size_t(GetParam()));
+    ExpectConverges(entry.name, entry.builder.Build(), DeviceChoice::kCpu);
 }
+
+// "box-row-10-2cm.gltf" → "box_row_10_2cm": gtest names take letters, digits and '_'.
+std::string SceneName(const ::testing::TestParamInfo<int>& info) {
+    std::string name = scenes::ClutterSuite().at(size_t(info.param)).name;
+    name = name.substr(0, name.find('.'));
+    for (char& c : name)
+        if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+    return name;
+}
+
+INSTANTIATE_TEST_SUITE_P(Stability, ClutterScene,
+                         ::testing::Range(0, int(scenes::ClutterSuite().size())), SceneName);
 
 // The paper's symmetric scheme diverges on a row of ten boxes 2 cm apart (the operator's
 // dominant eigenvalue is negative and past −1, docs/SOLVER.md "Stability"): the guard stops

@@ -65,9 +65,9 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
     opposite_.resize(dirs_.Count());
     for (int b = 0; b < dirs_.Count(); ++b) opposite_[b] = dirs_.Lookup(-dirs_.Direction(b));
     sky_.Update(scene.environment, dirs_, environment_);
-    const size_t leaves = hierarchy_.leaves.size();
-    gathered_.assign(leaves, glm::vec3(0.0f));
-    direct_.assign(leaves, glm::vec3(0.0f));
+    std::vector<uint32_t> order;
+    for (uint32_t node : hierarchy_.leaves) order.push_back(hierarchy_.nodes[node].surfel);
+    light_.Reset(std::move(order));
     ReadMaterials(scene);
     if (!scene.lights.empty()) {
         if (progress) progress("shadow maps", 0.0);
@@ -78,53 +78,20 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
     }
     if (progress) progress("linking", 0.0);
     Relink();
-    Reradiate();
+    light_.Reradiate();
     setupSeconds_ = std::chrono::duration<double>(Clock::now() - start).count();
 }
 
 std::vector<direct::GpuReceiver> ImplicitSolver::LeafReceivers() const {
-    std::vector<uint32_t> order;
-    for (uint32_t node : hierarchy_.leaves) order.push_back(hierarchy_.nodes[node].surfel);
-    return direct::MakeReceivers(surfels_, order);
+    return direct::MakeReceivers(surfels_, light_.surfel);
 }
 
-void ImplicitSolver::CopyDirect() {
-    const std::vector<float> e = directStage_->Irradiance();
-    for (size_t i = 0; i < direct_.size(); ++i)
-        direct_[i] = glm::vec3(e[i * 4], e[i * 4 + 1], e[i * 4 + 2]);
-}
+void ImplicitSolver::CopyDirect() { light_.CopyDirect(directStage_->Irradiance()); }
 
 void ImplicitSolver::ReadMaterials(const Scene& scene) {
-    PENUMBRA_CHECK_EQ(scene.primitives.size(), surfels_.firstSurfel.size());
     materials_ = scene.materials;
-    for (size_t p = 0; p < scene.primitives.size(); ++p)
-        for (size_t s = surfels_.firstSurfel[p]; s < surfels_.End(p); ++s)
-            surfels_.materials[s] = scene.primitives[p].material;
-    Rematerial();
-}
-
-void ImplicitSolver::Rematerial() {
-    const size_t leaves = hierarchy_.leaves.size();
-    albedo_.resize(leaves);
-    emission_.resize(leaves);
-    for (size_t i = 0; i < leaves; ++i) {
-        const uint32_t s = hierarchy_.nodes[hierarchy_.leaves[i]].surfel;
-        const Material& m = materials_[surfels_.materials[s]];
-        albedo_[i] = surfels_.Albedo(m, s);
-        // With a first shot from outside (SetEmitterDirect) the emitters' light is not carried.
-        emission_[i] = emitterDirect_.empty() ? surfels_.Emission(m, s) : glm::vec3(0.0f);
-    }
-    Reradiate();
-}
-
-void ImplicitSolver::Reradiate() {
-    const float invPi = 1.0f / std::numbers::pi_v<float>;
-    radiance_.resize(gathered_.size());
-    for (size_t i = 0; i < radiance_.size(); ++i) {
-        glm::vec3 arriving = gathered_[i] + direct_[i];
-        if (!emitterDirect_.empty()) arriving += emitterDirect_[i];
-        radiance_[i] = emission_[i] + albedo_[i] * invPi * arriving;
-    }
+    AssignSurfelMaterials(scene, surfels_);
+    light_.Rematerial(surfels_, materials_);
 }
 
 void ImplicitSolver::Relink() {
@@ -152,7 +119,7 @@ void ImplicitSolver::ExitantTables() {
     tbb::parallel_for(size_t(0), hierarchy_.leaves.size(), [&](size_t i) {
         const HierarchyNode& n = hierarchy_.nodes[hierarchy_.leaves[i]];
         glm::vec3* row = intensity_.data() + size_t(hierarchy_.leaves[i]) * bins;
-        const glm::vec3 sent = n.area * radiance_[i];
+        const glm::vec3 sent = n.area * light_.radiance[i];
         for (size_t b = 0; b < bins; ++b)
             row[b] = std::max(0.0f, glm::dot(n.normal, dirs_.Direction(uint32_t(b)))) * sent;
     });
@@ -160,7 +127,8 @@ void ImplicitSolver::ExitantTables() {
     // Mean radiance per node, area-weighted: Σ A L up the tree, then over Σ A.
     mean_.assign(hierarchy_.size(), glm::vec3(0.0f));
     for (size_t i = 0; i < hierarchy_.leaves.size(); ++i)
-        mean_[hierarchy_.leaves[i]] = hierarchy_.nodes[hierarchy_.leaves[i]].area * radiance_[i];
+        mean_[hierarchy_.leaves[i]] =
+            hierarchy_.nodes[hierarchy_.leaves[i]].area * light_.radiance[i];
     PullRows(hierarchy_, 1, mean_);
     for (size_t n = 0; n < mean_.size(); ++n)
         mean_[n] =
@@ -194,11 +162,11 @@ void ImplicitSolver::Bounce() {
                     }
                     e += links_.weight[k] * l;
                 }
-                gathered_[i] = e;
+                light_.gathered[i] = e;
             }
         });
-    Reradiate();
-    for (const glm::vec3& l : radiance_)
+    light_.Reradiate();
+    for (const glm::vec3& l : light_.radiance)
         if (divergence_.empty() && !Finite(l))
             divergence_ = "diverged at iteration " + std::to_string(iterations_ + 1) +
                           ": a leaf's light is not finite";
@@ -218,16 +186,7 @@ void ImplicitSolver::Iterate(int n) {
 }
 
 std::vector<glm::vec3> ImplicitSolver::SurfelIrradiance(Channel channel) {
-    std::vector<glm::vec3> out(surfels_.size(), glm::vec3(0.0f));
-    for (size_t i = 0; i < hierarchy_.leaves.size(); ++i) {
-        glm::vec3 indirect = gathered_[i];
-        if (!emitterDirect_.empty()) indirect += emitterDirect_[i];
-        glm::vec3 e = channel == Channel::kDirect  ? direct_[i]
-                      : channel == Channel::kTotal ? indirect + direct_[i]
-                                                   : indirect;
-        out[hierarchy_.nodes[hierarchy_.leaves[i]].surfel] = e;
-    }
-    return out;
+    return light_.SurfelIrradiance(channel, surfels_.size());
 }
 
 void ImplicitSolver::UpdateMaterials(const Scene& scene) { ReadMaterials(scene); }
@@ -236,7 +195,7 @@ void ImplicitSolver::UpdateLights(const Scene& scene) {
     sky_.Update(scene.environment, dirs_, environment_);
     if (!direct::UpdateDirectStage(directStage_.get(), lights_, scene)) return;
     CopyDirect();
-    Reradiate();  // the radiance leaving, with the new direct light
+    light_.Reradiate();  // the radiance leaving, with the new direct light
 }
 
 std::string ImplicitSolver::Mismatch(const Scene& scene, Surfels& now) const {
@@ -259,7 +218,7 @@ std::string ImplicitSolver::UpdateGeometry(const Scene& scene) {
     if (directStage_) {
         directStage_->Move(scene, LeafReceivers());
         CopyDirect();
-        Reradiate();
+        light_.Reradiate();
     }
     Relink();
     ++geometryUpdates_;
@@ -269,13 +228,8 @@ std::string ImplicitSolver::UpdateGeometry(const Scene& scene) {
 }
 
 void ImplicitSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) {
-    if (!perSurfel.empty() && perSurfel.size() != surfels_.size())
-        throw Error("emitter direct light for " + std::to_string(perSurfel.size()) +
-                    " surfels; the solver has " + std::to_string(surfels_.size()));
-    emitterDirect_.clear();
-    for (uint32_t node : hierarchy_.leaves)
-        if (!perSurfel.empty()) emitterDirect_.push_back(perSurfel[hierarchy_.nodes[node].surfel]);
-    Rematerial();
+    light_.SetEmitterDirect(perSurfel, surfels_.size());
+    light_.Rematerial(surfels_, materials_);
 }
 
 std::string ImplicitSolver::WarmStart(Solver& previous, const SurfelCarry& carry) {
@@ -292,8 +246,8 @@ std::string ImplicitSolver::WarmStart(Solver& previous, const SurfelCarry& carry
         const auto it = std::lower_bound(before->hierarchy_.leaves.begin(),
                                          before->hierarchy_.leaves.end(), old);
         const size_t j = size_t(it - before->hierarchy_.leaves.begin());
-        gathered_[i] = before->gathered_[j];
-        radiance_[i] = before->radiance_[j];
+        light_.gathered[i] = before->light_.gathered[j];
+        light_.radiance[i] = before->light_.radiance[j];
         ++kept;
     }
     return "warm start for " + std::to_string(kept) + " of " + std::to_string(surfels_.size()) +

@@ -24,6 +24,7 @@
 #include "hierarchy/hierarchy.h"
 #include "solver/implicit/implicit_links.h"
 #include "solver/implicit/settings.h"
+#include "solver/receiver_light.h"
 #include "solver/solver.h"
 
 namespace penumbra {
@@ -56,11 +57,9 @@ class ImplicitSolver : public Solver {
     std::string Mismatch(const Scene& scene, Surfels& now) const;
     void Relink();  // refit, links, projected areas
     void Bounce();  // one gather over the links and the pull of the new light
-    void ReadMaterials(const Scene& scene);  // the scene's materials, then Rematerial
-    void Rematerial();                       // albedo and emission per leaf, then Reradiate
-    void Reradiate();      // the light leaving each leaf from the light arriving there now
-    void CopyDirect();     // E_d per leaf from the direct stage
-    void ExitantTables();  // I and P per node and bin from the leaves' radiance
+    void ReadMaterials(const Scene& scene);  // the scene's materials, then the leaves' light
+    void CopyDirect();                       // E_d per leaf from the direct stage
+    void ExitantTables();                    // I and P per node and bin from the leaves' radiance
     std::vector<direct::GpuReceiver> LeafReceivers() const;
 
     SolverSettings settings_;
@@ -73,9 +72,7 @@ class ImplicitSolver : public Solver {
     std::vector<uint32_t> opposite_;  // per bin: the bin of the opposite direction
     ImplicitLinker linker_;
     ImplicitLinks links_;
-    // Per leaf (hierarchy leaf order): albedo, emission carried, irradiance gathered, the
-    // punctual lights' E_d, the gather stage's first shot (empty: none), radiance leaving.
-    std::vector<glm::vec3> albedo_, emission_, gathered_, direct_, emitterDirect_, radiance_;
+    ReceiverLight light_;  // per leaf, in hierarchy leaf order
     std::vector<Material> materials_;
     // Per node and bin: exitant intensity (RGB, ExitantTables) and front-facing projected
     // area (Relink).

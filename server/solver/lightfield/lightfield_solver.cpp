@@ -75,9 +75,10 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
     base_ = HemisphereDirections(own.directions);
     sky_.Binned(scene.environment);
     const size_t n = surfels_.size();
-    gathered_.assign(n, glm::vec3(0.0f));
+    std::vector<uint32_t> order(n);
+    std::iota(order.begin(), order.end(), 0u);
+    light_.Reset(std::move(order));
     coverage_.assign(n, 0.0f);
-    direct_.assign(n, glm::vec3(0.0f));
     if (!scene.lights.empty()) {
         if (progress) progress("shadow maps", 0.0);
         mapSize_ = direct::MapSize(settings.shadowMapSize, scene.Diameter(), h);
@@ -92,15 +93,11 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
 LightfieldSolver::~LightfieldSolver() = default;
 
 std::vector<direct::GpuReceiver> LightfieldSolver::Receivers() const {
-    std::vector<uint32_t> order(surfels_.size());
-    std::iota(order.begin(), order.end(), 0u);
-    return direct::MakeReceivers(surfels_, order);
+    return direct::MakeReceivers(surfels_, light_.surfel);
 }
 
 void LightfieldSolver::CopyDirect() {
-    const std::vector<float> e = directStage_->Irradiance();
-    for (size_t i = 0; i < direct_.size(); ++i)
-        direct_[i] = glm::vec3(e[i * 4], e[i * 4 + 1], e[i * 4 + 2]);
+    light_.CopyDirect(directStage_->Irradiance());
     perLight_ = directStage_->PerLight();
     for (size_t b = 0; b < batches_.size(); ++b) {
         PreparePunctual(b);
@@ -206,27 +203,13 @@ void LightfieldSolver::PrepareLobes(size_t b) {
 
 void LightfieldSolver::Rematerial() {
     ReadGlossy();
-    const size_t n = surfels_.size();
-    albedo_.resize(n);
-    emission_.resize(n);
-    for (size_t s = 0; s < n; ++s) {
-        const Material& m = scene_.materials[surfels_.materials[s]];
-        albedo_[s] = surfels_.Albedo(m, s);
-        // With a first shot from outside (SetEmitterDirect) the emitters' light is not carried.
-        emission_[s] = emitterDirect_.empty() ? surfels_.Emission(m, s) : glm::vec3(0.0f);
-    }
-    Reradiate();
+    light_.Rematerial(surfels_, scene_.materials);
+    stale_ = true;
 }
 
 void LightfieldSolver::Reradiate() {
     stale_ = true;  // the next iteration walks every kept batch
-    const float invPi = 1.0f / std::numbers::pi_v<float>;
-    radiance_.resize(gathered_.size());
-    for (size_t i = 0; i < radiance_.size(); ++i) {
-        glm::vec3 arriving = gathered_[i] + direct_[i];
-        if (!emitterDirect_.empty()) arriving += emitterDirect_[i];
-        radiance_[i] = emission_[i] + albedo_[i] * invPi * arriving;
-    }
+    light_.Reradiate();
 }
 
 void LightfieldSolver::Bounce(bool newestOnly) {
@@ -248,11 +231,12 @@ void LightfieldSolver::Bounce(bool newestOnly) {
     // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled (lines.h).
     const float pi = std::numbers::pi_v<float>;
     for (size_t s = 0; s < weighted_.size(); ++s)
-        gathered_[s] = coverage_[s] > 0.0f ? (pi / coverage_[s]) * weighted_[s] : glm::vec3(0.0f);
+        light_.gathered[s] =
+            coverage_[s] > 0.0f ? (pi / coverage_[s]) * weighted_[s] : glm::vec3(0.0f);
     Reradiate();
     msLastWalk_ = MsSince(t);
     msWalk_ += msLastWalk_;
-    for (const glm::vec3& l : radiance_)
+    for (const glm::vec3& l : light_.radiance)
         if (divergence_.empty() && !Finite(l))
             divergence_ = "diverged at iteration " + std::to_string(iterations_ + 1) +
                           ": a surfel's light is not finite";
@@ -260,9 +244,10 @@ void LightfieldSolver::Bounce(bool newestOnly) {
 
 void LightfieldSolver::Walk(size_t b, const Environment* sky, const GlossyLines* glossy) {
     if (vulkanWalk_)
-        vulkanWalk_->Walk(b, batches_[b], grid_.CellArea(), radiance_, sky, weighted_, glossy);
+        vulkanWalk_->Walk(b, batches_[b], grid_.CellArea(), light_.radiance, sky, weighted_,
+                          glossy);
     else
-        WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), radiance_, sky, weighted_,
+        WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), light_.radiance, sky, weighted_,
                   glossy);
 }
 
@@ -298,25 +283,15 @@ void LightfieldSolver::Iterate(int n) {
 }
 
 std::vector<glm::vec3> LightfieldSolver::SurfelIrradiance(Channel channel) {
-    std::vector<glm::vec3> out(surfels_.size());
-    for (size_t s = 0; s < out.size(); ++s) {
-        glm::vec3 indirect = gathered_[s];
-        if (!emitterDirect_.empty()) indirect += emitterDirect_[s];
-        out[s] = channel == Channel::kDirect  ? direct_[s]
-                 : channel == Channel::kTotal ? indirect + direct_[s]
-                                              : indirect;
-    }
-    return out;
+    return light_.SurfelIrradiance(channel, surfels_.size());
 }
 
 void LightfieldSolver::UpdateMaterials(const Scene& scene) {
     PENUMBRA_CHECK_EQ(scene.primitives.size(), surfels_.firstSurfel.size());
     scene_.materials = scene.materials;
-    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+    for (size_t p = 0; p < scene.primitives.size(); ++p)
         scene_.primitives[p].material = scene.primitives[p].material;
-        for (size_t s = surfels_.firstSurfel[p]; s < surfels_.End(p); ++s)
-            surfels_.materials[s] = scene.primitives[p].material;
-    }
+    AssignSurfelMaterials(scene, surfels_);
     Rematerial();
 }
 
@@ -393,10 +368,7 @@ std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
 }
 
 void LightfieldSolver::SetEmitterDirect(const std::vector<glm::vec3>& perSurfel) {
-    if (!perSurfel.empty() && perSurfel.size() != surfels_.size())
-        throw Error("emitter direct light for " + std::to_string(perSurfel.size()) +
-                    " surfels; the solver has " + std::to_string(surfels_.size()));
-    emitterDirect_ = perSurfel;
+    light_.SetEmitterDirect(perSurfel, surfels_.size());
     Rematerial();
 }
 
@@ -407,7 +379,7 @@ std::string LightfieldSolver::WarmStart(Solver& previous, const SurfelCarry& car
     size_t kept = 0;
     for (size_t s = 0; s < surfels_.size(); ++s) {
         if (carry.from[s] == SurfelCarry::kNone) continue;
-        gathered_[s] = before->gathered_[size_t(carry.from[s])];
+        light_.gathered[s] = before->light_.gathered[size_t(carry.from[s])];
         ++kept;
     }
     Reradiate();

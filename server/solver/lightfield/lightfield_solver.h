@@ -22,6 +22,7 @@
 #include "solver/lightfield/settings.h"
 #include "solver/lightfield/vulkan_lines.h"
 #include "solver/lightfield/vulkan_walk.h"
+#include "solver/receiver_light.h"
 #include "solver/solver.h"
 
 namespace penumbra {
@@ -105,10 +106,8 @@ class LightfieldSolver : public Solver {
     std::vector<float> perLight_;  // the direct stage's E_d per light and surfel (stride 4)
     std::vector<std::vector<LobeTable>> lobes_;
     std::vector<std::vector<uint32_t>> lobeOf_;
-    bool stale_ = true;  // the light changed since the last walk of every batch
-    // Per surfel: albedo, emission carried, irradiance gathered, the punctual lights' E_d,
-    // the gather stage's first shot (empty: none), radiance leaving.
-    std::vector<glm::vec3> albedo_, emission_, gathered_, direct_, emitterDirect_, radiance_;
+    bool stale_ = true;    // the light changed since the last walk of every batch
+    ReceiverLight light_;  // per surfel, in surfel order
     std::unique_ptr<direct::DirectStage> directStage_;
     direct::SkyBins sky_;  // the sky the walks read (only its Last() is used)
     int lights_ = 0, mapSize_ = 0;
