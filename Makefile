@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check check-asan fuzz bench bench-service bench-direct bench-glossy bench-stability bench-soak bench-lightfield accuracy images format clean
+.PHONY: all deps build demo check check-asan fuzz bench bench-service bench-direct bench-glossy bench-stability bench-soak bench-lightfield bench-implicit accuracy images format clean
 
 all: build
 
@@ -44,6 +44,9 @@ bench-service: build
 
 bench-lightfield: build
 	$(BUILD)/bench/penumbra-bench-lightfield --out bench/results
+
+bench-implicit: build
+	$(BUILD)/bench/penumbra-bench-implicit --out bench/results
 
 bench-direct: build
 	$(BUILD)/bench/penumbra-bench-direct --out bench/results
