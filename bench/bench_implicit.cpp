@@ -104,9 +104,10 @@ int main(int argc, char** argv) {
         solver->Iterate(1);             // illumination: one bounce
         frameMs.push_back(Ms(frameStart));
         const SolverStats s = solver->Stats();
-        for (const auto& [name, ms] : s.passes) split[name].push_back(ms);
-        for (const auto& [name, ms] : s.passes)
+        for (const auto& [name, ms] : s.passes) {
+            split[name].push_back(ms);
             if (name == "create" && ms > 0.0) linksPerSecond.push_back(double(s.links) / ms * 1e3);
+        }
     }
     const SolverStats s = solver->Stats();
 

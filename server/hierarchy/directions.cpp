@@ -98,7 +98,7 @@ Directions::Directions(int count) : count_(count) {
     adjacent_.resize(count);
     for (int i = 0; i < count; ++i)
         for (int j = 0; j < count; ++j)
-            if (i != j && AngleBetween(dirs_[i], dirs_[j]) < 2.0f * spacing_)
+            if (i != j && AngleBetween(dirs_[i], dirs_[j]) < AdjacentAngle())
                 adjacent_[i].push_back(j);
 
     // Cube-map table, brute force at build time (≤ 6·64²·1024 dot products).

@@ -43,6 +43,9 @@ class Directions {
 
     // Nearest bin centre to unit direction `d`.
     uint32_t Lookup(const glm::vec3& d) const;
+    // The other bins within AdjacentAngle() of bin `bin`'s direction, in bin order.
+    std::span<const uint32_t> Adjacent(uint32_t bin) const { return adjacent_[bin]; }
+    float AdjacentAngle() const { return 2.0f * spacing_; }
     // Nearest bin to `d` among those with dot(ω_b, a) > 0 and dot(ω_b, b) > 0 (a zero
     // vector imposes nothing), searched around the nearest bin; the nearest bin if none.
     uint32_t LookupWithin(const glm::vec3& d, const glm::vec3& a, const glm::vec3& b) const;

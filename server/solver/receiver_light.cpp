@@ -15,6 +15,7 @@ void ReceiverLight::Reset(std::vector<uint32_t> order) {
     radiance.assign(n, glm::vec3(0.0f));
     albedo.assign(n, glm::vec3(0.0f));
     emission.assign(n, glm::vec3(0.0f));
+    emitterDirect.clear();
 }
 
 void ReceiverLight::Rematerial(const Surfels& surfels, const std::vector<Material>& materials) {

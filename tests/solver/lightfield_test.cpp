@@ -568,11 +568,7 @@ TEST(Lightfield, MirrorAndGlossyFloorAgainstTheReference) {
     const Scene scene = room(true);
     ReferenceSettings rs;
     rs.samples = 1024;
-    const IrradianceFile truth = ToIrradianceFile(scene, [&] {
-        IrradianceResult r;
-        r.primitives = RenderReference(scene, rs).irradiance;
-        return r;
-    }());
+    const IrradianceFile truth = ReferenceFile(scene, rs);
     double errors[2];
     for (int lobes = 1; lobes >= 0; --lobes) {
         const Scene solved = room(lobes == 1);
@@ -606,11 +602,7 @@ TEST(Lightfield, ASpotsGlossyReflectionAgainstTheReference) {
     const Scene scene = b.Build();
     ReferenceSettings rs;
     rs.samples = 8192;
-    const IrradianceFile truth = ToIrradianceFile(scene, [&] {
-        IrradianceResult r;
-        r.primitives = RenderReference(scene, rs).irradiance;
-        return r;
-    }());
+    const IrradianceFile truth = ReferenceFile(scene, rs);
     auto solver = CreateSolver(scene, Lightfield(0.1f, 64, 16));
     IterateUntilConverged(*solver, 1e-3, 100);
     const IrradianceFile solved = ToIrradianceFile(scene, CollectIrradiance(scene, *solver));

@@ -60,17 +60,7 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
     if (!(linkThreshold > 0.0f)) throw Error("link threshold must be a positive number");
     // Ends wider than half a bin's spacing are spread over the bins they cover.
     splat_ = std::sin(0.5f * dirs.Spacing());
-    // Four spacings: ~50 bins a list at any count.
-    const float nearAngle = std::min(std::numbers::pi_v<float>, 4.0f * dirs.Spacing());
-    nearCos_ = std::cos(nearAngle);
-    const uint32_t bins = uint32_t(dirs.Count());
-    nearOffsets_.reserve(bins + 1);
-    nearOffsets_.push_back(0);
-    for (uint32_t b = 0; b < bins; ++b) {
-        for (uint32_t o = 0; o < bins; ++o)
-            if (glm::dot(dirs.Direction(b), dirs.Direction(o)) >= nearCos_) near_.push_back(o);
-        nearOffsets_.push_back(uint32_t(near_.size()));
-    }
+    adjacentCos_ = std::cos(dirs.AdjacentAngle());
 }
 
 void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontArea,
@@ -313,14 +303,13 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
         };
         // A bin within the disc (radius r about `dir`) lies within r + θ of the centre bin's
         // direction, θ the angle from `dir` to it: when r + θ stays inside the centre bin's
-        // neighbourhood, its list holds every such bin, in bin order (the same ends, in the
-        // same order, as testing every bin). cos(r + θ) = cos r cos θ − sin r sin θ; the
-        // margin keeps rounding on the side of testing every bin.
+        // adjacency (Directions::Adjacent), that list holds every such bin, in bin order (the
+        // same ends, in the same order, as testing every bin). cos(r + θ) = cos r cos θ −
+        // sin r sin θ; the margin keeps rounding on the side of testing every bin.
         const float cosTheta = std::min(1.0f, glm::dot(dir, dirs_.Direction(centre)));
         const float sinTheta = std::sqrt(std::max(0.0f, 1.0f - cosTheta * cosTheta));
-        if (cosRadius * cosTheta - s * sinTheta >= nearCos_ + 1e-4f) {
-            for (uint32_t k = nearOffsets_[centre]; k < nearOffsets_[centre + 1]; ++k)
-                spread(near_[k]);
+        if (cosRadius * cosTheta - s * sinTheta >= adjacentCos_ + 1e-4f) {
+            for (uint32_t b : dirs_.Adjacent(centre)) spread(b);
         } else {
             for (uint32_t b = 0; b < uint32_t(bins); ++b) spread(b);
         }

@@ -83,12 +83,8 @@ class ImplicitLinker {
                 const glm::vec3& dir, float dist, float omega, std::vector<End>& ends) const;
     const Directions& dirs_;
     float threshold_;
-    float splat_ = 0.0f;  // sin of the angular radius above which an end is spread
-    // Per bin, the bins within nearAngle_ of its direction, in bin order
-    // (near_[nearOffsets_[b] … nearOffsets_[b + 1])): where a spread end's disc lies within
-    // that of the bin its centre falls in, Record tests those instead of every bin.
-    float nearCos_ = -1.0f;
-    std::vector<uint32_t> nearOffsets_, near_;
+    float splat_ = 0.0f;        // sin of the angular radius above which an end is spread
+    float adjacentCos_ = 1.0f;  // cos of Directions::AdjacentAngle()
 };
 
 }  // namespace penumbra
