@@ -84,6 +84,9 @@ SceneInfo ToSceneInfo(const protocol::Message& m) {
                 node.boundsMin = std::array<float, 3>{lo->x(), lo->y(), lo->z()};
                 node.boundsMax = std::array<float, 3>{hi->x(), hi->y(), hi->z()};
             }
+            node.morphTargets = n->morph_targets();
+            if (n->morph_weights())
+                node.morphWeights.assign(n->morph_weights()->begin(), n->morph_weights()->end());
             if (n->primitives())
                 for (const auto* p : *n->primitives())
                     node.primitives.push_back(
@@ -351,6 +354,26 @@ uint64_t Client::SetTransform(const std::string& node, const std::array<float, 1
     std::vector<float> m(matrix.begin(), matrix.end());
     b.Finish(fb::CreateSetTransformDirect(b, scene.c_str(), node.c_str(), &m));
     return impl_->Call(MessageType::kSetTransform, b, MessageType::kEditAck)
+        .As<fb::EditAck>()
+        ->edit_id();
+}
+
+uint64_t Client::SetVertices(const std::string& node, const std::vector<float>& positions,
+                             const std::vector<float>& normals, const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateSetVerticesDirect(b, scene.c_str(), node.c_str(), &positions,
+                                         normals.empty() ? nullptr : &normals));
+    return impl_->Call(MessageType::kSetVertices, b, MessageType::kEditAck)
+        .As<fb::EditAck>()
+        ->edit_id();
+}
+
+uint64_t Client::SetMorphWeights(const std::string& node, const std::vector<float>& weights,
+                                 const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(
+        fb::CreateSetVerticesDirect(b, scene.c_str(), node.c_str(), nullptr, nullptr, &weights));
+    return impl_->Call(MessageType::kSetVertices, b, MessageType::kEditAck)
         .As<fb::EditAck>()
         ->edit_id();
 }

@@ -40,6 +40,8 @@ struct NodeInfo {
     // Motion bounds (world space): moves inside them update links in place; absent: none.
     std::optional<std::array<float, 3>> boundsMin, boundsMax;
     std::vector<PrimitiveInfo> primitives;
+    uint32_t morphTargets = 0;        // its mesh's morph targets (SetMorphWeights)
+    std::vector<float> morphWeights;  // the weights it is posed with now
 };
 struct MaterialInfo {
     std::string name;
@@ -136,6 +138,14 @@ class Client {
     // Edits return their edit id; frames with lastEdit ≥ id include them.
     uint64_t SetTransform(const std::string& node, const std::array<float, 16>& matrix,
                           const std::string& scene = "");
+    // A deformation of a dynamic node's mesh: its vertices in its own space (before its
+    // matrix), its primitives' one after another in NodeInfo::primitives order, xyz each;
+    // `normals` the same or empty (computed from the deformed triangles).
+    uint64_t SetVertices(const std::string& node, const std::vector<float>& positions,
+                         const std::vector<float>& normals = {}, const std::string& scene = "");
+    // The same for a mesh with morph targets: one weight a target (NodeInfo::morphTargets).
+    uint64_t SetMorphWeights(const std::string& node, const std::vector<float>& weights,
+                             const std::string& scene = "");
     // A light edit: absent parts stay as they are. Position, direction, cone and range
     // apply to punctual lights only.
     struct LightChange {

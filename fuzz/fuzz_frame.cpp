@@ -41,6 +41,9 @@ void Read(const protocol::Message& m) {
             case protocol::MessageType::kSetEnvironment:
                 net::ReadSetEnvironment(*m.As<fb::SetEnvironment>());
                 break;
+            case protocol::MessageType::kSetVertices:
+                net::ReadSetVertices(*m.As<fb::SetVertices>());
+                break;
             default:
                 break;
         }

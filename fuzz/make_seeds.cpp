@@ -82,6 +82,18 @@ void Frames(const fs::path& dir) {
     }
     {
         flatbuffers::FlatBufferBuilder b;
+        std::vector<float> p = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+        b.Finish(fb::CreateSetVerticesDirect(b, "s", "blob", &p));
+        add("vertices", protocol::MessageType::kSetVertices, b);
+    }
+    {
+        flatbuffers::FlatBufferBuilder b;
+        std::vector<float> w = {0.25f, 0.75f};
+        b.Finish(fb::CreateSetVerticesDirect(b, "s", "blob", nullptr, nullptr, &w));
+        add("morph", protocol::MessageType::kSetVertices, b);
+    }
+    {
+        flatbuffers::FlatBufferBuilder b;
         b.Finish(fb::CreateStepDirect(b, "s", 3));
         add("step", protocol::MessageType::kStep, b);
     }

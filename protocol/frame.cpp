@@ -56,6 +56,8 @@ const char* MessageName(MessageType type) {
             return "EditAck";
         case MessageType::kSetEnvironment:
             return "SetEnvironment";
+        case MessageType::kSetVertices:
+            return "SetVertices";
         case MessageType::kSubscribe:
             return "Subscribe";
         case MessageType::kUnsubscribe:
@@ -110,6 +112,8 @@ bool VerifyPayload(MessageType type, const uint8_t* data, size_t size) {
             return Verify<fb::EditAck>(data, size);
         case MessageType::kSetEnvironment:
             return Verify<fb::SetEnvironment>(data, size);
+        case MessageType::kSetVertices:
+            return Verify<fb::SetVertices>(data, size);
         case MessageType::kSubscribe:
             return Verify<fb::Subscribe>(data, size);
         case MessageType::kUnsubscribe:

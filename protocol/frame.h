@@ -42,6 +42,7 @@ enum class MessageType : uint16_t {
     kSetMaterial = 22,
     kEditAck = 23,
     kSetEnvironment = 24,
+    kSetVertices = 25,
     kSubscribe = 30,
     kUnsubscribe = 31,
     kGetIrradiance = 32,

@@ -1,6 +1,11 @@
 // Geometry of the bundled scenes.
 #include "bundled_scenes.h"
 
+#include <algorithm>
+#include <cmath>
+
+#include "clutter_scenes.h"
+
 namespace penumbra::scenes {
 namespace {
 
@@ -232,12 +237,41 @@ SceneBuilder GlossyBox() {
     return b;
 }
 
+SceneBuilder MorphRoom() {
+    SceneBuilder b;
+    AddClutterRoom(b);
+    const uint32_t clay = b.AddMaterial("clay", {0.75f, 0.45f, 0.35f});
+    const uint32_t grey = b.AddMaterial("plinth", glm::vec3(0.6f));
+    b.AddBox("plinth", grey, {1.0f, 0.1f, 1.0f}, {0.5f, 0.2f, 0.5f}, 20.0f, false);
+    const glm::vec3 centre(1.0f, 0.55f, 1.0f);
+    const float radius = 0.3f;
+    b.AddSphere("blob", clay, centre, radius, 34, 33);
+    b.SetDynamic("blob", centre, {0.4f, 0.2f, 0.4f}, {1.6f, 1.2f, 1.6f});
+    // squash: y × 0.55 about the base (its lowest point stays), x and z × 1.3.
+    const float base = centre.y - radius;
+    b.AddMorphTarget("blob", [&](glm::vec3 p) {
+        const glm::vec3 q(centre.x + 1.3f * (p.x - centre.x), base + 0.55f * (p.y - base),
+                          centre.z + 1.3f * (p.z - centre.z));
+        return q - p;
+    });
+    // ripple: radial, 6 cm × sin 4φ × sin 3θ.
+    b.AddMorphTarget("blob", [&](glm::vec3 p) {
+        const glm::vec3 n = (p - centre) / radius;
+        const float theta = std::acos(std::clamp(n.y, -1.0f, 1.0f));
+        const float phi = std::atan2(n.z, n.x);
+        return 0.06f * std::sin(4.0f * phi) * std::sin(3.0f * theta) * n;
+    });
+    b.AddCamera("camera", {1.9f, 1.3f, 0.15f}, {1.0f, 0.5f, 1.0f}, 1.0f);
+    return b;
+}
+
 std::vector<Bundled> All() {
     return {{"cornell-box.gltf", &CornellBox},
             {"blocker.gltf", [] { return Blocker(true); }},
             {"maze.gltf", &Maze},
             {"office.gltf", &Office},
-            {"glossy-box.gltf", &GlossyBox}};
+            {"glossy-box.gltf", &GlossyBox},
+            {"morph-room.gltf", &MorphRoom}};
 }
 
 }  // namespace penumbra::scenes

@@ -26,6 +26,12 @@ SceneBuilder Office();
 // spot aimed at the cube: most light in the room is reflected directionally (Fig. 15).
 SceneBuilder GlossyBox();
 
+// The clutter suite's 2 m room under its ceiling panel with a morphing "blob" (a sphere of
+// 0.3 m, 1,091 vertices, dynamic) over a low box: its mesh has two morph targets, `squash`
+// (flattened and widened on its base) and `ripple` (a standing wave over its surface),
+// posed over the protocol (SetVertices `weights`, `penumbra deform blob --weights a,b`).
+SceneBuilder MorphRoom();
+
 struct Bundled {
     std::string file;  // name under scenes/
     SceneBuilder (*make)();

@@ -178,6 +178,21 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.move->add_option("--matrix", s.matrix, "16 numbers, column-major: the new local transform")
         ->delimiter(',');
 
+    s.deform = app.add_subcommand(
+        "deform",
+        "Deform a dynamic node's mesh: pose its morph targets (--weights) or give its vertices "
+        "(--vertices)");
+    s.deform->add_option("node", s.node, "node name")->required();
+    auto* weights = s.deform
+                        ->add_option("--weights", s.weights,
+                                     "w1,w2,...: one weight a morph target (`info` lists them)")
+                        ->delimiter(',');
+    s.deform
+        ->add_option("--vertices", s.verticesFile,
+                     "JSON file {\"positions\": [x,y,z,...], \"normals\": [...] (optional)}: "
+                     "the node's vertices in its own space, its primitives' one after another")
+        ->excludes(weights);
+
     s.light = app.add_subcommand(
         "light",
         "Change a light: a punctual light's colour, intensity, placement, cone and range, or an "
@@ -253,16 +268,17 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
             ->capture_default_str();
         s.script->add_flag("-q,--quiet", s.quiet, "do not echo the script's lines");
     }
-    for (CLI::App* c : {s.load, s.info, s.watch, s.move, s.light, s.material, s.sky, s.get, s.step,
-                        s.stats, s.wait})
+    for (CLI::App* c : {s.load, s.info, s.watch, s.move, s.deform, s.light, s.material, s.sky,
+                        s.get, s.step, s.stats, s.wait})
         c->add_flag("-q,--quiet", s.quiet, "print less");
 }
 
 ServiceCommands::~ServiceCommands() = default;
 
 bool ServiceCommands::Parsed() const {
-    for (CLI::App* c : {s_->load, s_->info, s_->watch, s_->move, s_->light, s_->material, s_->sky,
-                        s_->get, s_->step, s_->stats, s_->script, s_->wait, s_->sleep})
+    for (CLI::App* c :
+         {s_->load, s_->info, s_->watch, s_->move, s_->deform, s_->light, s_->material, s_->sky,
+          s_->get, s_->step, s_->stats, s_->script, s_->wait, s_->sleep})
         if (c && c->parsed()) return true;
     return false;
 }
@@ -341,10 +357,11 @@ int ServiceCommands::State::Wait(client::Client& c, uint64_t edit, double timeou
 int ServiceCommands::State::Execute(client::Client& c) {
     using Command = int (State::*)(client::Client&);
     const std::pair<CLI::App*, Command> commands[] = {
-        {load, &State::RunLoad},   {info, &State::RunInfo},   {watch, &State::RunWatch},
-        {move, &State::RunMove},   {light, &State::RunLight}, {material, &State::RunMaterial},
-        {sky, &State::RunSky},     {get, &State::RunGet},     {step, &State::RunStep},
-        {stats, &State::RunStats}, {sleep, &State::RunSleep}, {script, &State::RunScript},
+        {load, &State::RunLoad},         {info, &State::RunInfo},     {watch, &State::RunWatch},
+        {move, &State::RunMove},         {deform, &State::RunDeform}, {light, &State::RunLight},
+        {material, &State::RunMaterial}, {sky, &State::RunSky},       {get, &State::RunGet},
+        {step, &State::RunStep},         {stats, &State::RunStats},   {sleep, &State::RunSleep},
+        {script, &State::RunScript},
     };
     for (const auto& [command, run] : commands)
         if (command && command->parsed()) return (this->*run)(c);

@@ -124,9 +124,15 @@ int ServiceCommands::State::RunInfo(client::Client& c) {
     for (const auto& n : i.nodes) {
         uint32_t vertices = 0;
         for (const auto& p : n.primitives) vertices += p.vertices;
-        std::printf("  node %-20s %zu primitives, %u vertices%s%s\n", n.name.c_str(),
+        std::string morph;
+        if (n.morphTargets > 0) {
+            morph = ", " + std::to_string(n.morphTargets) + " morph targets (weights";
+            for (float w : n.morphWeights) morph += " " + std::to_string(w).substr(0, 6);
+            morph += ")";
+        }
+        std::printf("  node %-20s %zu primitives, %u vertices%s%s%s\n", n.name.c_str(),
                     n.primitives.size(), vertices, n.dynamic ? ", dynamic" : "",
-                    n.emissive ? ", light" : "");
+                    n.emissive ? ", light" : "", morph.c_str());
     }
     for (const auto& l : i.lights)
         std::printf(
@@ -223,6 +229,41 @@ int ServiceCommands::State::RunMove(client::Client& c) {
     }
     lastEdit = c.SetTransform(node, out, session);
     if (!quiet) std::printf("edit %llu: move %s\n", (unsigned long long)lastEdit, node.c_str());
+    return kExitOk;
+}
+
+int ServiceCommands::State::RunDeform(client::Client& c) {
+    if (verticesFile.empty() == weights.empty())
+        throw Error("deform: give --weights (morph targets) or --vertices FILE");
+    if (!weights.empty()) {
+        lastEdit = c.SetMorphWeights(node, weights, session);
+    } else {
+        std::ifstream in(verticesFile);
+        if (!in) throw Error("deform: cannot read " + verticesFile);
+        nlohmann::json j;
+        try {
+            j = nlohmann::json::parse(in);
+        } catch (const std::exception& e) {
+            throw Error("deform: " + verticesFile + " is not JSON: " + e.what());
+        }
+        auto numbers = [&](const char* key) {
+            std::vector<float> out;
+            if (!j.is_object() || !j.contains(key)) return out;
+            if (!j[key].is_array())
+                throw Error("deform: \"" + std::string(key) + "\" must be a list of numbers");
+            for (const auto& x : j[key]) {
+                if (!x.is_number())
+                    throw Error("deform: \"" + std::string(key) + "\" must be a list of numbers");
+                out.push_back(x.get<float>());
+            }
+            return out;
+        };
+        const std::vector<float> positions = numbers("positions");
+        if (positions.empty())
+            throw Error("deform: " + verticesFile + " has no \"positions\" list");
+        lastEdit = c.SetVertices(node, positions, numbers("normals"), session);
+    }
+    if (!quiet) std::printf("edit %llu: deform %s\n", (unsigned long long)lastEdit, node.c_str());
     return kExitOk;
 }
 

@@ -24,7 +24,7 @@ struct ServiceCommands::State {
 
     CLI::App *load = nullptr, *info = nullptr, *watch = nullptr, *move = nullptr, *light = nullptr,
              *material = nullptr, *sky = nullptr, *get = nullptr, *step = nullptr, *stats = nullptr,
-             *script = nullptr, *wait = nullptr, *sleep = nullptr;
+             *script = nullptr, *wait = nullptr, *sleep = nullptr, *deform = nullptr;
 
     client::LoadOptions loadOptions;
     std::string loadPath;
@@ -42,6 +42,8 @@ struct ServiceCommands::State {
     std::string node;
     std::vector<float> translate, matrix, color, albedo, emission, position, direction, cone;
     float rotateY = 0.0f;
+    std::vector<float> weights;  // deform --weights
+    std::string verticesFile;    // deform --vertices
     // Optional, so that a negative value reaches the server and is refused there with why.
     std::optional<float> intensity, range;
     std::optional<float> roughness, metallic;
@@ -62,6 +64,7 @@ struct ServiceCommands::State {
     int RunInfo(client::Client& c);
     int RunWatch(client::Client& c);
     int RunMove(client::Client& c);
+    int RunDeform(client::Client& c);
     int RunLight(client::Client& c);
     int RunMaterial(client::Client& c);
     int RunSky(client::Client& c);

@@ -141,6 +141,37 @@ service::TransformEdit ReadSetTransform(const fb::SetTransform& t) {
     return e;
 }
 
+service::DeformEdit ReadSetVertices(const fb::SetVertices& v) {
+    service::DeformEdit e;
+    e.node = Str(v.node());
+    const bool positions = v.positions() && v.positions()->size() > 0;
+    const bool weights = v.weights() != nullptr;
+    if (positions == weights)
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "SetVertices takes either `positions` or `weights`");
+    if (weights) {
+        e.weights.emplace(v.weights()->begin(), v.weights()->end());
+        if (v.normals() && v.normals()->size() > 0)
+            throw ServiceError(ErrorKind::kInvalidArgument,
+                               "SetVertices: `normals` go with `positions`, not `weights`");
+        return e;
+    }
+    auto read = [](const flatbuffers::Vector<float>& f, const char* what) {
+        if (f.size() % 3 != 0)
+            throw ServiceError(ErrorKind::kInvalidArgument, std::string("SetVertices: `") + what +
+                                                                "` must hold 3 numbers a vertex (" +
+                                                                std::to_string(f.size()) +
+                                                                " is not a multiple of 3)");
+        std::vector<glm::vec3> out(f.size() / 3);
+        for (size_t i = 0; i < out.size(); ++i)
+            out[i] = glm::vec3(f.Get(3 * i), f.Get(3 * i + 1), f.Get(3 * i + 2));
+        return out;
+    };
+    e.positions = read(*v.positions(), "positions");
+    if (v.normals() && v.normals()->size() > 0) e.normals = read(*v.normals(), "normals");
+    return e;
+}
+
 service::LightEdit ReadSetLight(const fb::SetLight& l) {
     service::LightEdit e;
     e.light = Str(l.light());
@@ -200,9 +231,12 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
         for (int i = 0; i < 16; ++i) matrix[i] = n.local[i / 4][i % 4];
         const fb::Vec3 lo(n.boundsMin.x, n.boundsMin.y, n.boundsMin.z),
             hi(n.boundsMax.x, n.boundsMax.y, n.boundsMax.z);
+        const uint32_t targets =
+            static_cast<uint32_t>(NodeMorphTargets(scene, int(&n - &scene.nodes[0])));
         nodes.push_back(fb::CreateNodeInfoDirect(b, n.name.c_str(), n.dynamic, &matrix, &prims,
                                                  emissive, n.hasMotionBounds ? &lo : nullptr,
-                                                 n.hasMotionBounds ? &hi : nullptr));
+                                                 n.hasMotionBounds ? &hi : nullptr, targets,
+                                                 targets ? &n.morphWeights : nullptr));
     }
     std::vector<flatbuffers::Offset<fb::MaterialInfo>> materials;
     for (const auto& m : scene.materials) {

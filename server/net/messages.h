@@ -22,6 +22,7 @@ std::string Str(const flatbuffers::String* s);  // "" for an absent string
 service::LoadRequest ReadLoadScene(const protocol::fb::LoadScene& l,
                                    const service::Service& service);
 service::TransformEdit ReadSetTransform(const protocol::fb::SetTransform& t);
+service::DeformEdit ReadSetVertices(const protocol::fb::SetVertices& v);
 service::LightEdit ReadSetLight(const protocol::fb::SetLight& l);
 service::MaterialEdit ReadSetMaterial(const protocol::fb::SetMaterial& s);
 // A sky edit; a new sky (`path` or `color`) is made later, on the blocking pool

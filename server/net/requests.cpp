@@ -61,6 +61,11 @@ void Connection::Handle(const protocol::Message& m) {
             auto session = SessionOf(t->scene());
             return SendAck(id, session->Submit(ReadSetTransform(*t)));
         }
+        case MessageType::kSetVertices: {
+            const auto* v = m.As<fb::SetVertices>();
+            auto session = SessionOf(v->scene());
+            return SendAck(id, session->Submit(ReadSetVertices(*v)));
+        }
         case MessageType::kSetLight: {
             const auto* l = m.As<fb::SetLight>();
             auto session = SessionOf(l->scene());

@@ -484,6 +484,71 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
     }
 }
 
+// A primitive's morph targets (POSITION and NORMAL displacements, float VEC3 like the
+// attributes; TANGENT is not used). Throws penumbra::Error (through ctx.Fail) for what it
+// cannot read; the caller then ignores the targets.
+void ReadMorphTargets(const Context& ctx, const std::string& where, const tinygltf::Primitive& prim,
+                      Primitive& out) {
+    for (size_t t = 0; t < prim.targets.size(); ++t) {
+        const std::string label = where + " morph target " + std::to_string(t);
+        const auto& target = prim.targets[t];
+        std::vector<glm::vec3> dp(out.positions.size(), glm::vec3(0.0f)), dn;
+        if (auto it = target.find("POSITION"); it != target.end())
+            dp = ReadVec3(ctx, label, it->second, "POSITION");
+        if (auto it = target.find("NORMAL"); it != target.end())
+            dn = ReadVec3(ctx, label, it->second, "NORMAL");
+        if (dp.size() != out.positions.size() || (!dn.empty() && dn.size() != dp.size()))
+            ctx.Fail(label, "has another vertex count than its primitive");
+        for (const auto* list : {&dp, &dn})
+            for (const glm::vec3& v : *list)
+                if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+                    ctx.Fail(label, "has NaN or infinity");
+        out.morphPositions.push_back(std::move(dp));
+        out.morphNormals.push_back(std::move(dn));
+    }
+}
+
+// Poses node `ni`'s mesh at its morph weights (the node's `weights`, else the mesh's, else
+// zeros), once its primitives are read. glTF asks every primitive of a mesh for the same
+// number of targets; a mesh that breaks that keeps its rest pose, with a warning.
+void PoseMorphTargets(const Context& ctx, const std::string& where, const tinygltf::Node& node,
+                      Scene& scene, int ni, std::vector<std::string>& warnings) {
+    const size_t targets = NodeMorphTargets(scene, ni);
+    SceneNode& sn = scene.nodes[ni];
+    bool even = true;
+    for (uint32_t p : sn.primitives)
+        even = even && scene.primitives[p].morphPositions.size() == targets;
+    if (targets == 0 || !even) {
+        for (uint32_t p : sn.primitives) {
+            scene.primitives[p].morphPositions.clear();
+            scene.primitives[p].morphNormals.clear();
+        }
+        if (!even)
+            warnings.push_back(where +
+                               ": its primitives have different numbers of morph "
+                               "targets: they are ignored (rest pose)");
+        return;
+    }
+    const auto& given = !node.weights.empty() ? node.weights : ctx.model.meshes[node.mesh].weights;
+    std::vector<float> weights(targets, 0.0f);
+    if (!given.empty()) {
+        if (given.size() != targets)
+            ctx.Fail(where, "has " + std::to_string(given.size()) + " morph weights for " +
+                                std::to_string(targets) + " targets");
+        for (size_t t = 0; t < targets; ++t) weights[t] = static_cast<float>(given[t]);
+    }
+    sn.morphWeights = weights;
+    bool posed = false;
+    for (float w : weights) posed = posed || w != 0.0f;
+    if (!posed) return;
+    try {
+        SetNodeMorphWeights(scene, ni, weights);
+    } catch (const Error& e) {
+        ctx.Fail(where, e.what());
+    }
+    for (uint32_t p : sn.primitives) scene.primitives[p].shape = 0;  // as loaded
+}
+
 // What LoadGltf read but ignored or approximated, one sentence each (Scene::warnings).
 std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene& scene) {
     std::vector<std::string> out;
@@ -514,12 +579,6 @@ std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene&
     if (!model.skins.empty())
         out.push_back(std::to_string(model.skins.size()) +
                       " skin(s) ignored: skinned meshes are lit in their rest pose");
-    size_t morphed = 0;
-    for (const auto& mesh : model.meshes)
-        for (const auto& prim : mesh.primitives) morphed += prim.targets.empty() ? 0 : 1;
-    if (morphed > 0)
-        out.push_back(std::to_string(morphed) +
-                      " primitive(s) with morph targets: lit in their rest pose (weights ignored)");
     if (!model.animations.empty())
         out.push_back(std::to_string(model.animations.size()) +
                       " animation(s) ignored: nodes keep their rest transforms");
@@ -579,7 +638,7 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
             if (!isChild[i]) roots.push_back(static_cast<int>(i));
     }
 
-    std::vector<std::string> untextured;  // warnings: primitives without the coordinates
+    std::vector<std::string> readNotes;  // warnings: coordinates or targets left out
     std::vector<int> visits(model.nodes.size(), 0);
     scene.nodes.resize(model.nodes.size());
     for (size_t i = 0; i < model.nodes.size(); ++i)
@@ -707,9 +766,9 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
                     const std::string name = "TEXCOORD_" + std::to_string(set);
                     auto uv = prim.attributes.find(name);
                     if (uv == prim.attributes.end()) {
-                        untextured.push_back(where + ": no " + name +
-                                             " for its material's texture: the texture's mean "
-                                             "colour is used over it");
+                        readNotes.push_back(where + ": no " + name +
+                                            " for its material's texture: the texture's mean "
+                                            "colour is used over it");
                         continue;
                     }
                     if (static_cast<int>(out.texcoords.size()) <= set)
@@ -718,6 +777,17 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
                     out.texcoords[set] = ReadTexcoords(ctx, where, uv->second, name);
                     if (out.texcoords[set].size() != out.positions.size())
                         ctx.Fail(where, name + " and POSITION counts differ");
+                }
+                // Morph targets: displacements in the mesh's own space (posed below).
+                if (!prim.targets.empty()) {
+                    try {
+                        ReadMorphTargets(ctx, where, prim, out);
+                    } catch (const Error& e) {
+                        out.morphPositions.clear();
+                        out.morphNormals.clear();
+                        readNotes.push_back(std::string(e.what()) +
+                                            ": its morph targets are ignored (rest pose)");
+                    }
                 }
                 // Keep the mesh-space vertices (moves re-place them), then go to world space.
                 out.objectPositions = out.positions;
@@ -732,13 +802,14 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
                 scene.primitives.push_back(std::move(out));
             }
         }
+        if (node.mesh >= 0) PoseMorphTargets(ctx, NodeLabel(model, ni), node, scene, ni, readNotes);
         for (int c : node.children) visit(c, ni, depth + 1);
     };
     for (int r : roots) visit(r, -1, 0);
 
     if (scene.TriangleCount() == 0) throw Error(path + ": the scene has no triangles to light");
     scene.warnings = IgnoredInput(model, scene);
-    scene.warnings.insert(scene.warnings.end(), untextured.begin(), untextured.end());
+    scene.warnings.insert(scene.warnings.end(), readNotes.begin(), readNotes.end());
     return scene;
 }
 

@@ -59,6 +59,7 @@ std::vector<glm::mat4> SurfelMotion::BuiltFrames() const {
 SurfelMotion AssignMotionGroups(const Scene& scene, Surfels& s) {
     SurfelMotion motion;
     motion.primitiveGroup.assign(scene.primitives.size(), 0);
+    for (const Primitive& p : scene.primitives) motion.primitiveShape.push_back(p.shape);
     std::vector<uint32_t> groupOfNode(scene.nodes.size(), 0);
     for (size_t p = 0; p < scene.primitives.size(); ++p) {
         const int node = scene.primitives[p].nodeIndex;
@@ -102,6 +103,10 @@ std::string MotionMismatch(const SurfelMotion& motion, const Surfels& sf, const 
             continue;
         }
         const MotionGroup& group = motion.groups[g - 1];
+        if (prim.shape != motion.primitiveShape[p])
+            return "node '" + prim.node +
+                   "' changed shape (its vertices were replaced), not "
+                   "only its place";
         if (const char* why = NotRigid(scene.nodes[group.node].world * glm::inverse(group.built)))
             return "node '" + prim.node + "' " + why;
         if (OutsideBounds(scene, {uint32_t(p)}, group.bounds))

@@ -49,6 +49,7 @@ struct MotionGroup {
 struct SurfelMotion {
     std::vector<MotionGroup> groups;
     std::vector<uint32_t> primitiveGroup;  // per primitive: its group (0: static)
+    std::vector<uint32_t> primitiveShape;  // per primitive: Primitive::shape when made
     // Per surfel, as made (the rest pose every placement starts from).
     std::vector<glm::vec3> restPositions, restNormals, restCentroids;
 
@@ -65,7 +66,8 @@ SurfelMotion AssignMotionGroups(const Scene& scene, Surfels& surfels);
 
 // Why `scene` (the scene the surfels were made from, dynamic nodes moved) is not a move the
 // groups can take in place (no groups, other primitives, a static surface moved, a group
-// scaled, sheared, mirrored or outside its bounds); empty when PlaceSurfels can.
+// scaled, sheared, mirrored, deformed (SetNodeVertices) or outside its bounds); empty when
+// PlaceSurfels can.
 std::string MotionMismatch(const SurfelMotion& motion, const Surfels& surfels, const Scene& scene);
 
 // The groups re-placed at their nodes' poses in `scene` (MotionMismatch must be empty).

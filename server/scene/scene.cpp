@@ -241,6 +241,123 @@ void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
     }
 }
 
+size_t NodeVertexCount(const Scene& scene, int node) {
+    if (node < 0 || node >= static_cast<int>(scene.nodes.size())) return 0;
+    size_t n = 0;
+    for (uint32_t p : scene.nodes[node].primitives) n += scene.primitives[p].positions.size();
+    return n;
+}
+
+void SetNodeVertices(Scene& scene, int node, const std::vector<glm::vec3>& positions,
+                     const std::vector<glm::vec3>& normals) {
+    if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
+        throw Error("node index " + std::to_string(node) + " does not exist");
+    const SceneNode& n = scene.nodes[node];
+    const size_t count = NodeVertexCount(scene, node);
+    if (count == 0) throw Error("node '" + n.name + "' has no triangles to deform");
+    if (positions.size() != count)
+        throw Error("node '" + n.name + "' has " + std::to_string(count) + " vertices; " +
+                    std::to_string(positions.size()) + " positions were given");
+    if (!normals.empty() && normals.size() != count)
+        throw Error("node '" + n.name + "' has " + std::to_string(count) + " vertices; " +
+                    std::to_string(normals.size()) + " normals were given (give none or all)");
+    auto finite = [](const glm::vec3& v) {
+        return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+    };
+    for (size_t i = 0; i < count; ++i) {
+        if (!finite(positions[i]))
+            throw Error("position " + std::to_string(i) + " of '" + n.name +
+                        "' has NaN or infinity");
+        if (!normals.empty() && !(finite(normals[i]) && glm::length(normals[i]) > 1e-12f))
+            throw Error("normal " + std::to_string(i) + " of '" + n.name +
+                        "' is zero, NaN or infinite");
+    }
+    const glm::mat4& w = n.world;
+    const glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(w)));
+    // The loader wound a mirrored node's triangles for the world: in its own space their
+    // cross products point inwards.
+    const float winding = glm::determinant(glm::mat3(w)) < 0.0f ? -1.0f : 1.0f;
+    for (const bool apply : {false, true}) {  // every world position checked, then placed
+        size_t at = 0;
+        for (uint32_t pi : n.primitives) {
+            Primitive& p = scene.primitives[pi];
+            const size_t v = p.positions.size();
+            if (!apply) {
+                for (size_t i = 0; i < v; ++i)
+                    if (!finite(glm::vec3(w * glm::vec4(positions[at + i], 1.0f))))
+                        throw Error("position " + std::to_string(at + i) + " of '" + n.name +
+                                    "' overflows to infinity in the world");
+                at += v;
+                continue;
+            }
+            if (p.restPositions.empty()) {
+                p.restPositions = p.objectPositions;
+                p.restNormals = p.objectNormals;
+            }
+            p.objectPositions.assign(positions.begin() + at, positions.begin() + at + v);
+            if (normals.empty()) {
+                Primitive own;  // the deformed triangles' normals, in own space
+                own.positions = p.objectPositions;
+                own.indices = p.indices;
+                ComputeVertexNormals(own);
+                p.objectNormals = std::move(own.normals);
+                for (glm::vec3& m : p.objectNormals) m *= winding;
+            } else {
+                p.objectNormals.assign(normals.begin() + at, normals.begin() + at + v);
+                for (glm::vec3& m : p.objectNormals) m = glm::normalize(m);
+            }
+            for (size_t i = 0; i < v; ++i) {
+                p.positions[i] = glm::vec3(w * glm::vec4(p.objectPositions[i], 1.0f));
+                p.normals[i] = glm::normalize(normalMatrix * p.objectNormals[i]);
+            }
+            ++p.shape;
+            at += v;
+        }
+    }
+}
+
+size_t NodeMorphTargets(const Scene& scene, int node) {
+    if (node < 0 || node >= static_cast<int>(scene.nodes.size())) return 0;
+    const SceneNode& n = scene.nodes[node];
+    return n.primitives.empty() ? 0 : scene.primitives[n.primitives[0]].morphPositions.size();
+}
+
+void SetNodeMorphWeights(Scene& scene, int node, const std::vector<float>& weights) {
+    const size_t targets = NodeMorphTargets(scene, node);
+    if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
+        throw Error("node index " + std::to_string(node) + " does not exist");
+    const SceneNode& n = scene.nodes[node];
+    if (targets == 0) throw Error("node '" + n.name + "' has no morph targets");
+    if (weights.size() != targets)
+        throw Error("node '" + n.name + "' has " + std::to_string(targets) + " morph targets; " +
+                    std::to_string(weights.size()) + " weights were given");
+    for (float x : weights)
+        if (!std::isfinite(x)) throw Error("morph weights must be finite numbers");
+    std::vector<glm::vec3> positions, normals;
+    bool withNormals = true;
+    for (uint32_t pi : n.primitives) {
+        const Primitive& p = scene.primitives[pi];
+        for (const auto& t : p.morphNormals) withNormals = withNormals && !t.empty();
+        withNormals = withNormals && p.morphNormals.size() == targets;
+    }
+    for (uint32_t pi : n.primitives) {
+        const Primitive& p = scene.primitives[pi];
+        const std::vector<glm::vec3>& rest = p.RestPositions();
+        const std::vector<glm::vec3>& restNormals = p.RestNormals();
+        for (size_t i = 0; i < rest.size(); ++i) {
+            glm::vec3 x = rest[i], m = restNormals[i];
+            for (size_t t = 0; t < targets; ++t) {
+                x += weights[t] * p.morphPositions[t][i];
+                if (withNormals) m += weights[t] * p.morphNormals[t][i];
+            }
+            positions.push_back(x);
+            if (withNormals) normals.push_back(glm::length(m) > 1e-12f ? m : restNormals[i]);
+        }
+    }
+    SetNodeVertices(scene, node, positions, withNormals ? normals : std::vector<glm::vec3>{});
+    scene.nodes[node].morphWeights = weights;
+}
+
 namespace {
 
 // Distance from `p` to triangle abc (closest point by Voronoi regions, Ericson 5.1.5).

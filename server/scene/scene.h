@@ -77,6 +77,22 @@ struct Primitive {
     std::vector<glm::vec3> objectNormals;
     // TEXCOORD_n, one per position, for the sets its material's maps read (others empty).
     std::vector<std::vector<glm::vec2>> texcoords;
+    // The rest pose: the own-space vertices and normals as loaded (glTF's base mesh, before
+    // morph weights), kept when a deformation (SetNodeVertices) replaces objectPositions.
+    // The refinement splits by restPositions (scene/surfels.h), so a deformed mesh keeps its
+    // surfels. Empty: objectPositions and objectNormals are the rest pose.
+    std::vector<glm::vec3> restPositions, restNormals;
+    // Morph targets (glTF `targets`): per target, per vertex, the own-space displacement of
+    // POSITION and of NORMAL (a target's NORMAL list is empty when it has none).
+    std::vector<std::vector<glm::vec3>> morphPositions, morphNormals;
+    uint32_t shape = 0;  // deformations taken so far (SetNodeVertices); 0: as loaded
+
+    const std::vector<glm::vec3>& RestPositions() const {
+        return restPositions.empty() ? objectPositions : restPositions;
+    }
+    const std::vector<glm::vec3>& RestNormals() const {
+        return restNormals.empty() ? objectNormals : restNormals;
+    }
 };
 
 // One glTF node: its transform, whether it may move, and the primitives it places.
@@ -92,6 +108,9 @@ struct SceneNode {
     bool hasMotionBounds = false;
     glm::vec3 boundsMin{0.0f}, boundsMax{0.0f};
     std::vector<uint32_t> primitives;  // indices into Scene::primitives
+    // The morph target weights its primitives are posed with (glTF node or mesh `weights`;
+    // SetNodeMorphWeights); empty when its mesh has no targets.
+    std::vector<float> morphWeights;
 };
 
 // A KHR_lights_punctual light placed by a node. Lights shine down the node's −Z axis.
@@ -205,5 +224,25 @@ std::vector<bool> ClosedNodes(const Scene& scene);
 
 // Fills `normals` with area-weighted vertex normals of the triangles.
 void ComputeVertexNormals(Primitive& primitive);
+
+// Deformations (a skinned or morphing mesh driven from outside: protocol/SPEC.md,
+// SetVertices). The vertices of node `node`'s own primitives, one primitive after another
+// in SceneNode::primitives order, each in its input order:
+size_t NodeVertexCount(const Scene& scene, int node);
+// Replaces them with `positions` (own space: the mesh's coordinates before the node's
+// matrix) and `normals` (same layout; empty: area-weighted normals of the deformed
+// triangles), re-placed in the world by the node's matrix. The triangles, the rest pose the
+// refinement splits by, materials and texture coordinates stay. Throws penumbra::Error
+// (the scene unchanged) for a node without triangles, a count other than NodeVertexCount,
+// NaN or infinity, or a zero normal.
+void SetNodeVertices(Scene& scene, int node, const std::vector<glm::vec3>& positions,
+                     const std::vector<glm::vec3>& normals = {});
+// The morph targets of node `node`'s mesh (0: none).
+size_t NodeMorphTargets(const Scene& scene, int node);
+// Poses the node's mesh at morph `weights` (glTF: position = rest + Σ wᵢ·targetᵢ, the same
+// for normals, renormalised; a mesh whose targets carry no normals gets area-weighted ones)
+// through SetNodeVertices. Throws penumbra::Error for a count other than NodeMorphTargets
+// or a weight that is not finite.
+void SetNodeMorphWeights(Scene& scene, int node, const std::vector<float>& weights);
 
 }  // namespace penumbra

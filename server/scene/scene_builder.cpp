@@ -65,6 +65,56 @@ void SceneBuilder::AddQuad(const std::string& node, uint32_t material, glm::vec3
                                                      at(i, j), at(i + 1, j + 1), at(i, j + 1)});
 }
 
+void SceneBuilder::AddSphere(const std::string& node, uint32_t material, glm::vec3 centre,
+                             float radius, int rings, int segments) {
+    PENUMBRA_CHECK_LE(2, rings);
+    PENUMBRA_CHECK_LE(3, segments);
+    if (std::find(nodeOrder_.begin(), nodeOrder_.end(), node) == nodeOrder_.end())
+        nodeOrder_.push_back(node);
+    Part& part = nodes_[node][material];
+    const uint32_t base = static_cast<uint32_t>(part.positions.size());
+    auto add = [&](glm::vec3 n) {
+        part.positions.push_back(centre + radius * n);
+        part.normals.push_back(n);
+    };
+    add({0.0f, 1.0f, 0.0f});  // north pole: base
+    for (int r = 1; r < rings; ++r) {
+        const float theta = float(M_PI) * float(r) / float(rings);
+        for (int s = 0; s < segments; ++s) {
+            const float phi = 2.0f * float(M_PI) * float(s) / float(segments);
+            add({std::sin(theta) * std::cos(phi), std::cos(theta),
+                 std::sin(theta) * std::sin(phi)});
+        }
+    }
+    add({0.0f, -1.0f, 0.0f});  // south pole
+    const uint32_t south = static_cast<uint32_t>(part.positions.size() - 1);
+    auto ring = [&](int r, int s) {
+        return base + 1 + uint32_t((r - 1) * segments + s % segments);
+    };
+    // Wound counter-clockwise seen from outside (normal = (b − a) × (c − a) points out).
+    for (int s = 0; s < segments; ++s) {
+        part.indices.insert(part.indices.end(), {base, ring(1, s + 1), ring(1, s)});
+        part.indices.insert(part.indices.end(),
+                            {south, ring(rings - 1, s), ring(rings - 1, s + 1)});
+    }
+    for (int r = 1; r + 1 < rings; ++r)
+        for (int s = 0; s < segments; ++s)
+            part.indices.insert(part.indices.end(),
+                                {ring(r, s), ring(r, s + 1), ring(r + 1, s + 1), ring(r, s),
+                                 ring(r + 1, s + 1), ring(r + 1, s)});
+}
+
+void SceneBuilder::AddMorphTarget(const std::string& node,
+                                  const std::function<glm::vec3(glm::vec3)>& displacement) {
+    auto it = nodes_.find(node);
+    if (it == nodes_.end() || it->second.size() != 1)
+        throw Error("a morph target needs a node with one material: '" + node + "'");
+    Part& part = it->second.begin()->second;
+    std::vector<glm::vec3> d;
+    for (const glm::vec3& p : part.positions) d.push_back(displacement(p));
+    part.targets.push_back(std::move(d));
+}
+
 void SceneBuilder::AddTiledQuad(const std::string& node, uint32_t material, glm::vec3 origin,
                                 glm::vec3 u, glm::vec3 v, int nu, int nv, glm::vec3 towards) {
     glm::vec3 du = u / float(nu), dv = v / float(nv);
@@ -182,6 +232,9 @@ Scene SceneBuilder::Build() const {
             p.indices = part.indices;
             for (const auto& v : part.positions) p.objectPositions.push_back(v - origin);
             p.objectNormals = part.normals;
+            p.morphPositions = part.targets;
+            p.morphNormals.assign(part.targets.size(), {});
+            if (!part.targets.empty()) node.morphWeights.assign(part.targets.size(), 0.0f);
             node.primitives.push_back(static_cast<uint32_t>(scene.primitives.size()));
             scene.primitives.push_back(std::move(p));
         }
@@ -289,6 +342,18 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
             idx.count = part.indices.size();
             model.accessors.push_back(idx);
             prim.indices = static_cast<int>(model.accessors.size() - 1);
+            for (const auto& target : part.targets) {
+                glm::vec3 dlo(1e30f), dhi(-1e30f);
+                for (const auto& d : target) dlo = glm::min(dlo, d), dhi = glm::max(dhi, d);
+                tinygltf::Accessor t = pos;
+                t.bufferView =
+                    addView(target.data(), target.size() * 12, TINYGLTF_TARGET_ARRAY_BUFFER);
+                t.minValues = {dlo.x, dlo.y, dlo.z};
+                t.maxValues = {dhi.x, dhi.y, dhi.z};
+                model.accessors.push_back(t);
+                prim.targets.push_back({{"POSITION", int(model.accessors.size() - 1)}});
+                mesh.weights.push_back(0.0);
+            }
             mesh.primitives.push_back(prim);
         }
         model.meshes.push_back(mesh);

@@ -2,6 +2,7 @@
 // bundled scenes). Every object is one glTF node; each material one primitive of it.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -39,6 +40,16 @@ class SceneBuilder {
     void SetDynamic(const std::string& node, glm::vec3 origin, glm::vec3 boundsMin,
                     glm::vec3 boundsMax);
 
+    // A closed sphere of `rings` latitude bands × `segments` longitudes with shared vertices
+    // (one at each pole) and outward normals: 2 + (rings − 1) × segments vertices.
+    void AddSphere(const std::string& node, uint32_t material, glm::vec3 centre, float radius,
+                   int rings, int segments);
+    // A morph target (glTF `targets`) for `node`, which must have one material: each of its
+    // vertices displaced by `displacement(position)` (world space, of the vertex as added).
+    // The targets carry positions only: a posed mesh gets area-weighted normals.
+    void AddMorphTarget(const std::string& node,
+                        const std::function<glm::vec3(glm::vec3)>& displacement);
+
     // A KHR_lights_punctual light on its own node called `light.name`, placed at
     // `light.position` and turned so that its −Z axis is `light.direction`.
     void AddLight(const PunctualLight& light);
@@ -55,6 +66,7 @@ class SceneBuilder {
     struct Part {
         std::vector<glm::vec3> positions, normals;
         std::vector<uint32_t> indices;
+        std::vector<std::vector<glm::vec3>> targets;  // morph targets: per vertex displacement
     };
     struct Motion {
         glm::vec3 origin{0.0f};

@@ -26,10 +26,13 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
         const Primitive& prim = scene.primitives[pi];
         const uint32_t base = static_cast<uint32_t>(out.positions.size());
         out.firstSurfel.push_back(base);
-        // A dynamic node's primitives are split by their own-space edges, measured with the
-        // metric AᵀA of the node's world matrix rounded to 2⁻²⁰ of its trace: the same splits
-        // at every pose (world-space lengths of equal edges differ by rounding noise from pose
-        // to pose, and ties would break differently), so a move keeps the surfels (Sec. 3.3).
+        // A dynamic node's primitives are split by their own-space edges in the rest pose
+        // (Primitive::restPositions), measured with the metric AᵀA of the node's world matrix
+        // rounded to 2⁻²⁰ of its trace: the same splits at every pose (world-space lengths of
+        // equal edges differ by rounding noise from pose to pose, and ties would break
+        // differently) and every deformation, so a move keeps the surfels (Sec. 3.3) and a
+        // deformed mesh its elements (implicit visibility paper, Sec. 4: the hierarchy is
+        // refitted, not rebuilt).
         const bool own = prim.nodeIndex >= 0 && scene.nodes[prim.nodeIndex].dynamic &&
                          prim.objectPositions.size() == prim.positions.size();
         anyOwn = anyOwn || own;
@@ -55,9 +58,11 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             ownAreas.push_back(0.0f);
         }
         std::vector<glm::vec3> object;  // own-space positions of this primitive's surfels
+        std::vector<glm::vec3> rest;    // the same in the rest pose (what splits)
         glm::mat3 metric(1.0f);
         if (own) {
             object = prim.objectPositions;
+            rest = prim.RestPositions();
             const glm::mat3 a(scene.nodes[prim.nodeIndex].world);
             metric = glm::transpose(a) * a;
             const float q = (metric[0][0] + metric[1][1] + metric[2][2]) / 1048576.0f;
@@ -81,6 +86,7 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             ownAreas.push_back(0.0f);
             if (own) {
                 object.push_back(0.5f * (object[a - base] + object[b - base]));
+                rest.push_back(0.5f * (rest[a - base] + rest[b - base]));
                 glm::vec3 on = ownNormals[a] + ownNormals[b];
                 float ol = glm::length(on);
                 ownNormals.push_back(ol > 1e-6f ? on / ol : ownNormals[a]);
@@ -108,7 +114,7 @@ Surfels RefineScene(const Scene& scene, float elementSize) {
             float e[3];
             for (int k = 0; k < 3; ++k) {
                 if (own) {
-                    glm::vec3 d = object[tri[(k + 1) % 3] - base] - object[tri[k] - base];
+                    glm::vec3 d = rest[tri[(k + 1) % 3] - base] - rest[tri[k] - base];
                     e[k] = glm::dot(d, metric * d);
                 } else {
                     glm::vec3 d = p[(k + 1) % 3] - p[k];

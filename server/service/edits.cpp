@@ -113,6 +113,44 @@ uint64_t Session::Submit(const TransformEdit& edit) {
                  lights);
 }
 
+uint64_t Session::Submit(const DeformEdit& edit) {
+    std::lock_guard lock(mutex_);
+    const int node = FindNode(validated_, edit.node);
+    if (node < 0 || validated_.nodes[node].primitives.empty())
+        throw ServiceError(ErrorKind::kNotFound,
+                           (node < 0 ? "no node '" + edit.node + "' in scene '" + name_ + "'"
+                                     : "node '" + edit.node + "' has no mesh of its own") +
+                               "; deformable nodes: " + NodeList(validated_, true));
+    if (!validated_.nodes[node].dynamic)
+        throw ServiceError(ErrorKind::kStaticNode,
+                           "node '" + edit.node +
+                               "' is static; mark it extras.penumbra.dynamic in the glTF to "
+                               "deform it (deformable nodes: " +
+                               NodeList(validated_, true) + ")");
+    if (edit.weights && !edit.positions.empty())
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "give either vertex positions or morph weights, not both");
+    std::function<void(Scene&)> apply;
+    if (edit.weights) {
+        std::vector<float> weights = *edit.weights;
+        apply = [node, weights](Scene& s) { SetNodeMorphWeights(s, node, weights); };
+    } else {
+        auto positions = std::make_shared<const std::vector<glm::vec3>>(edit.positions);
+        auto normals = std::make_shared<const std::vector<glm::vec3>>(edit.normals);
+        apply = [node, positions, normals](Scene& s) {
+            SetNodeVertices(s, node, *positions, *normals);
+        };
+    }
+    try {
+        apply(validated_);  // throws, changing nothing, for a wrong count or bad numbers
+    } catch (const Error& e) {
+        throw ServiceError(ErrorKind::kInvalidArgument, e.what());
+    }
+    std::string what = "deformed " + edit.node;
+    if (OutsideBounds(validated_, validated_.nodes[node])) what += " (outside its motion bounds)";
+    return Queue(std::move(apply), true, what, false);
+}
+
 uint64_t Session::Submit(const LightEdit& edit) {
     std::lock_guard lock(mutex_);
     if (int li = FindLight(validated_, edit.light); li >= 0) return SubmitPunctual(li, edit);

@@ -109,6 +109,13 @@ struct TransformEdit {
     std::string node;
     glm::mat4 local{1.0f};
 };
+// A deformation of a dynamic node's mesh: its vertices in its own space (and normals, or
+// none: computed), scene/scene.h SetNodeVertices, or its morph target weights.
+struct DeformEdit {
+    std::string node;
+    std::vector<glm::vec3> positions, normals;
+    std::optional<std::vector<float>> weights;
+};
 struct LightEdit {
     std::string light;  // a punctual light (its or its node's name) or an emissive node
     std::optional<glm::vec3> color;
@@ -147,6 +154,9 @@ class Session {
     // queues it; returns its edit id. Throws ServiceError (unknown node, static node,
     // NaN or singular matrix, negative intensity...).
     uint64_t Submit(const TransformEdit& edit);
+    // A deformation: taken in place by a solver that relinks every frame (implicit), by a
+    // re-trace near it (light field), else by a rebuild, like a move out of its bounds.
+    uint64_t Submit(const DeformEdit& edit);
     uint64_t Submit(const LightEdit& edit);
     uint64_t Submit(const MaterialEdit& edit);
     // A sky change re-bins the environment between iterations; one that gives a scene loaded

@@ -62,6 +62,11 @@ std::vector<uint8_t> Payload(MessageType type) {
             b.Finish(fb::CreateSetEnvironmentDirect(b, "s", nullptr, &c, false, 2.0f, 0.5f, true));
             break;
         }
+        case MessageType::kSetVertices: {
+            std::vector<float> p = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+            b.Finish(fb::CreateSetVerticesDirect(b, "s", "blob", &p));
+            break;
+        }
         case MessageType::kSubscribe:
             b.Finish(fb::CreateSubscribeDirect(b, "s", fb::Channel::Total, fb::Format::Float16));
             break;
@@ -103,6 +108,7 @@ const MessageType kAllTypes[] = {
     MessageType::kSubscribe,    MessageType::kUnsubscribe, MessageType::kGetIrradiance,
     MessageType::kFrame,        MessageType::kStep,        MessageType::kProgress,
     MessageType::kGetStats,     MessageType::kStats,       MessageType::kSetEnvironment,
+    MessageType::kSetVertices,
 };
 
 TEST(Frame, EveryMessageRoundTripsByteByByte) {

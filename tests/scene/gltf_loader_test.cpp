@@ -450,6 +450,134 @@ TEST(SceneTransform, BadMatricesAreRefusedAndChangeNothing) {
     EXPECT_EQ(p.positions, before);
 }
 
+const std::string kMorph = std::string(PENUMBRA_SOURCE_DIR) + "/scenes/morph-room.gltf";
+
+// The bundled morphing blob: its two targets are read, posed exactly (rest + Σ w·target), and
+// the refinement keeps its elements through any pose (it splits by the rest pose).
+TEST(Deform, MorphTargetsPoseTheMeshAndKeepItsElements) {
+    Scene scene = LoadGltf(kMorph);
+    const int blob = FindNode(scene, "blob");
+    ASSERT_GE(blob, 0);
+    ASSERT_EQ(NodeMorphTargets(scene, blob), 2u);
+    EXPECT_EQ(scene.nodes[blob].morphWeights, std::vector<float>({0.0f, 0.0f}));
+    for (const std::string& w : scene.warnings) EXPECT_EQ(w.find("morph"), std::string::npos) << w;
+    EXPECT_TRUE(ClosedNodes(scene)[blob]) << "the sphere must close a solid";
+    const Primitive& p = scene.primitives[scene.nodes[blob].primitives[0]];
+    const std::vector<glm::vec3> rest = p.positions;
+    const Surfels before = RefineScene(scene, 0.1f);
+
+    SetNodeMorphWeights(scene, blob, {0.7f, -0.4f});
+    const glm::mat4& world = scene.nodes[blob].world;
+    float lowest = 1e9f, lowestRest = 1e9f;
+    for (size_t i = 0; i < rest.size(); ++i) {
+        const glm::vec3 own =
+            p.RestPositions()[i] + 0.7f * p.morphPositions[0][i] - 0.4f * p.morphPositions[1][i];
+        EXPECT_NEAR(glm::length(p.positions[i] - glm::vec3(world * glm::vec4(own, 1.0f))), 0.0f,
+                    1e-6f);
+        EXPECT_NEAR(glm::length(p.normals[i]), 1.0f, 1e-5f);
+        lowest = std::min(lowest, p.positions[i].y);
+        lowestRest = std::min(lowestRest, rest[i].y);
+    }
+    EXPECT_EQ(p.shape, 1u);
+    EXPECT_EQ(scene.nodes[blob].morphWeights, std::vector<float>({0.7f, -0.4f}));
+    EXPECT_GT(lowest, lowestRest - 0.05f);  // squash keeps its base (ripple moves it a little)
+    const Surfels after = RefineScene(scene, 0.1f);
+    EXPECT_EQ(after.size(), before.size());
+    EXPECT_EQ(after.refinedTriangles, before.refinedTriangles);
+    EXPECT_NE(after.positions, before.positions);
+    // Back to weights 0: the rest pose again, not an accumulated drift.
+    SetNodeMorphWeights(scene, blob, {0.0f, 0.0f});
+    for (size_t i = 0; i < rest.size(); ++i)
+        EXPECT_NEAR(glm::length(p.positions[i] - rest[i]), 0.0f, 1e-6f);
+}
+
+// Vertices given directly: normals computed from the deformed triangles when none are given,
+// taken (normalised) when they are; bad input is refused and changes nothing.
+TEST(Deform, VerticesReplaceTheMeshAndBadOnesChangeNothing) {
+    Scene scene = LoadGltf(kMorph);
+    const int blob = FindNode(scene, "blob");
+    const Primitive& p = scene.primitives[scene.nodes[blob].primitives[0]];
+    const size_t n = NodeVertexCount(scene, blob);
+    ASSERT_EQ(n, p.positions.size());
+    // Stretch the sphere 2× along its own x: the normals tilt towards ±x.
+    std::vector<glm::vec3> stretched = p.objectPositions;
+    for (glm::vec3& v : stretched) v.x *= 2.0f;
+    SetNodeVertices(scene, blob, stretched);
+    size_t tilted = 0;
+    for (size_t i = 0; i < n; ++i) {
+        const glm::vec3 own = p.objectPositions[i];
+        EXPECT_EQ(own, stretched[i]);
+        // An ellipsoid x²/4 + y² + z² = r²: its normal is along (x/4, y, z), outwards.
+        const glm::vec3 want = glm::normalize(glm::vec3(own.x / 4.0f, own.y, own.z));
+        if (glm::dot(p.normals[i], want) > 0.98f) ++tilted;
+    }
+    EXPECT_GT(tilted, n * 95 / 100) << "computed normals must follow the deformed surface";
+    std::vector<glm::vec3> up(n, glm::vec3(0.0f, 2.0f, 0.0f));
+    SetNodeVertices(scene, blob, stretched, up);
+    EXPECT_EQ(p.normals[7], glm::vec3(0.0f, 1.0f, 0.0f));
+    EXPECT_EQ(p.shape, 2u);
+
+    const std::vector<glm::vec3> before = p.positions;
+    auto refused = [&](const std::vector<glm::vec3>& pos, const std::vector<glm::vec3>& nrm) {
+        try {
+            SetNodeVertices(scene, blob, pos, nrm);
+        } catch (const Error& e) {
+            return std::string(e.what());
+        }
+        return std::string("(accepted)");
+    };
+    std::vector<glm::vec3> fewer(stretched.begin(), stretched.end() - 1);
+    EXPECT_NE(refused(fewer, {}).find("positions were given"), std::string::npos);
+    std::vector<glm::vec3> nan = stretched;
+    nan[5].y = std::numeric_limits<float>::quiet_NaN();
+    EXPECT_NE(refused(nan, {}).find("NaN"), std::string::npos) << refused(nan, {});
+    std::vector<glm::vec3> zero = up;
+    zero[3] = glm::vec3(0.0f);
+    EXPECT_NE(refused(stretched, zero).find("normal 3"), std::string::npos);
+    EXPECT_NE(refused(stretched, fewer).find("normals were given"), std::string::npos);
+    EXPECT_EQ(p.positions, before);
+    EXPECT_EQ(p.shape, 2u);
+    for (const std::vector<float>& w : {std::vector<float>{1.0f}, {1.0f, NAN}}) {
+        EXPECT_THROW(SetNodeMorphWeights(scene, blob, w), Error);
+    }
+    EXPECT_EQ(p.positions, before);
+    const int floor = FindNode(scene, "floor");
+    EXPECT_THROW(SetNodeMorphWeights(scene, floor, {}), Error);  // no targets
+}
+
+// A file's own weights (the node's, else the mesh's) pose the mesh at load; the rest pose is
+// still the base mesh, so the refinement is the one of weights 0.
+TEST(Deform, TheFilesWeightsPoseTheLoadedMesh) {
+    const auto dir = testing::TempDir("morph-weights");
+    nlohmann::json j;
+    std::ifstream(kMorph) >> j;
+    int blobNode = -1;
+    for (size_t i = 0; i < j["nodes"].size(); ++i)
+        if (j["nodes"][i]["name"] == "blob") blobNode = int(i);
+    ASSERT_GE(blobNode, 0);
+    j["nodes"][blobNode]["weights"] = {1.0, 0.0};
+    const std::string posed = (dir / "posed.gltf").string();
+    std::ofstream(posed) << j.dump();
+    Scene a = LoadGltf(posed), rest = LoadGltf(kMorph);
+    const int blob = FindNode(a, "blob");
+    EXPECT_EQ(a.nodes[blob].morphWeights, std::vector<float>({1.0f, 0.0f}));
+    SetNodeMorphWeights(rest, blob, {1.0f, 0.0f});
+    const uint32_t p = a.nodes[blob].primitives[0];
+    EXPECT_EQ(a.primitives[p].positions, rest.primitives[p].positions);
+    EXPECT_EQ(a.primitives[p].shape, 0u);  // as loaded
+    EXPECT_EQ(RefineScene(a, 0.1f).refinedTriangles,
+              RefineScene(LoadGltf(kMorph), 0.1f).refinedTriangles);
+    // A weight count that does not match the targets fails the load, naming the node.
+    j["nodes"][blobNode]["weights"] = {1.0};
+    std::ofstream(posed) << j.dump();
+    try {
+        LoadGltf(posed);
+        ADD_FAILURE() << "a wrong weight count was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("morph weights"), std::string::npos) << e.what();
+    }
+}
+
 // WriteGltfModel: a .glb holds its buffers and images in its one BIN chunk (the image's bytes
 // as they were in its file), and an infinite camera has no zfar, in either form.
 TEST(GltfWriter, GlbHoldsImagesAndBuffersInItsBinChunk) {
