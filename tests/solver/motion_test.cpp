@@ -118,6 +118,15 @@ TEST(MotionLinks, RefusesWhatTheLinksDoNotCover) {
     SetNodeTransform(moved, node, Moved(scene, "tall_block", {0.02f, 0, 0}, 0.0f));
     EXPECT_NE(plain.GeometryMismatch(moved).find("without motion bounds"), std::string::npos);
     EXPECT_EQ(solver.GeometryMismatch(moved), "");
+    // A deformation is no rigid move, even inside the bounds: the links were built for the
+    // rest shape (the service rebuilds them).
+    Scene deformed = scene;
+    std::vector<glm::vec3> squeezed;
+    for (uint32_t p : deformed.nodes[node].primitives)
+        for (glm::vec3 v : deformed.primitives[p].objectPositions) squeezed.push_back(0.9f * v);
+    SetNodeVertices(deformed, node, squeezed);
+    EXPECT_NE(solver.GeometryMismatch(deformed).find("changed shape"), std::string::npos)
+        << solver.GeometryMismatch(deformed);
 }
 
 // The test: a move gives, within a stated tolerance, what baking the moved scene from
