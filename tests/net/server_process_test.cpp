@@ -708,6 +708,95 @@ TEST(ServerProcess, BadRequestsGetClearErrorsAndTheConnectionStays) {
     EXPECT_TRUE(c.Connected());
 }
 
+// A morphing mesh driven over the socket (SetVertices): morph weights and whole vertex lists
+// are taken in place by the implicit solver (a relink a frame), by a rebuild of the links
+// with the antiradiance solver; bad deformations are refused with their reasons.
+TEST(ServerProcess, DeformsAMorphingMeshOverTheSocket) {
+    ServerProcess server("deform");
+    client::Client c(server.Tcp(), "deformer");
+    client::LoadOptions o;
+    o.path = "morph-room.gltf";
+    o.solver = "implicit";
+    o.solverOptions["bins"] = "64";
+    o.elementSize = 0.15f;
+    o.device = "cpu";
+    o.gatherRays = 64;
+    o.emitterRays = 64;
+    client::SceneInfo info = c.Load(o);
+    const client::NodeInfo* blob = info.Node("blob");
+    ASSERT_TRUE(blob);
+    EXPECT_TRUE(blob->dynamic);
+    EXPECT_EQ(blob->morphTargets, 2u);
+    EXPECT_EQ(blob->morphWeights, std::vector<float>({0.0f, 0.0f}));
+    Watcher watch;
+    c.Subscribe(std::ref(watch));
+    auto start = watch.Until(0);
+    ASSERT_TRUE(start);
+
+    const uint64_t squash = c.SetMorphWeights("blob", {1.0f, 0.5f});
+    auto squashed = watch.Until(squash);
+    ASSERT_TRUE(squashed) << "no converged frame with the deformation";
+    EXPECT_EQ(c.Info().Node("blob")->morphWeights, std::vector<float>({1.0f, 0.5f}));
+    auto noted = [&](const std::string& what) {
+        std::lock_guard lock(watch.m);
+        for (const auto& f : watch.frames)
+            if (f.note.find(what) != std::string::npos) return true;
+        return false;
+    };
+    EXPECT_TRUE(noted("deformed blob: links rebuilt in place"));
+    // The squashed blob is wider and lower: its own light changes.
+    EXPECT_GT(std::abs(MeanOf(*squashed, "blob") - MeanOf(*start, "blob")),
+              0.02f * MeanOf(*start, "blob"));
+
+    // Whole vertex lists: the rest mesh shrunk to 80% about the node's origin.
+    Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/morph-room.gltf");
+    std::vector<float> shrunk;
+    for (uint32_t p : scene.nodes[FindNode(scene, "blob")].primitives)
+        for (const glm::vec3& v : scene.primitives[p].objectPositions)
+            shrunk.insert(shrunk.end(), {0.8f * v.x, 0.8f * v.y, 0.8f * v.z});
+    const uint64_t shrink = c.SetVertices("blob", shrunk);
+    ASSERT_TRUE(watch.Until(shrink));
+
+    // Refused, each with its reason, changing nothing.
+    std::vector<float> fewer(shrunk.begin(), shrunk.end() - 3);
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetVertices("blob", fewer); }),
+              int(fb::ErrorCode::InvalidArgument));
+    std::vector<float> ragged(shrunk.begin(), shrunk.end() - 1);
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetVertices("blob", ragged); }),
+              int(fb::ErrorCode::InvalidArgument));
+    std::vector<float> nan = shrunk;
+    nan[10] = std::nanf("");
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetVertices("blob", nan); }),
+              int(fb::ErrorCode::InvalidArgument));
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetMorphWeights("blob", {1.0f}); }),
+              int(fb::ErrorCode::InvalidArgument));
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetMorphWeights("floor", {1.0f}); }),
+              int(fb::ErrorCode::StaticNode));
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetMorphWeights("nothing", {1.0f}); }),
+              int(fb::ErrorCode::NotFound));
+    EXPECT_EQ(c.Info().Node("blob")->morphWeights, std::vector<float>({1.0f, 0.5f}));
+
+    // The antiradiance solver's links are built for the rest shape: it rebuilds them, warm.
+    ServerProcess other("deform-rebuild");
+    client::Client d(other.Unix(), "second");
+    client::LoadOptions a = o;
+    a.solver = "antiradiance";
+    EXPECT_EQ(d.Load(a).solver, "antiradiance");
+    Watcher second;
+    d.Subscribe(std::ref(second));
+    ASSERT_TRUE(second.Until(0));
+    const uint64_t again = d.SetMorphWeights("blob", {0.0f, 1.0f});
+    ASSERT_TRUE(second.Until(again));
+    bool rebuilt = false;
+    {
+        std::lock_guard lock(second.m);
+        for (const auto& f : second.frames)
+            rebuilt = rebuilt || f.note.find("links rebuilt: deformed blob") == 0;
+    }
+    EXPECT_TRUE(rebuilt);
+    EXPECT_NO_THROW(d.Stats());
+}
+
 TEST(ServerProcess, AClientKilledMidStreamHarmsNoOne) {
     ServerProcess server("killed");
     client::Client viewer(server.Unix(), "viewer");

@@ -22,7 +22,7 @@ from penumbra_client._fb import (Bye, Channel, EditAck, Error, ErrorCode, Format
                                  GetIrradiance, GetSceneInfo, GetStats, Hello, LoadScene, Ok,
                                  Progress,
                                  SceneInfo as FbSceneInfo, SetEnvironment, SetLight, SetMaterial,
-                                 SetTransform, SolverOption, Stats, Step, Subscribe, Unsubscribe,
+                                 SetTransform, SetVertices, SolverOption, Stats, Step, Subscribe, Unsubscribe,
                                  Vec3, Welcome)
 
 MAGIC = b"PNBR"
@@ -33,7 +33,8 @@ PROTOCOL_VERSION = 1
 # Message types (protocol/frame.h, SPEC.md "Messages").
 HELLO, WELCOME, ERROR, BYE, OK = 1, 2, 3, 4, 5
 LOAD_SCENE, GET_SCENE_INFO, SCENE_INFO = 10, 11, 12
-SET_TRANSFORM, SET_LIGHT, SET_MATERIAL, EDIT_ACK, SET_ENVIRONMENT = 20, 21, 22, 23, 24
+SET_TRANSFORM, SET_LIGHT, SET_MATERIAL, EDIT_ACK, SET_ENVIRONMENT, SET_VERTICES = (20, 21, 22, 23,
+                                                                            24, 25)
 SUBSCRIBE, UNSUBSCRIBE, GET_IRRADIANCE, FRAME, STEP, PROGRESS = 30, 31, 32, 33, 34, 35
 GET_STATS, STATS = 40, 41
 
@@ -92,6 +93,8 @@ class Node:
     matrix: np.ndarray  # 4 × 4 local transform (matrix[:, 3] is the translation)
     primitives: List[dict]
     bounds: Optional[tuple] = None  # (min, max) motion bounds, world space; None: not given
+    morph_targets: int = 0  # its mesh's morph targets (deform(weights=...))
+    morph_weights: Optional[List[float]] = None  # the weights it is posed with now
 
 
 @dataclass
@@ -390,7 +393,9 @@ class Client:
             info.nodes[_text(n.Name())] = Node(
                 name=_text(n.Name()), dynamic=n.Dynamic(), emissive=n.Emissive(),
                 matrix=np.asarray(columns, dtype=np.float64).reshape(4, 4).T, primitives=prims,
-                bounds=(_vec(n.BoundsMin()), _vec(n.BoundsMax())) if n.BoundsMin() else None)
+                bounds=(_vec(n.BoundsMin()), _vec(n.BoundsMax())) if n.BoundsMin() else None,
+                morph_targets=n.MorphTargets(),
+                morph_weights=[n.MorphWeights(j) for j in range(n.MorphWeightsLength())])
         for i in range(s.MaterialsLength()):
             m = s.Materials(i)
             info.materials[_text(m.Name())] = {
@@ -446,6 +451,38 @@ class Client:
         SetTransform.AddMatrix(b, mv)
         b.Finish(SetTransform.End(b))
         return self._edit(SET_TRANSFORM, b)
+
+    def deform(self, node: str, positions: Optional[Sequence[float]] = None,
+               normals: Optional[Sequence[float]] = None,
+               weights: Optional[Sequence[float]] = None, scene: str = "") -> int:
+        """Deforms a dynamic node's mesh (SPEC.md SetVertices): `positions` (every vertex of
+        its primitives in its own space, n × 3 or flat) and optionally `normals` (the same;
+        None: computed by the server), or `weights` for its morph targets. Returns the edit id."""
+        if (positions is None) == (weights is None):
+            raise ValueError("deform takes either positions or weights")
+        def flat(name, values):
+            v = np.asarray(values, dtype=np.float32).ravel()
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"{name} must be finite numbers")
+            return v
+        b = flatbuffers.Builder(1024)
+        s, n = b.CreateString(scene), b.CreateString(node)
+        vectors = {}
+        for key, values in (("positions", positions), ("normals", normals), ("weights", weights)):
+            if values is None:
+                continue
+            v = flat(key, values)
+            getattr(SetVertices, "Start" + key.capitalize() + "Vector")(b, len(v))
+            for x in reversed(v):
+                b.PrependFloat32(float(x))
+            vectors[key] = b.EndVector()
+        SetVertices.Start(b)
+        SetVertices.AddScene(b, s)
+        SetVertices.AddNode(b, n)
+        for key, offset in vectors.items():
+            getattr(SetVertices, "Add" + key.capitalize())(b, offset)
+        b.Finish(SetVertices.End(b))
+        return self._edit(SET_VERTICES, b)
 
     def light(self, name: str, color: Optional[Sequence[float]] = None,
               intensity: Optional[float] = None, position: Optional[Sequence[float]] = None,
