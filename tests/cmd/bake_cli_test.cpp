@@ -119,7 +119,8 @@ TEST(BakeCli, GltfOutputPassesTheKhronosValidator) {
     ASSERT_TRUE(std::filesystem::exists(tools + "/node_modules/gltf-validator"))
         << "the validator is not installed: run scripts/install-deps.sh (make check does)";
     const auto dir = testing::TempDir("bake-validate");
-    for (const char* name : {"cornell-box", "blocker", "maze", "office", "glossy-box", "morph-room"}) {
+    for (const char* name :
+         {"cornell-box", "blocker", "maze", "office", "glossy-box", "morph-room"}) {
         for (const char* ext : {".glb", ".gltf"}) {
             const std::string out = (dir / (std::string(name) + ext)).string();
             ProcessResult r = Execute(std::string("bake ") + PENUMBRA_SOURCE_DIR + "/scenes/" +

@@ -226,9 +226,8 @@ TEST(GltfLoader, IgnoredInputIsWarnedAbout) {
     for (const auto& w : SceneWarnings(scene)) all += w + "\n";
     for (const char* expected :
          {"no TEXCOORD_0 for its material's texture: the texture's mean colour is used",
-          "normalTexture ignored", "1 skin(s) ignored",
-          "1 animation(s) ignored", "extension 'KHR_materials_clearcoat' ignored",
-          "1 node(s) with a mesh but no name"})
+          "normalTexture ignored", "1 skin(s) ignored", "1 animation(s) ignored",
+          "extension 'KHR_materials_clearcoat' ignored", "1 node(s) with a mesh but no name"})
         EXPECT_NE(all.find(expected), std::string::npos) << expected << " in:\n" << all;
     EXPECT_EQ(all.find("no light"), std::string::npos) << all;
     EXPECT_EQ(scene.nodes[0].name, "node0");
