@@ -214,9 +214,10 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
     Scene scene = session.SceneSnapshot();
     SolverStats stats = session.SolverStatistics();
     std::vector<flatbuffers::Offset<fb::NodeInfo>> nodes;
-    for (const auto& n : scene.nodes) {
+    for (size_t ni = 0; ni < scene.nodes.size(); ++ni) {
+        const SceneNode& n = scene.nodes[ni];
         bool placesLight = false;
-        for (const auto& l : scene.lights) placesLight = placesLight || &scene.nodes[l.node] == &n;
+        for (const auto& l : scene.lights) placesLight = placesLight || l.node == int(ni);
         if (n.primitives.empty() && n.children.empty() && !placesLight) continue;
         std::vector<flatbuffers::Offset<fb::PrimitiveInfo>> prims;
         bool emissive = false;
@@ -231,8 +232,7 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
         for (int i = 0; i < 16; ++i) matrix[i] = n.local[i / 4][i % 4];
         const fb::Vec3 lo(n.boundsMin.x, n.boundsMin.y, n.boundsMin.z),
             hi(n.boundsMax.x, n.boundsMax.y, n.boundsMax.z);
-        const uint32_t targets =
-            static_cast<uint32_t>(NodeMorphTargets(scene, int(&n - &scene.nodes[0])));
+        const uint32_t targets = static_cast<uint32_t>(NodeMorphTargets(scene, int(ni)));
         nodes.push_back(fb::CreateNodeInfoDirect(b, n.name.c_str(), n.dynamic, &matrix, &prims,
                                                  emissive, n.hasMotionBounds ? &lo : nullptr,
                                                  n.hasMotionBounds ? &hi : nullptr, targets,

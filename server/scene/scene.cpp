@@ -323,10 +323,10 @@ size_t NodeMorphTargets(const Scene& scene, int node) {
 }
 
 void SetNodeMorphWeights(Scene& scene, int node, const std::vector<float>& weights) {
-    const size_t targets = NodeMorphTargets(scene, node);
     if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
         throw Error("node index " + std::to_string(node) + " does not exist");
     const SceneNode& n = scene.nodes[node];
+    const size_t targets = NodeMorphTargets(scene, node);
     if (targets == 0) throw Error("node '" + n.name + "' has no morph targets");
     if (weights.size() != targets)
         throw Error("node '" + n.name + "' has " + std::to_string(targets) + " morph targets; " +
@@ -334,12 +334,11 @@ void SetNodeMorphWeights(Scene& scene, int node, const std::vector<float>& weigh
     for (float x : weights)
         if (!std::isfinite(x)) throw Error("morph weights must be finite numbers");
     std::vector<glm::vec3> positions, normals;
-    bool withNormals = true;
-    for (uint32_t pi : n.primitives) {
-        const Primitive& p = scene.primitives[pi];
-        for (const auto& t : p.morphNormals) withNormals = withNormals && !t.empty();
-        withNormals = withNormals && p.morphNormals.size() == targets;
-    }
+    bool withNormals = true;  // every target of every primitive displaces the normals
+    for (uint32_t pi : n.primitives)
+        for (size_t t = 0; t < targets; ++t)
+            withNormals = withNormals && t < scene.primitives[pi].morphNormals.size() &&
+                          !scene.primitives[pi].morphNormals[t].empty();
     for (uint32_t pi : n.primitives) {
         const Primitive& p = scene.primitives[pi];
         const std::vector<glm::vec3>& rest = p.RestPositions();

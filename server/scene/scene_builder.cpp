@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <glm/gtc/matrix_transform.hpp>
+#include <numbers>
 #define GLM_ENABLE_EXPERIMENTAL
 #include <glm/gtx/quaternion.hpp>
 
@@ -79,9 +80,9 @@ void SceneBuilder::AddSphere(const std::string& node, uint32_t material, glm::ve
     };
     add({0.0f, 1.0f, 0.0f});  // north pole: base
     for (int r = 1; r < rings; ++r) {
-        const float theta = float(M_PI) * float(r) / float(rings);
+        const float theta = std::numbers::pi_v<float> * float(r) / float(rings);
         for (int s = 0; s < segments; ++s) {
-            const float phi = 2.0f * float(M_PI) * float(s) / float(segments);
+            const float phi = 2.0f * std::numbers::pi_v<float> * float(s) / float(segments);
             add({std::sin(theta) * std::cos(phi), std::cos(theta),
                  std::sin(theta) * std::sin(phi)});
         }
