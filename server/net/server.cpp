@@ -171,7 +171,7 @@ nlohmann::json Server::StatsJson() const {
 std::shared_ptr<const std::vector<uint8_t>> Server::EncodedFrame(const service::FramePtr& frame,
                                                                  service::Channel channel,
                                                                  fb::Format format) {
-    EncodedKey key{frame->scene, frame->frame, frame->converged, static_cast<int>(channel),
+    EncodedKey key{frame->session, frame->frame, frame->converged, static_cast<int>(channel),
                    static_cast<int>(format)};
     {
         std::lock_guard lock(encodedMutex_);
@@ -183,9 +183,12 @@ std::shared_ptr<const std::vector<uint8_t>> Server::EncodedFrame(const service::
     auto bytes = std::make_shared<const std::vector<uint8_t>>(
         protocol::EncodeFrame(MessageType::kFrame, 0, b));
     std::lock_guard lock(encodedMutex_);
-    // Keep only the newest few frames' encodings.
-    while (encoded_.size() > 16) encoded_.erase(encoded_.begin());
-    encoded_[key] = bytes;
+    // Keep only the newest few encodings, whichever sessions made them.
+    if (encoded_.emplace(key, bytes).second) encodedOrder_.push_back(key);
+    while (encoded_.size() > 16) {
+        encoded_.erase(encodedOrder_.front());
+        encodedOrder_.pop_front();
+    }
     return bytes;
 }
 

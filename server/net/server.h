@@ -6,6 +6,7 @@
 #include <asio.hpp>
 #include <atomic>
 #include <cstdint>
+#include <deque>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -93,13 +94,14 @@ class Server {
 
     std::mutex encodedMutex_;
     struct EncodedKey {
-        std::string scene;
+        uint64_t session;  // not the scene's name: a reload numbers its frames from 1 again
         uint64_t frame;
         bool converged;  // a replayed frame may differ from the original in this flag
         int channel, format;
         auto operator<=>(const EncodedKey&) const = default;
     };
     std::map<EncodedKey, std::shared_ptr<const std::vector<uint8_t>>> encoded_;
+    std::deque<EncodedKey> encodedOrder_;  // oldest first
 };
 
 }  // namespace penumbra::net

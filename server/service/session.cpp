@@ -3,6 +3,7 @@
 #include "service/session.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -49,9 +50,16 @@ void CheckSessionSettings(const SessionSettings& s) {
         throw Error("element size must be ≥ 0 metres (0: automatic)");
 }
 
+namespace {
+uint64_t NextSessionId() {
+    static std::atomic<uint64_t> next{1};
+    return next.fetch_add(1, std::memory_order_relaxed);
+}
+}  // namespace
+
 Session::Session(std::string name, Scene scene, SessionSettings settings,
                  const ProgressFn& progress)
-    : name_(std::move(name)), settings_(std::move(settings)) {
+    : name_(std::move(name)), id_(NextSessionId()), settings_(std::move(settings)) {
     CheckSessionSettings(settings_);
     auto start = Clock::now();
     std::vector<std::string> notes;
@@ -224,6 +232,7 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
     const double change = RelativeChange(surfels, lastSurfels_);
     auto frame = std::make_shared<FrameData>();
     frame->scene = name_;
+    frame->session = id_;
     frame->layout = layout_;
     frame->note = std::move(note);
     frame->irradiance.resize(applied_.primitives.size());

@@ -84,6 +84,9 @@ struct PrimitiveKey {
 // One frame as the session produced it; shared (read-only) by every subscriber.
 struct FrameData {
     std::string scene;
+    // The session that made it: unique in the process, so a scene reloaded under the same
+    // name (whose frames are numbered from 1 again) never passes for the one it replaced.
+    uint64_t session = 0;
     uint64_t frame = 0;
     uint64_t lastEdit = 0;
     uint64_t iterations = 0;
@@ -240,6 +243,7 @@ class Session {
     bool FallBackToCpu(std::unique_lock<std::mutex>& lock, std::string& note);
 
     const std::string name_;
+    const uint64_t id_;  // FrameData::session
     const SessionSettings settings_;
     double buildSeconds_ = 0.0;
     int punctualLights_ = 0;

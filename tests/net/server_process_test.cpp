@@ -797,6 +797,49 @@ TEST(ServerProcess, DeformsAMorphingMeshOverTheSocket) {
     EXPECT_NO_THROW(d.Stats());
 }
 
+// A scene reloaded under the same name while another client watches it: the new session's
+// subscribers get the new session's frames, never the old one's that share their numbers
+// (the server encodes each frame once for all its subscribers).
+TEST(ServerProcess, AReloadedSceneStreamsItsOwnFrames) {
+    ServerProcess server("reload");
+    client::Client a(server.Unix(), "first");
+    Watcher old;
+    ASSERT_TRUE(LoadAndWatch(a, old));
+    const client::Frame before = *old.Until(0);
+    auto blueOverRed = [](const client::Frame& f) {
+        double r = 0, b = 0;
+        for (const auto& p : f.primitives)
+            if (p.node == "floor")
+                for (size_t i = 0; i + 2 < p.rgb.size(); i += 3) r += p.rgb[i], b += p.rgb[i + 2];
+        return r > 0 ? b / r : 0.0;
+    };
+    // The same file again, under a blue sky: a new session of the same name. `a` stays
+    // connected and subscribed.
+    client::Client b(server.Tcp(), "second");
+    client::LoadOptions blue = Cornell();
+    blue.reload = true;
+    blue.environmentColor = std::array<float, 3>{0.0f, 0.0f, 1.0f};
+    blue.environmentIntensity = 4.0f;
+    EXPECT_FALSE(b.Load(blue).reused);
+    Watcher fresh;
+    b.Subscribe(std::ref(fresh));
+    auto after = fresh.Until(0);
+    ASSERT_TRUE(after);
+    std::lock_guard lock(fresh.m);
+    ASSERT_FALSE(fresh.frames.empty());
+    for (const auto& f : fresh.frames) {
+        EXPECT_EQ(f.lastEdit, 0u);
+        EXPECT_GT(blueOverRed(f), 1.5 * blueOverRed(before))
+            << "frame " << f.frame << " of the reloaded session looks like the old one's";
+    }
+    client::Frame got = b.Get();
+    if (got.frame == fresh.frames.back().frame) {
+        EXPECT_NEAR(MeanOf(got, "floor"), MeanOf(fresh.frames.back(), "floor"),
+                    1e-5f * MeanOf(got, "floor"));
+    }
+    EXPECT_TRUE(a.Connected());
+}
+
 TEST(ServerProcess, AClientKilledMidStreamHarmsNoOne) {
     ServerProcess server("killed");
     client::Client viewer(server.Unix(), "viewer");
