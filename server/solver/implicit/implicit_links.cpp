@@ -64,13 +64,14 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
 }
 
 void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontArea,
-                           ImplicitLinks& out) {
+                           const std::vector<uint32_t>& solid, float thin, ImplicitLinks& out) {
     const auto& nodes = h.nodes;
     const size_t bins = static_cast<size_t>(dirs_.Count());
     const float omegaBin = dirs_.BinSolidAngle();
     const float limit = threshold_ * omegaBin;
     const float pi = std::numbers::pi_v<float>;
     PENUMBRA_CHECK_EQ(frontArea.size(), nodes.size() * bins);
+    PENUMBRA_CHECK(solid.empty() || solid.size() == nodes.size());
     auto start = std::chrono::steady_clock::now();
 
     // The solid angle sender `s` covers seen from `r` along `dir` (unit, r → s) at `dist`: a
@@ -184,18 +185,37 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     start = std::chrono::steady_clock::now();
     const size_t leaves = h.leaves.size();
     std::vector<std::vector<Entry>> perLeaf(leaves);
+    // A closed solid's flat senders met in one bin so far: the solid angles of those facing
+    // the leaf and of those turned away, the nearest facing one and its depth.
+    struct SolidCover {
+        uint32_t solid;
+        float facing, away, near;
+        uint32_t front;
+    };
     tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves, 16), [&](const auto& range) {
         std::vector<uint32_t> chain;
         std::vector<std::pair<const End*, const End*>> heads;
+        std::vector<SolidCover> solids;
+        // Per leaf: the bins where each solid's near faces were met (solid, bin, sender), and
+        // the shares of its far faces in bins without them (share index, solid).
+        struct Front {
+            uint32_t solid, bin, sender;
+        };
+        std::vector<Front> fronts;
+        std::vector<std::pair<size_t, uint32_t>> unseen;
         for (size_t i = range.begin(); i != range.end(); ++i) {
             const uint32_t leaf = h.leaves[i];
             chain.clear();
             for (uint32_t n = leaf; n != kNoParent; n = nodes[n].parent) chain.push_back(n);
             const glm::vec3& normal = nodes[leaf].normal;
+            const glm::vec3& centre = nodes[leaf].center;
             const float norm = dirs_.CosineNorm(normal);
             std::vector<Entry>& list = perLeaf[i];
+            fronts.clear();
+            unseen.clear();
             for (size_t b = 0; b < bins; ++b) {
-                const float c = glm::dot(normal, dirs_.Direction(uint32_t(b)));
+                const glm::vec3& w = dirs_.Direction(uint32_t(b));
+                const float c = glm::dot(normal, w);
                 if (!(c > 0.0f)) continue;
                 // The chain's slots for this bin, each sorted nearest first, merged until
                 // the bin is full (most fill after a few links).
@@ -207,6 +227,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 }
                 const size_t bin0 = list.size();
                 float left = omegaBin;
+                solids.clear();
                 while (left > 1e-4f * omegaBin) {
                     std::pair<const End*, const End*>* next = nullptr;
                     for (auto& h : heads)
@@ -214,9 +235,44 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                             next = &h;
                     if (!next) break;
                     const End& e = *next->first++;
-                    const float take = std::min(left, e.omega);
+                    float omega = e.omega;
+                    uint32_t sender = e.sender;
+                    bool farOnly = false;  // a solid's far face, none of its near ones in the bin
+                    const uint32_t of = solid.empty() ? kNoSolid : solid[e.sender];
+                    if (of != kNoSolid && nodes[e.sender].coneCos >= kFlatCone) {
+                        const HierarchyNode& s = nodes[e.sender];
+                        const bool facing = glm::dot(s.normal, centre - s.center) > 0.0f;
+                        auto it = std::find_if(solids.begin(), solids.end(),
+                                               [&](const SolidCover& c) { return c.solid == of; });
+                        if (it == solids.end())
+                            it = solids.insert(solids.end(), {of, 0.0f, 0.0f, e.dist, e.sender});
+                        if (facing) {
+                            if (it->facing == 0.0f) {
+                                it->near = e.dist;
+                                it->front = e.sender;
+                                fronts.push_back({of, uint32_t(b), e.sender});
+                            }
+                            it->facing += omega;
+                        } else if (it->facing > 0.0f) {
+                            // Behind the solid's near faces by `thin` or more, across the
+                            // solid (along the far face's normal): it adds only what it
+                            // covers beyond them. Either way what it covers stands for the
+                            // solid as seen from here, its near face (black, it would
+                            // darken the gaps the near faces' ends leave).
+                            if ((e.dist - it->near) * std::abs(glm::dot(s.normal, w)) >= thin) {
+                                const float before = std::max(it->facing, it->away);
+                                it->away += omega;
+                                omega = std::max(it->facing, it->away) - before;
+                            }
+                            sender = it->front;
+                        } else {
+                            farOnly = true;
+                        }
+                    }
+                    const float take = std::min(left, omega);
                     if (!(take > 0.0f)) continue;
-                    list.push_back({uint32_t(b), e.sender, c * norm * take});
+                    if (farOnly) unseen.push_back({list.size(), of});
+                    list.push_back({uint32_t(b), sender, c * norm * take});
                     left -= take;
                 }
                 // A bin mostly covered is a surface the discretisation left gaps in (its
@@ -230,6 +286,20 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 }
                 if (left > 1e-4f * omegaBin)
                     list.push_back({uint32_t(b), kNoSender, c * norm * left});
+            }
+            // A solid whose near faces this leaf sees somewhere has it outside: its far faces
+            // lie behind near ones everywhere, also where the near faces' ends fell into
+            // other bins; such a share shows the near face met in the closest bin. A leaf
+            // that sees only far faces of a solid is inside it (a floor under a box without
+            // a bottom): they block, black.
+            for (const auto& [k, of] : unseen) {
+                const glm::vec3& w = dirs_.Direction(list[k].bin);
+                float best = -2.0f;
+                for (const Front& f : fronts)
+                    if (f.solid == of) {
+                        const float cw = glm::dot(w, dirs_.Direction(f.bin));
+                        if (cw > best) best = cw, list[k].sender = f.sender;
+                    }
             }
         }
     });

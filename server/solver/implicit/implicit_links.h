@@ -30,6 +30,8 @@ inline constexpr uint32_t kNoSender = 0xffffffffu;
 inline constexpr uint32_t kFacing = 0xfffffffeu;
 inline constexpr uint32_t kAway = 0xfffffffdu;
 inline constexpr float kFlatCone = 0.9f;  // cos 25.8°
+// ImplicitLinker::Build's `solid` of a node that is not part of one closed solid.
+inline constexpr uint32_t kNoSolid = 0xffffffffu;
 
 struct ImplicitLinks {
     // Per leaf (hierarchy leaf order), the shares of its front bins [offsets[i],
@@ -59,7 +61,16 @@ class ImplicitLinker {
     ImplicitLinker(const Directions& dirs, float linkThreshold);
     // The links of `hierarchy` as it is placed now. `frontArea`: per node and bin, the
     // front-facing projected area Σ A cos⁺(n, ω_b) (what a cluster covers of a bin).
-    void Build(const Hierarchy& hierarchy, const std::vector<float>& frontArea, ImplicitLinks& out);
+    // `solid`: per node, the closed solid (scene/scene.h ClosedNodes) all its members bound,
+    // or kNoSolid; empty: none known. In a bin, a solid's turned-away flat senders that lie
+    // `thin` or more behind its nearest facing one add only what they cover beyond its
+    // facing ones: seen from outside, a solid's far faces lie behind its near ones (at a
+    // silhouette both would count, and the far ones, black, darken the bin); seen from
+    // inside (a floor under a box without a bottom) only far faces show, and they block. A
+    // solid thinner than `thin` (a wall thinner than an element) keeps both: its near
+    // faces' ends fall into the bins unevenly, and its far faces fill the gaps.
+    void Build(const Hierarchy& hierarchy, const std::vector<float>& frontArea,
+               const std::vector<uint32_t>& solid, float thin, ImplicitLinks& out);
 
   private:
     // A link at one end: the (node, bin) slot, the sender, its depth along the bin (what the

@@ -62,6 +62,7 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
     surfels_ = RefineScene(scene, h);
     if (progress) progress("clustering", 0.0);
     hierarchy_ = BuildHierarchy(surfels_);
+    FindSolids(scene);
     opposite_.resize(dirs_.Count());
     for (int b = 0; b < dirs_.Count(); ++b) opposite_[b] = dirs_.Lookup(-dirs_.Direction(b));
     sky_.Update(scene.environment, dirs_, environment_);
@@ -88,6 +89,32 @@ std::vector<direct::GpuReceiver> ImplicitSolver::LeafReceivers() const {
 
 void ImplicitSolver::CopyDirect() { light_.CopyDirect(directStage_->Irradiance()); }
 
+void ImplicitSolver::FindSolids(const Scene& scene) {
+    // Per surfel the closed node it lies on, then per node the one all its members share.
+    const std::vector<bool> closed = ClosedNodes(scene);
+    std::vector<uint32_t> ofSurfel(surfels_.size(), kNoSolid);
+    bool any = false;
+    for (size_t p = 0; p < scene.primitives.size(); ++p) {
+        const int node = scene.primitives[p].nodeIndex;
+        if (node < 0 || !closed[size_t(node)]) continue;
+        any = true;
+        for (size_t i = surfels_.firstSurfel[p]; i < surfels_.End(p); ++i)
+            ofSurfel[i] = uint32_t(node);
+    }
+    solid_.clear();
+    if (!any) return;
+    solid_.assign(hierarchy_.size(), kNoSolid);
+    for (size_t n = hierarchy_.size(); n-- > 0;) {  // preorder: children after their parent
+        const HierarchyNode& node = hierarchy_.nodes[n];
+        if (node.IsLeaf()) {
+            solid_[n] = ofSurfel[node.surfel];
+        } else {
+            const uint32_t a = solid_[n + 1], b = solid_[hierarchy_.nodes[n + 1].end];
+            solid_[n] = a == b ? a : kNoSolid;
+        }
+    }
+}
+
 void ImplicitSolver::ReadMaterials(const Scene& scene) {
     materials_ = scene.materials;
     AssignSurfelMaterials(scene, surfels_);
@@ -109,7 +136,7 @@ void ImplicitSolver::Relink() {
     });
     PullRows(hierarchy_, bins, projected_);
     msUpdate_ = MsSince(start);
-    linker_.Build(hierarchy_, projected_, links_);
+    linker_.Build(hierarchy_, projected_, solid_, elementSize_, links_);
     ++relinks_;
 }
 

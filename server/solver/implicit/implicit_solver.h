@@ -58,6 +58,7 @@ class ImplicitSolver : public Solver {
     void Relink();  // refit, links, projected areas
     void Bounce();  // one gather over the links and the pull of the new light
     void ReadMaterials(const Scene& scene);  // the scene's materials, then the leaves' light
+    void FindSolids(const Scene& scene);     // solid_ from the scene's closed nodes
     void CopyDirect();                       // E_d per leaf from the direct stage
     void ExitantTables();                    // I and P per node and bin from the leaves' radiance
     std::vector<direct::GpuReceiver> LeafReceivers() const;
@@ -72,6 +73,10 @@ class ImplicitSolver : public Solver {
     std::vector<uint32_t> opposite_;  // per bin: the bin of the opposite direction
     ImplicitLinker linker_;
     ImplicitLinks links_;
+    // Per node: the closed solid all its members bound (ClosedNodes: the scene node), or
+    // kNoSolid; empty when the scene has none. Fixed by the triangles' connectivity, so it
+    // is found once (a deformation keeps it).
+    std::vector<uint32_t> solid_;
     ReceiverLight light_;  // per leaf, in hierarchy leaf order
     std::vector<Material> materials_;
     // Per node and bin: exitant intensity (RGB, ExitantTables) and front-facing projected
