@@ -90,9 +90,13 @@ std::vector<direct::GpuReceiver> ImplicitSolver::LeafReceivers() const {
 void ImplicitSolver::CopyDirect() { light_.CopyDirect(directStage_->Irradiance()); }
 
 void ImplicitSolver::FindSolids(const Scene& scene) {
-    // Per surfel the closed node it lies on, then per node the one all its members share.
+    // Per surfel the closed node it lies on (kOpen: a surface that bounds no solid), then per
+    // node the one all its members on solids share: a cluster of a solid's face and an open
+    // surface just before it (a lamp quad 2 mm before its housing) is the solid's, since
+    // whatever of the open surface lies in the solid's shadow shows no more than the solid.
+    constexpr uint32_t kOpen = kNoSolid - 1;
     const std::vector<bool> closed = ClosedNodes(scene);
-    std::vector<uint32_t> ofSurfel(surfels_.size(), kNoSolid);
+    std::vector<uint32_t> ofSurfel(surfels_.size(), kOpen);
     bool any = false;
     for (size_t p = 0; p < scene.primitives.size(); ++p) {
         const int node = scene.primitives[p].nodeIndex;
@@ -110,9 +114,13 @@ void ImplicitSolver::FindSolids(const Scene& scene) {
             solid_[n] = ofSurfel[node.surfel];
         } else {
             const uint32_t a = solid_[n + 1], b = solid_[hierarchy_.nodes[n + 1].end];
-            solid_[n] = a == b ? a : kNoSolid;
+            solid_[n] = a == b ? a : a == kOpen ? b : b == kOpen ? a : kNoSolid;
         }
     }
+    for (size_t n = 0; n < hierarchy_.size(); ++n)
+        if (solid_[n] == kOpen ||
+            (hierarchy_.nodes[n].IsLeaf() && ofSurfel[hierarchy_.nodes[n].surfel] == kOpen))
+            solid_[n] = kNoSolid;
 }
 
 void ImplicitSolver::ReadMaterials(const Scene& scene) {
