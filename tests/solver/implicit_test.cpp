@@ -273,6 +273,9 @@ TEST(Implicit, AMoveLandsNearAFreshBuild) {
     ASSERT_EQ(solver->GeometryMismatch(scene), "");
     const std::string note = solver->UpdateGeometry(scene);
     EXPECT_NE(note.find("links rebuilt in place"), std::string::npos) << note;
+    // The check and the update refine the moved scene once between them (the service calls
+    // both for every move).
+    EXPECT_EQ(solver->Stats().Number("refinements"), 1.0);
     solver->Iterate(20);
     auto fresh = CreateSolver(scene, Implicit(0.08f));
     fresh->Iterate(30);
@@ -306,6 +309,7 @@ TEST(Implicit, ADeformationIsAsGoodAsAFreshBuild) {
     ASSERT_EQ(solver->GeometryMismatch(scene), "");
     const std::string note = solver->UpdateGeometry(scene);
     EXPECT_NE(note.find("links rebuilt in place"), std::string::npos) << note;
+    EXPECT_EQ(solver->Stats().Number("refinements"), 1.0);  // checked and taken: refined once
     solver->Iterate(20);
     auto fresh = CreateSolver(scene, settings);
     fresh->Iterate(30);

@@ -233,8 +233,33 @@ void ImplicitSolver::UpdateLights(const Scene& scene) {
     light_.Reradiate();  // the radiance leaving, with the new direct light
 }
 
+bool ImplicitSolver::Checked::Same(const Scene& scene) const {
+    if (!valid || positions.size() != scene.primitives.size()) return false;
+    for (size_t p = 0; p < positions.size(); ++p)
+        if (scene.primitives[p].positions != positions[p] ||
+            scene.primitives[p].normals != normals[p])
+            return false;
+    return true;
+}
+
 std::string ImplicitSolver::Mismatch(const Scene& scene, Surfels& now) const {
-    return RefinementMismatch(scene, lights_, surfels_, elementSize_, now);
+    if (scene.lights.size() == size_t(lights_) && checked_.Same(scene)) {
+        now = checked_.surfels;
+        return {};
+    }
+    ++refinements_;
+    std::string why = RefinementMismatch(scene, lights_, surfels_, elementSize_, now);
+    checked_.valid = why.empty();
+    if (checked_.valid) {
+        checked_.positions.resize(scene.primitives.size());
+        checked_.normals.resize(scene.primitives.size());
+        for (size_t p = 0; p < scene.primitives.size(); ++p) {
+            checked_.positions[p] = scene.primitives[p].positions;
+            checked_.normals[p] = scene.primitives[p].normals;
+        }
+        checked_.surfels = now;
+    }
+    return why;
 }
 
 std::string ImplicitSolver::GeometryMismatch(const Scene& scene) const {
@@ -322,6 +347,7 @@ SolverStats ImplicitSolver::Stats() const {
     s.SetDetail("candidate_pairs", double(links_.pairs));
     s.SetDetail("empty_bins", double(links_.empty));
     s.SetDetail("relinks", double(relinks_));
+    s.SetDetail("refinements", double(refinements_));
     return s;
 }
 

@@ -53,10 +53,23 @@ class ImplicitSolver : public Solver {
 
   private:
     // GeometryMismatch's reasons, with `now` the surfels refined from `scene` when it gets
+    // that far. The refinement of a scene that passed is kept (checked_), so that the
+    // UpdateGeometry that follows a GeometryMismatch of the same geometry (the service's
+    // check, then its update, every deformed frame) refines once.
     // that far (UpdateGeometry takes them instead of refining again).
     std::string Mismatch(const Scene& scene, Surfels& now) const;
-    void Relink();  // refit, links, projected areas
-    void Bounce();  // one gather over the links and the pull of the new light
+    // The last geometry that passed Mismatch: every primitive's positions and normals, and
+    // what they refined into.
+    struct Checked {
+        std::vector<std::vector<glm::vec3>> positions, normals;
+        Surfels surfels;
+        bool valid = false;
+        bool Same(const Scene& scene) const;
+    };
+    mutable Checked checked_;
+    mutable size_t refinements_ = 0;  // RefineScene runs for geometry updates (stats)
+    void Relink();                    // refit, links, projected areas
+    void Bounce();                    // one gather over the links and the pull of the new light
     void ReadMaterials(const Scene& scene);  // the scene's materials, then the leaves' light
     void FindSolids(const Scene& scene);     // solid_ from the scene's closed nodes
     void CopyDirect();                       // E_d per leaf from the direct stage
