@@ -37,6 +37,26 @@ double FilledFraction(const ImplicitLinks& links, size_t leaf) {
     return all > 0.0 ? filled / all : 0.0;
 }
 
+// Every vertex's irradiance from `samples` paths a vertex, one array (AllVertices' order).
+std::vector<glm::vec3> Truth(const Scene& scene, int samples) {
+    ReferenceSettings rs;
+    rs.samples = samples;
+    std::vector<glm::vec3> truth;
+    for (const auto& v : RenderReference(scene, rs).irradiance)
+        truth.insert(truth.end(), v.begin(), v.end());
+    return truth;
+}
+
+// Relative RMS between `solver`'s answer and that of a solver built afresh for `scene` with
+// `settings` and iterated `iterations` times.
+double ApartFromAFreshBuild(Solver& solver, const Scene& scene, const SolverSettings& settings,
+                            int iterations) {
+    auto fresh = CreateSolver(scene, settings);
+    fresh->Iterate(iterations);
+    return testing::RelativeRms(testing::AllVertices(solver, scene, Channel::kIndirect),
+                                testing::AllVertices(*fresh, scene, Channel::kIndirect));
+}
+
 // An open plane under a constant sky of radiance 1: nothing stands above it, every front bin
 // reads the sky, E = π everywhere.
 TEST(Implicit, OpenPlaneUnderASkyReceivesPiL) {
@@ -105,11 +125,7 @@ TEST(Implicit, MazeFurnaceKeepsItsEnergy) {
     auto solver = CreateSolver(scene, s);
     solver->Iterate(40);
     const std::vector<glm::vec3> e = testing::AllVertices(*solver, scene, Channel::kIndirect);
-    ReferenceSettings rs;
-    rs.samples = 256;
-    std::vector<glm::vec3> truth;
-    for (const auto& v : RenderReference(scene, rs).irradiance)
-        truth.insert(truth.end(), v.begin(), v.end());
+    const std::vector<glm::vec3> truth = Truth(scene, 256);
     double sum = 0.0, sumTruth = 0.0;
     for (size_t i = 0; i < e.size(); ++i) sum += e[i].x, sumTruth += truth[i].x;
     const double rms = testing::RelativeRms(e, truth);
@@ -315,11 +331,7 @@ TEST(Implicit, ADeformationIsAsGoodAsAFreshBuild) {
     fresh->Iterate(30);
     const std::vector<glm::vec3> now = testing::AllVertices(*solver, scene, Channel::kIndirect),
                                  rebuilt = testing::AllVertices(*fresh, scene, Channel::kIndirect);
-    ReferenceSettings rs;
-    rs.samples = 512;
-    std::vector<glm::vec3> truth;
-    for (const auto& v : RenderReference(scene, rs).irradiance)
-        truth.insert(truth.end(), v.begin(), v.end());
+    const std::vector<glm::vec3> truth = Truth(scene, 512);
     const double inPlace = testing::RelativeRms(now, truth),
                  fromScratch = testing::RelativeRms(rebuilt, truth),
                  apart = testing::RelativeRms(now, rebuilt),
@@ -389,11 +401,7 @@ TEST(Implicit, ADeformingMeshOverAHundredFramesStaysBoundedAndSmooth) {
     EXPECT_LT(worstRoom, 0.025);
     EXPECT_LT(worstAll, 0.2);
     solver->Iterate(20);
-    auto fresh = CreateSolver(scene, settings);
-    fresh->Iterate(40);
-    const double rel =
-        testing::RelativeRms(testing::AllVertices(*solver, scene, Channel::kIndirect),
-                             testing::AllVertices(*fresh, scene, Channel::kIndirect));
+    const double rel = ApartFromAFreshBuild(*solver, scene, settings, 40);
     std::printf("after 100 frames, settled, against a fresh build: %.4f relative RMS\n", rel);
     EXPECT_LT(rel, 0.03);
 }

@@ -117,10 +117,8 @@ void ImplicitSolver::FindSolids(const Scene& scene) {
             solid_[n] = a == b ? a : a == kOpen ? b : b == kOpen ? a : kNoSolid;
         }
     }
-    for (size_t n = 0; n < hierarchy_.size(); ++n)
-        if (solid_[n] == kOpen ||
-            (hierarchy_.nodes[n].IsLeaf() && ofSurfel[hierarchy_.nodes[n].surfel] == kOpen))
-            solid_[n] = kNoSolid;
+    for (uint32_t& s : solid_)
+        if (s == kOpen) s = kNoSolid;
 }
 
 void ImplicitSolver::ReadMaterials(const Scene& scene) {
@@ -242,13 +240,10 @@ bool ImplicitSolver::Checked::Same(const Scene& scene) const {
     return true;
 }
 
-std::string ImplicitSolver::Mismatch(const Scene& scene, Surfels& now) const {
-    if (scene.lights.size() == size_t(lights_) && checked_.Same(scene)) {
-        now = checked_.surfels;
-        return {};
-    }
+std::string ImplicitSolver::GeometryMismatch(const Scene& scene) const {
+    if (scene.lights.size() == size_t(lights_) && checked_.Same(scene)) return {};
     ++refinements_;
-    std::string why = RefinementMismatch(scene, lights_, surfels_, elementSize_, now);
+    std::string why = RefinementMismatch(scene, lights_, surfels_, elementSize_, checked_.surfels);
     checked_.valid = why.empty();
     if (checked_.valid) {
         checked_.positions.resize(scene.primitives.size());
@@ -257,20 +252,16 @@ std::string ImplicitSolver::Mismatch(const Scene& scene, Surfels& now) const {
             checked_.positions[p] = scene.primitives[p].positions;
             checked_.normals[p] = scene.primitives[p].normals;
         }
-        checked_.surfels = now;
     }
     return why;
 }
 
-std::string ImplicitSolver::GeometryMismatch(const Scene& scene) const {
-    Surfels now;
-    return Mismatch(scene, now);
-}
-
 std::string ImplicitSolver::UpdateGeometry(const Scene& scene) {
     const auto start = Clock::now();
-    Surfels now;  // refined once: checked, then taken
-    if (std::string why = Mismatch(scene, now); !why.empty()) throw Error(why);
+    // Refined once: checked (GeometryMismatch keeps it), then taken.
+    if (std::string why = GeometryMismatch(scene); !why.empty()) throw Error(why);
+    Surfels now = std::move(checked_.surfels);
+    checked_.valid = false;
     surfels_.positions = std::move(now.positions);
     surfels_.normals = std::move(now.normals);
     surfels_.areas = std::move(now.areas);

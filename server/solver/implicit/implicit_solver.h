@@ -52,14 +52,10 @@ class ImplicitSolver : public Solver {
     const Hierarchy& GetHierarchy() const { return hierarchy_; }
 
   private:
-    // GeometryMismatch's reasons, with `now` the surfels refined from `scene` when it gets
-    // that far. The refinement of a scene that passed is kept (checked_), so that the
-    // UpdateGeometry that follows a GeometryMismatch of the same geometry (the service's
-    // check, then its update, every deformed frame) refines once.
-    // that far (UpdateGeometry takes them instead of refining again).
-    std::string Mismatch(const Scene& scene, Surfels& now) const;
-    // The last geometry that passed Mismatch: every primitive's positions and normals, and
-    // what they refined into.
+    // The last geometry that passed GeometryMismatch: every primitive's positions and
+    // normals, and what they refined into, so that the UpdateGeometry that follows a check
+    // of the same geometry (the service's check, then its update, every deformed frame)
+    // takes it instead of refining again.
     struct Checked {
         std::vector<std::vector<glm::vec3>> positions, normals;
         Surfels surfels;
