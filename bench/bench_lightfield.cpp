@@ -44,7 +44,12 @@ int main(int argc, char** argv) {
     std::string out = "bench/results";
     int samples = 1024;
     bool quick = false;
-    app.add_option("--out", out, "folder for lightfield.json")->capture_default_str();
+    std::vector<std::string> devices{"cpu"};
+    std::string name = "lightfield.json";
+    app.add_option("--out", out, "folder for the results JSON")->capture_default_str();
+    app.add_option("--name", name, "the results file's name")->capture_default_str();
+    app.add_option("--devices", devices, "devices to run each case on: cpu, lavapipe, gpu")
+        ->capture_default_str();
     app.add_option("--samples", samples, "reference paths per vertex")->capture_default_str();
     app.add_flag("--quick", quick, "the bundled scenes at their defaults only");
     CLI11_PARSE(app, argc, argv);
@@ -74,57 +79,68 @@ int main(int argc, char** argv) {
     report["reference_samples"] = samples;
     std::printf("light field on %s; reference %d paths a vertex\n",
                 report["device"].get<std::string>().c_str(), samples);
-    std::printf("%-22s %8s %6s %5s %5s %8s %9s %9s %9s %8s %8s\n", "case", "surfels", "dirs",
-                "cells", "iters", "hits M", "setup s", "trace s", "walk ms", "total s", "rel rmse");
+    std::printf("%-22s %-8s %8s %6s %5s %5s %8s %9s %9s %9s %8s %8s\n", "case", "device", "surfels",
+                "dirs", "cells", "iters", "hits M", "setup s", "trace s", "walk ms", "total s",
+                "rel rmse");
     std::map<std::string, IrradianceFile> truths;
     try {
         for (const Case& c : cases) {
             const Scene scene = LoadGltf(c.scene);
             if (!truths.count(c.scene)) truths.emplace(c.scene, bench::Reference(scene, samples));
-            SolverSettings s;
-            s.solver = "lightfield";
-            s.device = DeviceChoice::kCpu;
-            s.elementSize = c.elementSize;
-            SetOption(s.options, "directions", c.directions);
-            SetOption(s.options, "batches", c.batches);
-            SetOption(s.options, "cells", c.cells);
-            GatherSettings g;
-            g.emitterRays = c.emitterRays;
-            g.gatherRays = 0;
-            const auto t = Clock::now();
-            auto solver = CreateGatheredSolver(scene, s, g);
-            const double setup = Seconds(t);
-            int iterations = c.iterations;
-            if (iterations > 0)
-                solver->Iterate(iterations);
-            else
-                iterations = IterateUntilConverged(*solver, 1e-3, 200).iterations;
-            const double total = Seconds(t);
-            const SolverStats st = solver->Stats();
-            const IrradianceFile mine =
-                ToIrradianceFile(scene, CollectIrradiance(scene, *solver, Channel::kIndirect));
-            const double rel = Compare(mine, truths.at(c.scene)).overall.relRmse;
-            const double walk = st.Number("last_walk_ms");
-            const double trace = st.linkBuildSeconds;
-            std::printf("%-22s %8zu %6d %5d %5d %8.1f %9.2f %9.2f %9.1f %8.2f %7.2f%%\n",
-                        c.name.c_str(), st.elements, c.directions * int(st.Number("batches")),
-                        int(st.Number("cells")), iterations, st.Number("line_hits") / 1e6, setup,
-                        trace, walk, total, 100 * rel);
-            nlohmann::json j = StatsToJson(st);
-            j["case"] = c.name;
-            j["scene"] = c.scene;
-            j["line_directions"] = c.directions * int(st.Number("batches"));
-            j["iterations"] = iterations;
-            j["first_shot_rays"] = c.emitterRays;
-            j["setup_seconds"] = setup;
-            j["trace_seconds"] = trace;
-            j["last_walk_ms"] = walk;
-            j["total_seconds"] = total;
-            j["rel_rmse"] = rel;
-            if (!c.paper.empty()) j["paper"] = c.paper;
-            report["results"].push_back(j);
+            for (const std::string& device : devices) {
+                SolverSettings s;
+                s.solver = "lightfield";
+                s.device = ParseDevice(device);
+                s.elementSize = c.elementSize;
+                SetOption(s.options, "directions", c.directions);
+                SetOption(s.options, "batches", c.batches);
+                SetOption(s.options, "cells", c.cells);
+                GatherSettings g;
+                g.emitterRays = c.emitterRays;
+                g.gatherRays = 0;
+                const auto t = Clock::now();
+                std::unique_ptr<Solver> solver;
+                try {
+                    solver = CreateGatheredSolver(scene, s, g);
+                } catch (const Error& e) {
+                    std::printf("%-22s %-8s unavailable: %s\n", c.name.c_str(), device.c_str(),
+                                e.what());
+                    continue;
+                }
+                const double setup = Seconds(t);
+                int iterations = c.iterations;
+                if (iterations > 0)
+                    solver->Iterate(iterations);
+                else
+                    iterations = IterateUntilConverged(*solver, 1e-3, 200).iterations;
+                const double total = Seconds(t);
+                const SolverStats st = solver->Stats();
+                const IrradianceFile mine =
+                    ToIrradianceFile(scene, CollectIrradiance(scene, *solver, Channel::kIndirect));
+                const double rel = Compare(mine, truths.at(c.scene)).overall.relRmse;
+                const double walk = st.Number("last_walk_ms");
+                const double trace = st.linkBuildSeconds;
+                std::printf("%-22s %-8s %8zu %6d %5d %5d %8.1f %9.2f %9.2f %9.1f %8.2f %7.2f%%\n",
+                            c.name.c_str(), device.c_str(), st.elements,
+                            c.directions * int(st.Number("batches")), int(st.Number("cells")),
+                            iterations, st.Number("line_hits") / 1e6, setup, trace, walk, total,
+                            100 * rel);
+                nlohmann::json j = StatsToJson(st);
+                j["case"] = c.name;
+                j["scene"] = c.scene;
+                j["line_directions"] = c.directions * int(st.Number("batches"));
+                j["iterations"] = iterations;
+                j["first_shot_rays"] = c.emitterRays;
+                j["setup_seconds"] = setup;
+                j["trace_seconds"] = trace;
+                j["last_walk_ms"] = walk;
+                j["total_seconds"] = total;
+                j["rel_rmse"] = rel;
+                if (!c.paper.empty()) j["paper"] = c.paper;
+                report["results"].push_back(j);
+            }
         }
-        bench::WriteReport(report, out, "lightfield.json");
+        bench::WriteReport(report, out, name);
     } catch (const std::exception& e) {
         std::fprintf(stderr, "error: %s\n", e.what());
         return 1;

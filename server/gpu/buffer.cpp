@@ -13,7 +13,8 @@ uint32_t FindMemory(const Context& ctx, uint32_t typeBits, vk::MemoryPropertyFla
 
 namespace {
 
-// A transient host-visible buffer for staging copies.
+// A host-visible buffer for staging copies; host-cached memory where the device has it (the
+// host reads a readback).
 struct Staging {
     vk::raii::Buffer buffer{nullptr};
     vk::raii::DeviceMemory memory{nullptr};
@@ -25,9 +26,11 @@ struct Staging {
                                                        vk::BufferUsageFlagBits::eTransferSrc |
                                                            vk::BufferUsageFlagBits::eTransferDst));
         auto req = buffer.getMemoryRequirements();
-        uint32_t type = FindMemory(
-            ctx, req.memoryTypeBits,
-            vk::MemoryPropertyFlagBits::eHostVisible | vk::MemoryPropertyFlagBits::eHostCoherent);
+        const vk::MemoryPropertyFlags host =
+            vk::MemoryPropertyFlagBits::eHostVisible | vk::MemoryPropertyFlagBits::eHostCoherent;
+        uint32_t type = FindMemory(ctx, req.memoryTypeBits,
+                                   host | vk::MemoryPropertyFlagBits::eHostCached);
+        if (type == UINT32_MAX) type = FindMemory(ctx, req.memoryTypeBits, host);
         if (type == UINT32_MAX) throw Error("Vulkan device has no host-visible memory");
         memory = vk::raii::DeviceMemory(ctx.Device(), vk::MemoryAllocateInfo(req.size, type));
         buffer.bindMemory(*memory, 0);
@@ -68,6 +71,8 @@ Buffer::Buffer(Context& ctx, size_t bytes)
                     " MiB) failed: " + e.what());
     }
     buffer_.bindMemory(*memory_, 0);
+    cached_ = mappable && (ctx.Physical().getMemoryProperties().memoryTypes[type].propertyFlags &
+                           vk::MemoryPropertyFlagBits::eHostCached);
     if (mappable) {
         mapped_ = memory_.mapMemory(0, bytes_);
         std::memset(mapped_, 0, bytes_);
@@ -108,15 +113,21 @@ void Buffer::Upload(const void* data, size_t bytes, size_t offset) {
 
 void Buffer::Download(void* data, size_t bytes, size_t offset) const {
     PENUMBRA_CHECK_LE(offset + bytes, bytes_);
-    if (mapped_) {
+    if (mapped_ && cached_) {
         std::memcpy(data, static_cast<const char*>(mapped_) + offset, bytes);
         return;
     }
-    Staging staging(ctx_, bytes);
+    if (bytes > readbackBytes_) {
+        Staging staging(ctx_, bytes);
+        readback_ = std::move(staging.buffer);
+        readbackMemory_ = std::move(staging.memory);
+        readbackMapped_ = staging.mapped;
+        readbackBytes_ = bytes;
+    }
     ctx_.RunNow([&](const vk::raii::CommandBuffer& cb) {
-        cb.copyBuffer(*buffer_, *staging.buffer, vk::BufferCopy(offset, 0, bytes));
+        cb.copyBuffer(*buffer_, *readback_, vk::BufferCopy(offset, 0, bytes));
     });
-    std::memcpy(data, staging.mapped, bytes);
+    std::memcpy(data, readbackMapped_, bytes);
 }
 
 }  // namespace penumbra::gpu

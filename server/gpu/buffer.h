@@ -1,5 +1,9 @@
-// Storage buffers with upload and readback. Device-local memory; a staging copy is used
-// when that memory is not host-visible (real GPUs), a direct map when it is (lavapipe).
+// Storage buffers with upload and readback. Device-local memory; uploads write it directly
+// where it is host-visible (lavapipe, a real GPU's resizable BAR), else through a staging
+// copy. Readbacks read it directly only where it is also host-cached (lavapipe): a real
+// GPU's BAR memory is uncached, and reading it over the bus was 40× slower than copying it
+// to host-cached memory first (bench/results/gpu-h100.md), so those go through a readback
+// buffer kept with the buffer.
 #pragma once
 
 #include <cstring>
@@ -47,6 +51,13 @@ class Buffer {
     vk::raii::Buffer buffer_{nullptr};
     vk::raii::DeviceMemory memory_{nullptr};
     void* mapped_ = nullptr;
+    bool cached_ = false;  // mapped_ is host-cached: read it directly
+    // The readback copy (host-visible, host-cached where the device has such memory), made on
+    // the first download that needs it and grown to the largest.
+    mutable vk::raii::Buffer readback_{nullptr};
+    mutable vk::raii::DeviceMemory readbackMemory_{nullptr};
+    mutable void* readbackMapped_ = nullptr;
+    mutable size_t readbackBytes_ = 0;
     mutable std::vector<std::pair<vk::Format, vk::raii::BufferView>> views_;
 };
 

@@ -89,7 +89,7 @@ struct RayTracer::Impl {
     vk::raii::AccelerationStructureKHR blas{nullptr}, tlas{nullptr};
     uint32_t triangles = 0;
 
-    // Pipeline: set 0 = (0) the top level, (1) rays, (2) hits; push constants: first, count.
+    // Pipeline: set 0 = (0) the top level, (1) rays, (2) hits; push constant: count.
     vk::raii::DescriptorSetLayout setLayout{nullptr};
     vk::raii::PipelineLayout layout{nullptr};
     vk::raii::Pipeline pipeline{nullptr};
@@ -120,7 +120,7 @@ struct RayTracer::Impl {
             vk::DescriptorSetLayoutBinding(2, vk::DescriptorType::eStorageBuffer, 1, stages)};
         setLayout = vk::raii::DescriptorSetLayout(ctx.Device(),
                                                   vk::DescriptorSetLayoutCreateInfo({}, bindings));
-        vk::PushConstantRange push(stages, 0, 2 * sizeof(uint32_t));
+        vk::PushConstantRange push(stages, 0, sizeof(uint32_t));
         vk::DescriptorSetLayout raw = *setLayout;
         layout =
             vk::raii::PipelineLayout(ctx.Device(), vk::PipelineLayoutCreateInfo({}, raw, push));
@@ -275,8 +275,8 @@ struct RayTracer::Impl {
             ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
                 cb.bindPipeline(vk::PipelineBindPoint::eRayTracingKHR, *pipeline);
                 cb.bindDescriptorSets(vk::PipelineBindPoint::eRayTracingKHR, *layout, 0, *set, {});
-                const std::array<uint32_t, 2> push = {0, count};
-                cb.pushConstants<uint32_t>(*layout, vk::ShaderStageFlagBits::eRaygenKHR, 0, push);
+                cb.pushConstants<uint32_t>(*layout, vk::ShaderStageFlagBits::eRaygenKHR, 0,
+                                           count);
                 cb.traceRaysKHR(raygen, miss, hit, callable, count, 1, 1);
                 // The host reads the hits after the fence.
                 vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,
