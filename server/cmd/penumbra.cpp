@@ -63,7 +63,8 @@ int main(int argc, char** argv) {
     cli::AddSolverOptions(bake, settings.solver, settings.options);
     iterations.Add(bake);
     bake->add_option("--element-size", settings.elementSize,
-                     "longest element edge after refinement, metres (default: scene diameter/40)");
+                     "longest element edge after refinement, metres (default: scene diameter/24 behind the "
+                     "final gather, /40 without)");
     bake->add_option("--device", device,
                      "auto, gpu, lavapipe or cpu (auto: a real GPU if present, else cpu)")
         ->capture_default_str();
@@ -162,7 +163,7 @@ int main(int argc, char** argv) {
     renderIterations.Add(render);
     ro.gather.Add(render);
     render->add_option("--element-size", renderSettings.elementSize,
-                       "metres; 0 = scene diameter / 40");
+                       "metres; 0 = scene diameter / 24 behind the final gather, / 40 without");
     render->add_option("--device", renderSolverDevice, "solver device: auto, gpu, lavapipe, cpu")
         ->capture_default_str();
     render->add_option("--shadow-map-size", renderSettings.shadowMapSize,

@@ -122,7 +122,7 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
                      "solver iterations per streamed frame")
         ->capture_default_str();
     s.load->add_option("--element-size", s.loadOptions.elementSize,
-                       "metres (0: scene diameter / 40)");
+                       "metres (0: scene diameter / 24 behind the final gather, / 40 without)");
     s.load->add_option("--device", s.loadOptions.device, "auto|gpu|lavapipe|cpu");
     s.load->add_flag("--reload", s.loadOptions.reload, "rebuild even if already loaded");
     s.load

@@ -28,7 +28,7 @@ enum class DeviceChoice { kAuto, kGpu, kLavapipe, kCpu };
 // registry entry: solver/registry.h).
 struct SolverSettings {
     std::string solver = "antiradiance";  // a name in the registry (Solvers())
-    float elementSize = 0.0f;  // metres; 0 picks kDefaultElementFraction × scene diameter
+    float elementSize = 0.0f;  // metres; 0 picks a fraction of the scene's diameter (below)
     DeviceChoice device = DeviceChoice::kAuto;
     int threads = 0;          // CPU threads; 0 = all cores
     bool validation = false;  // Vulkan validation layers (tests turn them on)
@@ -45,10 +45,14 @@ struct SolverSettings {
 };
 
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
+// Behind a final gather (behindGather) the solver's answer is read a bounce away through the
+// gather's hits, so coarser elements cost little there (docs/SOLVER.md, "Settings behind the
+// gather"; measured in bench/results/FINDINGS.md): the office's load-to-answer 7.5 → 4.0 s.
+inline constexpr float kGatherElementFraction = 1.0f / 24.0f;
 
-// The element size a solver refines `scene` at: settings.elementSize, or
-// kDefaultElementFraction × the scene's diameter when 0. Throws penumbra::Error when that is
-// not a positive number of metres.
+// The element size a solver refines `scene` at: settings.elementSize, or when 0 the scene's
+// diameter times kGatherElementFraction behind a final gather, kDefaultElementFraction
+// otherwise. Throws penumbra::Error when that is not a positive number of metres.
 float ElementSize(const Scene& scene, const SolverSettings& settings);
 // For a solver that takes any move keeping its refinement: why `scene` (edited) cannot be
 // taken by one built with `lights` punctual lights over `surfels` refined at `elementSize`

@@ -325,7 +325,7 @@ TEST(ServerProcess, EnvironmentAtLoad) {
     SetOption(s.options, "bins", 64);
     s.elementSize = 0.06f;
     s.device = DeviceChoice::kCpu;
-    auto solver = WithGather(CreateSolver(scene, s), scene, {});  // as the server: gather on
+    auto solver = CreateGatheredSolver(scene, s, {});  // as the server: gather on
     solver->Iterate(lit.iterations);
     std::vector<glm::vec3> want =
         PrimitiveIrradiance(solver->GetSurfels(), solver->SurfelIrradiance(), scene, 0);
@@ -363,7 +363,7 @@ TEST(ServerProcess, SkyChangedInALoadedSession) {
         SetOption(s.options, "bins", 64);
         s.elementSize = 0.06f;
         s.device = DeviceChoice::kCpu;
-        auto solver = WithGather(CreateSolver(scene, s), scene, {});  // as the server
+        auto solver = CreateGatheredSolver(scene, s, {});  // as the server
         solver->Iterate(40);
         return PrimitiveIrradiance(solver->GetSurfels(), solver->SurfelIrradiance(), scene, 0);
     };
