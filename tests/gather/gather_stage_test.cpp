@@ -244,8 +244,10 @@ void EditsMatchAFreshGather(Scene scene, const std::vector<std::pair<std::string
         if (name == "move") {
             // Only the rays near the box were traced again: fewer than a third of them.
             const SolverStats st = stage.Stats();
-            const size_t all =
-                st.gatherTargets * st.gatherRays + stage.GetSurfels().size() * st.emitterRays;
+            // The glints: a view from the vertex and one of each light each.
+            const size_t all = st.gatherTargets * st.gatherRays +
+                               stage.GetSurfels().size() * st.emitterRays +
+                               size_t(st.Number("gather_glints")) * (1 + scene.lights.size());
             std::printf("the move traced %zu of at least %zu rays again\n", st.gatherRaysRetraced,
                         all);
             EXPECT_GT(st.gatherRaysRetraced, 0u);
