@@ -383,17 +383,19 @@ std::string GatherStage::UpdateGeometry(const Scene& scene) {
     diameter_ = scene_.Diameter();
     Place();
     raysRetraced_ = 0;
-    // A moved emitter moves the points the shadow rays aim at: everything is traced again.
-    const Moved* partial = emitterMoved ? nullptr : &moved;
+    // The gather's rays, lobes and glints: those that pass near what moved are traced again,
+    // a moved emitter too (what a ray meets emits what its material does, wherever it is). A
+    // moved emitter moves the points the first shot's shadow rays aim at: the shot is traced
+    // again whole.
     if (!targets_.empty()) {
-        Trace(partial);
-        TraceLobes(partial);
+        Trace(&moved);
+        TraceLobes(&moved);
         PlaceGlints();
-        TraceGlints(partial);
+        TraceGlints(&moved);
         Relit(lightsBefore);  // lights placed by a moved node
         Sky();
     }
-    Shoot(partial);
+    Shoot(emitterMoved ? nullptr : &moved);
     fresh_ = false;
     lightsFresh_ = false;
     return done;
