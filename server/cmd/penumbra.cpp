@@ -62,9 +62,10 @@ int main(int argc, char** argv) {
     AddColor0(bake, bakeColor0);
     cli::AddSolverOptions(bake, settings.solver, settings.options);
     iterations.Add(bake);
-    bake->add_option("--element-size", settings.elementSize,
-                     "longest element edge after refinement, metres (default: scene diameter/24 behind the "
-                     "final gather, /40 without)");
+    bake->add_option(
+        "--element-size", settings.elementSize,
+        "longest element edge after refinement, metres (default: scene diameter/24 behind the "
+        "final gather, /40 without)");
     bake->add_option("--device", device,
                      "auto, gpu, lavapipe or cpu (auto: a real GPU if present, else cpu)")
         ->capture_default_str();

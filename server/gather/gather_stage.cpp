@@ -422,9 +422,10 @@ SolverStats GatherStage::Stats() const {
     s.gatherDevice =
         tracer_ ? "vulkan:" + tracer_->DeviceName() + " (ray tracing pipeline)" : "cpu (Embree)";
     if (!tracer_ && !tracerNote_.empty()) s.gatherDevice += "; no GPU ray tracing: " + tracerNote_;
-    size_t glints = 0;
-    for (const auto& g : glints_) glints += g.size();
-    if (glints > 0) s.SetDetail("gather_glints", static_cast<double>(glints));
+    // Every target has GlintCount() glints where there are glossy triangles to draw them on
+    // (TraceGlints).
+    if (!glossyTriangles_.empty())
+        s.SetDetail("gather_glints", static_cast<double>(targets_.size() * GlintCount()));
     return s;
 }
 

@@ -28,8 +28,8 @@ struct Staging {
         auto req = buffer.getMemoryRequirements();
         const vk::MemoryPropertyFlags host =
             vk::MemoryPropertyFlagBits::eHostVisible | vk::MemoryPropertyFlagBits::eHostCoherent;
-        uint32_t type = FindMemory(ctx, req.memoryTypeBits,
-                                   host | vk::MemoryPropertyFlagBits::eHostCached);
+        uint32_t type =
+            FindMemory(ctx, req.memoryTypeBits, host | vk::MemoryPropertyFlagBits::eHostCached);
         if (type == UINT32_MAX) type = FindMemory(ctx, req.memoryTypeBits, host);
         if (type == UINT32_MAX) throw Error("Vulkan device has no host-visible memory");
         memory = vk::raii::DeviceMemory(ctx.Device(), vk::MemoryAllocateInfo(req.size, type));

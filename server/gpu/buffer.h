@@ -1,9 +1,9 @@
 // Storage buffers with upload and readback. Device-local memory; uploads write it directly
 // where it is host-visible (lavapipe, a real GPU's resizable BAR), else through a staging
 // copy. Readbacks read it directly only where it is also host-cached (lavapipe): a real
-// GPU's BAR memory is uncached, and reading it over the bus was 40× slower than copying it
-// to host-cached memory first (bench/results/gpu-h100.md), so those go through a readback
-// buffer kept with the buffer.
+// GPU's BAR memory is uncached, and reading it over the bus made the light field's lines 9×
+// slower on an H100 than copying it to host-cached memory first (bench/results/gpu-h100.md),
+// so those go through a readback buffer kept with the buffer.
 #pragma once
 
 #include <cstring>

@@ -275,8 +275,7 @@ struct RayTracer::Impl {
             ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
                 cb.bindPipeline(vk::PipelineBindPoint::eRayTracingKHR, *pipeline);
                 cb.bindDescriptorSets(vk::PipelineBindPoint::eRayTracingKHR, *layout, 0, *set, {});
-                cb.pushConstants<uint32_t>(*layout, vk::ShaderStageFlagBits::eRaygenKHR, 0,
-                                           count);
+                cb.pushConstants<uint32_t>(*layout, vk::ShaderStageFlagBits::eRaygenKHR, 0, count);
                 cb.traceRaysKHR(raygen, miss, hit, callable, count, 1, 1);
                 // The host reads the hits after the fence.
                 vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,

@@ -135,6 +135,13 @@ bool IsFinite(const glm::mat4& m) {
     return true;
 }
 
+// Node `node` of `scene`; throws penumbra::Error when there is none.
+const SceneNode& NodeAt(const Scene& scene, int node) {
+    if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
+        throw Error("node index " + std::to_string(node) + " does not exist");
+    return scene.nodes[node];
+}
+
 // World transforms of `node`'s subtree under `parentWorld`, written into `world`.
 void PlaceSubtree(const Scene& scene, int node, const glm::mat4& parentWorld,
                   const glm::mat4& local, std::vector<std::pair<int, glm::mat4>>& world) {
@@ -200,9 +207,7 @@ int FindLight(const Scene& scene, const std::string& name) {
 }
 
 void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
-    if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
-        throw Error("node index " + std::to_string(node) + " does not exist");
-    const SceneNode& n = scene.nodes[node];
+    const SceneNode& n = NodeAt(scene, node);
     if (!IsFinite(local)) throw Error("transform of '" + n.name + "' has NaN or infinity");
     glm::mat4 parentWorld = n.parent >= 0 ? scene.nodes[n.parent].world : glm::mat4(1.0f);
     // Check every new world matrix before changing anything.
@@ -250,9 +255,7 @@ size_t NodeVertexCount(const Scene& scene, int node) {
 
 void SetNodeVertices(Scene& scene, int node, const std::vector<glm::vec3>& positions,
                      const std::vector<glm::vec3>& normals) {
-    if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
-        throw Error("node index " + std::to_string(node) + " does not exist");
-    const SceneNode& n = scene.nodes[node];
+    const SceneNode& n = NodeAt(scene, node);
     const size_t count = NodeVertexCount(scene, node);
     if (count == 0) throw Error("node '" + n.name + "' has no triangles to deform");
     if (positions.size() != count)
@@ -323,9 +326,7 @@ size_t NodeMorphTargets(const Scene& scene, int node) {
 }
 
 void SetNodeMorphWeights(Scene& scene, int node, const std::vector<float>& weights) {
-    if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
-        throw Error("node index " + std::to_string(node) + " does not exist");
-    const SceneNode& n = scene.nodes[node];
+    const SceneNode& n = NodeAt(scene, node);
     const size_t targets = NodeMorphTargets(scene, node);
     if (targets == 0) throw Error("node '" + n.name + "' has no morph targets");
     if (weights.size() != targets)

@@ -86,8 +86,7 @@ double RelativeChange(const std::vector<glm::vec3>& now, const std::vector<glm::
 }
 
 float ElementSize(const Scene& scene, const SolverSettings& settings) {
-    const float fraction =
-        settings.behindGather ? kGatherElementFraction : kDefaultElementFraction;
+    const float fraction = settings.behindGather ? kGatherElementFraction : kDefaultElementFraction;
     const float h =
         settings.elementSize > 0.0f ? settings.elementSize : scene.Diameter() * fraction;
     if (!(h > 0.0f) || !std::isfinite(h))
