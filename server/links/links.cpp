@@ -196,10 +196,31 @@ NearField BuildNearField(const Surfels& surfels) {
     return near;
 }
 
+namespace {
+
+// Centroids of a 6×6 regular subdivision of a triangle (36 equal sub-triangles), as
+// barycentrics (u, v) of its corners b and c; φ = 1 − u − v, the hat function of corner a.
+struct NearRule {
+    static constexpr int kDiv = 6, kPoints = kDiv * kDiv;
+    float u[kPoints], v[kPoints], phi[kPoints];
+    NearRule() {
+        int k = 0;
+        for (int row = 0; row < kDiv; ++row)
+            for (int col = 0; col < kDiv - row; ++col)
+                for (int up = 0; up < (col + row < kDiv - 1 ? 2 : 1); ++up, ++k) {
+                    u[k] = static_cast<float>(3 * col + (up ? 2 : 1)) / (3.0f * kDiv);
+                    v[k] = static_cast<float>(3 * row + (up ? 2 : 1)) / (3.0f * kDiv);
+                    phi[k] = 1.0f - u[k] - v[k];
+                }
+    }
+};
+
+}  // namespace
+
 float NearFieldIrradiance(const NearField& near, uint32_t s, glm::vec3 p, glm::vec3 n) {
-    // Centroids of a 6×6 regular subdivision (36 equal sub-triangles) integrate linear
-    // functions exactly; φ_s at a centroid is the barycentric weight of s's corner.
-    constexpr int kDiv = 6;
+    // The centroid rule integrates linear functions exactly; φ_s at a centroid is the
+    // barycentric weight of s's corner.
+    static const NearRule rule;
     const Surfels& sf = *near.surfels;
     const glm::vec3 ns = sf.normals[s];
     double sum = 0.0;
@@ -209,24 +230,32 @@ float NearFieldIrradiance(const NearField& near, uint32_t s, glm::vec3 p, glm::v
         int corner = v[0] == s ? 0 : v[1] == s ? 1 : 2;
         glm::vec3 a = sf.positions[v[corner]], b = sf.positions[v[(corner + 1) % 3]],
                   c = sf.positions[v[(corner + 2) % 3]];
-        float area = 0.5f * glm::length(glm::cross(b - a, c - a));
-        float w = area / (kDiv * kDiv);
-        for (int row = 0; row < kDiv; ++row)
-            for (int col = 0; col < kDiv - row; ++col)
-                for (int up = 0; up < (col + row < kDiv - 1 ? 2 : 1); ++up) {
-                    // Barycentric (of b, c) of the centroid of sub-triangle (row, col, up).
-                    float u = (3 * col + (up ? 2 : 1)) / (3.0f * kDiv);
-                    float vv = (3 * row + (up ? 2 : 1)) / (3.0f * kDiv);
-                    float phi = 1.0f - u - vv;  // hat function of corner a
-                    glm::vec3 q = a + u * (b - a) + vv * (c - a);
-                    glm::vec3 d = p - q;
-                    float d2 = glm::dot(d, d);
-                    if (d2 <= 0.0f) continue;
-                    float inv = 1.0f / std::sqrt(d2);
-                    float cs = std::abs(glm::dot(ns, d)) * inv;
-                    float cr = std::max(0.0f, -glm::dot(n, d)) * inv;
-                    sum += w * phi * cs * cr / d2;
-                }
+        // The receiver's cosine max(0, n·(q − p)) is linear in q before the clamp: where it is
+        // not positive at any corner, the whole triangle sends nothing (a coplanar
+        // neighbour's, or one behind the receiver). The margin keeps rounding in a plane from
+        // integrating a trace that kNearTrace would drop anyway.
+        const float margin =
+            1e-5f * std::sqrt(std::max(
+                        {glm::dot(a - p, a - p), glm::dot(b - p, b - p), glm::dot(c - p, c - p)}));
+        if (std::max({glm::dot(n, a - p), glm::dot(n, b - p), glm::dot(n, c - p)}) <= margin)
+            continue;
+        const float w = 0.5f * glm::length(glm::cross(b - a, c - a)) / NearRule::kPoints;
+        // d = p − q = (p − a) − u (b − a) − v (c − a); cos_s cos_r / d² = |n_s·d| max(0, −n·d)
+        // / d⁴ (no square root). Written per point into an array so that the loop vectorises.
+        const glm::vec3 pa = p - a, ab = b - a, ac = c - a;
+        float part[NearRule::kPoints];
+        for (int k = 0; k < NearRule::kPoints; ++k) {
+            const float dx = pa.x - rule.u[k] * ab.x - rule.v[k] * ac.x;
+            const float dy = pa.y - rule.u[k] * ab.y - rule.v[k] * ac.y;
+            const float dz = pa.z - rule.u[k] * ab.z - rule.v[k] * ac.z;
+            const float d2 = dx * dx + dy * dy + dz * dz;
+            const float cs = std::abs(ns.x * dx + ns.y * dy + ns.z * dz);
+            const float cr = std::max(0.0f, -(n.x * dx + n.y * dy + n.z * dz));
+            part[k] = d2 > 0.0f ? rule.phi[k] * cs * cr / (d2 * d2) : 0.0f;
+        }
+        float triangle = 0.0f;
+        for (float x : part) triangle += x;
+        sum += static_cast<double>(w) * triangle;
     }
     return static_cast<float>(sum);
 }
