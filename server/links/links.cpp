@@ -92,11 +92,18 @@ struct Refiner {
         if (r.IsLeaf() && s.IsLeaf()) return glm::dot(r.normal, d) <= 1e-6f * dist;
         if (dist <= r.radius + s.radius) return false;
         if (r.IsLeaf()) return glm::dot(r.normal, d) <= -s.radius;
-        // Normal cone vs the cone of directions from receiver to sender.
-        float axisAngle = std::acos(std::clamp(glm::dot(r.normal, d / dist), -1.0f, 1.0f));
-        float coneAngle = std::acos(std::clamp(r.coneCos, -1.0f, 1.0f));
-        float spread = std::asin(std::min(1.0f, (r.radius + s.radius) / dist));
-        return axisAngle > 0.5f * std::numbers::pi_v<float> + coneAngle + spread;
+        // Normal cone vs the cone of directions from receiver to sender: culled when the
+        // angle between the normal and the direction to the sender exceeds π/2 + θ, θ = the
+        // cone's half angle + the pair's angular spread. In cosines (no inverse
+        // trigonometry): cos(axis) < cos(π/2 + θ) = −sin θ, where θ < π/2; never beyond.
+        const float cosC = std::clamp(r.coneCos, -1.0f, 1.0f);
+        const float sinS = std::min(1.0f, (r.radius + s.radius) / dist);
+        if (cosC <= 0.0f || sinS >= 1.0f) return false;  // θ ≥ π/2
+        const float sinC = std::sqrt(1.0f - cosC * cosC), cosS = std::sqrt(1.0f - sinS * sinS);
+        // θ < π/2 ⟺ cos θ = cosC cosS − sinC sinS > 0.
+        if (cosC * cosS - sinC * sinS <= 0.0f) return false;
+        const float sinTheta = sinC * cosS + cosC * sinS;
+        return glm::dot(r.normal, d) < -sinTheta * dist;
     }
 
     // One refinement step of pair (r, s): either emits its link, drops it, or hands the
@@ -448,14 +455,16 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
     };
     place(seedLinks);
     for (const auto& v : local) place(v);
+    // The order as one 64-bit key: level (< 64) | scrambled bin (10 bits) | bin | sender.
+    static_assert(Directions::kLevels <= 64 && Directions::kMaxBins <= 65536);
+    auto key = [](const Link& l) {
+        return uint64_t(l.level) << 58 | uint64_t((l.bin * 37u) & 1023u) << 48 |
+               uint64_t(l.bin) << 32 | l.sender;
+    };
     tbb::parallel_for(size_t(0), h.size(), [&](size_t r) {
         std::sort(links.links.begin() + links.offsets[r],
-                  links.links.begin() + links.offsets[r + 1], [](const Link& a, const Link& b) {
-                      if (a.level != b.level) return a.level < b.level;
-                      const uint32_t ka = (a.bin * 37u) & 1023u, kb = (b.bin * 37u) & 1023u;
-                      if (ka != kb) return ka < kb;
-                      return a.bin != b.bin ? a.bin < b.bin : a.sender < b.sender;
-                  });
+                  links.links.begin() + links.offsets[r + 1],
+                  [&](const Link& a, const Link& b) { return key(a) < key(b); });
     });
     if (!settings.motion.empty()) {
         for (uint32_t r = 0; r < h.size(); ++r)
