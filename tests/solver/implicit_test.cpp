@@ -416,10 +416,95 @@ TEST(Implicit, ADeformingMeshOverAHundredFramesStaysBoundedAndSmooth) {
                 worstAll);
     EXPECT_LT(worstRoom, 0.025);
     EXPECT_LT(worstAll, 0.2);
+    // Every relink after the first deformation kept the links of the pairs away from the blob.
+    EXPECT_EQ(solver->Stats().Number("relinks_kept"), 99.0);
     solver->Iterate(20);
     const double rel = ApartFromAFreshBuild(*solver, scene, settings, 40);
     std::printf("after 100 frames, settled, against a fresh build: %.4f relative RMS\n", rel);
     EXPECT_LT(rel, 0.03);
+}
+
+// The links of a deformation with the unmoved pairs' links kept (ImplicitLinker::Build's
+// `moving`) are those of a full build at the new pose, to the bit, pose after pose; a move
+// outside the kept set builds everything again.
+TEST(Implicit, KeptLinksEqualAFullBuild) {
+    Scene scene = scenes::MorphRoom().Build();
+    const int blob = FindNode(scene, "blob");
+    const Directions dirs(64);
+    Surfels surfels = RefineScene(scene, 0.15f);
+    Hierarchy h = BuildHierarchy(surfels);
+    RefitHierarchy(h,
+                   surfels);  // as the solver's Relink: the clusters' spheres from their children's
+    const size_t bins = size_t(dirs.Count());
+    auto frontArea = [&] {  // as the solver's Relink: per leaf A cos⁺, summed up the tree
+        std::vector<float> fa(h.size() * bins, 0.0f);
+        for (size_t k = h.size(); k-- > 0;) {
+            const HierarchyNode& n = h.nodes[k];
+            for (size_t b = 0; b < bins; ++b)
+                fa[k * bins + b] =
+                    n.IsLeaf() ? n.area * std::max(0.0f, glm::dot(n.normal, dirs.Direction(b)))
+                               : fa[(k + 1) * bins + b] + fa[size_t(h.nodes[k + 1].end) * bins + b];
+        }
+        return fa;
+    };
+    // The nodes above the blob's elements.
+    std::vector<uint8_t> ofBlob(surfels.size(), 0), moving(h.size(), 0);
+    for (size_t p = 0; p < scene.primitives.size(); ++p)
+        if (scene.primitives[p].nodeIndex == blob)
+            for (size_t i = surfels.firstSurfel[p]; i < surfels.End(p); ++i) ofBlob[i] = 1;
+    for (size_t k = h.size(); k-- > 0;) {
+        const HierarchyNode& n = h.nodes[k];
+        moving[k] =
+            n.IsLeaf() ? ofBlob[n.surfel] : uint8_t(moving[k + 1] | moving[h.nodes[k + 1].end]);
+    }
+    ImplicitLinker kept(dirs, 0.5f);
+    ImplicitLinks links;
+    kept.Build(h, frontArea(), {}, 0.15f, links, &moving);
+    EXPECT_FALSE(kept.Incremental());
+    {
+        ImplicitLinker full(dirs, 0.5f);
+        ImplicitLinks fresh;
+        full.Build(h, frontArea(), {}, 0.15f, fresh);
+        EXPECT_EQ(links.sender, fresh.sender);
+        EXPECT_EQ(links.weight, fresh.weight);
+        EXPECT_EQ(links.pairs, fresh.pairs);
+        EXPECT_EQ(links.linked, fresh.linked);
+        // Again with the same pose, kept.
+        kept.Build(h, frontArea(), {}, 0.15f, links, &moving);
+        EXPECT_TRUE(kept.Incremental());
+        EXPECT_EQ(links.sender, fresh.sender);
+        EXPECT_EQ(links.pairs, fresh.pairs);
+    }
+    for (int pose = 0; pose < 3; ++pose) {
+        SetNodeMorphWeights(scene, blob, {0.3f * float(pose + 1), 0.8f - 0.3f * float(pose)});
+        const Surfels now = RefineScene(scene, 0.15f);
+        ASSERT_EQ(now.size(), surfels.size());
+        surfels.centroids = now.centroids, surfels.normals = now.normals;
+        surfels.areas = now.areas, surfels.positions = now.positions;
+        RefitHierarchy(h, surfels);
+        const std::vector<float> fa = frontArea();
+        kept.Build(h, fa, {}, 0.15f, links, &moving);
+        EXPECT_TRUE(kept.Incremental());
+        ImplicitLinker full(dirs, 0.5f);
+        ImplicitLinks fresh;
+        full.Build(h, fa, {}, 0.15f, fresh);
+        std::printf(
+            "pose %d: %zu shares, %zu pairs, create %.1f ms, push %.1f ms (a full build: %zu "
+            "shares, %zu pairs, create %.1f ms, push %.1f ms)\n",
+            pose, links.sender.size(), links.pairs, links.msCreate, links.msPush,
+            fresh.sender.size(), fresh.pairs, fresh.msCreate, fresh.msPush);
+        EXPECT_EQ(links.offsets, fresh.offsets);
+        EXPECT_EQ(links.bin, fresh.bin);
+        EXPECT_EQ(links.sender, fresh.sender);
+        EXPECT_EQ(links.weight, fresh.weight);
+        EXPECT_EQ(links.travel, fresh.travel);
+        EXPECT_EQ(links.pairs, fresh.pairs);
+        EXPECT_EQ(links.linked, fresh.linked);
+    }
+    // Another moving set (the plinth's nodes as well): everything built again.
+    std::vector<uint8_t> more(h.size(), 1);
+    kept.Build(h, frontArea(), {}, 0.15f, links, &more);
+    EXPECT_FALSE(kept.Incremental());
 }
 
 }  // namespace

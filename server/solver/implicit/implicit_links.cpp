@@ -42,6 +42,7 @@ bool CanReceive(const HierarchyNode& r, const HierarchyNode& s, const glm::vec3&
 
 struct Pair {
     uint32_t a, b;
+    uint32_t root;  // the kept pair whose descendant it is (ImplicitLinker::Build)
 };
 
 // Whether direction `dir` (unit) leaves `r` above the horizon of some member: a flat node
@@ -64,8 +65,19 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
 }
 
 void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontArea,
-                           const std::vector<uint32_t>& solid, float thin, ImplicitLinks& out) {
+                           const std::vector<uint32_t>& solid, float thin, ImplicitLinks& out,
+                           const std::vector<uint8_t>* moving) {
     const auto& nodes = h.nodes;
+    PENUMBRA_CHECK(!moving || moving->size() == nodes.size());
+    // With the ends kept for this `moving`: only the pairs with a moving end are examined.
+    // Else everything, and the ends of the pairs without one are kept for the next build.
+    incremental_ = moving && !keptFor_.empty() && keptFor_ == *moving;
+    if (!incremental_) {
+        kept_ = {};
+        keptFor_ = moving ? *moving : std::vector<uint8_t>{};
+    }
+    const uint8_t* still = moving ? moving->data() : nullptr;  // still[n] == 0: n is kept
+    auto keptPair = [&](uint32_t a, uint32_t b) { return still && !still[a] && !still[b]; };
     const size_t bins = static_cast<size_t>(dirs_.Count());
     const float omegaBin = dirs_.BinSolidAngle();
     const float limit = threshold_ * omegaBin;
@@ -88,25 +100,67 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
 
     // CreateHierarchicalLinks, level by level: each round splits or links every pair of the
     // last round, in parallel; a link is recorded at each end that can receive.
-    std::vector<Pair> round{{0, 0}};
+    //
+    // Kept pairs (both nodes outside `moving`): which of them a build meets depends on how
+    // the pairs above them, with a moving end, were split; what a kept pair yields (its
+    // descendants' ends) does not. So the first kept pair of each lineage (a root, its
+    // parent pair had a moving end) is numbered, its descendants carry its number, and
+    // their ends, pairs and links are kept per root; a later build given the same `moving`
+    // takes a root's ends where it meets that root, and splits any other kept pair afresh.
+    constexpr uint32_t kFresh = 0xffffffffu;
+    std::vector<Pair> round{{0, 0, kFresh}};
     tbb::enumerable_thread_specific<std::vector<Pair>> next;
     tbb::enumerable_thread_specific<std::vector<End>> recorded;
+    struct KeptEnd {
+        End end;
+        uint32_t root;
+    };
+    tbb::enumerable_thread_specific<std::vector<KeptEnd>> keeping;
+    // Per thread: new roots (pair key, number); per kept pair examined and per kept link,
+    // its root (counted per root afterwards); roots taken (incremental).
+    tbb::enumerable_thread_specific<std::vector<std::pair<uint64_t, uint32_t>>> roots;
+    tbb::enumerable_thread_specific<std::vector<uint32_t>> examinedOf, linkedOf, taken;
+    std::atomic<uint32_t> rootCount{0};
     std::atomic<size_t> pairs{0}, linked{0};
+    const bool keeps = still && !incremental_;
+    auto keyOf = [](uint32_t a, uint32_t b) { return uint64_t(a) << 32 | b; };
     while (!round.empty()) {
         pairs += round.size();
         tbb::parallel_for(tbb::blocked_range<size_t>(0, round.size(), 512), [&](const auto& range) {
             std::vector<Pair>& emit = next.local();
-            std::vector<End>& ends = recorded.local();
+            std::vector<End>& fresh = recorded.local();
+            std::vector<KeptEnd>* keepInto = keeps ? &keeping.local() : nullptr;
+            std::vector<uint32_t>* examined = keeps ? &examinedOf.local() : nullptr;
+            std::vector<uint32_t>* linkedRoots = keeps ? &linkedOf.local() : nullptr;
             size_t made = 0;
             for (size_t k = range.begin(); k != range.end(); ++k) {
                 const uint32_t a = round[k].a, b = round[k].b;
+                uint32_t root = round[k].root;
+                if (keptPair(a, b)) {
+                    if (incremental_) {
+                        // A root kept: its ends stand for all its descendants' (the pair
+                        // itself is counted with them).
+                        const auto it = kept_.index.find(keyOf(a, b));
+                        if (it != kept_.index.end()) {
+                            taken.local().push_back(it->second);
+                            --pairs;
+                            continue;
+                        }
+                    } else {
+                        if (root == kFresh) {
+                            root = rootCount++;
+                            roots.local().push_back({keyOf(a, b), root});
+                        }
+                        examined->push_back(root);
+                    }
+                }
                 const HierarchyNode& A = nodes[a];
                 if (a == b) {  // a self-pair: its children's self-pairs and their pair
                     if (A.IsLeaf()) continue;
                     const uint32_t l = a + 1, r = nodes[a + 1].end;
-                    emit.push_back({l, l});
-                    emit.push_back({r, r});
-                    emit.push_back({l, r});
+                    emit.push_back({l, l, root});
+                    emit.push_back({r, r, root});
+                    emit.push_back({l, r, root});
                     continue;
                 }
                 const HierarchyNode& B = nodes[b];
@@ -123,21 +177,28 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 const bool splitB =
                     !B.IsLeaf() && (overlap || pi * B.radius * B.radius / dist2 > limit);
                 if (splitB && (!splitA || B.radius >= A.radius)) {
-                    emit.push_back({a, b + 1});
-                    emit.push_back({a, nodes[b + 1].end});
+                    emit.push_back({a, b + 1, root});
+                    emit.push_back({a, nodes[b + 1].end, root});
                     continue;
                 }
                 if (splitA) {
-                    emit.push_back({a + 1, b});
-                    emit.push_back({nodes[a + 1].end, b});
+                    emit.push_back({a + 1, b, root});
+                    emit.push_back({nodes[a + 1].end, b, root});
                     continue;
                 }
                 if (!(dist > 0.0f)) continue;  // coincident ends: no direction between them
                 const glm::vec3 dir = d / dist;
+                const size_t before = fresh.size();
                 if (aGets && AboveHorizon(A, dir))
-                    Record(a, b, B, A.center, dir, dist, covered(b, dir, dist), ends);
+                    Record(a, b, B, A.center, dir, dist, covered(b, dir, dist), fresh);
                 if (bGets && AboveHorizon(B, -dir))
-                    Record(b, a, A, B.center, -dir, dist, covered(a, -dir, dist), ends);
+                    Record(b, a, A, B.center, -dir, dist, covered(a, -dir, dist), fresh);
+                if (keeps && root != kFresh) {  // this pair's ends are kept with its root
+                    for (size_t e = before; e < fresh.size(); ++e)
+                        keepInto->push_back({fresh[e], root});
+                    fresh.resize(before);
+                    linkedRoots->push_back(root);
+                }
                 ++made;
             }
             linked += made;
@@ -148,13 +209,49 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
             v.clear();
         }
     }
-    out.pairs = pairs;
-    out.linked = linked;
+    if (keeps) {
+        // The kept ends grouped by root (a counting sort), the roots by pair.
+        const uint32_t n = rootCount;
+        kept_.first.assign(size_t(n) + 1, 0);
+        kept_.pairs.assign(n, 0);
+        kept_.linked.assign(n, 0);
+        for (const auto& v : keeping)
+            for (const KeptEnd& e : v) ++kept_.first[e.root + 1];
+        for (uint32_t r = 0; r < n; ++r) kept_.first[r + 1] += kept_.first[r];
+        kept_.ends.resize(kept_.first[n]);
+        std::vector<uint32_t> fill(kept_.first.begin(), kept_.first.end() - 1);
+        for (const auto& v : keeping)
+            for (const KeptEnd& e : v) kept_.ends[fill[e.root]++] = e.end;
+        for (const auto& v : examinedOf)
+            for (uint32_t r : v) ++kept_.pairs[r];
+        for (const auto& v : linkedOf)
+            for (uint32_t r : v) ++kept_.linked[r];
+        kept_.index.reserve(n);
+        for (const auto& v : roots)
+            for (const auto& [key, r] : v) kept_.index.emplace(key, r);
+    }
+    // The roots taken, in a fixed order; what a full build would count.
+    std::vector<uint32_t> used;
+    for (const auto& v : taken) used.insert(used.end(), v.begin(), v.end());
+    std::sort(used.begin(), used.end());
+    size_t pairsSum = pairs, linkedSum = linked;
+    for (uint32_t r : used) pairsSum += kept_.pairs[r], linkedSum += kept_.linked[r];
+    out.pairs = pairsSum;
+    out.linked = linkedSum;
+    // The ends of this build: the kept ones of the roots it met, then the fresh ones (a
+    // full build with `moving` takes its kept ends from kept_ too).
+    if (keeps)
+        for (uint32_t r = 0; r + 1 < kept_.first.size(); ++r) used.push_back(r);
+    auto keptEnds = [&](auto&& f) {
+        for (uint32_t r : used)
+            for (uint32_t e = kept_.first[r]; e < kept_.first[r + 1]; ++e) f(kept_.ends[e]);
+    };
 
-    // The recorded ends by (node, bin), each slot's nearest first.
+    // The recorded ends (and the kept ones) by (node, bin), each slot's nearest first.
     const size_t slots = nodes.size() * bins;
     std::vector<uint32_t> first(slots + 1, 0);
     size_t total = 0;
+    keptEnds([&](const End& e) { ++first[e.slot + 1], ++total; });
     for (const auto& v : recorded) {
         total += v.size();
         for (const End& e : v) ++first[e.slot + 1];
@@ -163,6 +260,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     std::vector<End> ends(total);
     {
         std::vector<uint32_t> fill(first.begin(), first.end() - 1);
+        keptEnds([&](const End& e) { ends[fill[e.slot]++] = e; });
         for (const auto& v : recorded)
             for (const End& e : v) ends[fill[e.slot]++] = e;
     }

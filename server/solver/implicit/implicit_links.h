@@ -16,6 +16,7 @@
 #pragma once
 
 #include <cstdint>
+#include <unordered_map>
 #include <vector>
 
 #include "hierarchy/directions.h"
@@ -69,8 +70,18 @@ class ImplicitLinker {
     // inside (a floor under a box without a bottom) only far faces show, and they block. A
     // solid thinner than `thin` (a wall thinner than an element) keeps both: its near
     // faces' ends fall into the bins unevenly, and its far faces fill the gaps.
+    //
+    // `moving` (per node, or null): the nodes whose subtree holds an element that moved since
+    // the last build, or can move from now on. The ends of every pair of two nodes outside
+    // it are kept (a pair's ends depend on its two subtrees only), and a build given the same
+    // `moving` again takes them as kept, examining only the pairs with a moving end: the
+    // same links as a full build, when the nodes outside `moving` are as they were. Another
+    // `moving`, or none, builds everything (and keeps for the new one).
     void Build(const Hierarchy& hierarchy, const std::vector<float>& frontArea,
-               const std::vector<uint32_t>& solid, float thin, ImplicitLinks& out);
+               const std::vector<uint32_t>& solid, float thin, ImplicitLinks& out,
+               const std::vector<uint8_t>* moving = nullptr);
+    // Whether the last build took kept ends (the pairs examined are in ImplicitLinks::pairs).
+    bool Incremental() const { return incremental_; }
 
   private:
     // A link at one end: the (node, bin) slot, the sender, its depth along the bin (what the
@@ -94,6 +105,18 @@ class ImplicitLinker {
                 const glm::vec3& dir, float dist, float omega, std::vector<End>& ends) const;
     const Directions& dirs_;
     float threshold_;
+    // The ends of the pairs with no moving end, for `keptFor_` (empty: none kept), per root
+    // (the first such pair of a lineage, Build): its descendants' ends in ends[first[r],
+    // first[r + 1]), the pairs examined and the pairs linked below it, the roots by pair
+    // (receiver << 32 | sender).
+    struct Kept {
+        std::vector<End> ends;
+        std::vector<uint32_t> first, pairs, linked;
+        std::unordered_map<uint64_t, uint32_t> index;
+    };
+    std::vector<uint8_t> keptFor_;
+    Kept kept_;
+    bool incremental_ = false;
     float splat_ = 0.0f;        // sin of the angular radius above which an end is spread
     float adjacentCos_ = 1.0f;  // cos of Directions::AdjacentAngle()
 };

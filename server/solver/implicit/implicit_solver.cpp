@@ -127,9 +127,25 @@ void ImplicitSolver::ReadMaterials(const Scene& scene) {
     light_.Rematerial(surfels_, materials_);
 }
 
-void ImplicitSolver::Relink() {
+void ImplicitSolver::Relink(const std::vector<uint8_t>* moved) {
     auto start = Clock::now();
     RefitHierarchy(hierarchy_, surfels_);
+    // The nodes with a moved element below them (children follow their parent in preorder:
+    // walk backwards). Within the set of an earlier move, that set again: the links of the
+    // other pairs were kept for it, and nothing outside it has moved since.
+    const std::vector<uint8_t>* moving = nullptr;
+    if (moved) {
+        std::vector<uint8_t> now(hierarchy_.size(), 0);
+        for (size_t k = hierarchy_.size(); k-- > 0;) {
+            const HierarchyNode& n = hierarchy_.nodes[k];
+            now[k] = n.IsLeaf() ? (*moved)[n.surfel]
+                                : uint8_t(now[k + 1] | now[hierarchy_.nodes[k + 1].end]);
+        }
+        bool within = !moving_.empty();
+        for (size_t k = 0; within && k < now.size(); ++k) within = !now[k] || moving_[k];
+        if (!within) moving_ = std::move(now);
+        moving = &moving_;
+    }
     // Front-facing projected areas per node and bin, Σ A cos⁺(n, ω_b): the leaves', summed
     // up the tree.
     const size_t bins = dirs_.Count();
@@ -142,8 +158,9 @@ void ImplicitSolver::Relink() {
     });
     PullRows(hierarchy_, bins, projected_);
     msUpdate_ = MsSince(start);
-    linker_.Build(hierarchy_, projected_, solid_, elementSize_, links_);
+    linker_.Build(hierarchy_, projected_, solid_, elementSize_, links_, moving);
     ++relinks_;
+    if (linker_.Incremental()) ++incrementalRelinks_;
 }
 
 void ImplicitSolver::ExitantTables() {
@@ -262,6 +279,12 @@ std::string ImplicitSolver::UpdateGeometry(const Scene& scene) {
     if (std::string why = GeometryMismatch(scene); !why.empty()) throw Error(why);
     Surfels now = std::move(checked_.surfels);
     checked_.valid = false;
+    // What moved: the elements whose centroid, normal or area (what the hierarchy is
+    // refitted from) changed.
+    std::vector<uint8_t> moved(surfels_.size(), 0);
+    for (size_t i = 0; i < moved.size(); ++i)
+        moved[i] = surfels_.centroids[i] != now.centroids[i] ||
+                   surfels_.normals[i] != now.normals[i] || surfels_.areas[i] != now.areas[i];
     surfels_.positions = std::move(now.positions);
     surfels_.normals = std::move(now.normals);
     surfels_.areas = std::move(now.areas);
@@ -271,7 +294,7 @@ std::string ImplicitSolver::UpdateGeometry(const Scene& scene) {
         CopyDirect();
         light_.Reradiate();
     }
-    Relink();
+    Relink(&moved);
     ++geometryUpdates_;
     msGeometry_ = MsSince(start);
     return "links rebuilt in place (" + std::to_string(links_.Count()) + " links, " +
@@ -338,6 +361,7 @@ SolverStats ImplicitSolver::Stats() const {
     s.SetDetail("candidate_pairs", double(links_.pairs));
     s.SetDetail("empty_bins", double(links_.empty));
     s.SetDetail("relinks", double(relinks_));
+    s.SetDetail("relinks_kept", double(incrementalRelinks_));
     s.SetDetail("refinements", double(refinements_));
     return s;
 }

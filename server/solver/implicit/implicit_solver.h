@@ -64,8 +64,11 @@ class ImplicitSolver : public Solver {
     };
     mutable Checked checked_;
     mutable size_t refinements_ = 0;  // RefineScene runs for geometry updates (stats)
-    void Relink();                    // refit, links, projected areas
-    void Bounce();                    // one gather over the links and the pull of the new light
+    // Refit, links, projected areas. `moved` (per surfel, or null): what moved since the
+    // last relink; the pairs of what never moved since the first move keep their links
+    // (ImplicitLinker::Build's `moving`).
+    void Relink(const std::vector<uint8_t>* moved = nullptr);
+    void Bounce();  // one gather over the links and the pull of the new light
     void ReadMaterials(const Scene& scene);  // the scene's materials, then the leaves' light
     void FindSolids(const Scene& scene);     // solid_ from the scene's closed nodes
     void CopyDirect();                       // E_d per leaf from the direct stage
@@ -82,6 +85,10 @@ class ImplicitSolver : public Solver {
     std::vector<uint32_t> opposite_;  // per bin: the bin of the opposite direction
     ImplicitLinker linker_;
     ImplicitLinks links_;
+    // Per node: its subtree holds an element that moved since the first move (the linker
+    // keeps the links of the pairs of other nodes for it); empty before any move.
+    std::vector<uint8_t> moving_;
+    size_t incrementalRelinks_ = 0;  // relinks that kept the unmoved pairs' links (stats)
     // Per node: the closed solid all its members bound (ClosedNodes: the scene node), or
     // kNoSolid; empty when the scene has none. Fixed by the triangles' connectivity, so it
     // is found once (a deformation keeps it).
