@@ -59,6 +59,15 @@ std::vector<glm::vec3> EmitterDirect::Trace(const RayScene& rays,
                                             const std::vector<glm::vec3>& points,
                                             const std::vector<glm::vec3>& normals,
                                             const std::vector<int>& extraCosine) {
+    Start(rays, points, normals, extraCosine);
+    std::vector<glm::vec3> out(points.size(), glm::vec3(0.0f));
+    TracePart(rays, points, normals, 0, points.size(), out);
+    return out;
+}
+
+void EmitterDirect::Start(const RayScene& rays, const std::vector<glm::vec3>& points,
+                          const std::vector<glm::vec3>& normals,
+                          const std::vector<int>& extraCosine) {
     if (points.size() != normals.size() ||
         (!extraCosine.empty() && extraCosine.size() != points.size()))
         throw Error("emitter direct light: " + std::to_string(points.size()) + " points, " +
@@ -70,14 +79,22 @@ std::vector<glm::vec3> EmitterDirect::Trace(const RayScene& rays,
     blocked_.assign(points.size() * words_, 0);
     cosineT_.assign(points.size() * cosineRays_, std::numeric_limits<float>::infinity());
     cosineTri_.assign(points.size() * cosineRays_, ~0u);
-    std::vector<glm::vec3> out(points.size(), glm::vec3(0.0f));
-    if (rays.Emitters().empty()) return out;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 16), [&](const auto& range) {
+}
+
+void EmitterDirect::TracePart(const RayScene& rays, const std::vector<glm::vec3>& points,
+                              const std::vector<glm::vec3>& normals, size_t first, size_t last,
+                              std::vector<glm::vec3>& out) {
+    PENUMBRA_CHECK_EQ(points.size(), extra_.size());
+    PENUMBRA_CHECK(first <= last && last <= points.size() && out.size() == points.size());
+    if (rays.Emitters().empty()) {
+        std::fill(out.begin() + first, out.begin() + last, glm::vec3(0.0f));
+        return;
+    }
+    tbb::parallel_for(tbb::blocked_range<size_t>(first, last, 16), [&](const auto& range) {
         size_t traced = 0;
         for (size_t i = range.begin(); i != range.end(); ++i)
             out[i] = Shoot(rays, i, points[i], normals[i], nullptr, traced);
     });
-    return out;
 }
 
 std::vector<glm::vec3> EmitterDirect::Retrace(const RayScene& rays,

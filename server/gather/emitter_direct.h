@@ -43,6 +43,14 @@ class EmitterDirect {
     std::vector<glm::vec3> Trace(const RayScene& rays, const std::vector<glm::vec3>& points,
                                  const std::vector<glm::vec3>& normals,
                                  const std::vector<int>& extraCosine = {});
+    // Trace in parts (the same answer): Start forgets every point's outcomes, TracePart
+    // traces points [first, last) into out[first, last) (`out` sized as `points`). Retrace
+    // and Reevaluate need every point traced since the last Start.
+    void Start(const RayScene& rays, const std::vector<glm::vec3>& points,
+               const std::vector<glm::vec3>& normals, const std::vector<int>& extraCosine = {});
+    void TracePart(const RayScene& rays, const std::vector<glm::vec3>& points,
+                   const std::vector<glm::vec3>& normals, size_t first, size_t last,
+                   std::vector<glm::vec3>& out);
     // After a move (`rays` built on the moved scene, the points and normals as in Trace, the
     // moved ones at their new places): the points marked in `moved` are traced again; of the
     // others, each ray whose segment meets one of `boxes` (where the moved surfaces were and

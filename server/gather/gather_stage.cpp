@@ -224,6 +224,7 @@ void GatherStage::Evaluate() {
 }
 
 void GatherStage::Iterate(int n) {
+    ShotPart();  // a moved emitter's shot, its next part (none left: nothing)
     inner_->Iterate(n);
     fresh_ = false;
 }
@@ -395,7 +396,18 @@ std::string GatherStage::UpdateGeometry(const Scene& scene) {
         Relit(lightsBefore);  // lights placed by a moved node
         Sky();
     }
-    Shoot(emitterMoved ? nullptr : &moved);
+    // A moved emitter's shot in parts (any move while one is under way starts it again: its
+    // surfels traced so far saw the scene before this move); the sun's part as after any
+    // move.
+    if ((emitterMoved || ShotPending()) && settings_.shotPartMs > 0.0 && emitters_ &&
+        settings_.emitterRays > 0) {
+        Shoot(&moved, false);
+        const double sunMs = msShot_;
+        StartShotParts();
+        msShot_ += sunMs;
+    } else {
+        Shoot(emitterMoved ? nullptr : &moved);
+    }
     fresh_ = false;
     lightsFresh_ = false;
     return done;
@@ -426,6 +438,14 @@ SolverStats GatherStage::Stats() const {
     // (TraceGlints).
     if (!glossyTriangles_.empty())
         s.SetDetail("gather_glints", static_cast<double>(targets_.size() * GlintCount()));
+    if (ShotPending()) {
+        char line[160];
+        std::snprintf(line, sizeof line,
+                      "the first shot traced again after an emitter moved: %.0f%% of the "
+                      "surfels (the others keep its old place's light)",
+                      100.0 * double(shotNext_) / double(points_.size()));
+        s.catchingUp = line;
+    }
     return s;
 }
 

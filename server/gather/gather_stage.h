@@ -21,6 +21,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <memory>
 
 #include "gather/emitter_direct.h"
@@ -51,6 +52,12 @@ struct GatherSettings {
     // CreateGatheredSolver takes both from the solver's settings.
     DeviceChoice device = DeviceChoice::kCpu;
     bool validation = false;  // Vulkan validation layers on the ray tracer's device
+    // A moved emitter's first shot (every surfel's shadow rays aim at it): 0, traced again
+    // whole by UpdateGeometry; > 0, in parts of about this many milliseconds, the first by
+    // UpdateGeometry and one before each Iterate, so that frames go out while it is under
+    // way (the surfels not yet traced again keep the light of the emitter's old place;
+    // SolverStats::catchingUp says how far it is). The service's frames take parts.
+    double shotPartMs = 0.0;
 };
 
 // The most rays a surfel either part takes; CheckGatherRays throws penumbra::Error for a
@@ -147,9 +154,16 @@ class GatherStage : public Solver {
     void Place();
     // The emitters' and the sun's light at the surfels (all of it, or after a move the rays
     // it can have changed), then Combine.
-    void Shoot(const Moved* moved = nullptr);
+    // `emitterPart` false: the sun's part only (the emitters' is traced in parts).
+    void Shoot(const Moved* moved = nullptr, bool emitterPart = true);
     // shot_ = emitterShot_ + sunShot_, handed to the solver where it takes it.
     void Combine();
+    // A moved emitter's shot in parts (GatherSettings::shotPartMs): StartShotParts forgets
+    // the shooter's outcomes and traces the first part, ShotPart the next (about shotPartMs
+    // each); shotNext_ < the surfel count while parts are left.
+    void StartShotParts();
+    void ShotPart();
+    bool ShotPending() const { return shooter_ && shotNext_ < points_.size(); }
     // The sky the solver is given: without its sun where the solver takes the sun's shot
     // (SunHanded), the whole sky otherwise. Calls inner_->UpdateLights when that changed or
     // `always`.
@@ -242,13 +256,16 @@ class GatherStage : public Solver {
     std::vector<glm::vec3> points_;
     std::vector<uint32_t> surfelPrimitive_;   // per surfel: its primitive
     std::unique_ptr<EmitterDirect> shooter_;  // the first shot's rays (null: no emitters)
-    std::vector<glm::vec3> shot_;             // first shot per surfel (empty: off)
-    std::vector<glm::vec3> emitterShot_;      // its emitters' part (empty: none)
-    bool emitters_ = false;                   // the scene has emitting materials
-    SkyParts skyParts_;                       // the sky, its sun split off for the first shot
-    std::unique_ptr<SunDirect> sun_;          // the sun's rays (null: no sun)
-    std::vector<glm::vec3> sunShot_;          // the first shot's sun part (empty: none)
-    bool innerRest_ = false;                  // the solver has skyParts_.rest as its sky
+    // The next surfel of a shot in parts (past the surfels, SIZE_MAX when none is under way).
+    size_t shotNext_ = SIZE_MAX;
+    std::vector<int32_t> targetOf_;       // per surfel: its target, or −1
+    std::vector<glm::vec3> shot_;         // first shot per surfel (empty: off)
+    std::vector<glm::vec3> emitterShot_;  // its emitters' part (empty: none)
+    bool emitters_ = false;               // the scene has emitting materials
+    SkyParts skyParts_;                   // the sky, its sun split off for the first shot
+    std::unique_ptr<SunDirect> sun_;      // the sun's rays (null: no sun)
+    std::vector<glm::vec3> sunShot_;      // the first shot's sun part (empty: none)
+    bool innerRest_ = false;              // the solver has skyParts_.rest as its sky
     // Per target: the emitters its gather rays meet, weighted against the first shot's
     // shadow rays (EmitterHitWeight), which at the targets counts the gather rays in.
     std::vector<glm::vec3> emitterHits_;

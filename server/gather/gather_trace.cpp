@@ -21,13 +21,13 @@ namespace penumbra {
 
 using namespace gather_detail;
 
-void GatherStage::Shoot(const Moved* moved) {
+void GatherStage::Shoot(const Moved* moved, bool emitterPart) {
     if (settings_.emitterRays <= 0) return;
     auto start = std::chrono::steady_clock::now();
     const Surfels& s = inner_->GetSurfels();
     ++traces_;
-    if (emitters_) {
-        if (!moved || !shooter_) {
+    if (emitters_ && emitterPart) {
+        if (!moved || !shooter_ || ShotPending()) {  // (a shot in parts: whole now)
             EmitterDirectSettings es;
             es.rays = settings_.emitterRays;
             es.seed = settings_.seed;
@@ -36,6 +36,7 @@ void GatherStage::Shoot(const Moved* moved) {
             std::vector<int> extra(s.size(), 0);
             for (uint32_t i : targets_) extra[i] = settings_.gatherRays;
             emitterShot_ = shooter_->Trace(*rays_, points_, s.normals, extra);
+            shotNext_ = SIZE_MAX;  // whole: no parts left
         } else {
             size_t traced = 0;
             emitterShot_ = shooter_->Retrace(*rays_, points_, s.normals, moved->surfels,
@@ -59,6 +60,44 @@ void GatherStage::Shoot(const Moved* moved) {
         sun_.reset();
         sunShot_.clear();
     }
+    Combine();
+    msShot_ = Ms(start);
+}
+
+void GatherStage::StartShotParts() {
+    const Surfels& s = inner_->GetSurfels();
+    std::vector<int> extra(s.size(), 0);
+    targetOf_.assign(s.size(), -1);
+    for (size_t t = 0; t < targets_.size(); ++t) {
+        extra[targets_[t]] = settings_.gatherRays;
+        targetOf_[targets_[t]] = static_cast<int32_t>(t);
+    }
+    EmitterDirectSettings es;
+    es.rays = settings_.emitterRays;
+    es.seed = settings_.seed;
+    shooter_ = std::make_unique<EmitterDirect>(es);
+    shooter_->Start(*rays_, points_, s.normals, extra);
+    emitterShot_.resize(s.size(), glm::vec3(0.0f));  // the old place's light until traced
+    shotNext_ = 0;
+    ShotPart();
+}
+
+void GatherStage::ShotPart() {
+    if (!ShotPending()) return;
+    auto start = std::chrono::steady_clock::now();
+    const Surfels& s = inner_->GetSurfels();
+    // Blocks of surfels until the part's time is spent (at least one block).
+    constexpr size_t kBlock = 256;
+    std::vector<glm::vec3> out(s.size());
+    do {
+        const size_t first = shotNext_, last = std::min(points_.size(), first + kBlock);
+        shooter_->TracePart(*rays_, points_, s.normals, first, last, out);
+        for (size_t i = first; i < last; ++i) {
+            emitterShot_[i] = out[i];
+            if (targetOf_[i] >= 0) emitterShot_[i] += emitterHits_[size_t(targetOf_[i])];
+        }
+        shotNext_ = last;
+    } while (ShotPending() && Ms(start) < settings_.shotPartMs);
     Combine();
     msShot_ = Ms(start);
 }

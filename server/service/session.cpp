@@ -201,6 +201,8 @@ std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool prepareMov
     GatherSettings gather;
     gather.emitterRays = settings_.emitterRays;
     gather.gatherRays = settings_.gatherRays;
+    // A moved emitter's first shot goes out in parts over the frames that follow its move.
+    gather.shotPartMs = kShotPartMs;
     return CreateGatheredSolver(scene, settings, gather, progress, notes);
 }
 
@@ -251,6 +253,8 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
         passTotals_[i] = stats.passes[i].msTotal;
     }
     frame->iterations = stats.iterations;
+    if (!stats.catchingUp.empty())
+        frame->note += (frame->note.empty() ? "" : "; ") + stats.catchingUp;
     lastSurfels_ = std::move(surfels);
 
     std::vector<FrameSink> sinks;
@@ -264,7 +268,7 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
         }
         ++framesSinceEdit_;
         converged_ =
-            divergence.empty() && !edited &&
+            divergence.empty() && !edited && stats.catchingUp.empty() &&
             (change < settings_.convergedChange || framesSinceEdit_ >= settings_.maxFramesPerEdit);
         if (!divergence.empty() && diverged_.empty()) {
             diverged_ = divergence;

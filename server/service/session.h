@@ -68,6 +68,9 @@ struct SessionSettings {
 };
 
 inline constexpr int kMaxIterationsPerFrame = 64;
+// A moved emitter's first shot is traced again in parts of about this many milliseconds, one a
+// frame (GatherSettings::shotPartMs): the office's whole shot takes ~0.3 s on 2 cores.
+inline constexpr double kShotPartMs = 30.0;
 
 // Throws penumbra::Error naming what is wrong with `settings`: iterations per frame
 // (1…kMaxIterationsPerFrame), the converged change (≥ 0), the gather's rays

@@ -127,7 +127,8 @@ Convergence IterateUntilConverged(Solver& solver, double tolerance, int maxItera
             std::snprintf(stage, sizeof stage, "iterating, change %.2g", c.change);
             progress(stage, static_cast<double>(c.iterations) / maxIterations);
         }
-        quiet = c.change < tolerance ? quiet + 1 : 0;
+        // Work an edit left (Stats::catchingUp) is not a quiet iteration however small.
+        quiet = c.change < tolerance && solver.Stats().catchingUp.empty() ? quiet + 1 : 0;
         if (quiet >= 2) {
             c.converged = true;
             break;

@@ -103,6 +103,10 @@ struct SolverStats {
     size_t linksUpdated = 0;
     double msGeometry = 0.0;
     std::string motionDeclined;
+    // Work an edit left for the iterations that follow (a moved emitter's first shot traced
+    // in parts: GatherSettings::shotPartMs): what and how far; empty when none. The answer
+    // is not settled while it is not empty.
+    std::string catchingUp;
     int bounces = 0;  // bounces of light carried so far
     // No surface can receive more than `irradianceBound` lux (the furnace bound of the
     // scene's emitters, lights, sky and albedos; infinite when an albedo reaches 1). A solution

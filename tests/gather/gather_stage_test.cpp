@@ -309,6 +309,50 @@ TEST(FinalGather, EditsMatchAFreshGather) {
         });
 }
 
+// A moved emitter's first shot in parts (GatherSettings::shotPartMs, as the service's
+// frames take it): while parts are left the stats say how far it is and the iteration does
+// not count as settled; a move of something else while it is under way starts it again; once
+// done, the answer is the whole shot's.
+TEST(FinalGather, AMovedEmittersShotInPartsMatchesTheWholeShot) {
+    Scene scene = EditRoom();
+    SolverSettings settings = Cpu();
+    settings.prepareMoves = true;
+    GatherSettings parts;
+    parts.shotPartMs = 1e-3;  // one block of surfels a part
+    GatherStage whole(CreateSolver(scene, settings), scene, {});
+    GatherStage inParts(CreateSolver(scene, settings), scene, parts);
+    IterateUntilConverged(whole, 1e-4, 300);
+    IterateUntilConverged(inParts, 1e-4, 300);
+    EXPECT_EQ(inParts.Stats().catchingUp, "");
+    const int panel = FindNode(scene, "panel");
+    SetNodeTransform(
+        scene, panel,
+        glm::translate(glm::mat4(1.0f), glm::vec3(0.4f, -0.05f, 0.0f)) * scene.nodes[panel].local);
+    whole.UpdateGeometry(scene);
+    inParts.UpdateGeometry(scene);
+    EXPECT_EQ(whole.Stats().catchingUp, "");
+    const std::string first = inParts.Stats().catchingUp;
+    std::printf("after the move: %s\n", first.c_str());
+    ASSERT_NE(first.find("the first shot traced again"), std::string::npos) << first;
+    // A move of the box while parts are left: the shot starts again (the part traced so far
+    // saw the box where it was).
+    inParts.Iterate(1);
+    MoveTheBox()(scene);
+    whole.UpdateGeometry(scene);
+    inParts.UpdateGeometry(scene);
+    int left = 0;
+    for (; !inParts.Stats().catchingUp.empty() && left < 1000; ++left) inParts.Iterate(1);
+    std::printf("parts after the second move: %d\n", left + 1);
+    EXPECT_GT(left, 2);
+    const Convergence c = IterateUntilConverged(inParts, 1e-4, 300);
+    EXPECT_TRUE(c.converged);
+    IterateUntilConverged(whole, 1e-4, 300);
+    const double apart = testing::RelativeRms(testing::AllVertices(inParts, scene, Channel::kTotal),
+                                              testing::AllVertices(whole, scene, Channel::kTotal));
+    std::printf("in parts vs whole: %.5f%%\n", 100 * apart);
+    EXPECT_LT(apart, 2e-4);
+}
+
 // The same with glossy materials (a metal box, glossy walls): the lobe rays of glossy
 // hits and the punctual lights they see are cached too; a lobe's shape (roughness) or a
 // light's place traces them again, its colour or intensity re-reads them.
