@@ -292,7 +292,9 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
     // emission: re-weighted from their coefficients, unless an emitter is new.
     auto start = std::chrono::steady_clock::now();
     const size_t slots = rays_->EmitterPrimitives().size();
-    if (!newEmitter && shooter_ && shooter_->Reevaluate(*rays_, emitterShot_) &&
+    // (Not while a moved emitter's shot is traced in parts: the points not yet traced have no
+    // coefficients; it is traced whole below.)
+    if (!newEmitter && shooter_ && !ShotPending() && shooter_->Reevaluate(*rays_, emitterShot_) &&
         (targets_.empty() || emitterCoef_.size() == targets_.size() * slots)) {
         std::vector<glm::vec3> le(slots);
         for (size_t k = 0; k < slots; ++k)

@@ -163,6 +163,8 @@ class GatherStage : public Solver {
     // each); shotNext_ < the surfel count while parts are left.
     void StartShotParts();
     void ShotPart();
+    EmitterDirect& NewShooter();               // shooter_ made afresh for the settings
+    std::vector<int> CosineAtTargets() const;  // per surfel: the gather's rays (targets), or 0
     bool ShotPending() const { return shooter_ && shotNext_ < points_.size(); }
     // The sky the solver is given: without its sun where the solver takes the sun's shot
     // (SunHanded), the whole sky otherwise. Calls inner_->UpdateLights when that changed or

@@ -27,16 +27,9 @@ void GatherStage::Shoot(const Moved* moved, bool emitterPart) {
     const Surfels& s = inner_->GetSurfels();
     ++traces_;
     if (emitters_ && emitterPart) {
-        if (!moved || !shooter_ || ShotPending()) {  // (a shot in parts: whole now)
-            EmitterDirectSettings es;
-            es.rays = settings_.emitterRays;
-            es.seed = settings_.seed;
-            shooter_ = std::make_unique<EmitterDirect>(es);
-            // At the targets the gather's rays join the shot's own cosine rays (emitterHits_).
-            std::vector<int> extra(s.size(), 0);
-            for (uint32_t i : targets_) extra[i] = settings_.gatherRays;
-            emitterShot_ = shooter_->Trace(*rays_, points_, s.normals, extra);
-            shotNext_ = SIZE_MAX;  // whole: no parts left
+        if (!moved || !shooter_) {
+            emitterShot_ = NewShooter().Trace(*rays_, points_, s.normals, CosineAtTargets());
+            shotNext_ = SIZE_MAX;  // whole: a shot in parts under way is done
         } else {
             size_t traced = 0;
             emitterShot_ = shooter_->Retrace(*rays_, points_, s.normals, moved->surfels,
@@ -64,19 +57,26 @@ void GatherStage::Shoot(const Moved* moved, bool emitterPart) {
     msShot_ = Ms(start);
 }
 
-void GatherStage::StartShotParts() {
-    const Surfels& s = inner_->GetSurfels();
-    std::vector<int> extra(s.size(), 0);
-    targetOf_.assign(s.size(), -1);
-    for (size_t t = 0; t < targets_.size(); ++t) {
-        extra[targets_[t]] = settings_.gatherRays;
-        targetOf_[targets_[t]] = static_cast<int32_t>(t);
-    }
+EmitterDirect& GatherStage::NewShooter() {
     EmitterDirectSettings es;
     es.rays = settings_.emitterRays;
     es.seed = settings_.seed;
     shooter_ = std::make_unique<EmitterDirect>(es);
-    shooter_->Start(*rays_, points_, s.normals, extra);
+    return *shooter_;
+}
+
+std::vector<int> GatherStage::CosineAtTargets() const {
+    // At the targets the gather's rays join the shot's own cosine rays (emitterHits_).
+    std::vector<int> extra(inner_->GetSurfels().size(), 0);
+    for (uint32_t i : targets_) extra[i] = settings_.gatherRays;
+    return extra;
+}
+
+void GatherStage::StartShotParts() {
+    const Surfels& s = inner_->GetSurfels();
+    targetOf_.assign(s.size(), -1);
+    for (size_t t = 0; t < targets_.size(); ++t) targetOf_[targets_[t]] = static_cast<int32_t>(t);
+    NewShooter().Start(*rays_, points_, s.normals, CosineAtTargets());
     emitterShot_.resize(s.size(), glm::vec3(0.0f));  // the old place's light until traced
     shotNext_ = 0;
     ShotPart();
@@ -88,14 +88,11 @@ void GatherStage::ShotPart() {
     const Surfels& s = inner_->GetSurfels();
     // Blocks of surfels until the part's time is spent (at least one block).
     constexpr size_t kBlock = 256;
-    std::vector<glm::vec3> out(s.size());
     do {
         const size_t first = shotNext_, last = std::min(points_.size(), first + kBlock);
-        shooter_->TracePart(*rays_, points_, s.normals, first, last, out);
-        for (size_t i = first; i < last; ++i) {
-            emitterShot_[i] = out[i];
+        shooter_->TracePart(*rays_, points_, s.normals, first, last, emitterShot_);
+        for (size_t i = first; i < last; ++i)
             if (targetOf_[i] >= 0) emitterShot_[i] += emitterHits_[size_t(targetOf_[i])];
-        }
         shotNext_ = last;
     } while (ShotPending() && Ms(start) < settings_.shotPartMs);
     Combine();

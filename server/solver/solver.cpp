@@ -117,7 +117,8 @@ Convergence IterateUntilConverged(Solver& solver, double tolerance, int maxItera
     int quiet = 0;
     while (c.iterations < maxIterations) {
         solver.Iterate(1);
-        if (!solver.Stats().divergence.empty()) break;
+        const SolverStats stats = solver.Stats();
+        if (!stats.divergence.empty()) break;
         ++c.iterations;
         std::vector<glm::vec3> now = solver.SurfelIrradiance(Channel::kTotal);
         c.change = RelativeChange(now, last);
@@ -128,7 +129,7 @@ Convergence IterateUntilConverged(Solver& solver, double tolerance, int maxItera
             progress(stage, static_cast<double>(c.iterations) / maxIterations);
         }
         // Work an edit left (Stats::catchingUp) is not a quiet iteration however small.
-        quiet = c.change < tolerance && solver.Stats().catchingUp.empty() ? quiet + 1 : 0;
+        quiet = c.change < tolerance && stats.catchingUp.empty() ? quiet + 1 : 0;
         if (quiet >= 2) {
             c.converged = true;
             break;
