@@ -228,39 +228,75 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
     sb.x = rng.Uniform(), sb.y = rng.Uniform();
     const glm::vec3 from = x + eps * nx;
     uint64_t* bits = blocked_.data() + i * words_;
+    // The rays to trace go out in packets of 8 from the point (the same outcomes as one at a
+    // time); what each adds is summed in ray order after.
+    thread_local std::vector<Sample> samples;
+    thread_local std::vector<uint32_t> picked;
+    thread_local std::vector<int> batch;
+    thread_local std::vector<glm::vec3> spans;
+    samples.resize(size_t(nl));
+    picked.assign(size_t(nl), ~0u);  // ~0: the ray adds nothing
+    batch.clear();
+    auto flush = [&](auto&& trace) {
+        for (size_t k = 0; k < batch.size(); k += 8)
+            trace(k, std::min<size_t>(8, batch.size() - k));
+        batch.clear();
+    };
     for (int r = 0; r < nl; ++r) {
         // Emitter by power, from the r-th of nl strata of [0, 1): each emitter takes a run of
         // consecutive r, so its points below are consecutive R2 points.
         const float ut = (static_cast<float>(r) + rng.Uniform()) / nl;
         const uint32_t ti = rays.Emitters()[rays.PickEmitter(ut)];
-        Sample s;
-        if (!LightRay(rays, ti, r, sl, x, nx, s)) continue;
-        const uint64_t bit = uint64_t(1) << (r % 64);
-        if (meets(from, s.span, 1.0f)) {
-            ++traced;
-            if (rays.Occluded(from, s.span))
+        if (!LightRay(rays, ti, r, sl, x, nx, samples[r])) continue;
+        picked[r] = ti;
+        if (meets(from, samples[r].span, 1.0f)) batch.push_back(r);
+    }
+    traced += batch.size();
+    spans.resize(batch.size());
+    for (size_t k = 0; k < batch.size(); ++k) spans[k] = samples[batch[k]].span;
+    flush([&](size_t k, size_t count) {
+        bool blocked[8];
+        rays.Occluded8(from, spans.data() + k, int(count), blocked);
+        for (size_t j = 0; j < count; ++j) {
+            const int r = batch[k + j];
+            const uint64_t bit = uint64_t(1) << (r % 64);
+            if (blocked[j])
                 bits[r / 64] |= bit;
             else
                 bits[r / 64] &= ~bit;
         }
-        if (bits[r / 64] & bit) continue;
+    });
+    for (int r = 0; r < nl; ++r) {
+        const uint32_t ti = picked[r];
+        if (ti == ~0u || (bits[r / 64] & (uint64_t(1) << (r % 64)))) continue;
+        const Sample& s = samples[r];
         const float pdfArea = rays.AreaPdf(ti);
         const float weight = Power(nl, pdfArea * s.dist2 / s.cy, nb, s.cx / kPi);
         add(ti, weight * s.cx * s.cy / (s.dist2 * pdfArea * nl), s.uv);
     }
+    spans.resize(size_t(own));
     for (int r = 0; r < own; ++r) {
-        const glm::vec3 w = CosineDirection(nx, R2Point(sb, r));
-        float& dist = cosineT_[i * own + r];
-        uint32_t& tri = cosineTri_[i * own + r];
-        if (meets(from, w, dist)) {
-            ++traced;
-            const RayHit hit = rays.Intersect(from, w, std::numeric_limits<float>::infinity());
-            dist = hit.hit ? hit.t : std::numeric_limits<float>::infinity();
-            tri = hit.hit ? hit.triangle : ~0u;
+        spans[r] = CosineDirection(nx, R2Point(sb, r));
+        if (meets(from, spans[r], cosineT_[i * own + r])) batch.push_back(r);
+    }
+    traced += batch.size();
+    flush([&](size_t k, size_t count) {
+        glm::vec3 dirs[8];
+        RayHit hits[8];
+        for (size_t j = 0; j < count; ++j) dirs[j] = spans[batch[k + j]];
+        rays.Intersect8(from, dirs, int(count), std::numeric_limits<float>::infinity(), hits);
+        for (size_t j = 0; j < count; ++j) {
+            const int r = batch[k + j];
+            cosineT_[i * own + r] =
+                hits[j].hit ? hits[j].t : std::numeric_limits<float>::infinity();
+            cosineTri_[i * own + r] = hits[j].hit ? hits[j].triangle : ~0u;
         }
+    });
+    for (int r = 0; r < own; ++r) {
+        const uint32_t tri = cosineTri_[i * own + r];
         if (tri == ~0u || !(rays.AreaPdf(tri) > 0.0f)) continue;
-        add(tri, EmitterHitWeight(rays, settings_, nx, w, tri, dist, nb),
-            rays.Mapped() ? rays.Barycentrics(tri, from, w) : glm::vec2(0.0f));
+        add(tri, EmitterHitWeight(rays, settings_, nx, spans[r], tri, cosineT_[i * own + r], nb),
+            rays.Mapped() ? rays.Barycentrics(tri, from, spans[r]) : glm::vec2(0.0f));
     }
     return sum;
 }

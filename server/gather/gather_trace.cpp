@@ -278,10 +278,19 @@ void GatherStage::Trace(const Moved* moved) {
         std::vector<std::pair<glm::vec3, std::vector<CosineCone>>> patterns;
         std::vector<uint8_t> kept(n), was(n);
         std::vector<Hit> relaid;
+        // A target traced whole on the CPU: its rays in packets of 8 from its point.
+        std::vector<RayHit> packed(n);
+        std::vector<glm::vec3> dirs(n);
         for (size_t t = range.begin(); t != range.end(); ++t) {
             const uint32_t i = targets_[t];
             const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
             const bool all = !moved || moved->surfels[i];
+            if (all && !onGpu) {
+                for (int r = 0; r < n; ++r) dirs[r] = Direction(t, r);
+                for (int r = 0; r < n; r += 8)
+                    rays_->Intersect8(o, dirs.data() + r, std::min(8, n - r), inf,
+                                      packed.data() + r);
+            }
             // Nothing moved in front of it: every hit holds, its secondaries are checked.
             const bool clear = !all && !conesAt(o, surfels.normals[i], 0.0f, cones, pattern);
             bool same = !all;  // its short hits are the rays they were
@@ -294,10 +303,15 @@ void GatherStage::Trace(const Moved* moved) {
                                        o, cones, [&] { return Direction(t, r); }, before));
                 if (kept[r]) continue;
                 float dist = inf;
-                if (onGpu)
+                if (onGpu) {
                     dist = gpuDistances[t * n + r];
-                else
+                } else if (all) {
+                    const RayHit& h = packed[r];
+                    dist = h.hit ? h.t : inf;
+                    hit = h.hit ? Found(h.triangle, h.u, h.v, dirs[r]) : Hit{kEscaped, 0, 0};
+                } else {
                     hit = trace(o, Direction(t, r), dist);
+                }
                 ++count;
                 touched[t] = 1;
                 const bool isShort = Front(hit) && dist < shortHit;
@@ -335,6 +349,22 @@ void GatherStage::Trace(const Moved* moved) {
                 }
                 const glm::vec3 y = HitPoint(hit) + rays_->Epsilon() * normal;
                 const glm::vec2 rot = SecondRotation(t, r);
+                if (!old) {
+                    // All traced: in packets of 8 from y (the same hits as one at a time).
+                    glm::vec3 d2[8];
+                    RayHit h2[8];
+                    for (int j0 = 0; j0 < m; j0 += 8) {
+                        const int c = std::min(8, m - j0);
+                        for (int j = 0; j < c; ++j)
+                            d2[j] = CosineDirection(normal, R2Point(rot, j0 + j));
+                        rays_->Intersect8(y, d2, c, inf, h2);
+                        for (int j = 0; j < c; ++j)
+                            out[j0 + j] = h2[j].hit ? Found(h2[j].triangle, h2[j].u, h2[j].v, d2[j])
+                                                    : Hit{kEscaped, 0, 0};
+                        count += size_t(c);
+                    }
+                    return;
+                }
                 bool near = false;  // secondCones made at y
                 for (int j = 0; j < m; ++j) {
                     const glm::vec2 u = R2Point(rot, j);
