@@ -218,7 +218,6 @@ void GatherStage::Trace(const Moved* moved) {
     const auto& tris = rays_->Triangles();
     const Surfels& surfels = inner_->GetSurfels();
     const float inf = std::numeric_limits<float>::infinity();
-    auto trace = [&](const glm::vec3& o, const glm::vec3& d, float& t) { return Cast(o, d, &t); };
     // After a move: whether a cached hit still holds (its ray starts on a surface that did not
     // move, ends on one that did not, and passes by where the moved ones were and are). The
     // segment is the one to the hit point (no direction needed, which costs more to make
@@ -278,39 +277,45 @@ void GatherStage::Trace(const Moved* moved) {
         std::vector<std::pair<glm::vec3, std::vector<CosineCone>>> patterns;
         std::vector<uint8_t> kept(n), was(n);
         std::vector<Hit> relaid;
-        // A target traced whole on the CPU: its rays in packets of 8 from its point.
+        // The rays a target traces on the CPU go out in packets of 8 from its point.
         std::vector<RayHit> packed(n);
         std::vector<glm::vec3> dirs(n);
+        std::vector<int> batch, secondBatch;
+        std::vector<glm::vec3> secondDirs(m);
         for (size_t t = range.begin(); t != range.end(); ++t) {
             const uint32_t i = targets_[t];
             const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
             const bool all = !moved || moved->surfels[i];
-            if (all && !onGpu) {
-                for (int r = 0; r < n; ++r) dirs[r] = Direction(t, r);
-                for (int r = 0; r < n; r += 8)
-                    rays_->Intersect8(o, dirs.data() + r, std::min(8, n - r), inf,
-                                      packed.data() + r);
-            }
             // Nothing moved in front of it: every hit holds, its secondaries are checked.
             const bool clear = !all && !conesAt(o, surfels.normals[i], 0.0f, cones, pattern);
             bool same = !all;  // its short hits are the rays they were
+            batch.clear();
             for (int r = 0; r < n; ++r) {
-                Hit& hit = hits_[t * n + r];
-                const Hit before = all ? Hit{kEscaped, 0, 0} : hit;
+                const Hit before = all ? Hit{kEscaped, 0, 0} : hits_[t * n + r];
                 was[r] = Front(before) && (before.triangle & kShort);
                 kept[r] = !all && (clear || !mayMeet(pattern, R2Point(rotation_[t], r)) ||
                                    holds(
                                        o, cones, [&] { return Direction(t, r); }, before));
+                if (!kept[r] && !onGpu) {
+                    dirs[batch.size()] = Direction(t, r);
+                    batch.push_back(r);
+                }
+            }
+            for (size_t k = 0; k < batch.size(); k += 8)
+                rays_->Intersect8(o, dirs.data() + k, int(std::min<size_t>(8, batch.size() - k)),
+                                  inf, packed.data() + k);
+            size_t next = 0;  // the next of `batch`
+            for (int r = 0; r < n; ++r) {
                 if (kept[r]) continue;
+                Hit& hit = hits_[t * n + r];
                 float dist = inf;
                 if (onGpu) {
                     dist = gpuDistances[t * n + r];
-                } else if (all) {
-                    const RayHit& h = packed[r];
-                    dist = h.hit ? h.t : inf;
-                    hit = h.hit ? Found(h.triangle, h.u, h.v, dirs[r]) : Hit{kEscaped, 0, 0};
                 } else {
-                    hit = trace(o, Direction(t, r), dist);
+                    const RayHit& h = packed[next];
+                    dist = h.hit ? h.t : inf;
+                    hit = h.hit ? Found(h.triangle, h.u, h.v, dirs[next]) : Hit{kEscaped, 0, 0};
+                    ++next;
                 }
                 ++count;
                 touched[t] = 1;
@@ -349,23 +354,10 @@ void GatherStage::Trace(const Moved* moved) {
                 }
                 const glm::vec3 y = HitPoint(hit) + rays_->Epsilon() * normal;
                 const glm::vec2 rot = SecondRotation(t, r);
-                if (!old) {
-                    // All traced: in packets of 8 from y (the same hits as one at a time).
-                    glm::vec3 d2[8];
-                    RayHit h2[8];
-                    for (int j0 = 0; j0 < m; j0 += 8) {
-                        const int c = std::min(8, m - j0);
-                        for (int j = 0; j < c; ++j)
-                            d2[j] = CosineDirection(normal, R2Point(rot, j0 + j));
-                        rays_->Intersect8(y, d2, c, inf, h2);
-                        for (int j = 0; j < c; ++j)
-                            out[j0 + j] = h2[j].hit ? Found(h2[j].triangle, h2[j].u, h2[j].v, d2[j])
-                                                    : Hit{kEscaped, 0, 0};
-                        count += size_t(c);
-                    }
-                    return;
-                }
+                // Which rays hold (none without `old`); the others are traced again, in
+                // packets of 8 from y (the same hits as one at a time).
                 bool near = false;  // secondCones made at y
+                secondBatch.clear();
                 for (int j = 0; j < m; ++j) {
                     const glm::vec2 u = R2Point(rot, j);
                     auto d2 = [&] { return CosineDirection(normal, u); };
@@ -378,11 +370,20 @@ void GatherStage::Trace(const Moved* moved) {
                     if (holding) {
                         out[j] = old[j];
                     } else {
-                        float t2 = inf;
-                        out[j] = trace(y, d2(), t2);
-                        ++count;
+                        secondDirs[secondBatch.size()] = d2();
+                        secondBatch.push_back(j);
                     }
                 }
+                for (size_t k = 0; k < secondBatch.size(); k += 8) {
+                    const int c = int(std::min<size_t>(8, secondBatch.size() - k));
+                    RayHit h2[8];
+                    rays_->Intersect8(y, secondDirs.data() + k, c, inf, h2);
+                    for (int j = 0; j < c; ++j)
+                        out[secondBatch[k + j]] =
+                            h2[j].hit ? Found(h2[j].triangle, h2[j].u, h2[j].v, secondDirs[k + j])
+                                      : Hit{kEscaped, 0, 0};
+                }
+                count += secondBatch.size();
             };
             auto isShort = [&](int r) {
                 return Front(hits_[t * n + r]) && (hits_[t * n + r].triangle & kShort);
