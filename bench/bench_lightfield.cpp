@@ -61,8 +61,8 @@ int main(int argc, char** argv) {
                          "Cornell box, 19 faces, 34,816 elements, 64x64 cells: 4.067 s"});
         // The class as the solver runs it: the emitters' first shot (the gather stage's, as
         // at the defaults) and iterations until converged (three bounces leave light out).
-        cases.push_back({"cornell class, shot", "scenes/cornell-box.gltf", 0.01424f, 512, 1, 64,
-                         0, 256, ""});
+        cases.push_back(
+            {"cornell class, shot", "scenes/cornell-box.gltf", 0.01424f, 512, 1, 64, 0, 256, ""});
         // The same surfels with cells half an element wide, to convergence: what its answer
         // costs when the lines resolve the surfels.
         cases.push_back(
