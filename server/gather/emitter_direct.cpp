@@ -231,17 +231,14 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
     // The rays to trace go out in packets of 8 from the point (the same outcomes as one at a
     // time); what each adds is summed in ray order after.
     thread_local std::vector<Sample> samples;
-    thread_local std::vector<uint32_t> picked;
-    thread_local std::vector<int> batch;
-    thread_local std::vector<glm::vec3> spans;
+    thread_local std::vector<uint32_t> picked;  // per light ray its triangle; ~0: adds nothing
+    thread_local std::vector<int> batch;        // the rays to trace
+    thread_local std::vector<glm::vec3> spans, dirs;
+    thread_local std::vector<RayHit> hits;
+    thread_local std::vector<uint8_t> blocked;
     samples.resize(size_t(nl));
-    picked.assign(size_t(nl), ~0u);  // ~0: the ray adds nothing
-    batch.clear();
-    auto flush = [&](auto&& trace) {
-        for (size_t k = 0; k < batch.size(); k += 8)
-            trace(k, std::min<size_t>(8, batch.size() - k));
-        batch.clear();
-    };
+    picked.assign(size_t(nl), ~0u);
+    batch.clear(), spans.clear();
     for (int r = 0; r < nl; ++r) {
         // Emitter by power, from the r-th of nl strata of [0, 1): each emitter takes a run of
         // consecutive r, so its points below are consecutive R2 points.
@@ -249,23 +246,20 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
         const uint32_t ti = rays.Emitters()[rays.PickEmitter(ut)];
         if (!LightRay(rays, ti, r, sl, x, nx, samples[r])) continue;
         picked[r] = ti;
-        if (meets(from, samples[r].span, 1.0f)) batch.push_back(r);
+        if (meets(from, samples[r].span, 1.0f))
+            batch.push_back(r), spans.push_back(samples[r].span);
     }
     traced += batch.size();
-    spans.resize(batch.size());
-    for (size_t k = 0; k < batch.size(); ++k) spans[k] = samples[batch[k]].span;
-    flush([&](size_t k, size_t count) {
-        bool blocked[8];
-        rays.Occluded8(from, spans.data() + k, int(count), blocked);
-        for (size_t j = 0; j < count; ++j) {
-            const int r = batch[k + j];
-            const uint64_t bit = uint64_t(1) << (r % 64);
-            if (blocked[j])
-                bits[r / 64] |= bit;
-            else
-                bits[r / 64] &= ~bit;
-        }
-    });
+    blocked.resize(batch.size());
+    rays.OccludedFrom(from, spans.data(), spans.size(), blocked.data());
+    for (size_t k = 0; k < batch.size(); ++k) {
+        const int r = batch[k];
+        const uint64_t bit = uint64_t(1) << (r % 64);
+        if (blocked[k])
+            bits[r / 64] |= bit;
+        else
+            bits[r / 64] &= ~bit;
+    }
     for (int r = 0; r < nl; ++r) {
         const uint32_t ti = picked[r];
         if (ti == ~0u || (bits[r / 64] & (uint64_t(1) << (r % 64)))) continue;
@@ -274,29 +268,27 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
         const float weight = Power(nl, pdfArea * s.dist2 / s.cy, nb, s.cx / kPi);
         add(ti, weight * s.cx * s.cy / (s.dist2 * pdfArea * nl), s.uv);
     }
-    spans.resize(size_t(own));
+    dirs.resize(size_t(own));
+    batch.clear(), spans.clear();
     for (int r = 0; r < own; ++r) {
-        spans[r] = CosineDirection(nx, R2Point(sb, r));
-        if (meets(from, spans[r], cosineT_[i * own + r])) batch.push_back(r);
+        dirs[r] = CosineDirection(nx, R2Point(sb, r));
+        if (meets(from, dirs[r], cosineT_[i * own + r]))
+            batch.push_back(r), spans.push_back(dirs[r]);
     }
     traced += batch.size();
-    flush([&](size_t k, size_t count) {
-        glm::vec3 dirs[8];
-        RayHit hits[8];
-        for (size_t j = 0; j < count; ++j) dirs[j] = spans[batch[k + j]];
-        rays.Intersect8(from, dirs, int(count), std::numeric_limits<float>::infinity(), hits);
-        for (size_t j = 0; j < count; ++j) {
-            const int r = batch[k + j];
-            cosineT_[i * own + r] =
-                hits[j].hit ? hits[j].t : std::numeric_limits<float>::infinity();
-            cosineTri_[i * own + r] = hits[j].hit ? hits[j].triangle : ~0u;
-        }
-    });
+    hits.resize(batch.size());
+    rays.IntersectFrom(from, spans.data(), spans.size(), std::numeric_limits<float>::infinity(),
+                       hits.data());
+    for (size_t k = 0; k < batch.size(); ++k) {
+        const int r = batch[k];
+        cosineT_[i * own + r] = hits[k].hit ? hits[k].t : std::numeric_limits<float>::infinity();
+        cosineTri_[i * own + r] = hits[k].hit ? hits[k].triangle : ~0u;
+    }
     for (int r = 0; r < own; ++r) {
         const uint32_t tri = cosineTri_[i * own + r];
         if (tri == ~0u || !(rays.AreaPdf(tri) > 0.0f)) continue;
-        add(tri, EmitterHitWeight(rays, settings_, nx, spans[r], tri, cosineT_[i * own + r], nb),
-            rays.Mapped() ? rays.Barycentrics(tri, from, spans[r]) : glm::vec2(0.0f));
+        add(tri, EmitterHitWeight(rays, settings_, nx, dirs[r], tri, cosineT_[i * own + r], nb),
+            rays.Mapped() ? rays.Barycentrics(tri, from, dirs[r]) : glm::vec2(0.0f));
     }
     return sum;
 }

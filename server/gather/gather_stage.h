@@ -146,6 +146,8 @@ class GatherStage : public Solver {
     // The first hit of the ray o + t·d (kBack set on a back side, kEscaped where there is
     // none), and at `t` (when given) how far along it lies (∞ when it escaped).
     Hit Cast(const glm::vec3& o, const glm::vec3& d, float* t = nullptr) const;
+    // The cached form of Embree's answer `h` for a ray along d (kEscaped where it met nothing).
+    Hit Cached(const RayHit& h, const glm::vec3& d) const;
     // The cached form of a ray along d meeting triangle `tri` at (u, v), whichever tracer
     // found it.
     Hit Found(uint32_t tri, float u, float v, const glm::vec3& d) const;

@@ -161,8 +161,11 @@ GatherStage::Hit GatherStage::Cast(const glm::vec3& o, const glm::vec3& d, float
     const float inf = std::numeric_limits<float>::infinity();
     const RayHit h = rays_->Intersect(o, d, inf);
     if (t) *t = h.hit ? h.t : inf;
-    if (!h.hit) return Hit{kEscaped, 0, 0};
-    return Found(h.triangle, h.u, h.v, d);
+    return Cached(h, d);
+}
+
+GatherStage::Hit GatherStage::Cached(const RayHit& h, const glm::vec3& d) const {
+    return h.hit ? Found(h.triangle, h.u, h.v, d) : Hit{kEscaped, 0, 0};
 }
 
 GatherStage::Hit GatherStage::Found(uint32_t tri, float u, float v, const glm::vec3& d) const {
@@ -277,8 +280,9 @@ void GatherStage::Trace(const Moved* moved) {
         std::vector<std::pair<glm::vec3, std::vector<CosineCone>>> patterns;
         std::vector<uint8_t> kept(n), was(n);
         std::vector<Hit> relaid;
-        // The rays a target traces on the CPU go out in packets of 8 from its point.
-        std::vector<RayHit> packed(n);
+        // The rays a target traces on the CPU go out in packets of 8 from its point, and a
+        // short hit's from the hit (`packed` holds the answers of either).
+        std::vector<RayHit> packed(std::max(n, m));
         std::vector<glm::vec3> dirs(n);
         std::vector<int> batch, secondBatch;
         std::vector<glm::vec3> secondDirs(m);
@@ -301,9 +305,7 @@ void GatherStage::Trace(const Moved* moved) {
                     batch.push_back(r);
                 }
             }
-            for (size_t k = 0; k < batch.size(); k += 8)
-                rays_->Intersect8(o, dirs.data() + k, int(std::min<size_t>(8, batch.size() - k)),
-                                  inf, packed.data() + k);
+            rays_->IntersectFrom(o, dirs.data(), batch.size(), inf, packed.data());
             size_t next = 0;  // the next of `batch`
             for (int r = 0; r < n; ++r) {
                 if (kept[r]) continue;
@@ -312,9 +314,8 @@ void GatherStage::Trace(const Moved* moved) {
                 if (onGpu) {
                     dist = gpuDistances[t * n + r];
                 } else {
-                    const RayHit& h = packed[next];
-                    dist = h.hit ? h.t : inf;
-                    hit = h.hit ? Found(h.triangle, h.u, h.v, dirs[next]) : Hit{kEscaped, 0, 0};
+                    dist = packed[next].hit ? packed[next].t : inf;
+                    hit = Cached(packed[next], dirs[next]);
                     ++next;
                 }
                 ++count;
@@ -374,15 +375,9 @@ void GatherStage::Trace(const Moved* moved) {
                         secondBatch.push_back(j);
                     }
                 }
-                for (size_t k = 0; k < secondBatch.size(); k += 8) {
-                    const int c = int(std::min<size_t>(8, secondBatch.size() - k));
-                    RayHit h2[8];
-                    rays_->Intersect8(y, secondDirs.data() + k, c, inf, h2);
-                    for (int j = 0; j < c; ++j)
-                        out[secondBatch[k + j]] =
-                            h2[j].hit ? Found(h2[j].triangle, h2[j].u, h2[j].v, secondDirs[k + j])
-                                      : Hit{kEscaped, 0, 0};
-                }
+                rays_->IntersectFrom(y, secondDirs.data(), secondBatch.size(), inf, packed.data());
+                for (size_t k = 0; k < secondBatch.size(); ++k)
+                    out[secondBatch[k]] = Cached(packed[k], secondDirs[k]);
                 count += secondBatch.size();
             };
             auto isShort = [&](int r) {

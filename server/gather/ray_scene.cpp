@@ -29,6 +29,19 @@ void InitRay(RTCRay& r, const glm::vec3& o, const glm::vec3& d, float tfar) {
     r.flags = 0;
 }
 
+// Ray i of a packet of 8 (Embree's SoA layout, RTCRay8 or the ray of RTCRayHit8).
+template <typename Ray8>
+void SetRay8(Ray8& r, int i, const glm::vec3& o, const glm::vec3& d, float tfar) {
+    r.org_x[i] = o.x, r.org_y[i] = o.y, r.org_z[i] = o.z;
+    r.dir_x[i] = d.x, r.dir_y[i] = d.y, r.dir_z[i] = d.z;
+    r.tnear[i] = 0.0f;
+    r.tfar[i] = tfar;
+    r.time[i] = 0.0f;
+    r.mask[i] = ~0u;
+    r.id[i] = 0;
+    r.flags[i] = 0;
+}
+
 // The context of RayScene::AllHits: Embree's, then where the filter puts what it meets.
 struct AllHitsContext {
     RTCIntersectContext ctx;
@@ -320,60 +333,49 @@ RayHit RayScene::Intersect(const glm::vec3& origin, const glm::vec3& dir, float 
     return hit;
 }
 
-namespace {
-
-// Ray i of a packet of 8 (Embree's SoA layout, RTCRay8 or the ray of RTCRayHit8).
-template <typename Ray8>
-void SetRay8(Ray8& r, int i, const glm::vec3& o, const glm::vec3& d, float tfar) {
-    r.org_x[i] = o.x, r.org_y[i] = o.y, r.org_z[i] = o.z;
-    r.dir_x[i] = d.x, r.dir_y[i] = d.y, r.dir_z[i] = d.z;
-    r.tnear[i] = 0.0f;
-    r.tfar[i] = tfar;
-    r.time[i] = 0.0f;
-    r.mask[i] = ~0u;
-    r.id[i] = 0;
-    r.flags[i] = 0;
-}
-
-}  // namespace
-
-void RayScene::Occluded8(const glm::vec3& from, const glm::vec3* spans, int count,
-                         bool* out) const {
-    PENUMBRA_CHECK(count >= 0 && count <= 8);
-    alignas(32) RTCRay8 r;
-    alignas(32) int valid[8];
-    for (int i = 0; i < 8; ++i) {
-        valid[i] = i < count ? -1 : 0;
-        SetRay8(r, i, from, i < count ? spans[i] : glm::vec3(0.0f, 0.0f, 1.0f), 1.0f - 1e-4f);
-    }
+void RayScene::OccludedFrom(const glm::vec3& from, const glm::vec3* spans, size_t count,
+                            uint8_t* out) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
-    rtcOccluded8(valid, rtcScene_, &ctx, &r);
-    for (int i = 0; i < count; ++i) out[i] = r.tfar[i] < 0.0f;
+    for (size_t k = 0; k < count; k += 8) {
+        const size_t c = std::min<size_t>(8, count - k);
+        alignas(32) RTCRay8 r;
+        alignas(32) int valid[8];
+        for (size_t i = 0; i < 8; ++i) {
+            valid[i] = i < c ? -1 : 0;
+            SetRay8(r, int(i), from, i < c ? spans[k + i] : glm::vec3(0.0f, 0.0f, 1.0f),
+                    1.0f - 1e-4f);
+        }
+        rtcOccluded8(valid, rtcScene_, &ctx, &r);
+        for (size_t i = 0; i < c; ++i) out[k + i] = r.tfar[i] < 0.0f ? 1 : 0;
+    }
 }
 
-void RayScene::Intersect8(const glm::vec3& origin, const glm::vec3* dirs, int count, float tfar,
-                          RayHit* out) const {
-    PENUMBRA_CHECK(count >= 0 && count <= 8);
-    alignas(32) RTCRayHit8 rh;
-    alignas(32) int valid[8];
-    for (int i = 0; i < 8; ++i) {
-        valid[i] = i < count ? -1 : 0;
-        SetRay8(rh.ray, i, origin, i < count ? dirs[i] : glm::vec3(0.0f, 0.0f, 1.0f), tfar);
-        rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-    }
+void RayScene::IntersectFrom(const glm::vec3& origin, const glm::vec3* dirs, size_t count,
+                             float tfar, RayHit* out) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
-    rtcIntersect8(valid, rtcScene_, &ctx, &rh);
-    for (int i = 0; i < count; ++i) {
-        RayHit& hit = out[i];
-        hit = RayHit();
-        if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
-        hit.hit = true;
-        hit.triangle = rh.hit.primID[i];
-        hit.t = rh.ray.tfar[i];
-        hit.u = rh.hit.u[i];
-        hit.v = rh.hit.v[i];
+    for (size_t k = 0; k < count; k += 8) {
+        const size_t c = std::min<size_t>(8, count - k);
+        alignas(32) RTCRayHit8 rh;
+        alignas(32) int valid[8];
+        for (size_t i = 0; i < 8; ++i) {
+            valid[i] = i < c ? -1 : 0;
+            SetRay8(rh.ray, int(i), origin, i < c ? dirs[k + i] : glm::vec3(0.0f, 0.0f, 1.0f),
+                    tfar);
+            rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+        }
+        rtcIntersect8(valid, rtcScene_, &ctx, &rh);
+        for (size_t i = 0; i < c; ++i) {
+            RayHit& hit = out[k + i];
+            hit = RayHit();
+            if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+            hit.hit = true;
+            hit.triangle = rh.hit.primID[i];
+            hit.t = rh.ray.tfar[i];
+            hit.u = rh.hit.u[i];
+            hit.v = rh.hit.v[i];
+        }
     }
 }
 

@@ -103,13 +103,14 @@ class RayScene {
     bool Occluded(const glm::vec3& from, const glm::vec3& span) const;
     // The nearest triangle along origin + t·dir, t in (0, tfar).
     RayHit Intersect(const glm::vec3& origin, const glm::vec3& dir, float tfar) const;
-    // Occluded for `count` (≤ 8) segments from one point, as one packet (rtcOccluded8): per
-    // segment whether something lies on it, into `out`.
-    void Occluded8(const glm::vec3& from, const glm::vec3* spans, int count, bool* out) const;
-    // Intersect for `count` (≤ 8) rays from one origin, as one packet (Embree's rtcIntersect8):
-    // the same hits as one at a time, for less where the rays start together.
-    void Intersect8(const glm::vec3& origin, const glm::vec3* dirs, int count, float tfar,
-                    RayHit* out) const;
+    // Occluded for `count` segments from one point, in Embree packets of 8 (rtcOccluded8):
+    // per segment 1 where something lies on it, else 0, into out[0, count).
+    void OccludedFrom(const glm::vec3& from, const glm::vec3* spans, size_t count,
+                      uint8_t* out) const;
+    // Intersect for `count` rays from one origin, in packets of 8 (rtcIntersect8): the same
+    // hits as one at a time, for less where the rays start together; into out[0, count).
+    void IntersectFrom(const glm::vec3& origin, const glm::vec3* dirs, size_t count, float tfar,
+                       RayHit* out) const;
     // Every triangle along origin + t·dir, t in (0, tfar), nearest first, in one traversal (a
     // filter that records each hit and lets the ray go on); a triangle Embree meets twice
     // (its spatial splits) counted once. For the light field's lines (solver/lightfield/).
