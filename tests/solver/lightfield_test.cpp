@@ -353,6 +353,61 @@ TEST(Lightfield, OpenPlaneUnderASkyReceivesPiL) {
     }
 }
 
+// Cells four elements wide: most surfels meet a line of a direction by chance, and their
+// global-lines estimate is noise; smoothing both sums over each surface (SurfelSmoothing,
+// the paper's interface read onto the faces at its own resolution) pools the neighbours'
+// lines. An open plane of separate tiles under a constant sky (E = π everywhere; every output
+// vertex a tile's corner, where the pooling reaches least), 8 batches of 64 directions: the
+// worst vertex 152% → 24%, the relative RMS 55% → 11%. The thin wall between a lit and a dark
+// room at the same coarse cells stays dark with the smoothing on: the ceiling and side walls
+// run from one room into the other, and the wall standing across them cuts their edges
+// (0.25% of the lit floor's light; 1.5% when it did not).
+TEST(Lightfield, CellsWiderThanTheSurfelsPoolTheirNeighboursLines) {
+    SceneBuilder b;
+    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.5f));
+    b.AddTiledQuad("ground", grey, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 4, 4, {0, 1, 0});
+    Scene plane = b.Build();
+    plane.environment = ConstantEnvironment(glm::vec3(1.0f));
+    double worst[2] = {0.0, 0.0}, rms[2] = {0.0, 0.0};
+    for (int smoothed : {0, 1}) {
+        SolverSettings settings = Lightfield(0.05f);
+        SetOption(settings.options, "cells", 14);  // 0.2 m: four elements
+        SetOption(settings.options, "smoothing", smoothed ? -1 : 0);
+        auto solver = CreateSolver(plane, settings);
+        solver->Iterate(8);
+        const std::vector<glm::vec3> e = testing::AllVertices(*solver, plane, Channel::kIndirect);
+        for (const glm::vec3& v : e) {
+            const double rel = std::abs(v.x - kPi) / kPi;
+            worst[smoothed] = std::max(worst[smoothed], rel);
+            rms[smoothed] += rel * rel;
+        }
+        rms[smoothed] = std::sqrt(rms[smoothed] / double(e.size()));
+        std::printf(
+            "open plane of tiles, cells 0.2 m over 0.05 m elements, %d smoothing "
+            "passes: worst vertex %.2f%% off, rms %.2f%%\n",
+            int(solver->Stats().Number("smoothing_passes")), 100 * worst[smoothed],
+            100 * rms[smoothed]);
+    }
+    EXPECT_GT(worst[0], 0.5);  // the raw estimate at these cells: noise
+    EXPECT_LT(worst[1], 0.3);
+    EXPECT_LT(rms[1], 0.25 * rms[0]);
+
+    const Scene rooms = testing::ThinWallRooms(0.005f);
+    SolverSettings settings = Lightfield(0.05f, 64, 2);
+    SetOption(settings.options, "cells", 16);  // 0.15 m: three elements
+    auto solver = CreateSolver(rooms, settings);
+    solver->Iterate(20);
+    EXPECT_GT(solver->Stats().Number("smoothing_passes"), 0.0);
+    const double lit = NodeMean(*solver, rooms, "floor_lit");
+    const double dark = NodeMean(*solver, rooms, "floor_dark");
+    std::printf(
+        "thin wall (5 mm), cells three elements wide, smoothed: dark floor %.6f of the "
+        "lit floor's light\n",
+        dark / lit);
+    EXPECT_GT(lit, 0.0);
+    EXPECT_LT(dark, 0.01 * lit);
+}
+
 // A closed room with boxes, every surface emitting L_e = 1 at albedo 0.5: L = 2, E = 2π
 // everywhere (a white furnace); the walk is exact in expectation, what is left is noise.
 TEST(Lightfield, WhiteFurnaceWithOccluders) {

@@ -58,6 +58,7 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
     rays_ = std::make_unique<RayScene>(scene_, surfels_);
     facets_ = std::make_unique<SurfelFacets>(*rays_, surfels_.size());
     grid_ = MakeGrid(surfels_, h, own.cells);
+    MakeSmoothing();
     if (settings.device == DeviceChoice::kGpu || settings.device == DeviceChoice::kLavapipe) {
         // A rasteriser samples pixel centres: one jitter a direction (the CPU's re-traces
         // after a move use the same grid).
@@ -91,6 +92,14 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
 }
 
 LightfieldSolver::~LightfieldSolver() = default;
+
+void LightfieldSolver::MakeSmoothing() {
+    const int passes =
+        own_.smoothing >= 0
+            ? own_.smoothing
+            : SmoothingPasses(2.0f * grid_.radius / float(grid_.cells), elementSize_);
+    smoothing_ = SurfelSmoothing(*rays_, surfels_.positions, surfels_.normals, passes);
+}
 
 std::vector<direct::GpuReceiver> LightfieldSolver::Receivers() const {
     return direct::MakeReceivers(surfels_, light_.surfel);
@@ -228,11 +237,22 @@ void LightfieldSolver::Bounce(bool newestOnly) {
         Walk(b, sky, &lines);
         Reflect(b);
     }
-    // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled (lines.h).
+    // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled (lines.h), both sums pooled over
+    // the neighbours where the cells are wider than the surfels (SurfelSmoothing).
     const float pi = std::numbers::pi_v<float>;
-    for (size_t s = 0; s < weighted_.size(); ++s)
-        light_.gathered[s] =
-            coverage_[s] > 0.0f ? (pi / coverage_[s]) * weighted_[s] : glm::vec3(0.0f);
+    if (smoothing_.Passes() > 0) {
+        pooled_.resize(weighted_.size());
+        for (size_t s = 0; s < weighted_.size(); ++s)
+            pooled_[s] = glm::vec4(weighted_[s], coverage_[s]);
+        smoothing_.Apply(pooled_, pooledScratch_);
+        for (size_t s = 0; s < weighted_.size(); ++s)
+            light_.gathered[s] =
+                pooled_[s].w > 0.0f ? (pi / pooled_[s].w) * glm::vec3(pooled_[s]) : glm::vec3(0.0f);
+    } else {
+        for (size_t s = 0; s < weighted_.size(); ++s)
+            light_.gathered[s] =
+                coverage_[s] > 0.0f ? (pi / coverage_[s]) * weighted_[s] : glm::vec3(0.0f);
+    }
     Reradiate();
     msLastWalk_ = MsSince(t);
     msWalk_ += msLastWalk_;
@@ -353,6 +373,7 @@ std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
         }
         if (vulkanWalk_) vulkanWalk_->SetFacets(*facets_);
         for (size_t b = 0; b < batches_.size(); ++b) PrepareLobes(b);
+        MakeSmoothing();  // a deformation can open or close a crease
     }
     scene_.lights = scene.lights;
     if (directStage_) {
@@ -430,6 +451,7 @@ SolverStats LightfieldSolver::Stats() const {
     s.SetDetail("batches", double(batches_.size()));
     s.SetDetail("batches_kept_at_most", double(own_.batches));
     s.SetDetail("cells", double(grid_.cells));
+    s.SetDetail("smoothing_passes", double(smoothing_.Passes()));
     s.SetDetail("lines", double(lines));
     s.SetDetail("line_hits", double(hits));
     s.SetDetail("lines_retraced", double(linesRetraced_));

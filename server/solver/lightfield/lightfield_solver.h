@@ -88,6 +88,10 @@ class LightfieldSolver : public Solver {
     void Walk(size_t b, const Environment* sky, const GlossyLines* glossy);
     std::unique_ptr<SurfelFacets> facets_;
     LineGrid grid_;
+    // The estimate pooled over neighbouring surfels where the cells are wider than they are.
+    SurfelSmoothing smoothing_;
+    void MakeSmoothing();
+    std::vector<glm::vec4> pooled_, pooledScratch_;
     std::vector<glm::vec3> base_;  // the batches' direction set before its rotation
     std::vector<LineBatch> batches_;
     std::vector<float> coverage_;      // per surfel: Σ P_s over the kept batches' directions

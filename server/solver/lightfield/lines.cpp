@@ -4,6 +4,7 @@
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <glm/gtc/quaternion.hpp>
 #include <numbers>
@@ -217,6 +218,82 @@ SurfelFacets::SurfelFacets(const RayScene& rays, size_t surfels) {
         const glm::uvec3& c = rays.Corners(t);
         facets[next[c.x]++] = f, facets[next[c.y]++] = f, facets[next[c.z]++] = f;
     }
+    // Facets with one normal add up to one (max(0, −f·t) is linear in f along a normal): a
+    // surfel inside a flat face keeps one instead of six.
+    size_t kept = 0;
+    for (size_t s = 0; s < surfels; ++s) {
+        const size_t first = kept;
+        for (uint32_t k = offsets[s]; k < offsets[s + 1]; ++k) {
+            const glm::vec3 f = facets[k];
+            const float len = glm::length(f);
+            bool merged = false;
+            for (size_t j = first; j < kept && !merged; ++j)
+                if (glm::dot(facets[j], f) >= 0.999999f * glm::length(facets[j]) * len)
+                    facets[j] += f, merged = true;
+            if (!merged) facets[kept++] = f;
+        }
+        offsets[s] = static_cast<uint32_t>(first);
+    }
+    offsets[surfels] = static_cast<uint32_t>(kept);
+    facets.resize(kept);
+}
+
+SurfelSmoothing::SurfelSmoothing(const RayScene& rays, const std::vector<glm::vec3>& positions,
+                                 const std::vector<glm::vec3>& normals, int passes)
+    : passes_(passes) {
+    if (passes <= 0) return;
+    const size_t surfels = normals.size();
+    std::vector<std::pair<uint32_t, uint32_t>> edges;
+    edges.reserve(3 * rays.Triangles().size());
+    for (uint32_t t = 0; t < rays.Triangles().size(); ++t) {
+        const glm::uvec3& c = rays.Corners(t);
+        for (const auto& [a, b] : {std::pair{c.x, c.y}, std::pair{c.y, c.z}, std::pair{c.z, c.x}})
+            if (glm::dot(normals[a], normals[b]) >= kSmoothCrease)
+                edges.emplace_back(std::min(a, b), std::max(a, b));
+    }
+    std::sort(edges.begin(), edges.end());
+    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+    // An edge something stands on is cut: a wall across a ceiling, a box on a floor (the
+    // segment between the two surfels, lifted off the surface by kSmoothLift of its length,
+    // meets a surface).
+    std::vector<uint8_t> cut(edges.size(), 0);
+    tbb::parallel_for(size_t(0), edges.size(), [&](size_t k) {
+        const auto [a, b] = edges[k];
+        const glm::vec3 pa = positions[a], pb = positions[b];
+        const glm::vec3 lift =
+            kSmoothLift * glm::length(pb - pa) * glm::normalize(normals[a] + normals[b]);
+        cut[k] = rays.Occluded(pa + lift, pb - pa) || rays.Occluded(pb + lift, pa - pb);
+    });
+    std::vector<std::pair<uint32_t, uint32_t>> kept;
+    kept.reserve(2 * edges.size());
+    for (size_t k = 0; k < edges.size(); ++k)
+        if (!cut[k]) kept.push_back(edges[k]), kept.emplace_back(edges[k].second, edges[k].first);
+    std::sort(kept.begin(), kept.end());
+    edges.swap(kept);
+    offsets_.assign(surfels + 1, 0);
+    for (const auto& e : edges) ++offsets_[e.first + 1];
+    for (size_t s = 0; s < surfels; ++s) offsets_[s + 1] += offsets_[s];
+    neighbours_.resize(edges.size());
+    for (size_t k = 0; k < edges.size(); ++k) neighbours_[k] = edges[k].second;
+}
+
+void SurfelSmoothing::Apply(std::vector<glm::vec4>& values, std::vector<glm::vec4>& scratch) const {
+    if (passes_ <= 0) return;
+    scratch.resize(values.size());
+    for (int p = 0; p < passes_; ++p) {
+        tbb::parallel_for(size_t(0), values.size(), [&](size_t s) {
+            glm::vec4 sum = values[s];
+            for (uint32_t k = offsets_[s]; k < offsets_[s + 1]; ++k) sum += values[neighbours_[k]];
+            scratch[s] = sum / float(1 + offsets_[s + 1] - offsets_[s]);
+        });
+        values.swap(scratch);
+    }
+}
+
+int SmoothingPasses(float side, float elementSize) {
+    if (!(elementSize > 0.0f) || side <= elementSize) return 0;
+    const float reach = 0.5f * side / elementSize;  // half a cell, in elements
+    return std::max(1, int(std::ceil(reach * reach / 0.43f)));
 }
 
 void SurfelFacets::Coverage(const std::vector<glm::vec3>& directions,
@@ -235,15 +312,14 @@ namespace {
 // A direction of travel's sums per surfel: Σ φ L_I and Σ φ over the hits it received, and
 // which surfels were met (to add and clear them after the direction).
 struct TravelSums {
-    std::vector<glm::vec3> light;
-    std::vector<float> weight;
+    std::vector<glm::vec4> sums;  // per surfel: Σ φ L_I (RGB) and Σ φ (w), side by side
     std::vector<uint32_t> met;
-    explicit TravelSums(size_t surfels) : light(surfels, glm::vec3(0.0f)), weight(surfels, 0.0f) {}
+    explicit TravelSums(size_t surfels) : sums(surfels, glm::vec4(0.0f)) {}
     void Receive(uint32_t s, float w, const glm::vec3& l) {
         if (w <= 0.0f) return;
-        if (weight[s] == 0.0f) met.push_back(s);
-        weight[s] += w;
-        light[s] += w * l;
+        glm::vec4& sum = sums[s];
+        if (sum.w == 0.0f) met.push_back(s);
+        sum += glm::vec4(w * l, w);
     }
     // Adds each met surfel's share for light travelling along `travel` (WalkBatch).
     void Flush(const SurfelFacets& facets, const glm::vec3& travel, float cellArea,
@@ -251,12 +327,13 @@ struct TravelSums {
                size_t columns) {
         for (uint32_t s : met) {
             const float p = facets.Projected(s, travel);
+            const glm::vec3 light(sums[s]);
+            const float weight = sums[s].w;
             if (glossy && (*glossy->slot)[s] >= 0 && p > 0.0f)
                 glossy->incoming[size_t((*glossy->slot)[s]) * columns + column] =
-                    p >= kRatioCells * cellArea ? light[s] / weight[s] : (cellArea / p) * light[s];
-            weighted[s] +=
-                p >= kRatioCells * cellArea ? (p / weight[s]) * light[s] : cellArea * light[s];
-            light[s] = glm::vec3(0.0f), weight[s] = 0.0f;
+                    p >= kRatioCells * cellArea ? light / weight : (cellArea / p) * light;
+            weighted[s] += p >= kRatioCells * cellArea ? (p / weight) * light : cellArea * light;
+            sums[s] = glm::vec4(0.0f);
         }
         met.clear();
     }

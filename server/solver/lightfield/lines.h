@@ -117,6 +117,41 @@ struct SurfelFacets {
     void Coverage(const std::vector<glm::vec3>& directions, std::vector<float>& coverage) const;
 };
 
+// The estimate read at the interface's resolution where the cells are wider than the surfels.
+// Sec. 3.3 maps the interface onto each face's texels by texture lookup, so every texel reads
+// every direction's interface, blurred at the cell's scale; the global-lines estimator
+// instead feeds a surfel only from the lines that meet its hat, and a hat much smaller than a
+// cell meets few lines (a 1.5 cm surfel under 6 cm cells: ~14 lines over 512 two-way
+// directions), so its E_s is mostly noise. Smoothing Σ P L̄ and Σ P with one kernel before
+// dividing them pools the neighbours' lines: E_s = π Σ_j W_sj (Σ_ω P L̄)_j / Σ_j W_sj (Σ_ω P)_j,
+// the same mean where the light is smooth over the kernel, at the cells' resolution where it
+// is not (as the paper's lookup). The kernel: `passes` averages of each surfel with its
+// neighbours on the refined mesh (a surfel and the surfels it shares a triangle with), along
+// edges whose normals agree (cos ≥ kSmoothCrease) and that nothing stands on (the segment
+// between the two, lifted off the surface by kSmoothLift of its length, meets no surface), so
+// that light does not cross a crease, a gap between surfaces, or a wall standing across one
+// (as along a ceiling that runs over a wall from a lit room into a dark one).
+inline constexpr float kSmoothCrease = 0.9f;
+inline constexpr float kSmoothLift = 0.02f;
+class SurfelSmoothing {
+  public:
+    SurfelSmoothing() = default;
+    SurfelSmoothing(const RayScene& rays, const std::vector<glm::vec3>& positions,
+                    const std::vector<glm::vec3>& normals, int passes);
+    int Passes() const { return passes_; }
+    // Smooths each surfel's (Σ P L̄ as RGB, Σ P as w) in place (`scratch`: any vector).
+    void Apply(std::vector<glm::vec4>& values, std::vector<glm::vec4>& scratch) const;
+
+  private:
+    int passes_ = 0;
+    std::vector<uint32_t> offsets_, neighbours_;
+};
+// Smoothing passes for lines `side` apart over surfels `elementSize` wide: none where a
+// surfel meets a line of each direction it faces (side ≤ elementSize); else enough that the
+// kernel's radius (about √(0.43 · passes) elements: a random walk's spread over the mesh)
+// reaches half a cell.
+int SmoothingPasses(float side, float elementSize);
+
 // The radiance interface's walk (Sec. 3.2, Fig. 5) along every line of `b`, both ways: the
 // interface starts as the sky's radiance along the line (black without one: Sec. 3.3's reset);
 // a surface whose front faces the light arriving receives the interface and hides what lies

@@ -39,6 +39,15 @@ std::vector<OptionSpec> Options() {
          1,
          256,
          {}},
+        {"smoothing",
+         K::kInt,
+         "-1",
+         "passes of smoothing the estimate over each surface where the cells are wider than "
+         "the surfels (the interface read at its own resolution); -1: from the cells and the "
+         "element size, 0: none",
+         -1,
+         1000,
+         {}},
     };
 }
 
@@ -69,6 +78,7 @@ LightfieldSettings ReadLightfieldSettings(const SolverSettings& settings) {
     s.batches = r.Int("batches");
     s.seed = static_cast<uint32_t>(r.Int("seed"));
     s.layers = r.Int("layers");
+    s.smoothing = r.Int("smoothing");
     return s;
 }
 

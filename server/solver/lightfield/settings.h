@@ -24,6 +24,9 @@ struct LightfieldSettings {
     // On a Vulkan device (--device gpu or lavapipe): surfaces peeled a submission along each
     // direction's lines; more submissions follow while a line has surfaces left.
     int layers = 8;
+    // Passes of smoothing the estimate over the refined mesh (SurfelSmoothing, lines.h) where
+    // the cells are wider than the surfels; −1: from the cells and the element size.
+    int smoothing = -1;
 };
 
 SolverEntry LightfieldEntry();
