@@ -236,6 +236,9 @@ SurfelFacets::SurfelFacets(const RayScene& rays, size_t surfels) {
     }
     offsets[surfels] = static_cast<uint32_t>(kept);
     facets.resize(kept);
+    most.assign(surfels, 0.0f);
+    for (size_t s = 0; s < surfels; ++s)
+        for (uint32_t k = offsets[s]; k < offsets[s + 1]; ++k) most[s] += glm::length(facets[k]);
 }
 
 SurfelSmoothing::SurfelSmoothing(const RayScene& rays, const std::vector<glm::vec3>& positions,
@@ -356,6 +359,13 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
     // Directions no line met a glossy surfel from keep 0.
     if (glossy)
         std::fill(glossy->incoming, glossy->incoming + glossy->slots * columns, glm::vec3(0.0f));
+    // A hat that cannot span kRatioCells cells in any direction (P_s ≤ Σ|f|) always takes the
+    // first form, Σ φ L_I · A_cell, which needs no sums per direction: its hits add to
+    // `weighted` at once (a glossy surfel's record per direction needs them).
+    std::vector<uint8_t> small(surfels);
+    tbb::parallel_for(size_t(0), surfels, [&](size_t s) {
+        small[s] = facets.most[s] < kRatioCells * cellArea && (!glossy || (*glossy->slot)[s] < 0);
+    });
     tbb::combinable<WalkSums> local([&] { return WalkSums(surfels); });
     tbb::parallel_for(size_t(0), b.directions.size(), [&](size_t k) {
         WalkSums& sums = local.local();
@@ -371,7 +381,13 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
             glm::uvec3 c;
             glm::vec3 w;
             corners(h, c, w);
-            travel.Receive(c.x, w.x, l), travel.Receive(c.y, w.y, l), travel.Receive(c.z, w.z, l);
+            for (int k = 0; k < 3; ++k) {
+                if (w[k] <= 0.0f) continue;
+                if (small[c[k]])
+                    sums.weighted[c[k]] += (cellArea * w[k]) * l;
+                else
+                    travel.Receive(c[k], w[k], l);
+            }
         };
         // A sender's radiance towards travel column `column`: diffuse, plus its glossy
         // surfels' exitant light that way.

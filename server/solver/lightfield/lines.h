@@ -101,10 +101,12 @@ size_t RetraceBatch(const RayScene& rays, const LineGrid& grid, uint32_t seed, c
 
 // Each surfel's share of its triangles, for the projected area of its hat function towards a
 // direction: facets[offsets[s] … offsets[s + 1]) are normal × area / 3 of the refined
-// triangles around surfel s (RayScene's, built over the refined mesh).
+// triangles around surfel s (RayScene's, built over the refined mesh), those with one normal
+// summed into one; most[s] = Σ |f| bounds P_s over every direction.
 struct SurfelFacets {
     std::vector<uint32_t> offsets;
     std::vector<glm::vec3> facets;
+    std::vector<float> most;
     explicit SurfelFacets(const RayScene& rays, size_t surfels);
     // ∫ φ_s cos⁺ dA towards light arriving along `travel`: Σ max(0, −f · travel).
     float Projected(uint32_t s, const glm::vec3& travel) const {
