@@ -1,8 +1,9 @@
 // The light field's walk, second pass (solver/lightfield/vulkan_walk.h; TravelSums::Flush in
 // lines.cpp is the CPU twin): per surfel, per column of the group its lines met it along, the
-// global-lines share A_cell Σ φ L_I, or where the hat's projected area P_s spans two cells
-// or more P_s Σ φ L_I / Σ φ, added to `weighted`; a glossy surfel records the mean radiance
-// that arrived. The sums go back to 0 for the next group.
+// global-lines share A_cell Σ φ L_I with its weight A_cell Σ φ, or where the hat's projected
+// area P_s spans two cells or more P_s Σ φ L_I / Σ φ with P_s, added to `weighted` (RGB, w);
+// a glossy surfel records the mean radiance that arrived. The sums go back to 0 for the next
+// group.
 #version 450
 
 layout(local_size_x = 64) in;
@@ -28,7 +29,7 @@ layout(push_constant) uniform Push {
 void main() {
     const uint s = gl_GlobalInvocationID.x;
     if (s >= pc.surfels) return;
-    vec3 sum = vec3(0.0);
+    vec4 sum = vec4(0.0);
     for (uint c = 0u; c < 2u * pc.group; ++c) {
         const uint base = (c * pc.surfels + s) * 4u;
         const float w = sums[base + 3u];
@@ -44,8 +45,8 @@ void main() {
         if (pc.glossy != 0u && slot[s] >= 0 && p > 0.0)
             incoming[uint(slot[s]) * 2u * pc.directions + (back ? pc.directions + k : k)] =
                 vec4(ratio ? light / w : (pc.cellArea / p) * light, 0.0);
-        sum += ratio ? (p / w) * light : pc.cellArea * light;
+        sum += ratio ? vec4((p / w) * light, p) : pc.cellArea * vec4(light, w);
         sums[base] = 0.0, sums[base + 1u] = 0.0, sums[base + 2u] = 0.0, sums[base + 3u] = 0.0;
     }
-    weighted[s] += vec4(sum, 0.0);
+    weighted[s] += sum;
 }

@@ -79,7 +79,6 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
     std::vector<uint32_t> order(n);
     std::iota(order.begin(), order.end(), 0u);
     light_.Reset(std::move(order));
-    coverage_.assign(n, 0.0f);
     if (!scene.lights.empty()) {
         if (progress) progress("shadow maps", 0.0);
         mapSize_ = direct::MapSize(settings.shadowMapSize, scene.Diameter(), h);
@@ -225,7 +224,10 @@ void LightfieldSolver::Bounce(bool newestOnly) {
     const auto t = Clock::now();
     const Environment& env = sky_.Last();
     const Environment* sky = env.Active() ? &env : nullptr;
-    if (!newestOnly) weighted_.assign(surfels_.size(), glm::vec3(0.0f));
+    if (!newestOnly) {
+        weighted_.assign(surfels_.size(), glm::vec3(0.0f));
+        sampled_.assign(surfels_.size(), 0.0f);
+    }
     for (size_t b = newestOnly ? batches_.size() - 1 : 0; b < batches_.size(); ++b) {
         if (glossy_.empty()) {
             Walk(b, sky, nullptr);
@@ -237,13 +239,14 @@ void LightfieldSolver::Bounce(bool newestOnly) {
         Walk(b, sky, &lines);
         Reflect(b);
     }
-    // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled (lines.h), both sums pooled over
-    // the neighbours where the cells are wider than the surfels (SurfelSmoothing).
+    // E_s = π Σ_ω P L̄ / Σ_ω P over the directions sampled, each sum as the lines gave it
+    // (lines.h), both pooled over the neighbours where the cells are wider than the surfels
+    // (SurfelSmoothing).
     const float pi = std::numbers::pi_v<float>;
     if (smoothing_.Passes() > 0) {
         pooled_.resize(weighted_.size());
         for (size_t s = 0; s < weighted_.size(); ++s)
-            pooled_[s] = glm::vec4(weighted_[s], coverage_[s]);
+            pooled_[s] = glm::vec4(weighted_[s], sampled_[s]);
         smoothing_.Apply(pooled_, pooledScratch_);
         for (size_t s = 0; s < weighted_.size(); ++s)
             light_.gathered[s] =
@@ -251,7 +254,7 @@ void LightfieldSolver::Bounce(bool newestOnly) {
     } else {
         for (size_t s = 0; s < weighted_.size(); ++s)
             light_.gathered[s] =
-                coverage_[s] > 0.0f ? (pi / coverage_[s]) * weighted_[s] : glm::vec3(0.0f);
+                sampled_[s] > 0.0f ? (pi / sampled_[s]) * weighted_[s] : glm::vec3(0.0f);
     }
     Reradiate();
     msLastWalk_ = MsSince(t);
@@ -265,10 +268,10 @@ void LightfieldSolver::Bounce(bool newestOnly) {
 void LightfieldSolver::Walk(size_t b, const Environment* sky, const GlossyLines* glossy) {
     if (vulkanWalk_)
         vulkanWalk_->Walk(b, batches_[b], grid_.CellArea(), light_.radiance, sky, weighted_,
-                          glossy);
+                          sampled_, glossy);
     else
         WalkBatch(batches_[b], *rays_, *facets_, grid_.CellArea(), light_.radiance, sky, weighted_,
-                  glossy);
+                  sampled_, glossy);
 }
 
 void LightfieldSolver::Iterate(int n) {
@@ -281,7 +284,6 @@ void LightfieldSolver::Iterate(int n) {
             const uint32_t next = static_cast<uint32_t>(batches_.size());
             batches_.push_back(vulkanLines_ ? vulkanLines_->TraceBatch(base_, own_.seed, next)
                                             : TraceBatch(*rays_, grid_, base_, own_.seed, next));
-            facets_->Coverage(batches_.back().directions, coverage_);
             const size_t cells = glossy_.size() * 2 * batches_.back().directions.size();
             incoming_.emplace_back(cells, glm::vec3(0.0f));
             exitant_.emplace_back(cells, glm::vec3(0.0f));
@@ -365,10 +367,8 @@ std::string LightfieldSolver::UpdateGeometry(const Scene& scene) {
         rays_->Update(surfels_);
         if (vulkanLines_) vulkanLines_->Update(*rays_);  // for the batches still to come
         facets_ = std::make_unique<SurfelFacets>(*rays_, surfels_.size());
-        coverage_.assign(surfels_.size(), 0.0f);
         for (size_t b = 0; b < batches_.size(); ++b) {
             retraced += RetraceBatch(*rays_, grid_, own_.seed, box, batches_[b]);
-            facets_->Coverage(batches_[b].directions, coverage_);
             if (vulkanWalk_) vulkanWalk_->Invalidate(b);
         }
         if (vulkanWalk_) vulkanWalk_->SetFacets(*facets_);

@@ -94,8 +94,9 @@ class LightfieldSolver : public Solver {
     std::vector<glm::vec4> pooled_, pooledScratch_;
     std::vector<glm::vec3> base_;  // the batches' direction set before its rotation
     std::vector<LineBatch> batches_;
-    std::vector<float> coverage_;      // per surfel: Σ P_s over the kept batches' directions
-    std::vector<glm::vec3> weighted_;  // per surfel: Σ P L̄ of the last walks (WalkBatch)
+    // Per surfel, over the last walks (WalkBatch): Σ P L̄ and Σ P as the lines gave them.
+    std::vector<glm::vec3> weighted_;
+    std::vector<float> sampled_;
     // Glossy surfels (Sec. 3.4): per surfel its slot or −1, per slot its surfel; per kept
     // batch, per slot and direction of travel, the light arriving and leaving (GlossyLines),
     // and the lobe tables (one per normal and exponent) with each slot's.

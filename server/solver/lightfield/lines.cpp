@@ -299,17 +299,6 @@ int SmoothingPasses(float side, float elementSize) {
     return std::max(1, int(std::ceil(reach * reach / 0.43f)));
 }
 
-void SurfelFacets::Coverage(const std::vector<glm::vec3>& directions,
-                            std::vector<float>& coverage) const {
-    tbb::parallel_for(size_t(0), coverage.size(), [&](size_t s) {
-        float sum = 0.0f;
-        for (const glm::vec3& d : directions)
-            for (uint32_t k = offsets[s]; k < offsets[s + 1]; ++k)
-                sum += std::abs(glm::dot(facets[k], d));  // P_s(d) + P_s(−d)
-        coverage[s] += sum;
-    });
-}
-
 namespace {
 
 // A direction of travel's sums per surfel: Σ φ L_I and Σ φ over the hits it received, and
@@ -326,7 +315,7 @@ struct TravelSums {
     }
     // Adds each met surfel's share for light travelling along `travel` (WalkBatch).
     void Flush(const SurfelFacets& facets, const glm::vec3& travel, float cellArea,
-               std::vector<glm::vec3>& weighted, const GlossyLines* glossy, size_t column,
+               std::vector<glm::vec4>& weighted, const GlossyLines* glossy, size_t column,
                size_t columns) {
         for (uint32_t s : met) {
             const float p = facets.Projected(s, travel);
@@ -335,7 +324,8 @@ struct TravelSums {
             if (glossy && (*glossy->slot)[s] >= 0 && p > 0.0f)
                 glossy->incoming[size_t((*glossy->slot)[s]) * columns + column] =
                     p >= kRatioCells * cellArea ? light / weight : (cellArea / p) * light;
-            weighted[s] += p >= kRatioCells * cellArea ? (p / weight) * light : cellArea * light;
+            weighted[s] += p >= kRatioCells * cellArea ? glm::vec4((p / weight) * light, p)
+                                                       : cellArea * glm::vec4(light, weight);
             sums[s] = glm::vec4(0.0f);
         }
         met.clear();
@@ -344,16 +334,17 @@ struct TravelSums {
 
 // What one thread adds up.
 struct WalkSums {
-    std::vector<glm::vec3> weighted;
+    std::vector<glm::vec4> weighted;
     TravelSums travel;
-    explicit WalkSums(size_t surfels) : weighted(surfels, glm::vec3(0.0f)), travel(surfels) {}
+    explicit WalkSums(size_t surfels) : weighted(surfels, glm::vec4(0.0f)), travel(surfels) {}
 };
 
 }  // namespace
 
 void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& facets, float cellArea,
                const std::vector<glm::vec3>& radiance, const Environment* sky,
-               std::vector<glm::vec3>& weighted, const GlossyLines* glossy) {
+               std::vector<glm::vec3>& weighted, std::vector<float>& sampled,
+               const GlossyLines* glossy) {
     const size_t surfels = weighted.size();
     const size_t columns = 2 * b.directions.size();
     // Directions no line met a glossy surfel from keep 0.
@@ -384,7 +375,7 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
             for (int k = 0; k < 3; ++k) {
                 if (w[k] <= 0.0f) continue;
                 if (small[c[k]])
-                    sums.weighted[c[k]] += (cellArea * w[k]) * l;
+                    sums.weighted[c[k]] += (cellArea * w[k]) * glm::vec4(l, 1.0f);
                 else
                     travel.Receive(c[k], w[k], l);
             }
@@ -436,7 +427,10 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
         travel.Flush(facets, -d, cellArea, sums.weighted, glossy, b.directions.size() + k, columns);
     });
     local.combine_each([&](const WalkSums& part) {
-        for (size_t s = 0; s < surfels; ++s) weighted[s] += part.weighted[s];
+        for (size_t s = 0; s < surfels; ++s) {
+            weighted[s] += glm::vec3(part.weighted[s]);
+            sampled[s] += part.weighted[s].w;
+        }
     });
 }
 

@@ -126,7 +126,8 @@ void VulkanWalk::Invalidate(size_t index) {
 
 void VulkanWalk::Walk(size_t index, const LineBatch& b, float cellArea,
                       const std::vector<glm::vec3>& radiance, const Environment* sky,
-                      std::vector<glm::vec3>& weighted, const GlossyLines* glossy) {
+                      std::vector<glm::vec3>& weighted, std::vector<float>& sampled,
+                      const GlossyLines* glossy) {
     Impl& s = *impl_;
     PENUMBRA_CHECK(s.facets);
     PENUMBRA_CHECK_EQ(radiance.size(), s.surfels);
@@ -207,7 +208,7 @@ void VulkanWalk::Walk(size_t index, const LineBatch& b, float cellArea,
                            vk::PipelineStageFlagBits::eHost, {}, toHost, {}, {});
     });
     s.weighted->Download(up.data(), up.size() * sizeof(glm::vec4));
-    for (size_t i = 0; i < s.surfels; ++i) weighted[i] += glm::vec3(up[i]);
+    for (size_t i = 0; i < s.surfels; ++i) weighted[i] += glm::vec3(up[i]), sampled[i] += up[i].w;
     if (gloss) {
         std::vector<glm::vec4> in(glossyTexels);
         s.incoming->Download(in.data(), in.size() * sizeof(glm::vec4));

@@ -34,7 +34,8 @@ class VulkanWalk {
     // WalkBatch (lines.h) for kept batch `index` (`b`).
     void Walk(size_t index, const LineBatch& b, float cellArea,
               const std::vector<glm::vec3>& radiance, const Environment* sky,
-              std::vector<glm::vec3>& weighted, const GlossyLines* glossy = nullptr);
+              std::vector<glm::vec3>& weighted, std::vector<float>& sampled,
+              const GlossyLines* glossy = nullptr);
 
     double msDevice = 0.0;  // uploads, submissions and waits, all walks
 
