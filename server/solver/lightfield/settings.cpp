@@ -55,7 +55,7 @@ std::vector<OptionSpec> Options() {
 
 SolverEntry LightfieldEntry() {
     return {"lightfield",
-            "virtual light field (Mortensen et al. 2008), in progress: parallel lines in "
+            "virtual light field (Mortensen et al. 2008): parallel lines in "
             "batches of rotated directions, exact visibility along each; diffuse and glossy "
             "surfaces; lines traced by Embree and walked on the CPU, or rasterised, "
             "depth-peeled and walked on a Vulkan device (docs/SOLVER.md)",
