@@ -243,19 +243,12 @@ void LightfieldSolver::Bounce(bool newestOnly) {
     // (lines.h), both pooled over the neighbours where the cells are wider than the surfels
     // (SurfelSmoothing).
     const float pi = std::numbers::pi_v<float>;
-    if (smoothing_.Passes() > 0) {
-        pooled_.resize(weighted_.size());
-        for (size_t s = 0; s < weighted_.size(); ++s)
-            pooled_[s] = glm::vec4(weighted_[s], sampled_[s]);
-        smoothing_.Apply(pooled_, pooledScratch_);
-        for (size_t s = 0; s < weighted_.size(); ++s)
-            light_.gathered[s] =
-                pooled_[s].w > 0.0f ? (pi / pooled_[s].w) * glm::vec3(pooled_[s]) : glm::vec3(0.0f);
-    } else {
-        for (size_t s = 0; s < weighted_.size(); ++s)
-            light_.gathered[s] =
-                sampled_[s] > 0.0f ? (pi / sampled_[s]) * weighted_[s] : glm::vec3(0.0f);
-    }
+    pooled_.resize(weighted_.size());
+    for (size_t s = 0; s < weighted_.size(); ++s) pooled_[s] = glm::vec4(weighted_[s], sampled_[s]);
+    smoothing_.Apply(pooled_, pooledScratch_);  // nothing at 0 passes
+    for (size_t s = 0; s < pooled_.size(); ++s)
+        light_.gathered[s] =
+            pooled_[s].w > 0.0f ? (pi / pooled_[s].w) * glm::vec3(pooled_[s]) : glm::vec3(0.0f);
     Reradiate();
     msLastWalk_ = MsSince(t);
     msWalk_ += msLastWalk_;
