@@ -23,23 +23,98 @@ float Power(float na, float pa, float nb, float pb) {
     return a * a / (a * a + b * b);
 }
 
-// Half the rays (none of a single one) sample the cosine-weighted hemisphere. A quarter gives
-// the office 3.9 against 4.1% (its small ceiling lights favour light sampling) but the white
-// furnace's worst vertex 1.4 against 0.7% (emitters all around favour cosine sampling).
-int CosineRays(const EmitterDirectSettings& s) { return s.rays >= 2 ? s.rays / 2 : 0; }
+// The share of a point's rays that sample the cosine-weighted hemisphere, the rest sampling
+// the emitters by power (both joined by the power heuristic), from each technique's relative
+// variance per ray, v = Var / mean², estimated by pilots of their own:
+// - light sampling: kLightPilot points drawn on the emitters by power, nothing traced (the
+//   emitters as if unoccluded): with g = L_e cosθx cosθy / (d² p), v_light = E[g²]/E[g]² − 1;
+// - cosine sampling: kCosinePilot cosine rays traced, each giving π L_e of the emitter it
+//   meets (0 where it meets none): v_cosine = E[L²]/E[L]² − 1, infinite when none met one.
+// The share is v_light / (v_light + v_cosine) within [kLeastCosine, 1 − kLeastCosine], so
+// that each technique still covers what the other misses. Emitters all round (a furnace)
+// give v_cosine = 0: cosine rays are exact there and light rays only add noise (the white
+// furnace's worst vertex was 1.15% at half each); a small or distant emitter gives
+// v_cosine ≫ v_light. A light-sampling pilot alone judged the first badly: its own estimate
+// of the emitters' coverage is noisiest exactly where they surround the point. The pilots
+// draw streams of their own and are not part of the estimate, so the split does not depend
+// on the samples the estimate uses: the estimate stays unbiased.
+constexpr int kLightPilot = 32, kCosinePilot = 16;
+constexpr float kLeastCosine = 0.125f;
+
+int CosineShare(const RayScene& rays, int total, uint64_t seed, size_t point, const glm::vec3& x,
+                const glm::vec3& nx) {
+    if (total < 2) return 0;
+    const int least = std::max(1, static_cast<int>(std::lround(kLeastCosine * total)));
+    Pcg32 rng(seed ^ 0x9e3779b97f4a7c15ull, point);
+    auto radiance = [&](uint32_t ti, float u, float v) {
+        const glm::vec3 le = rays.MaterialOf(ti).emission * rays.TintsAt(ti, u, v).emission;
+        return (le.x + le.y + le.z) / 3.0;
+    };
+    double g1 = 0.0, g2 = 0.0;
+    for (int k = 0; k < kLightPilot; ++k) {
+        const uint32_t ti = rays.Emitters()[rays.PickEmitter((k + rng.Uniform()) / kLightPilot)];
+        const RayTriangle& t = rays.Triangles()[ti];
+        glm::vec2 ab(rng.Uniform(), rng.Uniform());
+        if (ab.x + ab.y > 1.0f) ab = glm::vec2(1.0f) - ab;
+        const glm::vec3 d = t.p0 + ab.x * t.e1 + ab.y * t.e2 - x;
+        const float d2 = glm::dot(d, d);
+        if (!(d2 > 0.0f)) continue;
+        const glm::vec3 w = d / std::sqrt(d2);
+        const float cx = glm::dot(nx, w), cy = -glm::dot(t.normal, w);
+        if (cx <= 0.0f || cy <= 0.0f) continue;
+        const double g = radiance(ti, ab.x, ab.y) * cx * cy / (double(d2) * rays.AreaPdf(ti));
+        g1 += g, g2 += g * g;
+    }
+    if (!(g1 > 0.0)) return least;  // no emitter in front: the split does not matter
+    const double vl = std::max(0.0, g2 * kLightPilot / (g1 * g1) - 1.0);
+    glm::vec3 dirs[kCosinePilot];
+    RayHit hits[kCosinePilot];
+    const glm::vec2 rotation(rng.Uniform(), rng.Uniform());
+    for (int k = 0; k < kCosinePilot; ++k) dirs[k] = CosineDirection(nx, R2Point(rotation, k));
+    rays.IntersectFrom(x + rays.Epsilon() * nx, dirs, kCosinePilot,
+                       std::numeric_limits<float>::infinity(), hits);
+    double l1 = 0.0, l2 = 0.0;
+    for (int k = 0; k < kCosinePilot; ++k) {
+        const uint32_t ti = hits[k].triangle;
+        if (!hits[k].hit || !(rays.AreaPdf(ti) > 0.0f) ||
+            glm::dot(rays.Triangles()[ti].normal, dirs[k]) >= 0.0f)
+            continue;
+        const glm::vec2 uv = rays.Mapped() ? rays.Barycentrics(ti, x + rays.Epsilon() * nx, dirs[k])
+                                           : glm::vec2(0.0f);
+        const double l = radiance(ti, uv.x, uv.y);
+        l1 += l, l2 += l * l;
+    }
+    if (!(l1 > 0.0)) return least;
+    const double vc = std::max(0.0, l2 * kCosinePilot / (l1 * l1) - 1.0);
+    const double share = vl + vc > 0.0 ? vl / (vl + vc) : 0.5;
+    return std::clamp(static_cast<int>(std::lround(share * total)), least, total - least);
+}
 
 }  // namespace
 
-float EmitterHitWeight(const RayScene& rays, const EmitterDirectSettings& settings,
-                       const glm::vec3& n, const glm::vec3& w, uint32_t triangle, float t,
-                       int cosineRays) {
+float EmitterHitWeight(const RayScene& rays, int lightRays, int cosineRays, const glm::vec3& n,
+                       const glm::vec3& w, uint32_t triangle, float t) {
     const float pdfArea = rays.AreaPdf(triangle);
     if (!(pdfArea > 0.0f)) return 0.0f;
     const float cx = glm::dot(n, w), cy = -glm::dot(rays.Triangles()[triangle].normal, w);
     if (cx <= 0.0f || cy <= 0.0f) return 0.0f;
-    const int nl = settings.rays - CosineRays(settings);
-    const int nb = cosineRays >= 0 ? cosineRays : CosineRays(settings) + settings.extraCosineRays;
-    return Power(nb, cx / kPi, nl, pdfArea * t * t / cy) * kPi / nb;
+    return Power(cosineRays, cx / kPi, lightRays, pdfArea * t * t / cy) * kPi / cosineRays;
+}
+
+std::vector<uint16_t> EmitterCosineRays(const RayScene& rays, const std::vector<glm::vec3>& points,
+                                        const std::vector<glm::vec3>& normals,
+                                        const EmitterDirectSettings& settings) {
+    if (points.size() != normals.size())
+        throw Error("emitter direct light: " + std::to_string(points.size()) + " points, " +
+                    std::to_string(normals.size()) + " normals");
+    if (rays.Emitters().empty()) return {};
+    std::vector<uint16_t> split(points.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 256), [&](const auto& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i)
+            split[i] = static_cast<uint16_t>(
+                CosineShare(rays, settings.rays, settings.seed, i, points[i], normals[i]));
+    });
+    return split;
 }
 
 std::vector<glm::vec3> EmitterIrradiance(const RayScene& rays, const std::vector<glm::vec3>& points,
@@ -50,16 +125,15 @@ std::vector<glm::vec3> EmitterIrradiance(const RayScene& rays, const std::vector
 
 EmitterDirect::EmitterDirect(const EmitterDirectSettings& settings) : settings_(settings) {
     if (settings.rays < 1) throw Error("emitter direct light needs at least one ray a point");
-    cosineRays_ = CosineRays(settings);
-    lightRays_ = settings.rays - cosineRays_;
-    words_ = (lightRays_ + 63) / 64;
+    words_ = (settings.rays + 63) / 64;
 }
 
 std::vector<glm::vec3> EmitterDirect::Trace(const RayScene& rays,
                                             const std::vector<glm::vec3>& points,
                                             const std::vector<glm::vec3>& normals,
-                                            const std::vector<int>& extraCosine) {
-    Start(rays, points, normals, extraCosine);
+                                            const std::vector<int>& extraCosine,
+                                            const std::vector<uint16_t>& split) {
+    Start(rays, points, normals, extraCosine, split);
     std::vector<glm::vec3> out(points.size(), glm::vec3(0.0f));
     TracePart(rays, points, normals, 0, points.size(), out);
     return out;
@@ -67,9 +141,10 @@ std::vector<glm::vec3> EmitterDirect::Trace(const RayScene& rays,
 
 void EmitterDirect::Start(const RayScene& rays, const std::vector<glm::vec3>& points,
                           const std::vector<glm::vec3>& normals,
-                          const std::vector<int>& extraCosine) {
+                          const std::vector<int>& extraCosine, const std::vector<uint16_t>& split) {
     if (points.size() != normals.size() ||
-        (!extraCosine.empty() && extraCosine.size() != points.size()))
+        (!extraCosine.empty() && extraCosine.size() != points.size()) ||
+        (!split.empty() && split.size() != points.size()))
         throw Error("emitter direct light: " + std::to_string(points.size()) + " points, " +
                     std::to_string(normals.size()) + " normals");
     extra_ = extraCosine.empty() ? std::vector<int>(points.size(), settings_.extraCosineRays)
@@ -77,8 +152,17 @@ void EmitterDirect::Start(const RayScene& rays, const std::vector<glm::vec3>& po
     slots_ = rays.EmitterPrimitives().size() <= kMaxSlots ? rays.EmitterPrimitives().size() : 0;
     coef_.assign(points.size() * slots_, glm::vec3(0.0f));
     blocked_.assign(points.size() * words_, 0);
-    cosineT_.assign(points.size() * cosineRays_, std::numeric_limits<float>::infinity());
-    cosineTri_.assign(points.size() * cosineRays_, ~0u);
+    // Each point's split, its cosine rays' outcomes from cosineFirst_[i] on.
+    cosine_ = split.empty() ? EmitterCosineRays(rays, points, normals, settings_) : split;
+    cosine_.resize(points.size(), 0);
+    for (uint16_t c : cosine_)
+        if (c > settings_.rays)
+            throw Error("emitter direct light: a point's split of " + std::to_string(c) +
+                        " cosine rays exceeds its " + std::to_string(settings_.rays) + " rays");
+    cosineFirst_.assign(points.size() + 1, 0);
+    for (size_t i = 0; i < points.size(); ++i) cosineFirst_[i + 1] = cosineFirst_[i] + cosine_[i];
+    cosineT_.assign(cosineFirst_.back(), std::numeric_limits<float>::infinity());
+    cosineTri_.assign(cosineFirst_.back(), ~0u);
 }
 
 void EmitterDirect::TracePart(const RayScene& rays, const std::vector<glm::vec3>& points,
@@ -152,7 +236,7 @@ std::vector<glm::vec3> EmitterDirect::Retrace(const RayScene& rays,
             }
             cones.clear();
             for (const Ball& c : cutters) cones.emplace_back(x + rays.Epsilon() * normals[i], c);
-            if ((slots != 0 || (cosine && cosineRays_ > 0)) &&
+            if ((slots != 0 || (cosine && cosine_[i] > 0)) &&
                 Recheck(rays, i, x, normals[i], cut, cones, slots, cosine, moved, n)) {
                 out[i] = Shoot(rays, i, x, normals[i], &none, n);
                 continue;
@@ -203,7 +287,9 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
                                size_t& traced) {
     const auto& tris = rays.Triangles();
     const float eps = rays.Epsilon();
-    const int nl = lightRays_, own = cosineRays_, nb = own + extra_[i];
+    const int own = cosine_[i], nl = settings_.rays - own, nb = own + extra_[i];
+    float* const cosineT = cosineT_.data() + cosineFirst_[i];
+    uint32_t* const cosineTri = cosineTri_.data() + cosineFirst_[i];
     // Each contribution is L_e of its triangle's material times a coefficient (the emission
     // map's tint at the point in it), kept per emitting primitive (Reevaluate).
     glm::vec3* coef = slots_ ? coef_.data() + i * slots_ : nullptr;
@@ -272,8 +358,7 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
     batch.clear(), spans.clear();
     for (int r = 0; r < own; ++r) {
         dirs[r] = CosineDirection(nx, R2Point(sb, r));
-        if (meets(from, dirs[r], cosineT_[i * own + r]))
-            batch.push_back(r), spans.push_back(dirs[r]);
+        if (meets(from, dirs[r], cosineT[r])) batch.push_back(r), spans.push_back(dirs[r]);
     }
     traced += batch.size();
     hits.resize(batch.size());
@@ -281,13 +366,13 @@ glm::vec3 EmitterDirect::Shoot(const RayScene& rays, size_t i, const glm::vec3& 
                        hits.data());
     for (size_t k = 0; k < batch.size(); ++k) {
         const int r = batch[k];
-        cosineT_[i * own + r] = hits[k].hit ? hits[k].t : std::numeric_limits<float>::infinity();
-        cosineTri_[i * own + r] = hits[k].hit ? hits[k].triangle : ~0u;
+        cosineT[r] = hits[k].hit ? hits[k].t : std::numeric_limits<float>::infinity();
+        cosineTri[r] = hits[k].hit ? hits[k].triangle : ~0u;
     }
     for (int r = 0; r < own; ++r) {
-        const uint32_t tri = cosineTri_[i * own + r];
+        const uint32_t tri = cosineTri[r];
         if (tri == ~0u || !(rays.AreaPdf(tri) > 0.0f)) continue;
-        add(tri, EmitterHitWeight(rays, settings_, nx, dirs[r], tri, cosineT_[i * own + r], nb),
+        add(tri, EmitterHitWeight(rays, nl, nb, nx, dirs[r], tri, cosineT[r]),
             rays.Mapped() ? rays.Barycentrics(tri, from, dirs[r]) : glm::vec2(0.0f));
     }
     return sum;
@@ -298,7 +383,7 @@ bool EmitterDirect::Recheck(const RayScene& rays, size_t i, const glm::vec3& x, 
                             uint64_t slots, bool cosine, const std::vector<uint8_t>& moved,
                             size_t& traced) {
     const auto& tris = rays.Triangles();
-    const int nl = lightRays_, own = cosineRays_;
+    const int own = cosine_[i], nl = settings_.rays - own;
     const float inf = std::numeric_limits<float>::infinity();
     auto meets = [&](const glm::vec3& o, const glm::vec3& d, float tmax) {
         const bool endless = tmax == inf;
@@ -340,8 +425,8 @@ bool EmitterDirect::Recheck(const RayScene& rays, size_t i, const glm::vec3& x, 
         return moved[c.x] || moved[c.y] || moved[c.z];
     };
     for (int r = 0; cosine && r < own; ++r) {
-        float& dist = cosineT_[i * own + r];
-        uint32_t& tri = cosineTri_[i * own + r];
+        float& dist = cosineT_[cosineFirst_[i] + r];
+        uint32_t& tri = cosineTri_[cosineFirst_[i] + r];
         const bool stale = onMoved(tri);
         if (!stale && !emits(tri)) continue;
         const glm::vec3 w = CosineDirection(nx, R2Point(sb, r));

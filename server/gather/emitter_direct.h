@@ -12,7 +12,10 @@
 namespace penumbra {
 
 struct EmitterDirectSettings {
-    int rays = 256;     // rays per point: half shadow rays to the emitters, half cosine rays
+    // Rays per point: shadow rays to the emitters and cosine rays, split per point by the
+    // two techniques' variance for the unoccluded emitters (a quarter to three quarters
+    // cosine rays; EmitterCosineRays).
+    int rays = 256;
     uint64_t seed = 1;  // the same seed gives the same answer (no flicker between frames)
     // Cosine-distributed rays per point traced elsewhere (the final gather's) whose emitter
     // hits the caller adds with EmitterHitWeight: the weights here count them in.
@@ -25,12 +28,23 @@ struct EmitterDirectSettings {
 // (RayScene::PickEmitter, AreaPdf: jittered strata for the choice, a rotated R2 sequence for
 // the point), and cosine-distributed directions (a rotated R2 sequence), each kind with a
 // random stream of its own per point, so the answer depends neither on the thread count nor
-// on the frame. Light sampling alone is unbounded where an emitter lies close to the point
-// (the 1/d² of the area measure); cosine sampling alone misses small emitters. Points with no
-// emitter in front get 0. Throws penumbra::Error for rays < 1 or mismatched arrays.
+// on the frame. How many of each a point takes follows from a pilot of points on the
+// emitters that traces nothing (more cosine rays where emitters surround the point). Light sampling
+// alone is unbounded where an emitter lies close to the point (the 1/d² of the area measure);
+// cosine sampling alone misses small emitters. Points with no emitter in front get 0. Throws
+// penumbra::Error for rays < 1 or mismatched arrays.
 std::vector<glm::vec3> EmitterIrradiance(const RayScene& rays, const std::vector<glm::vec3>& points,
                                          const std::vector<glm::vec3>& normals,
                                          const EmitterDirectSettings& settings = {});
+
+// Per point, how many of `settings.rays` EmitterIrradiance's estimate makes cosine rays (the
+// rest are light rays): from a pilot of points drawn on the emitters that traces nothing
+// (more cosine rays where emitters surround the point, more light rays where they are small
+// or far). A split that stays fixed while the scene changes keeps the estimate unbiased,
+// only less efficient. Empty when the scene has no emitters.
+std::vector<uint16_t> EmitterCosineRays(const RayScene& rays, const std::vector<glm::vec3>& points,
+                                        const std::vector<glm::vec3>& normals,
+                                        const EmitterDirectSettings& settings);
 
 // EmitterIrradiance at a fixed set of points with every ray's outcome kept (a bit per shadow
 // ray, the first hit of each cosine ray: 8 bytes a cosine ray), so that after a move only the
@@ -39,15 +53,18 @@ class EmitterDirect {
   public:
     explicit EmitterDirect(const EmitterDirectSettings& settings);
     // Traces every point. `extraCosine` (empty: none) gives per point the cosine rays traced
-    // elsewhere whose emitter hits the caller adds (EmitterDirectSettings::extraCosineRays).
+    // elsewhere whose emitter hits the caller adds (EmitterDirectSettings::extraCosineRays);
+    // `split` (empty: EmitterCosineRays's) per point its cosine rays of the settings' rays.
     std::vector<glm::vec3> Trace(const RayScene& rays, const std::vector<glm::vec3>& points,
                                  const std::vector<glm::vec3>& normals,
-                                 const std::vector<int>& extraCosine = {});
+                                 const std::vector<int>& extraCosine = {},
+                                 const std::vector<uint16_t>& split = {});
     // Trace in parts (the same answer): Start forgets every point's outcomes, TracePart
     // traces points [first, last) into out[first, last) (`out` sized as `points`). Retrace
     // and Reevaluate need every point traced since the last Start.
     void Start(const RayScene& rays, const std::vector<glm::vec3>& points,
-               const std::vector<glm::vec3>& normals, const std::vector<int>& extraCosine = {});
+               const std::vector<glm::vec3>& normals, const std::vector<int>& extraCosine = {},
+               const std::vector<uint16_t>& split = {});
     void TracePart(const RayScene& rays, const std::vector<glm::vec3>& points,
                    const std::vector<glm::vec3>& normals, size_t first, size_t last,
                    std::vector<glm::vec3>& out);
@@ -95,22 +112,23 @@ class EmitterDirect {
                  uint64_t slots, bool cosine, const std::vector<uint8_t>& moved, size_t& traced);
 
     EmitterDirectSettings settings_;
-    int lightRays_ = 0, cosineRays_ = 0, words_ = 0;
+    int words_ = 0;
     std::vector<int> extra_;
-    std::vector<uint64_t> blocked_;  // points × words_: bit r, light ray r was blocked
-    std::vector<float> cosineT_;     // points × cosine rays: the first hit's distance (∞: none)
+    std::vector<uint64_t> blocked_;    // points × words_: bit r, light ray r was blocked
+    std::vector<uint16_t> cosine_;     // per point: its cosine rays (the rest are light rays)
+    std::vector<size_t> cosineFirst_;  // per point: its first cosine ray's outcome below
+    std::vector<float> cosineT_;       // per cosine ray: the first hit's distance (∞: none)
     std::vector<uint32_t> cosineTri_;  // and its triangle
     size_t slots_ = 0;                 // emitting primitives kept (0: none kept)
     std::vector<glm::vec3> coef_;      // points × slots_
 };
 
 // The share of E that a cosine-distributed ray from a point with normal n, meeting emitting
-// triangle `triangle`'s front at distance t in direction w, adds to EmitterIrradiance with
-// `settings` (extraCosineRays counting this ray's kind): weight × L_e, zero for a triangle
-// that does not emit or is met from behind.
-// `cosineRays` ≥ 0: that many cosine rays at this point in all instead of the settings'.
-float EmitterHitWeight(const RayScene& rays, const EmitterDirectSettings& settings,
-                       const glm::vec3& n, const glm::vec3& w, uint32_t triangle, float t,
-                       int cosineRays = -1);
+// triangle `triangle`'s front at distance t in direction w, adds to the point's emitter
+// direct light, when the point takes `lightRays` light rays and `cosineRays` cosine rays in
+// all (this ray's kind, traced elsewhere, counted in): weight × L_e, zero for a triangle that
+// does not emit or is met from behind.
+float EmitterHitWeight(const RayScene& rays, int lightRays, int cosineRays, const glm::vec3& n,
+                       const glm::vec3& w, uint32_t triangle, float t);
 
 }  // namespace penumbra

@@ -60,6 +60,7 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
     skyParts_ = Parts(scene_.environment);
     diameter_ = scene_.Diameter();
     Place();
+    SplitShot();
     const Surfels& s = inner_->GetSurfels();
     if (settings_.gatherRays > 0) {
         StartTracer();
@@ -311,6 +312,7 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
         return;
     }
     rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
+    SplitShot();  // a new emitter: split for the emitters there are now
     if (!targets_.empty()) {
         Trace();
         TraceLobes();

@@ -166,6 +166,7 @@ class GatherStage : public Solver {
     void StartShotParts();
     void ShotPart();
     EmitterDirect& NewShooter();               // shooter_ made afresh for the settings
+    void SplitShot();                          // shotSplit_ for the surfels and emitters now
     std::vector<int> CosineAtTargets() const;  // per surfel: the gather's rays (targets), or 0
     bool ShotPending() const { return shooter_ && shotNext_ < points_.size(); }
     // The sky the solver is given: without its sun where the solver takes the sun's shot
@@ -260,6 +261,10 @@ class GatherStage : public Solver {
     std::vector<glm::vec3> points_;
     std::vector<uint32_t> surfelPrimitive_;   // per surfel: its primitive
     std::unique_ptr<EmitterDirect> shooter_;  // the first shot's rays (null: no emitters)
+    // Per surfel: its first shot's cosine rays of emitterRays (EmitterCosineRays), the rest
+    // light rays; kept through moves (a stale split is still unbiased), so that the gather's
+    // emitter hits at a target are weighted as the shot there was. Empty: no emitters.
+    std::vector<uint16_t> shotSplit_;
     // The next surfel of a shot in parts (past the surfels, SIZE_MAX when none is under way).
     size_t shotNext_ = SIZE_MAX;
     std::vector<int32_t> targetOf_;       // per surfel: its target, or −1

@@ -28,7 +28,8 @@ void GatherStage::Shoot(const Moved* moved, bool emitterPart) {
     ++traces_;
     if (emitters_ && emitterPart) {
         if (!moved || !shooter_) {
-            emitterShot_ = NewShooter().Trace(*rays_, points_, s.normals, CosineAtTargets());
+            emitterShot_ =
+                NewShooter().Trace(*rays_, points_, s.normals, CosineAtTargets(), shotSplit_);
             shotNext_ = SIZE_MAX;  // whole: a shot in parts under way is done
         } else {
             size_t traced = 0;
@@ -65,6 +66,15 @@ EmitterDirect& GatherStage::NewShooter() {
     return *shooter_;
 }
 
+void GatherStage::SplitShot() {
+    shotSplit_.clear();
+    if (settings_.emitterRays <= 0) return;
+    EmitterDirectSettings es;
+    es.rays = settings_.emitterRays;
+    es.seed = settings_.seed;
+    shotSplit_ = EmitterCosineRays(*rays_, points_, inner_->GetSurfels().normals, es);
+}
+
 std::vector<int> GatherStage::CosineAtTargets() const {
     // At the targets the gather's rays join the shot's own cosine rays (emitterHits_).
     std::vector<int> extra(inner_->GetSurfels().size(), 0);
@@ -76,7 +86,7 @@ void GatherStage::StartShotParts() {
     const Surfels& s = inner_->GetSurfels();
     targetOf_.assign(s.size(), -1);
     for (size_t t = 0; t < targets_.size(); ++t) targetOf_[targets_[t]] = static_cast<int32_t>(t);
-    NewShooter().Start(*rays_, points_, s.normals, CosineAtTargets());
+    NewShooter().Start(*rays_, points_, s.normals, CosineAtTargets(), shotSplit_);
     emitterShot_.resize(s.size(), glm::vec3(0.0f));  // the old place's light until traced
     shotNext_ = 0;
     ShotPart();
@@ -421,9 +431,7 @@ void GatherStage::Trace(const Moved* moved) {
                             glm::vec3(0.0f));
     }
     if (settings_.emitterRays > 0 && slots > 0) {
-        EmitterDirectSettings es;  // the first shot's, for the weights of emitter hits
-        es.rays = settings_.emitterRays;
-        es.extraCosineRays = n;
+        PENUMBRA_CHECK_EQ(shotSplit_.size(), points_.size());
         tbb::parallel_for(
             tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
                 for (size_t t = range.begin(); t != range.end(); ++t) {
@@ -437,7 +445,10 @@ void GatherStage::Trace(const Moved* moved) {
                         const Hit& h = hits_[t * n + r];
                         if (!Front(h) || !(rays_->AreaPdf(h.triangle & kIndex) > 0.0f)) continue;
                         const uint32_t tri = h.triangle & kIndex;
-                        const float c = EmitterHitWeight(*rays_, es, surfels.normals[i],
+                        // Weighted against the shot's rays at this surfel, its split.
+                        const int cosine = shotSplit_[i];
+                        const float c = EmitterHitWeight(*rays_, settings_.emitterRays - cosine,
+                                                         cosine + n, surfels.normals[i],
                                                          Direction(t, r), tri, Distance(o, h));
                         // The emission map's tint at the hit is in the coefficient.
                         const glm::vec3 tinted =
