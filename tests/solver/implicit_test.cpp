@@ -507,5 +507,39 @@ TEST(Implicit, KeptLinksEqualAFullBuild) {
     EXPECT_FALSE(kept.Incremental());
 }
 
+// Glossy leaves reflect through their lobes (implicit_glossy.cpp). The sky furnace (a unit
+// room, half its ceiling open to a sky of radiance 1) built of white metal (F0 = 1, no
+// diffuse part) against paths traced through the same lobes, and of white plastic: no
+// radiance inside exceeds the sky's. Before the lobes a metal leaf was black.
+TEST(Implicit, GlossySkyFurnaceKeepsItsBoundAndAgreesWithTheReference) {
+    for (float metallic : {1.0f, 0.0f}) {
+        SceneBuilder b;
+        const Scene scene = testing::SkyFurnaceRoom(
+            b, b.AddPbrMaterial("white", glm::vec3(1.0f), metallic, 0.5f), 4);
+        auto solver = CreateSolver(scene, Implicit(0.1f));
+        solver->Iterate(60);
+        const std::vector<glm::vec3> mine =
+            testing::AllVertices(*solver, scene, Channel::kIndirect);
+        double sum = 0, most = 0;
+        for (const glm::vec3& e : mine) {
+            const double f = (e.x + e.y + e.z) / (3.0 * kPi);
+            sum += f, most = std::max(most, f);
+        }
+        const double mean = sum / mine.size();
+        std::printf("implicit glossy sky furnace (metallic %.0f): E/πL mean %.4f, max %.4f\n",
+                    metallic, mean, most);
+        EXPECT_LT(most, 1.05) << "metallic " << metallic;
+        EXPECT_LT(mean, 1.01) << "metallic " << metallic;
+        if (metallic == 0.0f) continue;
+        const std::vector<glm::vec3> truth = Truth(scene, 4096);
+        double truthSum = 0;
+        for (const glm::vec3& e : truth) truthSum += (e.x + e.y + e.z) / (3.0 * kPi);
+        const double rms = testing::RelativeRms(mine, truth);
+        std::printf("  reference mean %.4f, relative RMS %.4f\n", truthSum / truth.size(), rms);
+        EXPECT_NEAR(mean, truthSum / truth.size(), 0.2 * truthSum / truth.size());
+        EXPECT_LT(rms, 0.25);
+    }
+}
+
 }  // namespace
 }  // namespace penumbra

@@ -75,7 +75,7 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
         mapSize_ = direct::MapSize(settings.shadowMapSize, scene.Diameter(), h);
         lights_ = static_cast<int>(scene.lights.size());
         directStage_ = direct::MakeDirectStage(scene, LeafReceivers(), mapSize_);
-        CopyDirect();
+        CopyDirect(scene);
     }
     if (progress) progress("linking", 0.0);
     Relink();
@@ -87,7 +87,11 @@ std::vector<direct::GpuReceiver> ImplicitSolver::LeafReceivers() const {
     return direct::MakeReceivers(surfels_, light_.surfel);
 }
 
-void ImplicitSolver::CopyDirect() { light_.CopyDirect(directStage_->Irradiance()); }
+void ImplicitSolver::CopyDirect(const Scene& scene) {
+    light_.CopyDirect(directStage_->Irradiance());
+    lightPlaces_ = scene.lights;
+    GlossyDirectRows();
+}
 
 void ImplicitSolver::FindSolids(const Scene& scene) {
     // Per surfel the closed node it lies on (kOpen: a surface that bounds no solid), then per
@@ -125,11 +129,13 @@ void ImplicitSolver::ReadMaterials(const Scene& scene) {
     materials_ = scene.materials;
     AssignSurfelMaterials(scene, surfels_);
     light_.Rematerial(surfels_, materials_);
+    ReadGlossy();
 }
 
 void ImplicitSolver::Relink(const std::vector<uint8_t>* moved) {
     auto start = Clock::now();
     RefitHierarchy(hierarchy_, surfels_);
+    MirrorRows();  // the glossy leaves' normals as they are now
     // The nodes with a moved element below them (children follow their parent in preorder:
     // walk backwards). Within the set of an earlier move, that set again: the links of the
     // other pairs were kept for it, and nothing outside it has moved since.
@@ -174,6 +180,21 @@ void ImplicitSolver::ExitantTables() {
             row[b] = std::max(0.0f, glm::dot(n.normal, dirs_.Direction(uint32_t(b)))) * sent;
     });
     PullRows(hierarchy_, bins, intensity_);
+    if (!glossy_.empty()) {
+        glossyIntensity_.assign(hierarchy_.size() * bins, glm::vec3(0.0f));
+        tbb::parallel_for(size_t(0), glossy_.size(), [&](size_t g) {
+            const uint32_t node = hierarchy_.leaves[glossy_[g].leaf];
+            const HierarchyNode& n = hierarchy_.nodes[node];
+            glm::vec3* row = glossyIntensity_.data() + size_t(node) * bins;
+            const glm::vec3* leaving = glossyLeaving_.data() + g * bins;
+            for (size_t b = 0; b < bins; ++b)
+                row[b] = n.area * std::max(0.0f, glm::dot(n.normal, dirs_.Direction(uint32_t(b)))) *
+                         leaving[b];
+        });
+        PullRows(hierarchy_, bins, glossyIntensity_);
+    } else {
+        glossyIntensity_.clear();
+    }
     // Mean radiance per node, area-weighted: Σ A L up the tree, then over Σ A.
     mean_.assign(hierarchy_.size(), glm::vec3(0.0f));
     for (size_t i = 0; i < hierarchy_.leaves.size(); ++i)
@@ -188,9 +209,16 @@ void ImplicitSolver::ExitantTables() {
 void ImplicitSolver::Bounce() {
     ExitantTables();
     const size_t bins = dirs_.Count();
+    const bool glossy = !glossy_.empty();
     tbb::parallel_for(
         tbb::blocked_range<size_t>(0, hierarchy_.leaves.size(), 64), [&](const auto& range) {
             for (size_t i = range.begin(); i != range.end(); ++i) {
+                const HierarchyNode& receiver = hierarchy_.nodes[hierarchy_.leaves[i]];
+                const uint32_t g = glossy ? glossyOf_[i] : kNotGlossy;
+                const uint32_t* mirror =
+                    g != kNotGlossy ? mirror_.data() + size_t(g) * bins : nullptr;
+                glm::vec3* arrived = mirror ? glossyArrived_.data() + size_t(g) * bins : nullptr;
+                if (mirror) std::fill(arrived, arrived + bins, glm::vec3(0.0f));
                 glm::vec3 e(0.0f);
                 for (uint32_t k = links_.offsets[i]; k < links_.offsets[i + 1]; ++k) {
                     const uint32_t s = links_.sender[k];
@@ -200,6 +228,19 @@ void ImplicitSolver::Bounce() {
                         l = environment_[travel];
                     } else if (travel == kFacing) {
                         l = mean_[s];
+                        // A flat sender's glossy light towards this leaf, through the bin of
+                        // the direction from it (the diffuse part needs none: mean_).
+                        if (glossy && glossyNode_[s]) {
+                            const glm::vec3 d = receiver.center - hierarchy_.nodes[s].center;
+                            const float len = glm::length(d);
+                            if (len > 0.0f) {
+                                const uint32_t t = dirs_.Lookup(d / len);
+                                const size_t row = size_t(s) * bins;
+                                l += GlossySent(
+                                    s, t,
+                                    std::max(projected_[row + t], projected_[row + opposite_[t]]));
+                            }
+                        }
                     } else if (travel != kAway) {
                         const size_t row = size_t(s) * bins;
                         // What the sender shows: the larger of its front- and
@@ -209,10 +250,14 @@ void ImplicitSolver::Bounce() {
                         const float p =
                             std::max(projected_[row + travel], projected_[row + opposite_[travel]]);
                         if (p > 0.0f) l = intensity_[row + travel] / p;
+                        if (glossy && glossyNode_[s]) l += GlossySent(s, travel, p);
                     }
                     e += links_.weight[k] * l;
+                    // cos θ · Ω · L arriving from the link's bin, where its mirror image leaves.
+                    if (mirror) arrived[mirror[links_.bin[k]]] += links_.weight[k] * l;
                 }
                 light_.gathered[i] = e;
+                if (mirror) ReflectGlossy(g);
             }
         });
     light_.Reradiate();
@@ -244,7 +289,7 @@ void ImplicitSolver::UpdateMaterials(const Scene& scene) { ReadMaterials(scene);
 void ImplicitSolver::UpdateLights(const Scene& scene) {
     sky_.Update(scene.environment, dirs_, environment_);
     if (!direct::UpdateDirectStage(directStage_.get(), lights_, scene)) return;
-    CopyDirect();
+    CopyDirect(scene);
     light_.Reradiate();  // the radiance leaving, with the new direct light
 }
 
@@ -291,7 +336,7 @@ std::string ImplicitSolver::UpdateGeometry(const Scene& scene) {
     surfels_.centroids = std::move(now.centroids);
     if (directStage_) {
         directStage_->Move(scene, LeafReceivers());
-        CopyDirect();
+        CopyDirect(scene);
         light_.Reradiate();
     }
     Relink(&moved);

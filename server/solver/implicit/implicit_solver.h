@@ -22,6 +22,7 @@
 #include "direct/direct_stage.h"
 #include "hierarchy/directions.h"
 #include "hierarchy/hierarchy.h"
+#include "solver/bin_lobes.h"
 #include "solver/implicit/implicit_links.h"
 #include "solver/implicit/settings.h"
 #include "solver/receiver_light.h"
@@ -71,8 +72,26 @@ class ImplicitSolver : public Solver {
     void Bounce();  // one gather over the links and the pull of the new light
     void ReadMaterials(const Scene& scene);  // the scene's materials, then the leaves' light
     void FindSolids(const Scene& scene);     // solid_ from the scene's closed nodes
-    void CopyDirect();                       // E_d per leaf from the direct stage
-    void ExitantTables();                    // I and P per node and bin from the leaves' radiance
+    // E_d per leaf from the direct stage, the lights' glossy rows (GlossyDirectRows) with the
+    // lights as `scene` places them.
+    void CopyDirect(const Scene& scene);
+    // Glossy leaves (the paper's glossy receivers, Sec. 5, made to reflect all the light they
+    // gather, not only the direct): ReadGlossy finds them and their lobes from materials_,
+    // MirrorRows their mirror bins for their normals now, GlossyDirectRows the punctual
+    // lights' light through their lobes; Bounce's ReflectGlossy the light each sends along
+    // every bin from what arrived over its links (implicit_glossy.cpp).
+    void ReadGlossy();
+    void MirrorRows();
+    void GlossyDirectRows();
+    // Glossy slot g's light leaving along each bin: F0 × (the lobe over what arrived, per
+    // bin of travel after mirroring, + the lights' glossy rows).
+    void ReflectGlossy(uint32_t g);
+    // The glossy radiance sender node s sends along bin t towards a receiver, over `p` its
+    // projected area there (Bounce).
+    glm::vec3 GlossySent(uint32_t s, uint32_t t, float p) const {
+        return p > 0.0f ? glossyIntensity_[size_t(s) * dirs_.Count() + t] / p : glm::vec3(0.0f);
+    }
+    void ExitantTables();  // I and P per node and bin from the leaves' radiance
     std::vector<direct::GpuReceiver> LeafReceivers() const;
 
     SolverSettings settings_;
@@ -101,6 +120,30 @@ class ImplicitSolver : public Solver {
     std::vector<glm::vec3> mean_;  // per node: its leaves' radiance, area-weighted
     std::vector<float> projected_;
     std::vector<glm::vec3> environment_;  // per bin, radiance travelling along it
+    // Glossy leaves: per leaf its slot (kNotGlossy: diffuse); per slot its leaf, F0 and lobe
+    // (lobes_ over lobeWeights_, bin_lobes.h); per slot and link bin (towards the sender) the
+    // bin the light arriving from there leaves along (mirror_); per slot and bin the lights'
+    // direct light through the lobe before F0 (glossyDirect_) and the radiance leaving along
+    // it (glossyLeaving_); per node and bin the glossy intensity Σ A cos⁺ · leaving, pulled up
+    // (glossyIntensity_; empty: no glossy leaf), and whether a glossy leaf lies below
+    // (glossyNode_).
+    static constexpr uint32_t kNotGlossy = 0xffffffffu;
+    struct GlossySlot {
+        uint32_t leaf;
+        glm::vec3 specular;
+        uint32_t lobe;
+    };
+    std::vector<uint32_t> glossyOf_;
+    std::vector<GlossySlot> glossy_;
+    std::vector<GlossyLobe> lobes_;
+    std::vector<BinWeight> lobeWeights_;
+    std::vector<uint32_t> mirror_;
+    std::vector<glm::vec4> glossyDirect_;
+    std::vector<glm::vec3> glossyArrived_;  // per slot and bin: cos θ Ω L arrived, mirrored
+    std::vector<glm::vec3> glossyLeaving_;
+    std::vector<glm::vec3> glossyIntensity_;
+    std::vector<uint8_t> glossyNode_;
+    std::vector<PunctualLight> lightPlaces_;  // the lights as the direct stage last placed them
     std::unique_ptr<direct::DirectStage> directStage_;
     direct::SkyBins sky_;
     int lights_ = 0, mapSize_ = 0;
