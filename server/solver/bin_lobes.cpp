@@ -41,9 +41,12 @@ void MirrorBins(const Directions& dirs, const glm::vec3& n, uint32_t* row) {
     }
 }
 
-void AddLightLobe(const Directions& dirs, float n, const glm::vec3& normal,
-                  const glm::vec3& toLight, const glm::vec3& e, glm::vec4* row) {
+void AddLightLobe(const Directions& dirs, float n, const glm::vec3& p, const glm::vec3& normal,
+                  const PunctualLight& light, const glm::vec3& e, glm::vec4* row) {
     if (e.x <= 0.0f && e.y <= 0.0f && e.z <= 0.0f) return;
+    const glm::vec3 toLight = light.type == LightType::kDirectional
+                                  ? -light.direction
+                                  : glm::normalize(light.position - p);
     const int bins = dirs.Count();
     const glm::vec3 r = 2.0f * glm::dot(normal, toLight) * normal - toLight;
     float w[Directions::kMaxBins];

@@ -10,6 +10,7 @@
 
 #include "gpu/layout.h"
 #include "hierarchy/directions.h"
+#include "scene/scene.h"
 
 namespace penumbra {
 
@@ -42,12 +43,12 @@ GlossyLobe MakeLobe(const Directions& dirs, float n, std::vector<BinWeight>& wei
 // travelling along ω_l towards the surface leaves along it), into row[0 … bins).
 void MirrorBins(const Directions& dirs, const glm::vec3& n, uint32_t* row);
 
-// Adds to row[0 … bins) the lobe of exponent n at a surface point p with normal `normal` for
-// one punctual light's direct irradiance `e` there (RGB), before F0: e · cosⁿ∠(r, ω_j) / N_r
-// per bin j, r the light's mirror direction and N_r the lobe's normaliser for that exact
+// Adds to row[0 … bins) the lobe of exponent n at surface point p with normal `normal` for
+// punctual light `light`'s direct irradiance `e` there (RGB), before F0: e · cosⁿ∠(r, ω_j) /
+// N_r per bin j, r the light's mirror direction and N_r the lobe's normaliser for that exact
 // direction (Σ_j ω_bin w_j cos⁺∠(r, ω_j) = 1), so narrow lobes of direct light are not
 // snapped to bins. Nothing where e is black or the lobe misses every bin.
-void AddLightLobe(const Directions& dirs, float n, const glm::vec3& normal,
-                  const glm::vec3& toLight, const glm::vec3& e, glm::vec4* row);
+void AddLightLobe(const Directions& dirs, float n, const glm::vec3& p, const glm::vec3& normal,
+                  const PunctualLight& light, const glm::vec3& e, glm::vec4* row);
 
 }  // namespace penumbra

@@ -76,11 +76,8 @@ void GlossyDirect(AntiradianceModel& model, const std::vector<PunctualLight>& li
         std::fill(row, row + bins, glm::vec4(0.0f));
         for (size_t k = 0; k < lights.size(); ++k) {
             const float* e = perLight.data() + (k * leaves + model.glossyLeaves[g]) * 4;
-            const PunctualLight& light = lights[k];
-            const glm::vec3 toLight = light.type == LightType::kDirectional
-                                          ? -light.direction
-                                          : glm::normalize(light.position - p);
-            AddLightLobe(model.dirs, n, leaf.normal, toLight, glm::vec3(e[0], e[1], e[2]), row);
+            AddLightLobe(model.dirs, n, p, leaf.normal, lights[k], glm::vec3(e[0], e[1], e[2]),
+                         row);
         }
     });
 }

@@ -77,11 +77,7 @@ void ImplicitSolver::GlossyDirectRows() {
         const glm::vec3 p = surfels_.positions[leaf.surfel];
         for (size_t k = 0; directStage_ && k < lightPlaces_.size(); ++k) {
             const float* e = perLight.data() + (k * leaves + i) * 4;
-            const PunctualLight& light = lightPlaces_[k];
-            const glm::vec3 toLight = light.type == LightType::kDirectional
-                                          ? -light.direction
-                                          : glm::normalize(light.position - p);
-            AddLightLobe(dirs_, n, leaf.normal, toLight, glm::vec3(e[0], e[1], e[2]),
+            AddLightLobe(dirs_, n, p, leaf.normal, lightPlaces_[k], glm::vec3(e[0], e[1], e[2]),
                          glossyDirect_.data() + g * bins);
         }
         // The light leaving again, with these rows, from what arrived before.
