@@ -13,8 +13,7 @@ namespace penumbra {
 
 struct EmitterDirectSettings {
     // Rays per point: shadow rays to the emitters and cosine rays, split per point by the
-    // two techniques' variance for the unoccluded emitters (a quarter to three quarters
-    // cosine rays; EmitterCosineRays).
+    // two techniques' variance (an eighth to seven eighths cosine rays; EmitterCosineRays).
     int rays = 256;
     uint64_t seed = 1;  // the same seed gives the same answer (no flicker between frames)
     // Cosine-distributed rays per point traced elsewhere (the final gather's) whose emitter
@@ -28,8 +27,8 @@ struct EmitterDirectSettings {
 // (RayScene::PickEmitter, AreaPdf: jittered strata for the choice, a rotated R2 sequence for
 // the point), and cosine-distributed directions (a rotated R2 sequence), each kind with a
 // random stream of its own per point, so the answer depends neither on the thread count nor
-// on the frame. How many of each a point takes follows from a pilot of points on the
-// emitters that traces nothing (more cosine rays where emitters surround the point). Light sampling
+// on the frame. How many of each a point takes follows from pilots of its own
+// (EmitterCosineRays: more cosine rays where emitters surround the point). Light sampling
 // alone is unbounded where an emitter lies close to the point (the 1/d² of the area measure);
 // cosine sampling alone misses small emitters. Points with no emitter in front get 0. Throws
 // penumbra::Error for rays < 1 or mismatched arrays.
@@ -38,10 +37,11 @@ std::vector<glm::vec3> EmitterIrradiance(const RayScene& rays, const std::vector
                                          const EmitterDirectSettings& settings = {});
 
 // Per point, how many of `settings.rays` EmitterIrradiance's estimate makes cosine rays (the
-// rest are light rays): from a pilot of points drawn on the emitters that traces nothing
-// (more cosine rays where emitters surround the point, more light rays where they are small
-// or far). A split that stays fixed while the scene changes keeps the estimate unbiased,
-// only less efficient. Empty when the scene has no emitters.
+// rest are light rays): from two pilots that are not part of the estimate, points drawn on
+// the emitters (nothing traced) and a few traced cosine rays (more cosine rays where emitters
+// surround the point, more light rays where they are small or far). A split that stays fixed while
+// the scene changes keeps the estimate unbiased, only less efficient. Empty when the scene has no
+// emitters.
 std::vector<uint16_t> EmitterCosineRays(const RayScene& rays, const std::vector<glm::vec3>& points,
                                         const std::vector<glm::vec3>& normals,
                                         const EmitterDirectSettings& settings);

@@ -165,9 +165,10 @@ class GatherStage : public Solver {
     // each); shotNext_ < the surfel count while parts are left.
     void StartShotParts();
     void ShotPart();
-    EmitterDirect& NewShooter();               // shooter_ made afresh for the settings
-    void SplitShot();                          // shotSplit_ for the surfels and emitters now
-    std::vector<int> CosineAtTargets() const;  // per surfel: the gather's rays (targets), or 0
+    EmitterDirectSettings ShotSettings() const;  // the first shot's rays and seed
+    EmitterDirect& NewShooter();                 // shooter_ made afresh for the settings
+    void SplitShot();                            // shotSplit_ for the surfels and emitters now
+    std::vector<int> CosineAtTargets() const;    // per surfel: the gather's rays (targets), or 0
     bool ShotPending() const { return shooter_ && shotNext_ < points_.size(); }
     // The sky the solver is given: without its sun where the solver takes the sun's shot
     // (SunHanded), the whole sky otherwise. Calls inner_->UpdateLights when that changed or

@@ -58,21 +58,22 @@ void GatherStage::Shoot(const Moved* moved, bool emitterPart) {
     msShot_ = Ms(start);
 }
 
-EmitterDirect& GatherStage::NewShooter() {
+EmitterDirectSettings GatherStage::ShotSettings() const {
     EmitterDirectSettings es;
     es.rays = settings_.emitterRays;
     es.seed = settings_.seed;
-    shooter_ = std::make_unique<EmitterDirect>(es);
+    return es;
+}
+
+EmitterDirect& GatherStage::NewShooter() {
+    shooter_ = std::make_unique<EmitterDirect>(ShotSettings());
     return *shooter_;
 }
 
 void GatherStage::SplitShot() {
     shotSplit_.clear();
     if (settings_.emitterRays <= 0) return;
-    EmitterDirectSettings es;
-    es.rays = settings_.emitterRays;
-    es.seed = settings_.seed;
-    shotSplit_ = EmitterCosineRays(*rays_, points_, inner_->GetSurfels().normals, es);
+    shotSplit_ = EmitterCosineRays(*rays_, points_, inner_->GetSurfels().normals, ShotSettings());
 }
 
 std::vector<int> GatherStage::CosineAtTargets() const {

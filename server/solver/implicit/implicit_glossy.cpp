@@ -20,6 +20,8 @@ void ImplicitSolver::ReadGlossy() {
     const size_t leaves = hierarchy_.leaves.size();
     const int bins = dirs_.Count();
     const float sharpest = MaxLobeExponent(bins);
+    std::vector<uint32_t> before;  // the glossy leaves so far, whose arrived rows are kept
+    for (const GlossySlot& g : glossy_) before.push_back(g.leaf);
     glossyOf_.assign(leaves, kNotGlossy);
     glossy_.clear();
     lobes_.clear();
@@ -39,7 +41,11 @@ void ImplicitSolver::ReadGlossy() {
         glossy_.push_back({static_cast<uint32_t>(i), m.specular, lobe});
     }
     glossyLeaving_.assign(glossy_.size() * bins, glm::vec3(0.0f));
-    glossyArrived_.resize(glossy_.size() * bins, glm::vec3(0.0f));  // kept over an edit
+    // What arrived stays over an edit of F0 or the lobe (the next bounce gathers it anew);
+    // other slots start dark.
+    bool same = before.size() == glossy_.size();
+    for (size_t g = 0; same && g < glossy_.size(); ++g) same = before[g] == glossy_[g].leaf;
+    if (!same) glossyArrived_.assign(glossy_.size() * bins, glm::vec3(0.0f));
     glossyNode_.assign(hierarchy_.size(), 0);
     for (const GlossySlot& g : glossy_) glossyNode_[hierarchy_.leaves[g.leaf]] = 1;
     for (size_t n = hierarchy_.size(); n-- > 0;)  // preorder: children after their parent
