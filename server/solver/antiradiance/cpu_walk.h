@@ -65,6 +65,10 @@ static inline void EnvironmentRows(const AntiradianceModel& m, Rgba* lin) {
     }
 }
 
+// Links whose sender rows Gather reads ahead (measured: 16 → 32 cut the office's gather
+// by a tenth; 64 was slower).
+inline constexpr size_t kGatherChunk = 32;
+
 // acc[bin] += Σ over receiver r's links of F · w · I_ex[sender][link bin] (the U operator,
 // Eq. 16/17 with the σ spreading of Sec. 3.1), RGB in the first three lanes. A scaled
 // format's rows hold I_ex / senderScale[sender]. The sender reads are random rows of a
@@ -73,7 +77,7 @@ static inline void EnvironmentRows(const AntiradianceModel& m, Rgba* lin) {
 template <class Rows>
 inline void Gather(const AntiradianceModel& m, const typename Rows::Elem* iex,
                    const float* senderScale, uint32_t r, Rgba* acc) {
-    constexpr size_t kChunk = 16;
+    constexpr size_t kChunk = kGatherChunk;
     const size_t bins = m.Bins();
     const Link* begin = m.links.links.data() + m.links.offsets[r];
     const Link* end = m.links.links.data() + m.links.offsets[r + 1];
@@ -100,6 +104,17 @@ inline void Gather(const AntiradianceModel& m, const typename Rows::Elem* iex,
             for (int j = 0; j < width; ++j) acc[nb[j].bin] += nb[j].weight * sum;
         }
     }
+}
+
+// Starts the reads of receiver r's first senders' rows (Gather's first chunk).
+template <class Rows>
+inline void PrefetchSenders(const AntiradianceModel& m, const typename Rows::Elem* iex,
+                            uint32_t r) {
+    const size_t bins = m.Bins();
+    const Link* begin = m.links.links.data() + m.links.offsets[r];
+    const Link* end = std::min(begin + kGatherChunk, m.links.links.data() + m.links.offsets[r + 1]);
+    for (const Link* l = begin; l < end; ++l)
+        __builtin_prefetch(iex + (size_t(l->sender) * bins + l->bin) * 3);
 }
 
 // The glossy lobe's share of Eq. 18 at glossy leaf g, per outgoing bin ω_j in front, times
@@ -287,6 +302,9 @@ class FusedWalk {
         s.cycles[kPushStage] += t1 - t0;
         s.cycles[kGatherStage] += t2 - t1;
         const HierarchyNode& n = m_.hierarchy.nodes[node];
+        // The next node in the walk's order (left child, or the next subtree after a leaf):
+        // its first senders' rows start on their way while this node's local pass runs.
+        if (node + 1 < m_.hierarchy.nodes.size()) PrefetchSenders<Rows>(m_, t_.iex, node + 1);
         if (n.IsLeaf()) {
             uint32_t i = leafIndex_[node];
             float oldScale = Rows::kScaled ? t_.readScale[node] : 1.0f;

@@ -33,7 +33,7 @@ std::vector<OptionSpec> Options() {
          K::kFloat,
          "0",
          "adaptive scheme: a bounce is settled when an antiradiance step moves no element's "
-         "irradiance by more than this times the largest; 0: 1e-4, 1e-2 behind the final "
+         "irradiance by more than this times the largest; 0: 1e-4, 3e-2 behind the final "
          "gather",
          0,
          0.5,

@@ -30,7 +30,7 @@ inline constexpr int kDefaultBins = 128;
 // gather"): the gather reads the solver's answer only one bounce away, through 256 rays, so
 // fewer bins and a looser settling of each bounce cost little accuracy there.
 inline constexpr int kBinsBehindGather = 64;
-inline constexpr float kSettleBehindGather = 1e-2f;
+inline constexpr float kSettleBehindGather = 3e-2f;
 
 struct AntiradianceSettings {
     int bins = kDefaultBins;  // direction bins, 32…1024, a multiple of 4
