@@ -9,6 +9,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <numbers>
 
@@ -258,7 +259,9 @@ float NearFieldIrradiance(const NearField& near, uint32_t s, glm::vec3 p, glm::v
             const float d2 = dx * dx + dy * dy + dz * dz;
             const float cs = std::abs(ns.x * dx + ns.y * dy + ns.z * dz);
             const float cr = std::max(0.0f, -(n.x * dx + n.y * dy + n.z * dz));
-            part[k] = d2 > 0.0f ? rule.phi[k] * cs * cr / (d2 * d2) : 0.0f;
+            // d = 0 has cs = cr = 0, so the floor on d⁴ leaves it 0 without a branch (a
+            // division under a condition does not vectorise).
+            part[k] = rule.phi[k] * cs * cr / std::max(d2 * d2, std::numeric_limits<float>::min());
         }
         float triangle = 0.0f;
         for (float x : part) triangle += x;
