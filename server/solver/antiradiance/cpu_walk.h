@@ -112,8 +112,9 @@ inline void PrefetchSenders(const AntiradianceModel& m, const typename Rows::Ele
                             uint32_t r) {
     const size_t bins = m.Bins();
     const Link* begin = m.links.links.data() + m.links.offsets[r];
-    const Link* end = std::min(begin + kGatherChunk, m.links.links.data() + m.links.offsets[r + 1]);
-    for (const Link* l = begin; l < end; ++l)
+    const size_t count =
+        std::min<size_t>(kGatherChunk, m.links.offsets[r + 1] - m.links.offsets[r]);
+    for (const Link* l = begin; l < begin + count; ++l)
         __builtin_prefetch(iex + (size_t(l->sender) * bins + l->bin) * 3);
 }
 
