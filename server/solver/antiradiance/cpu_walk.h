@@ -69,6 +69,19 @@ static inline void EnvironmentRows(const AntiradianceModel& m, Rgba* lin) {
 // by a tenth; 64 was slower).
 inline constexpr size_t kGatherChunk = 32;
 
+// Starts the reads of receiver r's first senders' rows (Gather's first chunk): Gather does
+// for its own receiver, the walk for the next one while a node's local pass runs.
+template <class Rows>
+inline void PrefetchSenders(const AntiradianceModel& m, const typename Rows::Elem* iex,
+                            uint32_t r) {
+    const size_t bins = m.Bins();
+    const Link* begin = m.links.links.data() + m.links.offsets[r];
+    const size_t count =
+        std::min<size_t>(kGatherChunk, m.links.offsets[r + 1] - m.links.offsets[r]);
+    for (const Link* l = begin; l < begin + count; ++l)
+        __builtin_prefetch(iex + (size_t(l->sender) * bins + l->bin) * 3);
+}
+
 // acc[bin] += Σ over receiver r's links of F · w · I_ex[sender][link bin] (the U operator,
 // Eq. 16/17 with the σ spreading of Sec. 3.1), RGB in the first three lanes. A scaled
 // format's rows hold I_ex / senderScale[sender]. The sender reads are random rows of a
@@ -82,7 +95,7 @@ inline void Gather(const AntiradianceModel& m, const typename Rows::Elem* iex,
     const Link* begin = m.links.links.data() + m.links.offsets[r];
     const Link* end = m.links.links.data() + m.links.offsets[r + 1];
     auto source = [&](const Link* l) { return iex + (size_t(l->sender) * bins + l->bin) * 3; };
-    for (const Link* l = begin; l < begin + kChunk && l < end; ++l) __builtin_prefetch(source(l));
+    PrefetchSenders<Rows>(m, iex, r);
     Rgba v[kChunk];
     for (const Link* chunk = begin; chunk < end; chunk += kChunk) {
         const size_t n = std::min<size_t>(kChunk, end - chunk);
@@ -104,18 +117,6 @@ inline void Gather(const AntiradianceModel& m, const typename Rows::Elem* iex,
             for (int j = 0; j < width; ++j) acc[nb[j].bin] += nb[j].weight * sum;
         }
     }
-}
-
-// Starts the reads of receiver r's first senders' rows (Gather's first chunk).
-template <class Rows>
-inline void PrefetchSenders(const AntiradianceModel& m, const typename Rows::Elem* iex,
-                            uint32_t r) {
-    const size_t bins = m.Bins();
-    const Link* begin = m.links.links.data() + m.links.offsets[r];
-    const size_t count =
-        std::min<size_t>(kGatherChunk, m.links.offsets[r + 1] - m.links.offsets[r]);
-    for (const Link* l = begin; l < begin + count; ++l)
-        __builtin_prefetch(iex + (size_t(l->sender) * bins + l->bin) * 3);
 }
 
 // The glossy lobe's share of Eq. 18 at glossy leaf g, per outgoing bin ω_j in front, times
