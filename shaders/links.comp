@@ -59,47 +59,8 @@ const float kFrontMargin = 1e-4;     // links.cpp MakeLink
 const float kNearTrace = 1e-5;       // links.cpp
 const int kDiv = 6;                  // links.cpp NearFieldIrradiance
 
-// Directions::Lookup: cube-map texel, then a greedy walk to the exact nearest bin.
-uint Lookup(vec3 d) {
-    vec3 a = abs(d);
-    uint face;
-    float s, t, m;
-    if (a.x >= a.y && a.x >= a.z) {
-        face = d.x > 0.0 ? 0u : 1u;
-        m = a.x;
-        s = d.y;
-        t = d.z;
-    } else if (a.y >= a.z) {
-        face = d.y > 0.0 ? 2u : 3u;
-        m = a.y;
-        s = d.x;
-        t = d.z;
-    } else {
-        face = d.z > 0.0 ? 4u : 5u;
-        m = a.z;
-        s = d.x;
-        t = d.y;
-    }
-    int res = int(pc.cubeRes);
-    int u = clamp(int((s / m * 0.5 + 0.5) * float(res)), 0, res - 1);
-    int v = clamp(int((t / m * 0.5 + 0.5) * float(res)), 0, res - 1);
-    uint best = cube[(face * pc.cubeRes + uint(v)) * pc.cubeRes + uint(u)];
-    float bestDot = dot(d, dirs[best].xyz);
-    for (bool walked = true; walked;) {
-        walked = false;
-        uint row = best * pc.adjacentWidth;
-        for (uint k = 0u; k < pc.adjacentWidth; ++k) {
-            uint j = adjacent[row + k];
-            float dd = dot(d, dirs[j].xyz);
-            if (dd > bestDot) {
-                bestDot = dd;
-                best = j;
-                walked = true;
-            }
-        }
-    }
-    return best;
-}
+#include "directions.glsl"
+uint Lookup(vec3 d) { return LookupBin(d, pc.cubeRes, pc.adjacentWidth); }
 
 // Directions::LookupWithin, with `useA`/`useB` false for the zero vectors of the C++ side.
 bool Within(uint j, bool useA, vec3 a, bool useB, vec3 b) {

@@ -7,9 +7,11 @@
 
 #include "bundled_scenes.h"
 #include "gather/gather_stage.h"
+#include "gpu/context.h"
 #include "reference/path_tracer.h"
 #include "scene/scene_builder.h"
 #include "solver/implicit/implicit_solver.h"
+#include "solver/implicit/vulkan_links.h"
 #include "solver/registry.h"
 #include "test_util.h"
 
@@ -280,6 +282,95 @@ TEST(Implicit, HierarchicalLinksMatchBruteForce) {
         testing::RelativeRms(withShot(ReadImplicitSettings(settings)), withShot(every));
     std::printf("with the first shot: %.4f relative RMS\n", shotRel);
     EXPECT_LT(shotRel, 0.02);
+}
+
+// The Vulkan back end creates the links on the device (lavapipe here, validation on), the
+// rest of the frame on the CPU: the same links and answers as the CPU's, up to the device's
+// float rounding at a split or bin boundary, at rest (the Cornell box) and after a move (a box
+// on a floor under a sky, moved and turned: the device examines every pair again).
+TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
+    auto compare = [](const Scene& scene, Solver& cpu, Solver& device, const char* what) {
+        const auto& a = dynamic_cast<ImplicitSolver&>(cpu).Links();
+        const auto& b = dynamic_cast<ImplicitSolver&>(device).Links();
+        const double rel =
+            testing::RelativeRms(testing::AllVertices(device, scene, Channel::kIndirect),
+                                 testing::AllVertices(cpu, scene, Channel::kIndirect));
+        std::printf("%s: pairs %zu / %zu, linked %zu / %zu, shares %zu / %zu, %.2e relative RMS\n",
+                    what, b.pairs, a.pairs, b.linked, a.linked, b.Count(), a.Count(), rel);
+        // Measured: the same pairs, a handful of ends in another bin or split otherwise.
+        EXPECT_NEAR(double(b.pairs), double(a.pairs), 1e-4 * double(a.pairs)) << what;
+        EXPECT_NEAR(double(b.linked), double(a.linked), 1e-4 * double(a.linked)) << what;
+        EXPECT_NEAR(double(b.Count()), double(a.Count()), 1e-4 * double(a.Count())) << what;
+        EXPECT_LT(rel, 1e-4) << what;
+        const SolverStats stats = device.Stats();
+        EXPECT_NE(stats.Text("link_device"), "cpu");
+        EXPECT_GT(stats.Number("device_rounds"), 10.0);
+        for (const auto& m : device.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
+    };
+    SolverSettings onDevice = Implicit(0.06f);
+    onDevice.device = DeviceChoice::kLavapipe;
+    onDevice.validation = true;
+    {
+        Scene scene = scenes::CornellBox().Build();
+        auto cpu = CreateSolver(scene, Implicit(0.06f));
+        auto device = CreateSolver(scene, onDevice);
+        cpu->Iterate(10);
+        device->Iterate(10);
+        compare(scene, *cpu, *device, "Cornell box");
+    }
+    SceneBuilder b;
+    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.6f));
+    b.AddTiledQuad("ground", grey, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 8, 8, {0, 1, 0});
+    b.AddBox("box", grey, {0, 0.25f, 0}, {0.3f, 0.5f, 0.3f}, 0.0f, false);
+    b.SetDynamic("box", {0, 0, 0});
+    Scene scene = b.Build();
+    scene.environment = ConstantEnvironment(glm::vec3(1.0f));
+    auto cpu = CreateSolver(scene, Implicit(0.08f));
+    SolverSettings moving = onDevice;
+    moving.elementSize = 0.08f;
+    auto device = CreateSolver(scene, moving);
+    const int node = FindNode(scene, "box");
+    SetNodeTransform(scene, node,
+                     glm::translate(glm::mat4(1.0f), glm::vec3(0.3f, 0.0f, -0.2f)) *
+                         scene.nodes[node].local *
+                         glm::rotate(glm::mat4(1.0f), glm::radians(25.0f), glm::vec3(0, 1, 0)));
+    for (Solver* s : {cpu.get(), device.get()}) {
+        ASSERT_EQ(s->GeometryMismatch(scene), "");
+        s->UpdateGeometry(scene);
+        s->Iterate(20);
+    }
+    compare(scene, *cpu, *device, "moved box");
+}
+
+// The device's rounds in chunks (a list of pairs or ends held to 64 KiB, so that a round goes
+// up in many chunks and a chunk whose ends overflow runs again, larger or halved): the same
+// links as the CPU's linker from the same hierarchy.
+TEST(Implicit, VulkanLinkCreationInChunksMatchesTheCpu) {
+    Scene scene = scenes::CornellBox().Build();
+    ImplicitSolver solver(scene, Implicit(0.08f), ReadImplicitSettings(Implicit(0.08f)), {});
+    const Hierarchy& h = solver.GetHierarchy();
+    ImplicitLinks cpu, device;
+    ImplicitLinker(solver.GetDirections(), 0.5f).Build(h, solver.ProjectedAreas(), {}, 0.0f, cpu);
+    gpu::Context ctx(gpu::DeviceKind::kLavapipe, /*validation=*/true);
+    VulkanLinkCreation creation(ctx, solver.GetDirections(), 0.5f, size_t(64) << 10);
+    ImplicitLinker onDevice(solver.GetDirections(), 0.5f);
+    onDevice.UseDevice(&creation);
+    onDevice.Build(h, solver.ProjectedAreas(), {}, 0.0f, device);
+    std::printf("%zu pairs, %zu shares, %zu dispatches\n", device.pairs, device.Count(),
+                creation.rounds);
+    EXPECT_GT(creation.rounds, 100u);
+    EXPECT_EQ(device.pairs, cpu.pairs);
+    EXPECT_EQ(device.linked, cpu.linked);
+    EXPECT_EQ(device.offsets, cpu.offsets);
+    EXPECT_EQ(device.sender, cpu.sender);
+    EXPECT_EQ(device.bin, cpu.bin);
+    ASSERT_EQ(device.weight.size(), cpu.weight.size());
+    // A sender's solid angle (area · |cos| / d²) rounds on the device otherwise, and what it
+    // leaves of a bin with it: within 10⁻⁵ of a bin's solid angle.
+    const float omegaBin = solver.GetDirections().BinSolidAngle();
+    for (size_t k = 0; k < cpu.weight.size(); ++k)
+        ASSERT_NEAR(device.weight[k], cpu.weight[k], 1e-5f * omegaBin) << k;
+    for (const std::string& m : ctx.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
 }
 
 // Any move is taken in place (the links are rebuilt every frame): a box on a floor under a sky,

@@ -11,6 +11,7 @@
 #include <numbers>
 
 #include "base/check.h"
+#include "solver/implicit/vulkan_links.h"
 
 namespace penumbra {
 namespace {
@@ -69,6 +70,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                            const std::vector<uint8_t>* moving) {
     const auto& nodes = h.nodes;
     PENUMBRA_CHECK(!moving || moving->size() == nodes.size());
+    if (device_) moving = nullptr;  // the device examines every pair
     // With the ends kept for this `moving`: only the pairs with a moving end are examined.
     // Else everything, and the ends of the pairs without one are kept for the next build.
     incremental_ = moving && !keptFor_.empty() && keptFor_ == *moving;
@@ -109,6 +111,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // takes a root's ends where it meets that root, and splits any other kept pair afresh.
     constexpr uint32_t kFresh = 0xffffffffu;
     std::vector<Pair> round{{0, 0, kFresh}};
+    if (device_) round.clear();  // the rounds run on the device, below
     tbb::enumerable_thread_specific<std::vector<Pair>> next;
     tbb::enumerable_thread_specific<std::vector<End>> recorded;
     struct KeptEnd {
@@ -123,6 +126,13 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     std::atomic<uint32_t> rootCount{0};
     std::atomic<size_t> pairs{0}, linked{0};
     const bool keeps = still && !incremental_;
+    if (device_) {  // the same rounds on the device (vulkan_links.h): its ends stand for the
+                    // threads'
+        size_t devicePairs = 0, deviceLinked = 0;
+        device_->Create(h, frontArea, recorded.local(), devicePairs, deviceLinked);
+        pairs = devicePairs;
+        linked = deviceLinked;
+    }
     auto keyOf = [](uint32_t a, uint32_t b) { return uint64_t(a) << 32 | b; };
     while (!round.empty()) {
         pairs += round.size();

@@ -3,7 +3,8 @@
 // closest element in a bin covers it, so whatever lies behind it is hidden). Visibility is
 // never tested; it falls out of the closest-link rule.
 //
-// CPU back end (TBB). CreateHierarchicalLinks walks candidate pairs level by level from the
+// CPU back end (TBB), link creation also on a Vulkan device (vulkan_links.h).
+// CreateHierarchicalLinks walks candidate pairs level by level from the
 // root's self-pair (the data-parallel link creation of Meyer et al. 2009): a pair is split
 // while an end subtends more than linkThreshold × ω_bin from the other (Sec. 4.2.2), else it
 // becomes a link at both ends, recorded in the end's (node, bin) slot with its distance and
@@ -57,8 +58,18 @@ struct ImplicitLinks {
     size_t Count() const { return sender.size() - empty; }  // shares from a sender
 };
 
+class VulkanLinkCreation;
+
 class ImplicitLinker {
   public:
+    // A link at one end: the (node, bin) slot, the sender, its depth along the bin (what the
+    // bin's front-to-back order sorts by), the solid angle of the bin the sender covers.
+    struct End {
+        uint32_t slot;
+        uint32_t sender;
+        float dist;
+        float omega;
+    };
     ImplicitLinker(const Directions& dirs, float linkThreshold);
     // The links of `hierarchy` as it is placed now. `frontArea`: per node and bin, the
     // front-facing projected area Σ A cos⁺(n, ω_b) (what a cluster covers of a bin).
@@ -83,15 +94,11 @@ class ImplicitLinker {
     // Whether the last build took kept ends (the pairs examined are in ImplicitLinks::pairs).
     bool Incremental() const { return incremental_; }
 
+    // Creates the links' ends on `device` (vulkan_links.h) from now on, null: on the CPU. The
+    // device examines every pair each build: `moving` is not used, nothing is kept.
+    void UseDevice(VulkanLinkCreation* device) { device_ = device; }
+
   private:
-    // A link at one end: the (node, bin) slot, the sender, its depth along the bin (what the
-    // bin's front-to-back order sorts by), the solid angle of the bin the sender covers.
-    struct End {
-        uint32_t slot;
-        uint32_t sender;
-        float dist;
-        float omega;
-    };
     // One front bin's share of a leaf's light: from a sender (or kNoSender: the environment)
     // with its weight.
     struct Entry {
@@ -117,6 +124,7 @@ class ImplicitLinker {
     std::vector<uint8_t> keptFor_;
     Kept kept_;
     bool incremental_ = false;
+    VulkanLinkCreation* device_ = nullptr;
     float splat_ = 0.0f;        // sin of the angular radius above which an end is spread
     float adjacentCos_ = 1.0f;  // cos of Directions::AdjacentAngle()
 };

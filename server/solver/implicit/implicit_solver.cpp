@@ -9,6 +9,8 @@
 #include <numbers>
 
 #include "base/check.h"
+#include "gpu/context.h"
+#include "solver/implicit/vulkan_links.h"
 
 namespace penumbra {
 namespace {
@@ -51,10 +53,15 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
       dirs_(own.bins),
       linker_(dirs_, own.linkThreshold) {
     const auto start = Clock::now();
-    if (settings.device == DeviceChoice::kGpu || settings.device == DeviceChoice::kLavapipe)
-        throw Error(
-            "the implicit solver runs on the CPU only for now (its Vulkan back end is not "
-            "built yet): use --device cpu or auto");
+    if (settings.device == DeviceChoice::kGpu || settings.device == DeviceChoice::kLavapipe) {
+        // The links are created on the device (vulkan_links.h); the rest of the frame runs here.
+        device_ = std::make_unique<gpu::Context>(settings.device == DeviceChoice::kLavapipe
+                                                     ? gpu::DeviceKind::kLavapipe
+                                                     : gpu::DeviceKind::kRealGpu,
+                                                 settings.validation);
+        vulkanLinks_ = std::make_unique<VulkanLinkCreation>(*device_, dirs_, own.linkThreshold);
+        linker_.UseDevice(vulkanLinks_.get());
+    }
     ValidateEnvironment(scene.environment);
     const float h = ElementSize(scene, settings);
     elementSize_ = h;
@@ -82,6 +89,8 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
     light_.Reradiate();
     setupSeconds_ = std::chrono::duration<double>(Clock::now() - start).count();
 }
+
+ImplicitSolver::~ImplicitSolver() = default;
 
 std::vector<direct::GpuReceiver> ImplicitSolver::LeafReceivers() const {
     return direct::MakeReceivers(surfels_, light_.surfel);
@@ -376,7 +385,7 @@ std::string ImplicitSolver::WarmStart(Solver& previous, const SurfelCarry& carry
 SolverStats ImplicitSolver::Stats() const {
     SolverStats s;
     s.solver = "implicit";
-    s.device = "cpu";
+    s.device = device_ ? device_->DeviceName() : "cpu";
     s.elements = hierarchy_.leaves.size();
     s.nodes = hierarchy_.size();
     s.links = links_.Count();
@@ -408,7 +417,17 @@ SolverStats ImplicitSolver::Stats() const {
     s.SetDetail("relinks", double(relinks_));
     s.SetDetail("relinks_kept", double(incrementalRelinks_));
     s.SetDetail("refinements", double(refinements_));
+    // Where the links are created: the device's rounds (uploads, dispatches, readbacks).
+    s.SetDetail("link_device", device_ ? device_->DeviceName() : std::string("cpu"));
+    if (vulkanLinks_) {
+        s.SetDetail("device_create_ms", vulkanLinks_->msDevice);
+        s.SetDetail("device_rounds", double(vulkanLinks_->rounds));
+    }
     return s;
+}
+
+std::vector<std::string> ImplicitSolver::ValidationMessages() const {
+    return device_ ? device_->ValidationMessages() : std::vector<std::string>{};
 }
 
 }  // namespace penumbra

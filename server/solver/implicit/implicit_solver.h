@@ -1,8 +1,9 @@
 // The implicit-visibility solver (Dong, Kautz, Theobalt, Seidel, PG 2007) behind the Solver
-// interface, CPU back end. Algorithm 1: the surfels and their hierarchy are made once; every
-// frame that geometry changed, the hierarchy is refitted (UpdateElements) and the links are
-// built anew (implicit_links.h); every bounce, each leaf gathers the light of the closest
-// sender in each of its front bins (Eq. 5) and the exitant light is pulled up the tree.
+// interface, CPU back end (with a Vulkan device, the links are created there). Algorithm 1: the
+// surfels and their hierarchy are made once; every frame that geometry changed, the hierarchy is
+// refitted (UpdateElements) and the links are built anew (implicit_links.h); every bounce, each
+// leaf gathers the light of the closest sender in each of its front bins (Eq. 5) and the exitant
+// light is pulled up the tree.
 //
 // Radiance of a sender node s seen from a bin: per node and bin, the exitant intensity of its
 // leaves I(ω) = Σ A_i L_i cos⁺(n_i, ω) and their front-facing projected area
@@ -20,6 +21,7 @@
 #include <memory>
 
 #include "direct/direct_stage.h"
+#include "gpu/fwd.h"
 #include "hierarchy/directions.h"
 #include "hierarchy/hierarchy.h"
 #include "solver/bin_lobes.h"
@@ -34,6 +36,7 @@ class ImplicitSolver : public Solver {
   public:
     ImplicitSolver(const Scene& scene, const SolverSettings& settings, const ImplicitSettings& own,
                    const ProgressFn& progress);
+    ~ImplicitSolver() override;
 
     void Iterate(int n) override;
     std::vector<glm::vec3> SurfelIrradiance(Channel channel = Channel::kIndirect) override;
@@ -41,6 +44,7 @@ class ImplicitSolver : public Solver {
     void UpdateMaterials(const Scene& scene) override;
     void UpdateLights(const Scene& scene) override;
     SolverStats Stats() const override;
+    std::vector<std::string> ValidationMessages() const override;
     // Any move or deformation that keeps the primitives, their refinement and the number of
     // punctual lights: the links are rebuilt every frame anyway.
     std::string GeometryMismatch(const Scene& scene) const override;
@@ -51,6 +55,10 @@ class ImplicitSolver : public Solver {
 
     const ImplicitLinks& Links() const { return links_; }
     const Hierarchy& GetHierarchy() const { return hierarchy_; }
+    const Directions& GetDirections() const { return dirs_; }
+    // Per node and bin, Σ A cos⁺(n, ω_b) at the last relink (ImplicitLinker::Build's
+    // `frontArea`).
+    const std::vector<float>& ProjectedAreas() const { return projected_; }
 
   private:
     // The last geometry that passed GeometryMismatch: every primitive's positions and
@@ -102,6 +110,9 @@ class ImplicitSolver : public Solver {
     Hierarchy hierarchy_;
     Directions dirs_;
     std::vector<uint32_t> opposite_;  // per bin: the bin of the opposite direction
+    // With --device gpu or lavapipe: the device the links are created on (the rest runs here).
+    std::unique_ptr<gpu::Context> device_;
+    std::unique_ptr<VulkanLinkCreation> vulkanLinks_;
     ImplicitLinker linker_;
     ImplicitLinks links_;
     // Per node: its subtree holds an element that moved since the first move (the linker

@@ -1,0 +1,221 @@
+// The implicit solver's link creation on a Vulkan device (vulkan_links.h).
+#include "solver/implicit/vulkan_links.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "base/check.h"
+#include "gpu/buffer.h"
+#include "gpu/context.h"
+#include "gpu/layout.h"
+#include "gpu/pipeline.h"
+#include "shaders/implicit_pairs_spv.h"
+
+namespace penumbra {
+namespace {
+
+// shaders/implicit_pairs.comp: struct PairNode.
+struct PairNode {
+    glm::vec3 center;
+    float radius;
+    glm::vec3 normal;
+    float coneCos;
+    float area;
+    uint32_t right, leaf, pad;
+};
+PENUMBRA_GPU_FIELD(PairNode, center, 0);
+PENUMBRA_GPU_FIELD(PairNode, radius, 12);
+PENUMBRA_GPU_FIELD(PairNode, normal, 16);
+PENUMBRA_GPU_FIELD(PairNode, coneCos, 28);
+PENUMBRA_GPU_FIELD(PairNode, area, 32);
+PENUMBRA_GPU_FIELD(PairNode, right, 36);
+PENUMBRA_GPU_FIELD(PairNode, leaf, 40);
+static_assert(sizeof(PairNode) == 48);
+static_assert(sizeof(ImplicitLinker::End) == 16);
+PENUMBRA_GPU_FIELD(ImplicitLinker::End, slot, 0);
+PENUMBRA_GPU_FIELD(ImplicitLinker::End, sender, 4);
+PENUMBRA_GPU_FIELD(ImplicitLinker::End, dist, 8);
+PENUMBRA_GPU_FIELD(ImplicitLinker::End, omega, 12);
+
+struct PairPush {
+    uint32_t count, nextCapacity, endCapacity, bins, cubeRes, adjacentWidth;
+    float limit, binSolidAngle, splat, adjacentCos;
+};
+// shaders/implicit_pairs.comp (push constants).
+PENUMBRA_GPU_FIELD(PairPush, count, 0);
+PENUMBRA_GPU_FIELD(PairPush, nextCapacity, 4);
+PENUMBRA_GPU_FIELD(PairPush, endCapacity, 8);
+PENUMBRA_GPU_FIELD(PairPush, bins, 12);
+PENUMBRA_GPU_FIELD(PairPush, cubeRes, 16);
+PENUMBRA_GPU_FIELD(PairPush, adjacentWidth, 20);
+PENUMBRA_GPU_FIELD(PairPush, limit, 24);
+PENUMBRA_GPU_FIELD(PairPush, binSolidAngle, 28);
+PENUMBRA_GPU_FIELD(PairPush, splat, 32);
+PENUMBRA_GPU_FIELD(PairPush, adjacentCos, 36);
+
+constexpr uint32_t kGroup = 64;  // local_size_x
+
+std::unique_ptr<gpu::Buffer> MakeBuffer(gpu::Context& ctx, size_t bytes) {
+    return std::make_unique<gpu::Buffer>(ctx, std::max<size_t>(bytes, 16));
+}
+
+}  // namespace
+
+struct VulkanLinkCreation::Impl {
+    gpu::Context& ctx;
+    const Directions& dirs;
+    float threshold;
+    size_t bufferBytes;
+    uint32_t adjacentWidth = 0;
+    gpu::Pipeline pairs;
+    gpu::Buffer dirBuffer, cube;
+    std::unique_ptr<gpu::Buffer> adjacent;
+    // The nodes and their projected areas; a chunk of a round's pairs, its next pairs and
+    // ends; the three counters.
+    std::unique_ptr<gpu::Buffer> nodes, frontArea, round, next, ends, counts;
+    size_t roundCapacity = 0, nextCapacity = 0, endCapacity = 0;
+
+    Impl(gpu::Context& c, const Directions& d, float t, size_t bytes)
+        : ctx(c),
+          dirs(d),
+          threshold(t),
+          bufferBytes(bytes > 0 ? std::min<size_t>(bytes, c.Limits().maxStorageBufferRange)
+                                : c.Limits().maxStorageBufferRange),
+          pairs(c, gpu::Words(kSpirv_implicit_pairs), 9, std::span<const uint32_t>{},
+                sizeof(PairPush)),
+          dirBuffer(c, size_t(d.Count()) * sizeof(glm::vec4)),
+          cube(c, d.CubeTable().size() * sizeof(uint32_t)) {
+        std::vector<glm::vec4> up;
+        for (const glm::vec3& w : d.All()) up.emplace_back(w, 0.0f);
+        dirBuffer.Upload(up);
+        cube.Upload(d.CubeTable());
+        const std::vector<uint32_t> adj = d.PaddedAdjacency(adjacentWidth);
+        adjacent = MakeBuffer(c, adj.size() * sizeof(uint32_t));
+        adjacent->Upload(adj);
+        counts = MakeBuffer(c, 4 * sizeof(uint32_t));
+    }
+
+    // Grows `buffer` (kept in `capacity` elements of `size` bytes) to hold `want`, with room.
+    // (at most `limit` bytes: the device's storage-buffer range).
+    void Reserve(std::unique_ptr<gpu::Buffer>& buffer, size_t& capacity, size_t want, size_t size,
+                 size_t limit) {
+        if (buffer && capacity >= want) return;
+        capacity = std::min(std::max<size_t>(want + want / 2, 1024), limit / size);
+        buffer = MakeBuffer(ctx, capacity * size);
+    }
+};
+
+VulkanLinkCreation::VulkanLinkCreation(gpu::Context& ctx, const Directions& dirs,
+                                       float linkThreshold, size_t bufferBytes)
+    : impl_(std::make_unique<Impl>(ctx, dirs, linkThreshold, bufferBytes)) {}
+
+VulkanLinkCreation::~VulkanLinkCreation() = default;
+
+void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& frontArea,
+                                std::vector<ImplicitLinker::End>& ends, size_t& pairs,
+                                size_t& linked) {
+    Impl& s = *impl_;
+    const auto start = std::chrono::steady_clock::now();
+    const size_t bins = size_t(s.dirs.Count());
+    PENUMBRA_CHECK_EQ(frontArea.size(), h.nodes.size() * bins);
+    std::vector<PairNode> up(h.nodes.size());
+    for (size_t i = 0; i < up.size(); ++i) {
+        const HierarchyNode& n = h.nodes[i];
+        const bool leaf = n.IsLeaf();
+        up[i] = {n.center,       n.radius, n.normal,
+                 n.coneCos,      n.area,   leaf ? 0u : h.nodes[i + 1].end,
+                 leaf ? 1u : 0u, 0u};
+    }
+    if (!s.nodes || s.nodes->Bytes() < up.size() * sizeof(PairNode)) {
+        s.nodes = MakeBuffer(s.ctx, up.size() * sizeof(PairNode));
+        s.frontArea = MakeBuffer(s.ctx, frontArea.size() * sizeof(float));
+    }
+    s.nodes->Upload(up);
+    s.frontArea->Upload(frontArea);
+
+    const float omegaBin = s.dirs.BinSolidAngle();
+    PairPush push{};
+    push.bins = uint32_t(bins);
+    push.cubeRes = uint32_t(s.dirs.CubeRes());
+    push.adjacentWidth = s.adjacentWidth;
+    push.limit = s.threshold * omegaBin;
+    push.binSolidAngle = omegaBin;
+    push.splat = std::sin(0.5f * s.dirs.Spacing());
+    push.adjacentCos = std::cos(s.dirs.AdjacentAngle());
+
+    // The rounds: the pairs of a round go up in chunks that fit the device's storage-buffer
+    // limit with their next pairs (3 at most a pair) and ends; a chunk whose ends overflow
+    // runs again with a larger end list, or, at the limit, as two halves.
+    const size_t limit = s.bufferBytes;
+    const size_t endLimit = limit / sizeof(ImplicitLinker::End);
+    const size_t chunkLimit = limit / (3 * sizeof(glm::uvec2));
+    std::vector<glm::uvec2> round{{0u, 0u}}, next;
+    pairs = 0;
+    linked = 0;
+    rounds = 0;
+    while (!round.empty()) {
+        pairs += round.size();
+        next.clear();
+        size_t chunk = std::min(round.size(), chunkLimit);
+        for (size_t at = 0; at < round.size();) {
+            const size_t n = std::min(chunk, round.size() - at);
+            s.Reserve(s.round, s.roundCapacity, n, sizeof(glm::uvec2), limit);
+            s.Reserve(s.next, s.nextCapacity, 3 * n, sizeof(glm::uvec2), limit);
+            s.Reserve(s.ends, s.endCapacity, std::min(4 * n, endLimit), sizeof(ImplicitLinker::End),
+                      limit);
+            s.round->Upload(round.data() + at, n * sizeof(glm::uvec2));
+            push.count = uint32_t(n);
+            push.nextCapacity = uint32_t(s.nextCapacity);
+            push.endCapacity = uint32_t(s.endCapacity);
+            const gpu::Buffer* buffers[] = {s.nodes.get(), s.round.get(),  s.next.get(),
+                                            s.ends.get(),  s.counts.get(), s.frontArea.get(),
+                                            &s.dirBuffer,  &s.cube,        s.adjacent.get()};
+            vk::raii::DescriptorSet set = s.pairs.MakeSet(buffers);
+            s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+                cb.fillBuffer(s.counts->Handle(), 0, VK_WHOLE_SIZE, 0);
+                gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
+                             vk::AccessFlagBits::eTransferWrite,
+                             vk::PipelineStageFlagBits::eComputeShader);
+                cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.pairs.Handle());
+                cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.pairs.Layout(), 0, {*set},
+                                      {});
+                cb.pushConstants<PairPush>(s.pairs.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
+                                           push);
+                cb.dispatch(uint32_t((n + kGroup - 1) / kGroup), 1, 1);
+                const vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,
+                                               vk::AccessFlagBits::eHostRead);
+                cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
+                                   vk::PipelineStageFlagBits::eHost, {}, toHost, {}, {});
+            });
+            ++rounds;
+            uint32_t got[3] = {0, 0, 0};  // next pairs, ends, pairs linked
+            s.counts->Download(got, sizeof(got));
+            PENUMBRA_CHECK_LE(got[0], s.nextCapacity);
+            if (got[1] > s.endCapacity) {
+                if (got[1] <= endLimit) {
+                    s.Reserve(s.ends, s.endCapacity, got[1], sizeof(ImplicitLinker::End), limit);
+                } else {
+                    PENUMBRA_CHECK(n > 1);
+                    chunk = n / 2;
+                }
+                continue;
+            }
+            linked += got[2];
+            next.resize(next.size() + got[0]);
+            if (got[0] > 0)
+                s.next->Download(next.data() + next.size() - got[0],
+                                 size_t(got[0]) * sizeof(glm::uvec2));
+            ends.resize(ends.size() + got[1]);
+            if (got[1] > 0)
+                s.ends->Download(ends.data() + ends.size() - got[1],
+                                 size_t(got[1]) * sizeof(ImplicitLinker::End));
+            at += n;
+        }
+        std::swap(round, next);
+    }
+    msDevice =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace penumbra

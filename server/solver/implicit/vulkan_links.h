@@ -1,0 +1,44 @@
+// The implicit solver's link creation on a Vulkan device (shaders/implicit_pairs.comp): the
+// rounds of candidate pairs of ImplicitLinker::Build (CreateHierarchicalLinks, level by level
+// as in Meyer et al. 2009's data-parallel link creation), one dispatch a round, the next
+// round's pairs and the recorded ends appended with atomic counters. The ends come back to
+// the host, where ImplicitLinker::Build orders each (node, bin) slot and composites the
+// leaves' bins as it does for the CPU's ends: the same links, up to float rounding of the
+// device's arithmetic near a split or bin boundary.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "gpu/fwd.h"
+#include "hierarchy/directions.h"
+#include "hierarchy/hierarchy.h"
+#include "solver/implicit/implicit_links.h"
+
+namespace penumbra {
+
+class VulkanLinkCreation {
+  public:
+    // `bufferBytes`: the most a list of pairs or ends takes on the device (0: the device's
+    // storage-buffer range); a round larger than that goes up in chunks.
+    VulkanLinkCreation(gpu::Context& ctx, const Directions& dirs, float linkThreshold,
+                       size_t bufferBytes = 0);
+    ~VulkanLinkCreation();
+    VulkanLinkCreation(const VulkanLinkCreation&) = delete;
+    VulkanLinkCreation& operator=(const VulkanLinkCreation&) = delete;
+
+    // Every pair from the root's self-pair for `h` as placed now (`frontArea` per node and bin,
+    // ImplicitLinker::Build's): appends the ends to `ends`; `pairs` the candidate pairs
+    // examined, `linked` those that became links.
+    void Create(const Hierarchy& h, const std::vector<float>& frontArea,
+                std::vector<ImplicitLinker::End>& ends, size_t& pairs, size_t& linked);
+
+    double msDevice = 0.0;  // uploads, rounds and readbacks of the last Create
+    size_t rounds = 0;      // dispatches of the last Create
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace penumbra

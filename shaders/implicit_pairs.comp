@@ -1,0 +1,185 @@
+// One round of the implicit solver's link creation (Dong et al. 2007, Sec. 4.2.2,
+// CreateHierarchicalLinks), level by level as in Meyer et al. 2009's data-parallel link
+// creation: one invocation per candidate pair of this round; a pair is split into the next
+// round's pairs while an end subtends more than linkThreshold × ω_bin from the other, else it
+// becomes a link recorded at each end that can receive, in the end's (node, bin) slot with
+// its depth along the bin and the solid angle the sender covers. Both lists are appended with
+// atomic counters; the host reads the counts after the round (and runs it again with larger
+// buffers when one overflowed). The device twin of ImplicitLinker::Build's pair loop,
+// CanReceive, AboveHorizon and Record (solver/implicit/implicit_links.cpp): keep the
+// arithmetic in step with them.
+#version 450
+#extension GL_GOOGLE_include_directive : require
+
+layout(local_size_x = 64) in;
+
+// solver/implicit/vulkan_links.cpp: struct PairNode (48 bytes).
+struct PairNode {
+    vec3 center;
+    float radius;
+    vec3 normal;
+    float coneCos;
+    float area;
+    uint right;  // the second child (the first is the node after it); 0 for a leaf
+    uint leaf;   // 1 for a leaf
+    uint pad;
+};
+// ImplicitLinker::End.
+struct End {
+    uint slot;
+    uint sender;
+    float dist;
+    float omega;
+};
+
+layout(std430, binding = 0) readonly buffer Nodes { PairNode nodes[]; };
+layout(std430, binding = 1) readonly buffer Round { uvec2 round[]; };
+layout(std430, binding = 2) writeonly buffer Next { uvec2 next[]; };
+layout(std430, binding = 3) writeonly buffer Ends { End ends[]; };
+// [0] the next round's pairs, [1] the ends, [2] the pairs linked.
+layout(std430, binding = 4) buffer Counts { uint counts[]; };
+// Per node and bin: the front-facing projected area Σ A cos⁺(n, ω_b).
+layout(std430, binding = 5) readonly buffer FrontArea { float frontArea[]; };
+layout(std430, binding = 6) readonly buffer Dirs { vec4 dirs[]; };
+layout(std430, binding = 7) readonly buffer Cube { uint cube[]; };
+layout(std430, binding = 8) readonly buffer Adjacent { uint adjacent[]; };
+
+layout(push_constant) uniform Push {
+    uint count;  // pairs this round
+    uint nextCapacity;
+    uint endCapacity;
+    uint bins;
+    uint cubeRes;
+    uint adjacentWidth;
+    float limit;          // linkThreshold × ω_bin
+    float binSolidAngle;  // ω_bin
+    float splat;          // sin of the angular radius above which an end is spread
+    float adjacentCos;    // cos of Directions::AdjacentAngle()
+} pc;
+
+#include "directions.glsl"
+
+const float kFlatCone = 0.9;  // implicit_links.h
+const float kPi = 3.14159265358979323846;
+
+bool CanReceive(PairNode r, PairNode s, vec3 d, float dist) {
+    if (r.coneCos <= -1.0) return true;
+    float reach = r.radius + s.radius;
+    if (dist <= reach) return true;
+    float cosCone = clamp(r.coneCos, -1.0, 1.0);
+    float sinCone = sqrt(1.0 - cosCone * cosCone);
+    float sinSpread = reach / dist;
+    float cosSpread = sqrt(1.0 - sinSpread * sinSpread);
+    if (cosCone * cosSpread - sinCone * sinSpread <= 0.0) return true;
+    float sinAlpha = sinCone * cosSpread + cosCone * sinSpread;
+    return dot(r.normal, d) / dist > -sinAlpha;
+}
+
+bool AboveHorizon(PairNode r, vec3 dir) {
+    if (r.coneCos <= -1.0) return true;
+    float below = sqrt(max(0.0, 1.0 - r.coneCos * r.coneCos));
+    return dot(r.normal, dir) > 0.01 - below;
+}
+
+// The solid angle sender `s` covers seen along `dir` at `dist` (Build's `covered`).
+float Covered(uint s, vec3 dir, float dist) {
+    PairNode n = nodes[s];
+    float d2 = max(dist * dist, 1e-30);
+    if (n.coneCos >= kFlatCone) return n.area * abs(dot(n.normal, dir)) / d2;
+    uint t = LookupBin(-dir, pc.cubeRes, pc.adjacentWidth);
+    uint row = s * pc.bins;
+    return max(frontArea[row + t], frontArea[row + LookupBin(dir, pc.cubeRes, pc.adjacentWidth)]) /
+           d2;
+}
+
+void Emit(uint slot, uint sender, float dist, float omega) {
+    uint i = atomicAdd(counts[1], 1u);
+    if (i < pc.endCapacity) ends[i] = End(slot, sender, dist, omega);
+}
+
+// A flat sender's depth along `w` from the receiver's centre `at` (Record's `depth`).
+float Depth(PairNode from, vec3 at, vec3 w, float dist) {
+    if (from.coneCos < kFlatCone) return dist;
+    float facing = dot(from.normal, w);
+    if (abs(facing) < 0.2) return dist;
+    float t = dot(from.normal, from.center - at) / facing;
+    return t > 0.0 ? min(t, dist) : dist;
+}
+
+void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist, float omega) {
+    uint row = node * pc.bins;
+    float sinRadius = from.radius / dist;
+    if (sinRadius > pc.splat) {
+        float s = min(1.0, sinRadius);
+        float cosRadius = sqrt(max(0.0, 1.0 - s * s));
+        uint centre = LookupBin(dir, pc.cubeRes, pc.adjacentWidth);
+        float cosTheta = min(1.0, dot(dir, dirs[centre].xyz));
+        float sinTheta = sqrt(max(0.0, 1.0 - cosTheta * cosTheta));
+        if (cosRadius * cosTheta - s * sinTheta >= pc.adjacentCos + 1e-4) {
+            // The padding repeats the centre bin, which is skipped.
+            for (uint k = 0u; k < pc.adjacentWidth; ++k) {
+                uint b = adjacent[centre * pc.adjacentWidth + k];
+                vec3 w = dirs[b].xyz;
+                if (b != centre && dot(w, dir) >= cosRadius)
+                    Emit(row + b, sender, Depth(from, at, w, dist), pc.binSolidAngle);
+            }
+        } else {
+            for (uint b = 0u; b < pc.bins; ++b) {
+                vec3 w = dirs[b].xyz;
+                if (b != centre && dot(w, dir) >= cosRadius)
+                    Emit(row + b, sender, Depth(from, at, w, dist), pc.binSolidAngle);
+            }
+        }
+        Emit(row + centre, sender, Depth(from, at, dir, dist), pc.binSolidAngle);
+        return;
+    }
+    Emit(row + LookupBin(dir, pc.cubeRes, pc.adjacentWidth), sender, Depth(from, at, dir, dist),
+         omega);
+}
+
+void Split(uint a, uint b) {
+    uint i = atomicAdd(counts[0], 1u);
+    if (i < pc.nextCapacity) next[i] = uvec2(a, b);
+}
+
+void main() {
+    uint k = gl_GlobalInvocationID.x;
+    if (k >= pc.count) return;
+    uint a = round[k].x, b = round[k].y;
+    PairNode A = nodes[a];
+    if (a == b) {  // a self-pair: its children's self-pairs and their pair
+        if (A.leaf != 0u) return;
+        uint l = a + 1u, r = A.right;
+        Split(l, l);
+        Split(r, r);
+        Split(l, r);
+        return;
+    }
+    PairNode B = nodes[b];
+    vec3 d = B.center - A.center;
+    float dist = length(d);
+    bool aGets = CanReceive(A, B, d, dist);
+    bool bGets = CanReceive(B, A, -d, dist);
+    if (!aGets && !bGets) return;
+    // Sec. 4.2.2: an end that looks bigger than a bin from the other is split.
+    bool overlap = dist <= A.radius + B.radius;
+    float dist2 = max(dist * dist, 1e-30);
+    bool splitA = A.leaf == 0u && (overlap || kPi * A.radius * A.radius / dist2 > pc.limit);
+    bool splitB = B.leaf == 0u && (overlap || kPi * B.radius * B.radius / dist2 > pc.limit);
+    if (splitB && (!splitA || B.radius >= A.radius)) {
+        Split(a, b + 1u);
+        Split(a, B.right);
+        return;
+    }
+    if (splitA) {
+        Split(a + 1u, b);
+        Split(A.right, b);
+        return;
+    }
+    if (!(dist > 0.0)) return;
+    vec3 dir = d / dist;
+    if (aGets && AboveHorizon(A, dir)) Record(a, b, B, A.center, dir, dist, Covered(b, dir, dist));
+    if (bGets && AboveHorizon(B, -dir))
+        Record(b, a, A, B.center, -dir, dist, Covered(a, -dir, dist));
+    atomicAdd(counts[2], 1u);
+}
