@@ -81,15 +81,14 @@ bool AboveHorizon(PairNode r, vec3 dir) {
     return dot(r.normal, dir) > 0.01 - below;
 }
 
-// The solid angle sender `s` covers seen along `dir` at `dist` (Build's `covered`).
-float Covered(uint s, vec3 dir, float dist) {
+// The solid angle sender `s` covers seen along `dir` at `dist` (Build's `covered`): `ahead`
+// and `back` the bins of the direction between the ends and of its opposite.
+float Covered(uint s, vec3 dir, float dist, uint ahead, uint back) {
     PairNode n = nodes[s];
     float d2 = max(dist * dist, 1e-30);
     if (n.coneCos >= kFlatCone) return n.area * abs(dot(n.normal, dir)) / d2;
-    uint t = LookupBin(-dir, pc.cubeRes, pc.adjacentWidth);
     uint row = s * pc.bins;
-    return max(frontArea[row + t], frontArea[row + LookupBin(dir, pc.cubeRes, pc.adjacentWidth)]) /
-           d2;
+    return max(frontArea[row + back], frontArea[row + ahead]) / d2;
 }
 
 void Emit(uint slot, uint sender, float dist, float omega) {
@@ -106,13 +105,13 @@ float Depth(PairNode from, vec3 at, vec3 w, float dist) {
     return t > 0.0 ? min(t, dist) : dist;
 }
 
-void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist, float omega) {
+void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist, float omega,
+            uint centre) {
     uint row = node * pc.bins;
     float sinRadius = from.radius / dist;
     if (sinRadius > pc.splat) {
         float s = min(1.0, sinRadius);
         float cosRadius = sqrt(max(0.0, 1.0 - s * s));
-        uint centre = LookupBin(dir, pc.cubeRes, pc.adjacentWidth);
         float cosTheta = min(1.0, dot(dir, dirs[centre].xyz));
         float sinTheta = sqrt(max(0.0, 1.0 - cosTheta * cosTheta));
         if (cosRadius * cosTheta - s * sinTheta >= pc.adjacentCos + 1e-4) {
@@ -133,8 +132,7 @@ void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist
         Emit(row + centre, sender, Depth(from, at, dir, dist), pc.binSolidAngle);
         return;
     }
-    Emit(row + LookupBin(dir, pc.cubeRes, pc.adjacentWidth), sender, Depth(from, at, dir, dist),
-         omega);
+    Emit(row + centre, sender, Depth(from, at, dir, dist), omega);
 }
 
 void Split(uint a, uint b) {
@@ -178,8 +176,15 @@ void main() {
     }
     if (!(dist > 0.0)) return;
     vec3 dir = d / dist;
-    if (aGets && AboveHorizon(A, dir)) Record(a, b, B, A.center, dir, dist, Covered(b, dir, dist));
-    if (bGets && AboveHorizon(B, -dir))
-        Record(b, a, A, B.center, -dir, dist, Covered(a, -dir, dist));
+    bool aRecords = aGets && AboveHorizon(A, dir);
+    bool bRecords = bGets && AboveHorizon(B, -dir);
+    if (aRecords || bRecords) {
+        uint ahead = LookupBin(dir, pc.cubeRes, pc.adjacentWidth);
+        uint back = LookupBin(-dir, pc.cubeRes, pc.adjacentWidth);
+        if (aRecords)
+            Record(a, b, B, A.center, dir, dist, Covered(b, dir, dist, ahead, back), ahead);
+        if (bRecords)
+            Record(b, a, A, B.center, -dir, dist, Covered(a, -dir, dist, back, ahead), back);
+    }
     atomicAdd(counts[2], 1u);
 }

@@ -26,19 +26,25 @@ double MsSince(std::chrono::steady_clock::time_point t) {
 // Whether some member of `r` can receive light from some point of `s`, `d` = s.center −
 // r.center at distance `dist`: a member's front faces part of s's sphere. Conservative
 // (normal cone widened by both spheres' angular radii).
-bool CanReceive(const HierarchyNode& r, const HierarchyNode& s, const glm::vec3& d, float dist) {
+// `sinCone`: the sine of r's normal cone's half angle (ConeSine).
+bool CanReceive(const HierarchyNode& r, float sinCone, const HierarchyNode& s, const glm::vec3& d,
+                float dist) {
     if (r.coneCos <= -1.0f) return true;
     const float reach = r.radius + s.radius;
     if (dist <= reach) return true;
     // θ − cone − spread < π/2, in cosines (no inverse trigonometry in the pair loop): with
     // α = cone + spread, true when α ≥ π/2, else cos θ > cos(π/2 + α) = −sin α.
     const float cosCone = std::clamp(r.coneCos, -1.0f, 1.0f);
-    const float sinCone = std::sqrt(1.0f - cosCone * cosCone);
     const float sinSpread = reach / dist;
     const float cosSpread = std::sqrt(1.0f - sinSpread * sinSpread);
     if (cosCone * cosSpread - sinCone * sinSpread <= 0.0f) return true;
     const float sinAlpha = sinCone * cosSpread + cosCone * sinSpread;
     return glm::dot(r.normal, d) / dist > -sinAlpha;
+}
+
+float ConeSine(const HierarchyNode& r) {
+    const float cosCone = std::clamp(r.coneCos, -1.0f, 1.0f);
+    return std::sqrt(1.0f - cosCone * cosCone);
 }
 
 struct Pair {
@@ -63,6 +69,8 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
     // Ends wider than half a bin's spacing are spread over the bins they cover.
     splat_ = std::sin(0.5f * dirs.Spacing());
     adjacentCos_ = std::cos(dirs.AdjacentAngle());
+    opposite_.resize(size_t(dirs.Count()));
+    for (uint32_t b = 0; b < opposite_.size(); ++b) opposite_[b] = dirs.Lookup(-dirs.Direction(b));
 }
 
 void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontArea,
@@ -87,17 +95,21 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     PENUMBRA_CHECK_EQ(frontArea.size(), nodes.size() * bins);
     PENUMBRA_CHECK(solid.empty() || solid.size() == nodes.size());
     auto start = std::chrono::steady_clock::now();
+    std::vector<float> sinCone(nodes.size());
+    tbb::parallel_for(size_t(0), nodes.size(), [&](size_t n) { sinCone[n] = ConeSine(nodes[n]); });
 
     // The solid angle sender `s` covers seen from `r` along `dir` (unit, r → s) at `dist`: a
     // flat node's area times |cos| (turned away it still hides what is behind it), another
     // cluster's larger projected area (front or back: a closed solid shows one side).
-    auto covered = [&](uint32_t s, const glm::vec3& dir, float dist) {
+    // `ahead` and `back`: the bins of the direction between the two ends and of its opposite
+    // (the one its light travels along, and the other), looked up once a pair.
+    auto covered = [&](uint32_t s, const glm::vec3& dir, float dist, uint32_t ahead,
+                       uint32_t back) {
         const HierarchyNode& n = nodes[s];
         const float d2 = std::max(dist * dist, 1e-30f);
         if (n.coneCos >= kFlatCone) return n.area * std::abs(glm::dot(n.normal, dir)) / d2;
-        const uint32_t t = dirs_.Lookup(-dir);  // the direction its light travels
         const float* row = frontArea.data() + size_t(s) * bins;
-        return std::max(row[t], row[dirs_.Lookup(dir)]) / d2;
+        return std::max(row[back], row[ahead]) / d2;
     };
 
     // CreateHierarchicalLinks, level by level: each round splits or links every pair of the
@@ -176,8 +188,8 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 const HierarchyNode& B = nodes[b];
                 const glm::vec3 d = B.center - A.center;
                 const float dist = glm::length(d);
-                const bool aGets = CanReceive(A, B, d, dist);
-                const bool bGets = CanReceive(B, A, -d, dist);
+                const bool aGets = CanReceive(A, sinCone[a], B, d, dist);
+                const bool bGets = CanReceive(B, sinCone[b], A, -d, dist);
                 if (!aGets && !bGets) continue;  // a pair's only use is what its ends receive
                 // Sec. 4.2.2: an end that looks bigger than a bin from the other is split.
                 const bool overlap = dist <= A.radius + B.radius;
@@ -199,10 +211,17 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 if (!(dist > 0.0f)) continue;  // coincident ends: no direction between them
                 const glm::vec3 dir = d / dist;
                 const size_t before = fresh.size();
-                if (aGets && AboveHorizon(A, dir))
-                    Record(a, b, B, A.center, dir, dist, covered(b, dir, dist), fresh);
-                if (bGets && AboveHorizon(B, -dir))
-                    Record(b, a, A, B.center, -dir, dist, covered(a, -dir, dist), fresh);
+                const bool aRecords = aGets && AboveHorizon(A, dir);
+                const bool bRecords = bGets && AboveHorizon(B, -dir);
+                if (aRecords || bRecords) {
+                    const uint32_t ahead = dirs_.Lookup(dir), back = dirs_.Lookup(-dir);
+                    if (aRecords)
+                        Record(a, b, B, A.center, dir, dist, covered(b, dir, dist, ahead, back),
+                               ahead, fresh);
+                    if (bRecords)
+                        Record(b, a, A, B.center, -dir, dist, covered(a, -dir, dist, back, ahead),
+                               back, fresh);
+                }
                 if (keeps && root != kFresh) {  // this pair's ends are kept with its root
                     for (size_t e = before; e < fresh.size(); ++e)
                         keepInto->push_back({fresh[e], root});
@@ -428,7 +447,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
             out.sender[k] = e.sender;
             out.weight[k] = e.weight;
             if (e.sender == kNoSender) {
-                out.travel[k] = dirs_.Lookup(-dirs_.Direction(e.bin));
+                out.travel[k] = opposite_[e.bin];
                 ++none;
             } else {
                 const HierarchyNode& from = nodes[e.sender];
@@ -438,7 +457,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 else
                     out.travel[k] = glm::dot(toLeaf, toLeaf) > 0.0f
                                         ? dirs_.Lookup(glm::normalize(toLeaf))
-                                        : dirs_.Lookup(-dirs_.Direction(e.bin));
+                                        : opposite_[e.bin];
             }
             ++k;
         }
@@ -450,7 +469,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
 
 void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode& from,
                             const glm::vec3& at, const glm::vec3& dir, float dist, float omega,
-                            std::vector<End>& ends) const {
+                            uint32_t centre, std::vector<End>& ends) const {
     const size_t bins = static_cast<size_t>(dirs_.Count());
     const size_t row = size_t(node) * bins;
     // How far along `w` from the receiver's centre the sender lies, for the bin's front-to-
@@ -473,7 +492,6 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
     if (sinRadius > splat_) {
         const float s = std::min(1.0f, sinRadius);
         const float cosRadius = std::sqrt(std::max(0.0f, 1.0f - s * s));
-        const uint32_t centre = dirs_.Lookup(dir);
         auto spread = [&](uint32_t b) {
             const glm::vec3& w = dirs_.Direction(b);
             if (b != centre && glm::dot(w, dir) >= cosRadius)
@@ -494,7 +512,7 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
         ends.push_back({uint32_t(row + centre), sender, depth(dir), dirs_.BinSolidAngle()});
         return;
     }
-    ends.push_back({uint32_t(row + dirs_.Lookup(dir)), sender, depth(dir), omega});
+    ends.push_back({uint32_t(row + centre), sender, depth(dir), omega});
 }
 
 }  // namespace penumbra

@@ -106,10 +106,12 @@ class ImplicitLinker {
         float weight;
     };
     // Records the link (`node`, centred at `at`, receives from `sender`, node `from`, along
-    // `dir` at `dist`) in the slot of `dir`'s bin with the solid angle `omega` it covers, or,
-    // when the sender looks wider than a bin, in every bin its disc spans, covering each.
+    // `dir` at `dist`) in the slot of `dir`'s bin `centre` with the solid angle `omega` it
+    // covers, or, when the sender looks wider than a bin, in every bin its disc spans,
+    // covering each.
     void Record(uint32_t node, uint32_t sender, const HierarchyNode& from, const glm::vec3& at,
-                const glm::vec3& dir, float dist, float omega, std::vector<End>& ends) const;
+                const glm::vec3& dir, float dist, float omega, uint32_t centre,
+                std::vector<End>& ends) const;
     const Directions& dirs_;
     float threshold_;
     // The ends of the pairs with no moving end, for `keptFor_` (empty: none kept), per root
@@ -125,8 +127,9 @@ class ImplicitLinker {
     Kept kept_;
     bool incremental_ = false;
     VulkanLinkCreation* device_ = nullptr;
-    float splat_ = 0.0f;        // sin of the angular radius above which an end is spread
-    float adjacentCos_ = 1.0f;  // cos of Directions::AdjacentAngle()
+    float splat_ = 0.0f;              // sin of the angular radius above which an end is spread
+    float adjacentCos_ = 1.0f;        // cos of Directions::AdjacentAngle()
+    std::vector<uint32_t> opposite_;  // per bin, the bin of the opposite direction
 };
 
 }  // namespace penumbra
