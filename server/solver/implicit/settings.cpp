@@ -26,8 +26,9 @@ std::vector<OptionSpec> Options() {
 SolverEntry ImplicitEntry() {
     return {"implicit",
             "implicit visibility (Dong et al. 2007), in progress: links rebuilt every frame, the "
-            "closest surfaces in each direction bin, any move taken in place; CPU only, and "
-            "further off the truth than antiradiance (docs/SOLVER.md)",
+            "closest surfaces in each direction bin, any move taken in place; on the CPU (on a "
+            "Vulkan device only the link creation), and further off the truth than "
+            "antiradiance (docs/SOLVER.md)",
             Options(),
             [](const Scene& scene, const SolverSettings& settings,
                const ProgressFn& progress) -> std::unique_ptr<Solver> {
