@@ -217,10 +217,11 @@ TEST(Implicit, CoaxialDiscFillsItsBins) {
     const float rEff = std::sqrt(polygon / kPi);
     const float expected = kPi * rEff * rEff / (rEff * rEff + h * h);
     std::printf("coaxial disc: E %.4f, expected %.4f\n", e, expected);
-    // Measured 5.6% high at 128 bins: the rim's bins, covered more than half, are filled
-    // (kFillCoverage). Under-filled bins would make it far too dark (the closest element's
-    // own solid angle alone gave a room 13% of its light).
-    EXPECT_NEAR(e, expected, 0.08f * expected);
+    // Measured 3.9% low at 128 bins (5.6% high while the rim's bins, covered more than half,
+    // were filled though they border the black sky: session 34 fills only bins with no
+    // near-empty neighbour). Under-filled bins would make it far too dark (the closest
+    // element's own solid angle alone gave a room 13% of its light).
+    EXPECT_NEAR(e, expected, 0.05f * expected);
 }
 
 // Two rooms side by side, split by a wall 2 cm thick (a fifth of an element): only one has

@@ -17,7 +17,10 @@ namespace penumbra {
 namespace {
 
 // A bin covered at least this much is filled by its shares (ImplicitLinker::Build).
-constexpr float kFillCoverage = 0.5f;
+constexpr float kFillCoverage = 0.25f;
+// A front bin covered less than this shows mostly the environment: the bins next to it lie
+// at the edge of what is there, and are not filled.
+constexpr float kEdgeCoverage = 0.1f;
 
 double MsSince(std::chrono::steady_clock::time_point t) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
@@ -330,6 +333,17 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
         };
         std::vector<Front> fronts;
         std::vector<std::pair<size_t, uint32_t>> unseen;
+        // Per bin the solid angle its shares cover (−1: not a front bin); the bins not
+        // covered whole, with their shares' range in the leaf's list.
+        std::vector<float> cover(bins);
+        struct Partial {
+            uint32_t bin;
+            size_t first, end;
+        };
+        std::vector<Partial> partial;
+        // A bin more than a spacing above the receiver's horizon lies above it whole (one
+        // nearer the horizon is partly below it, where nothing covers it).
+        const float aboveHorizon = std::sin(dirs_.Spacing());
         for (size_t i = range.begin(); i != range.end(); ++i) {
             const uint32_t leaf = h.leaves[i];
             chain.clear();
@@ -340,6 +354,8 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
             std::vector<Entry>& list = perLeaf[i];
             fronts.clear();
             unseen.clear();
+            partial.clear();
+            std::fill(cover.begin(), cover.end(), -1.0f);
             for (size_t b = 0; b < bins; ++b) {
                 const glm::vec3& w = dirs_.Direction(uint32_t(b));
                 const float c = glm::dot(normal, w);
@@ -402,17 +418,31 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                     list.push_back({uint32_t(b), sender, c * norm * take});
                     left -= take;
                 }
-                // A bin mostly covered is a surface the discretisation left gaps in (its
-                // ends' centres fall into the bins unevenly): its shares fill it. A bin
-                // covered less than kFillCoverage shows the environment around what is there
-                // (a small object under the sky).
-                if (left > 1e-4f * omegaBin && omegaBin - left >= kFillCoverage * omegaBin) {
-                    const float scale = omegaBin / (omegaBin - left);
-                    for (size_t k = bin0; k < list.size(); ++k) list[k].weight *= scale;
+                cover[b] = omegaBin - left;
+                if (left > 1e-4f * omegaBin) partial.push_back({uint32_t(b), bin0, list.size()});
+            }
+            // A bin partly covered (kFillCoverage or more) is a surface the discretisation left
+            // gaps in (its ends' centres fall into the bins unevenly): its shares fill it,
+            // unless a front bin next to it, above the horizon, is nearly empty
+            // (kEdgeCoverage): then it lies at the edge of what is there, against the
+            // environment (a blocker's silhouette under a sky: filled, its bins would make it
+            // look larger than it is). What a bin's shares leave unfilled shows the
+            // environment.
+            for (const Partial& p : partial) {
+                float left = omegaBin - cover[p.bin];
+                bool fill = cover[p.bin] >= kFillCoverage * omegaBin;
+                for (uint32_t j : dirs_.Adjacent(p.bin))
+                    if (fill && cover[j] >= 0.0f && cover[j] < kEdgeCoverage * omegaBin &&
+                        glm::dot(normal, dirs_.Direction(j)) > aboveHorizon)
+                        fill = false;
+                if (fill) {
+                    const float scale = omegaBin / cover[p.bin];
+                    for (size_t k = p.first; k < p.end; ++k) list[k].weight *= scale;
                     left = 0.0f;
                 }
                 if (left > 1e-4f * omegaBin)
-                    list.push_back({uint32_t(b), kNoSender, c * norm * left});
+                    list.push_back(
+                        {p.bin, kNoSender, glm::dot(normal, dirs_.Direction(p.bin)) * norm * left});
             }
             // A solid whose near faces this leaf sees somewhere has it outside: its far faces
             // lie behind near ones everywhere, also where the near faces' ends fell into
