@@ -60,6 +60,18 @@ double ApartFromAFreshBuild(Solver& solver, const Scene& scene, const SolverSett
                                 testing::AllVertices(*fresh, scene, Channel::kIndirect));
 }
 
+// A grey box (dynamic, "box") on a grey ground under a constant sky of radiance 1.
+Scene BoxOnGroundUnderASky() {
+    SceneBuilder b;
+    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.6f));
+    b.AddTiledQuad("ground", grey, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 8, 8, {0, 1, 0});
+    b.AddBox("box", grey, {0, 0.25f, 0}, {0.3f, 0.5f, 0.3f}, 0.0f, false);
+    b.SetDynamic("box", {0, 0, 0});
+    Scene scene = b.Build();
+    scene.environment = ConstantEnvironment(glm::vec3(1.0f));
+    return scene;
+}
+
 // An open plane under a constant sky of radiance 1: nothing stands above it, every front bin
 // reads the sky, E = π everywhere.
 TEST(Implicit, OpenPlaneUnderASkyReceivesPiL) {
@@ -319,13 +331,7 @@ TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
         device->Iterate(10);
         compare(scene, *cpu, *device, "Cornell box");
     }
-    SceneBuilder b;
-    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.6f));
-    b.AddTiledQuad("ground", grey, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 8, 8, {0, 1, 0});
-    b.AddBox("box", grey, {0, 0.25f, 0}, {0.3f, 0.5f, 0.3f}, 0.0f, false);
-    b.SetDynamic("box", {0, 0, 0});
-    Scene scene = b.Build();
-    scene.environment = ConstantEnvironment(glm::vec3(1.0f));
+    Scene scene = BoxOnGroundUnderASky();
     auto cpu = CreateSolver(scene, Implicit(0.08f));
     SolverSettings moving = onDevice;
     moving.elementSize = 0.08f;
@@ -379,13 +385,7 @@ TEST(Implicit, VulkanLinkCreationInChunksMatchesTheCpu) {
 // afresh at the new pose (whose hierarchy is clustered there; the answers differ only by
 // that).
 TEST(Implicit, AMoveLandsNearAFreshBuild) {
-    SceneBuilder b;
-    uint32_t grey = b.AddMaterial("grey", glm::vec3(0.6f));
-    b.AddTiledQuad("ground", grey, {-1, 0, -1}, {2, 0, 0}, {0, 0, 2}, 8, 8, {0, 1, 0});
-    b.AddBox("box", grey, {0, 0.25f, 0}, {0.3f, 0.5f, 0.3f}, 0.0f, false);
-    b.SetDynamic("box", {0, 0, 0});
-    Scene scene = b.Build();
-    scene.environment = ConstantEnvironment(glm::vec3(1.0f));
+    Scene scene = BoxOnGroundUnderASky();
     auto solver = CreateSolver(scene, Implicit(0.08f));
     solver->Iterate(30);
     const std::vector<glm::vec3> before = testing::AllVertices(*solver, scene, Channel::kIndirect);
