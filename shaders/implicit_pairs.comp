@@ -54,7 +54,8 @@ layout(push_constant) uniform Push {
     float limit;          // linkThreshold × ω_bin
     float binSolidAngle;  // ω_bin
     float splat;          // sin of the angular radius above which an end is spread
-    float adjacentCos;    // cos of Directions::AdjacentAngle()
+    float adjacentAngle;  // Directions::AdjacentAngle()
+    float binRadius;      // the radius of a disc of a bin's solid angle
 } pc;
 
 #include "directions.glsl"
@@ -105,31 +106,43 @@ float Depth(PairNode from, vec3 at, vec3 w, float dist) {
     return t > 0.0 ? min(t, dist) : dist;
 }
 
+// LensArea (implicit_links.cpp): the overlap of discs of radii r and R, centres d apart.
+float LensArea(float d, float r, float R) {
+    if (d >= r + R) return 0.0;
+    float small = min(r, R), large = max(r, R);
+    if (d <= large - small) return kPi * small * small;
+    float a = r * r * acos(clamp((d * d + r * r - R * R) / (2.0 * d * r), -1.0, 1.0));
+    float b = R * R * acos(clamp((d * d + R * R - r * r) / (2.0 * d * R), -1.0, 1.0));
+    float k = (-d + r + R) * (d + r - R) * (d - r + R) * (d + r + R);
+    return a + b - 0.5 * sqrt(max(0.0, k));
+}
+
+// An end wider than half a bin's spacing: each bin its disc overlaps, with the overlap.
+void Spread(uint row, uint b, uint sender, PairNode from, vec3 at, vec3 dir, float dist,
+            float rho) {
+    vec3 w = dirs[b].xyz;
+    float theta = acos(clamp(dot(w, dir), -1.0, 1.0));
+    float a = min(pc.binSolidAngle, LensArea(theta, rho, pc.binRadius));
+    if (a > 1e-3 * pc.binSolidAngle) Emit(row + b, sender, Depth(from, at, w, dist), a);
+}
+
 void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist, float omega,
             uint centre) {
     uint row = node * pc.bins;
     float sinRadius = from.radius / dist;
     if (sinRadius > pc.splat) {
-        float s = min(1.0, sinRadius);
-        float cosRadius = sqrt(max(0.0, 1.0 - s * s));
-        float cosTheta = min(1.0, dot(dir, dirs[centre].xyz));
-        float sinTheta = sqrt(max(0.0, 1.0 - cosTheta * cosTheta));
-        if (cosRadius * cosTheta - s * sinTheta >= pc.adjacentCos + 1e-4) {
-            // The padding repeats the centre bin, which is skipped.
+        float rho = asin(min(1.0, sinRadius));
+        float theta = acos(clamp(dot(dir, dirs[centre].xyz), -1.0, 1.0));
+        if (theta + rho + pc.binRadius <= pc.adjacentAngle - 1e-3) {
+            // The padding repeats the centre bin, which is taken first.
+            Spread(row, centre, sender, from, at, dir, dist, rho);
             for (uint k = 0u; k < pc.adjacentWidth; ++k) {
                 uint b = adjacent[centre * pc.adjacentWidth + k];
-                vec3 w = dirs[b].xyz;
-                if (b != centre && dot(w, dir) >= cosRadius)
-                    Emit(row + b, sender, Depth(from, at, w, dist), pc.binSolidAngle);
+                if (b != centre) Spread(row, b, sender, from, at, dir, dist, rho);
             }
         } else {
-            for (uint b = 0u; b < pc.bins; ++b) {
-                vec3 w = dirs[b].xyz;
-                if (b != centre && dot(w, dir) >= cosRadius)
-                    Emit(row + b, sender, Depth(from, at, w, dist), pc.binSolidAngle);
-            }
+            for (uint b = 0u; b < pc.bins; ++b) Spread(row, b, sender, from, at, dir, dist, rho);
         }
-        Emit(row + centre, sender, Depth(from, at, dir, dist), pc.binSolidAngle);
         return;
     }
     Emit(row + centre, sender, Depth(from, at, dir, dist), omega);

@@ -128,7 +128,7 @@ class ImplicitLinker {
     bool incremental_ = false;
     VulkanLinkCreation* device_ = nullptr;
     float splat_ = 0.0f;              // sin of the angular radius above which an end is spread
-    float adjacentCos_ = 1.0f;        // cos of Directions::AdjacentAngle()
+    float binRadius_ = 0.0f;          // the radius of a disc of a bin's solid angle
     std::vector<uint32_t> opposite_;  // per bin, the bin of the opposite direction
 };
 

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 
 #include "base/check.h"
 #include "gpu/buffer.h"
@@ -40,7 +41,7 @@ PENUMBRA_GPU_FIELD(ImplicitLinker::End, omega, 12);
 
 struct PairPush {
     uint32_t count, nextCapacity, endCapacity, bins, cubeRes, adjacentWidth;
-    float limit, binSolidAngle, splat, adjacentCos;
+    float limit, binSolidAngle, splat, adjacentAngle, binRadius;
 };
 // shaders/implicit_pairs.comp (push constants).
 PENUMBRA_GPU_FIELD(PairPush, count, 0);
@@ -52,7 +53,8 @@ PENUMBRA_GPU_FIELD(PairPush, adjacentWidth, 20);
 PENUMBRA_GPU_FIELD(PairPush, limit, 24);
 PENUMBRA_GPU_FIELD(PairPush, binSolidAngle, 28);
 PENUMBRA_GPU_FIELD(PairPush, splat, 32);
-PENUMBRA_GPU_FIELD(PairPush, adjacentCos, 36);
+PENUMBRA_GPU_FIELD(PairPush, adjacentAngle, 36);
+PENUMBRA_GPU_FIELD(PairPush, binRadius, 40);
 
 constexpr uint32_t kGroup = 64;  // local_size_x
 
@@ -142,7 +144,8 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
     push.limit = s.threshold * omegaBin;
     push.binSolidAngle = omegaBin;
     push.splat = std::sin(0.5f * s.dirs.Spacing());
-    push.adjacentCos = std::cos(s.dirs.AdjacentAngle());
+    push.adjacentAngle = s.dirs.AdjacentAngle();
+    push.binRadius = std::sqrt(omegaBin / std::numbers::pi_v<float>);
 
     // The rounds: the pairs of a round go up in chunks that fit the device's storage-buffer
     // limit with their next pairs (3 at most a pair) and ends; a chunk whose ends overflow
