@@ -118,12 +118,17 @@ float LensArea(float d, float r, float R) {
 }
 
 // An end wider than half a bin's spacing: each bin its disc overlaps, with the overlap.
+const float kMinOverlap = 0.2;  // implicit_links.cpp
+
+// `cosReach`: cos(ρ + r_bin), below which a bin does not overlap the disc.
 void Spread(uint row, uint b, uint sender, PairNode from, vec3 at, vec3 dir, float dist,
-            float rho) {
+            float rho, float cosReach) {
     vec3 w = dirs[b].xyz;
-    float theta = acos(clamp(dot(w, dir), -1.0, 1.0));
+    float c = dot(w, dir);
+    if (c < cosReach) return;
+    float theta = acos(clamp(c, -1.0, 1.0));
     float a = min(pc.binSolidAngle, LensArea(theta, rho, pc.binRadius));
-    if (a > 1e-3 * pc.binSolidAngle) Emit(row + b, sender, Depth(from, at, w, dist), a);
+    if (a > kMinOverlap * pc.binSolidAngle) Emit(row + b, sender, Depth(from, at, w, dist), a);
 }
 
 void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist, float omega,
@@ -132,16 +137,18 @@ void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist
     float sinRadius = from.radius / dist;
     if (sinRadius > pc.splat) {
         float rho = asin(min(1.0, sinRadius));
+        float cosReach = cos(min(kPi, rho + pc.binRadius));
         float theta = acos(clamp(dot(dir, dirs[centre].xyz), -1.0, 1.0));
         if (theta + rho + pc.binRadius <= pc.adjacentAngle - 1e-3) {
             // The padding repeats the centre bin, which is taken first.
-            Spread(row, centre, sender, from, at, dir, dist, rho);
+            Spread(row, centre, sender, from, at, dir, dist, rho, cosReach);
             for (uint k = 0u; k < pc.adjacentWidth; ++k) {
                 uint b = adjacent[centre * pc.adjacentWidth + k];
-                if (b != centre) Spread(row, b, sender, from, at, dir, dist, rho);
+                if (b != centre) Spread(row, b, sender, from, at, dir, dist, rho, cosReach);
             }
         } else {
-            for (uint b = 0u; b < pc.bins; ++b) Spread(row, b, sender, from, at, dir, dist, rho);
+            for (uint b = 0u; b < pc.bins; ++b)
+                Spread(row, b, sender, from, at, dir, dist, rho, cosReach);
         }
         return;
     }

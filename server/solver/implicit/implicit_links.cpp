@@ -21,6 +21,9 @@ constexpr float kFillCoverage = 0.25f;
 // A front bin covered less than this shows mostly the environment: the bins next to it lie
 // at the edge of what is there, and are not filled.
 constexpr float kEdgeCoverage = 0.1f;
+// A spread end covers a bin it overlaps by at least this much of the bin (ImplicitLinker::
+// Record): smaller slivers add shares, not light.
+constexpr float kMinOverlap = 0.2f;
 
 double MsSince(std::chrono::steady_clock::time_point t) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
@@ -542,11 +545,17 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
     if (sinRadius > splat_) {
         const float rho = std::asin(std::min(1.0f, sinRadius));
         const float omegaBin = dirs_.BinSolidAngle();
+        // Bins farther than ρ + r_bin from `dir` do not overlap it (a cosine test before the
+        // arc cosine).
+        const float cosReach = std::cos(std::min(std::numbers::pi_v<float>, rho + binRadius_));
         auto spread = [&](uint32_t b) {
             const glm::vec3& w = dirs_.Direction(b);
-            const float theta = std::acos(std::clamp(glm::dot(w, dir), -1.0f, 1.0f));
+            const float c = glm::dot(w, dir);
+            if (c < cosReach) return;
+            const float theta = std::acos(std::clamp(c, -1.0f, 1.0f));
             const float a = std::min(omegaBin, LensArea(theta, rho, binRadius_));
-            if (a > 1e-3f * omegaBin) ends.push_back({uint32_t(row + b), sender, depth(w), a});
+            if (a > kMinOverlap * omegaBin)
+                ends.push_back({uint32_t(row + b), sender, depth(w), a});
         };
         const float theta =
             std::acos(std::clamp(glm::dot(dir, dirs_.Direction(centre)), -1.0f, 1.0f));
