@@ -60,6 +60,17 @@ double ApartFromAFreshBuild(Solver& solver, const Scene& scene, const SolverSett
                                 testing::AllVertices(*fresh, scene, Channel::kIndirect));
 }
 
+// Two builds' links equal to the bit, share for share, with the same pair counts.
+void ExpectSameLinks(const ImplicitLinks& a, const ImplicitLinks& b) {
+    EXPECT_EQ(a.offsets, b.offsets);
+    EXPECT_EQ(a.bin, b.bin);
+    EXPECT_EQ(a.sender, b.sender);
+    EXPECT_EQ(a.weight, b.weight);
+    EXPECT_EQ(a.travel, b.travel);
+    EXPECT_EQ(a.pairs, b.pairs);
+    EXPECT_EQ(a.linked, b.linked);
+}
+
 // A grey box (dynamic, "box") on a grey ground under a constant sky of radiance 1.
 Scene BoxOnGroundUnderASky() {
     SceneBuilder b;
@@ -375,12 +386,7 @@ TEST(Implicit, VulkanLinkCreationInChunksMatchesTheCpu) {
                 chunked.pairs, chunked.Count(), cpu.Count(), rounds, chunks);
     EXPECT_GT(chunks, 100u);
     EXPECT_LT(rounds, 40u);
-    EXPECT_EQ(chunked.pairs, whole.pairs);
-    EXPECT_EQ(chunked.linked, whole.linked);
-    EXPECT_EQ(chunked.offsets, whole.offsets);
-    EXPECT_EQ(chunked.sender, whole.sender);
-    EXPECT_EQ(chunked.bin, whole.bin);
-    EXPECT_EQ(chunked.weight, whole.weight);
+    ExpectSameLinks(chunked, whole);
     EXPECT_EQ(chunked.pairs, cpu.pairs);
     EXPECT_EQ(chunked.linked, cpu.linked);
     EXPECT_NEAR(double(chunked.Count()), double(cpu.Count()), 1e-4 * double(cpu.Count()));
@@ -592,13 +598,7 @@ TEST(Implicit, KeptLinksEqualAFullBuild) {
             "shares, %zu pairs, create %.1f ms, push %.1f ms)\n",
             pose, links.sender.size(), links.pairs, links.msCreate, links.msPush,
             fresh.sender.size(), fresh.pairs, fresh.msCreate, fresh.msPush);
-        EXPECT_EQ(links.offsets, fresh.offsets);
-        EXPECT_EQ(links.bin, fresh.bin);
-        EXPECT_EQ(links.sender, fresh.sender);
-        EXPECT_EQ(links.weight, fresh.weight);
-        EXPECT_EQ(links.travel, fresh.travel);
-        EXPECT_EQ(links.pairs, fresh.pairs);
-        EXPECT_EQ(links.linked, fresh.linked);
+        ExpectSameLinks(links, fresh);
     }
     // Another moving set (the plinth's nodes as well): everything built again.
     std::vector<uint8_t> more(h.size(), 1);
