@@ -116,6 +116,8 @@ Directions::Directions(int count) : count_(count) {
                 }
                 cube_[(f * cubeRes_ + v) * cubeRes_ + u] = best;
             }
+    opposite_.resize(count);
+    for (int b = 0; b < count; ++b) opposite_[b] = Lookup(-dirs_[b]);
 
     // Spreading tables: for each level, bins within 2.5σ with Gaussian weights, Σ = 1.
     offsets_.assign(kLevels * (count + 1), 0);

@@ -51,6 +51,9 @@ class Directions {
     uint32_t LookupWithin(const glm::vec3& d, const glm::vec3& a, const glm::vec3& b) const;
     // π / Σ_b ω_bin max(0, n·ω_b): corrects the discrete cosine integral over one side.
     float CosineNorm(const glm::vec3& n) const;
+    // The bin of bin `bin`'s opposite direction (Lookup(−ω_bin): the bins need not come in
+    // opposite pairs).
+    uint32_t Opposite(uint32_t bin) const { return opposite_[bin]; }
 
     // Gaussian width (radians) of spread level k.
     float LevelSigma(int level) const;
@@ -94,6 +97,7 @@ class Directions {
     // greedy walk over `adjacent_` to the exact nearest bin.
     int cubeRes_;
     std::vector<uint32_t> cube_;
+    std::vector<uint32_t> opposite_;
     std::vector<std::vector<uint32_t>> adjacent_;
     std::vector<uint32_t> offsets_;
     std::vector<BinWeight> weights_;

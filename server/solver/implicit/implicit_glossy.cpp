@@ -65,7 +65,7 @@ void ImplicitSolver::MirrorRows() {
         uint32_t image[Directions::kMaxBins];
         MirrorBins(dirs_, n, image);
         uint32_t* row = mirror_.data() + g * bins;
-        for (int b = 0; b < bins; ++b) row[b] = image[opposite_[b]];
+        for (int b = 0; b < bins; ++b) row[b] = image[dirs_.Opposite(b)];
     });
 }
 

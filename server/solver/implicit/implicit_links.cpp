@@ -89,8 +89,6 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
     // Ends wider than half a bin's spacing are spread over the bins they cover.
     splat_ = std::sin(0.5f * dirs.Spacing());
     binRadius_ = std::sqrt(dirs.BinSolidAngle() / std::numbers::pi_v<float>);
-    opposite_.resize(size_t(dirs.Count()));
-    for (uint32_t b = 0; b < opposite_.size(); ++b) opposite_[b] = dirs.Lookup(-dirs.Direction(b));
 }
 
 void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontArea,
@@ -350,9 +348,10 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
         };
         std::vector<Front> fronts;
         std::vector<std::pair<size_t, uint32_t>> unseen;
-        // Per bin the solid angle its shares cover (−1: not a front bin); the bins not
-        // covered whole, with their shares' range in the leaf's list.
-        std::vector<float> cover(bins);
+        // Per bin the solid angle its shares cover (−1: not a front bin) and its cosine to the
+        // leaf's normal; the bins not covered whole, with their shares' range in the leaf's
+        // list.
+        std::vector<float> cover(bins), rise(bins);
         struct Partial {
             uint32_t bin;
             size_t first, end;
@@ -376,6 +375,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
             for (size_t b = 0; b < bins; ++b) {
                 const glm::vec3& w = dirs_.Direction(uint32_t(b));
                 const float c = glm::dot(normal, w);
+                rise[b] = c;
                 if (!(c > 0.0f)) continue;
                 // The chain's slots for this bin, each sorted nearest first, merged until
                 // the bin is full (most fill after a few links).
@@ -450,7 +450,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 bool fill = cover[p.bin] >= kFillCoverage * omegaBin;
                 for (uint32_t j : dirs_.Adjacent(p.bin))
                     if (fill && cover[j] >= 0.0f && cover[j] < kEdgeCoverage * omegaBin &&
-                        glm::dot(normal, dirs_.Direction(j)) > aboveHorizon)
+                        rise[j] > aboveHorizon)
                         fill = false;
                 if (fill) {
                     const float scale = omegaBin / cover[p.bin];
@@ -458,8 +458,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                     left = 0.0f;
                 }
                 if (left > 1e-4f * omegaBin)
-                    list.push_back(
-                        {p.bin, kNoSender, glm::dot(normal, dirs_.Direction(p.bin)) * norm * left});
+                    list.push_back({p.bin, kNoSender, rise[p.bin] * norm * left});
             }
             // A solid whose near faces this leaf sees somewhere has it outside: its far faces
             // lie behind near ones everywhere, also where the near faces' ends fell into
@@ -494,7 +493,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
             out.sender[k] = e.sender;
             out.weight[k] = e.weight;
             if (e.sender == kNoSender) {
-                out.travel[k] = opposite_[e.bin];
+                out.travel[k] = dirs_.Opposite(e.bin);
                 ++none;
             } else {
                 const HierarchyNode& from = nodes[e.sender];
@@ -504,7 +503,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 else
                     out.travel[k] = glm::dot(toLeaf, toLeaf) > 0.0f
                                         ? dirs_.Lookup(glm::normalize(toLeaf))
-                                        : opposite_[e.bin];
+                                        : dirs_.Opposite(e.bin);
             }
             ++k;
         }

@@ -127,9 +127,8 @@ class ImplicitLinker {
     Kept kept_;
     bool incremental_ = false;
     VulkanLinkCreation* device_ = nullptr;
-    float splat_ = 0.0f;              // sin of the angular radius above which an end is spread
-    float binRadius_ = 0.0f;          // the radius of a disc of a bin's solid angle
-    std::vector<uint32_t> opposite_;  // per bin, the bin of the opposite direction
+    float splat_ = 0.0f;      // sin of the angular radius above which an end is spread
+    float binRadius_ = 0.0f;  // the radius of a disc of a bin's solid angle
 };
 
 }  // namespace penumbra

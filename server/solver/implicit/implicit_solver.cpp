@@ -70,8 +70,6 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
     if (progress) progress("clustering", 0.0);
     hierarchy_ = BuildHierarchy(surfels_);
     FindSolids(scene);
-    opposite_.resize(dirs_.Count());
-    for (int b = 0; b < dirs_.Count(); ++b) opposite_[b] = dirs_.Lookup(-dirs_.Direction(b));
     sky_.Update(scene.environment, dirs_, environment_);
     std::vector<uint32_t> order;
     for (uint32_t node : hierarchy_.leaves) order.push_back(hierarchy_.nodes[node].surfel);
@@ -245,9 +243,9 @@ void ImplicitSolver::Bounce() {
                             if (len > 0.0f) {
                                 const uint32_t t = dirs_.Lookup(d / len);
                                 const size_t row = size_t(s) * bins;
-                                l += GlossySent(
-                                    s, t,
-                                    std::max(projected_[row + t], projected_[row + opposite_[t]]));
+                                l += GlossySent(s, t,
+                                                std::max(projected_[row + t],
+                                                         projected_[row + dirs_.Opposite(t)]));
                             }
                         }
                     } else if (travel != kAway) {
@@ -256,8 +254,8 @@ void ImplicitSolver::Bounce() {
                         // back-facing projected areas (a closed solid hides its
                         // back faces behind its front ones; a sheet seen from
                         // behind is a dark blocker).
-                        const float p =
-                            std::max(projected_[row + travel], projected_[row + opposite_[travel]]);
+                        const float p = std::max(projected_[row + travel],
+                                                 projected_[row + dirs_.Opposite(travel)]);
                         if (p > 0.0f) l = intensity_[row + travel] / p;
                         if (glossy && glossyNode_[s]) l += GlossySent(s, travel, p);
                     }

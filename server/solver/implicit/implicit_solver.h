@@ -109,7 +109,6 @@ class ImplicitSolver : public Solver {
     Surfels surfels_;
     Hierarchy hierarchy_;
     Directions dirs_;
-    std::vector<uint32_t> opposite_;  // per bin: the bin of the opposite direction
     // With --device gpu or lavapipe: the device the links are created on (the rest runs here).
     std::unique_ptr<gpu::Context> device_;
     std::unique_ptr<VulkanLinkCreation> vulkanLinks_;
