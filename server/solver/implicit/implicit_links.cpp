@@ -113,8 +113,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     PENUMBRA_CHECK_EQ(frontArea.size(), nodes.size() * bins);
     PENUMBRA_CHECK(solid.empty() || solid.size() == nodes.size());
     auto start = std::chrono::steady_clock::now();
-    std::vector<float> sinCone(nodes.size());
-    tbb::parallel_for(size_t(0), nodes.size(), [&](size_t n) { sinCone[n] = ConeSine(nodes[n]); });
+    std::vector<float> sinCone(nodes.size());  // per node, ConeSine (the CPU's rounds)
 
     // The solid angle sender `s` covers seen from `r` along `dir` (unit, r → s) at `dist`: a
     // flat node's area times |cos| (turned away it still hides what is behind it), another
@@ -140,8 +139,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // their ends, pairs and links are kept per root; a later build given the same `moving`
     // takes a root's ends where it meets that root, and splits any other kept pair afresh.
     constexpr uint32_t kFresh = 0xffffffffu;
-    std::vector<Pair> round{{0, 0, kFresh}};
-    if (device_) round.clear();  // the rounds run on the device, below
+    std::vector<Pair> round;  // the root's self-pair, below (none: the rounds run on the device)
     tbb::enumerable_thread_specific<std::vector<Pair>> next;
     tbb::enumerable_thread_specific<std::vector<End>> recorded;
     struct KeptEnd {
@@ -156,12 +154,17 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     std::atomic<uint32_t> rootCount{0};
     std::atomic<size_t> pairs{0}, linked{0};
     const bool keeps = still && !incremental_;
-    if (device_) {  // the same rounds on the device (vulkan_links.h): its ends stand for the
-                    // threads'
+    // The rounds on the device (vulkan_links.h), its ends standing for the threads', or here
+    // from the root's self-pair.
+    if (device_) {
         size_t devicePairs = 0, deviceLinked = 0;
         device_->Create(h, frontArea, recorded.local(), devicePairs, deviceLinked);
         pairs = devicePairs;
         linked = deviceLinked;
+    } else {
+        round.push_back({0, 0, kFresh});
+        tbb::parallel_for(size_t(0), nodes.size(),
+                          [&](size_t n) { sinCone[n] = ConeSine(nodes[n]); });
     }
     auto keyOf = [](uint32_t a, uint32_t b) { return uint64_t(a) << 32 | b; };
     while (!round.empty()) {
