@@ -116,8 +116,10 @@ struct StageRun {
     int iterations = 0;
 };
 
-StageRun RunStage(const Scene& scene, float elementSize, const Stage& stage) {
+StageRun RunStage(const Scene& scene, const std::string& solverName, float elementSize,
+                  const Stage& stage) {
     SolverSettings s;
+    s.solver = solverName;
     s.elementSize = elementSize;
     s.device = DeviceChoice::kCpu;
     auto t = Clock::now();
@@ -171,13 +173,14 @@ Scene FurnaceScene() {
 }
 
 // The gather stage's table for one scene (against `truth`) into `md` and `js`.
-void GatherTable(const Scene& scene, const IrradianceFile& truth, float elementSize,
-                 std::ostringstream& md, nlohmann::json& js) {
+void GatherTable(const Scene& scene, const IrradianceFile& truth, const std::string& solverName,
+                 float elementSize, std::ostringstream& md, nlohmann::json& js) {
     char line[512];
     std::snprintf(line, sizeof line,
-                  "The gather stage, part by part (as `bake` builds it: 128 bins, 64 behind "
-                  "the final gather; element size %s, until an iteration changes the answer "
-                  "by < 10⁻³):\n\n",
+                  "The gather stage, part by part (as `bake --solver %s` builds it%s; element "
+                  "size %s, until an iteration changes the answer by < 10⁻³):\n\n",
+                  solverName.c_str(),
+                  solverName == "antiradiance" ? ": 128 bins, 64 behind the final gather" : "",
                   elementSize > 0 ? (std::to_string(elementSize).substr(0, 4) + " m").c_str()
                                   : "the scene's default");
     md << line;
@@ -187,7 +190,7 @@ void GatherTable(const Scene& scene, const IrradianceFile& truth, float elementS
     for (const auto& p : truth.primitives) truthVertices.push_back(p.irradiance);
     std::string notes;  // what was declined, once, after the table
     for (const Stage& stage : kStages) {
-        StageRun r = RunStage(scene, elementSize, stage);
+        StageRun r = RunStage(scene, solverName, elementSize, stage);
         IrradianceResult res;
         res.primitives = r.perVertex;
         const Comparison c = Compare(ToIrradianceFile(scene, res), truth);
@@ -216,15 +219,17 @@ void GatherTable(const Scene& scene, const IrradianceFile& truth, float elementS
 }
 
 // The white furnace: the worst vertex's distance from 2π per stage.
-void FurnaceTable(std::ostringstream& md, nlohmann::json& report) {
+void FurnaceTable(const std::string& solverName, std::ostringstream& md, nlohmann::json& report) {
     const Scene scene = FurnaceScene();
     const double expected = 2.0 * 3.14159265358979;
     md << "### white furnace with blockers\n\nEvery surface emits 1 nit and reflects 0.5: "
-          "E = 2π at every vertex, exactly. 0.1 m elements; bins as `bake` picks them (128, "
-          "64 behind the final gather).\n\n"
+          "E = 2π at every vertex, exactly. 0.1 m elements; solver `"
+       << solverName << "`, bins as `bake` picks them"
+       << (solverName == "antiradiance" ? " (128, 64 behind the final gather)" : "")
+       << ".\n\n"
           "| stage | worst vertex | mean | seconds |\n|---|---|---|---|\n";
     for (const Stage& stage : kStages) {
-        StageRun r = RunStage(scene, 0.1f, stage);
+        StageRun r = RunStage(scene, solverName, 0.1f, stage);
         double worst = 0, sum = 0;
         size_t n = 0;
         for (const auto& p : r.perVertex)
@@ -267,13 +272,26 @@ int main(int argc, char** argv) {
     app.add_flag("--gather-only", gatherOnly,
                  "only the gather stage's table per scene (no solver sweep, no path tracer)");
     app.add_option("--furnace", furnace, "the white furnace's table too")->capture_default_str();
+    std::string solverName = "antiradiance";
+    app.add_option("--solver", solverName,
+                   "the solver behind the gather stage's tables and the furnace (another than "
+                   "antiradiance: --gather-only, the sweep is the antiradiance solver's)")
+        ->capture_default_str();
     CLI11_PARSE(app, argc, argv);
+    if (solverName != "antiradiance" && !gatherOnly) {
+        std::fprintf(stderr,
+                     "--solver %s needs --gather-only (the sweep sets antiradiance "
+                     "options)\n",
+                     solverName.c_str());
+        return 2;
+    }
 
     try {
         std::ostringstream md;
         nlohmann::json report;
         report["truth_samples"] = truthSamples;
-        if (furnace) FurnaceTable(md, report);
+        report["solver"] = solverName;
+        if (furnace) FurnaceTable(solverName, md, report);
         for (const std::string& name : scenes) {
             std::fprintf(stderr, "%s: reference at %d samples...\n", name.c_str(), truthSamples);
             Scene scene = LoadGltf(sceneDir + "/" + name + ".gltf");
@@ -320,7 +338,7 @@ int main(int argc, char** argv) {
             js["reference"]["samples_for_1pct"] = n1;
             js["reference"]["seconds_for_1pct"] = t1;
             const Sweep sweep = SweepFor(name);
-            GatherTable(scene, truth, name == "office" ? 0.0f : 0.1f, md, js);
+            GatherTable(scene, truth, solverName, name == "office" ? 0.0f : 0.1f, md, js);
             if (gatherOnly) {
                 report["scenes"][name] = js;
                 continue;
