@@ -39,14 +39,20 @@ double Median(std::vector<double> v) {
 }
 
 // The clutter suite's 2 m room under its ceiling panel, and a "cloth": a 0.8 m square of
-// side × side tiles (4 vertices a tile: 3,364 at 29) hanging tilted in the middle, movable.
-Scene ClothRoom(int side) {
+// side × side tiles hanging tilted in the middle, movable. `shared`: one mesh, its tiles
+// sharing their corners ((side + 1)² vertices: 3,364 at 57), as a skinned or morphing mesh
+// is; else a tile soup (4 vertices a tile: 3,364 at 29, each inner corner four times).
+Scene ClothRoom(int side, bool shared) {
     SceneBuilder b;
     scenes::AddClutterRoom(b);
     const uint32_t cloth = b.AddMaterial("cloth", glm::vec3(0.6f, 0.5f, 0.4f));
     const glm::vec3 c(1.0f, 0.9f, 1.0f);
-    b.AddTiledQuad("cloth", cloth, c + glm::vec3(-0.4f, -0.2f, -0.4f), {0.8f, 0.0f, 0.0f},
-                   {0.0f, 0.4f, 0.8f}, side, side, c + glm::vec3(0.0f, 1.0f, -0.5f));
+    const glm::vec3 corner = c + glm::vec3(-0.4f, -0.2f, -0.4f), u(0.8f, 0.0f, 0.0f),
+                    v(0.0f, 0.4f, 0.8f), towards = c + glm::vec3(0.0f, 1.0f, -0.5f);
+    if (shared)
+        b.AddQuad("cloth", cloth, corner, corner + u, corner + u + v, corner + v, towards, side);
+    else
+        b.AddTiledQuad("cloth", cloth, corner, u, v, side, side, towards);
     b.SetDynamic("cloth", c);
     return b.Build();
 }
@@ -56,7 +62,7 @@ Scene ClothRoom(int side) {
 int main(int argc, char** argv) {
     CLI::App app{"penumbra implicit-visibility benchmark (issue 21): the paper's Table 1 class"};
     std::string out = "bench/results";
-    int samples = 1024, frames = 20, bins = 864, side = 29;
+    int samples = 1024, frames = 20, bins = 864, side = 57;
     std::string motion = "deform", device = "cpu";
     float elementSize = 0.25f;
     app.add_option("--out", out, "folder for implicit.json (empty: print only)")
@@ -67,8 +73,14 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--bins", bins, "direction bins (the paper: 6 x 12 x 12 = 864)")
         ->capture_default_str();
-    app.add_option("--side", side, "tiles a side of the moving mesh (4 vertices a tile)")
+    app.add_option("--side", side,
+                   "tiles a side of the moving mesh ((side + 1)² shared vertices; with "
+                   "--tile-soup, 4 vertices a tile: 29 for the same count)")
         ->capture_default_str();
+    bool soup = false;
+    app.add_flag("--tile-soup", soup,
+                 "the mesh as separate tiles, each with its own 4 vertices (sessions 25–34's "
+                 "bench: each inner corner is four coincident surfels)");
     app.add_option("--element-size", elementSize,
                    "metres: the room's walls in elements this size (the mesh keeps its "
                    "vertices; the paper's room is a few quads)")
@@ -83,7 +95,7 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     CLI11_PARSE(app, argc, argv);
 
-    Scene scene = ClothRoom(side);
+    Scene scene = ClothRoom(side, !soup);
     const int node = FindNode(scene, "cloth");
     const glm::mat4 rest = scene.nodes[node].local;
     std::vector<glm::vec3> restVertices;  // own space
@@ -153,6 +165,7 @@ int main(int argc, char** argv) {
     report["scene"] = {
         {"room", "the clutter suite's 2 m room, ceiling panel"},
         {"moving_mesh_vertices", clothVertices},
+        {"mesh", soup ? "tile soup (4 vertices a tile)" : "one mesh, shared vertices"},
         {"motion", motion == "rigid" ? "rigid (a turn and a sway a frame)"
                                      : "deforming (SetVertices a frame: a travelling "
                                        "wave of 8 cm)"}};

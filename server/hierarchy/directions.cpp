@@ -36,9 +36,8 @@ void CubeCoords(const glm::vec3& d, int res, int& face, int& u, int& v) {
     v = std::clamp(static_cast<int>((t / m * 0.5f + 0.5f) * res), 0, res - 1);
 }
 
-glm::vec3 CubeTexelCentre(int face, int u, int v, int res) {
-    float s = ((u + 0.5f) / res) * 2.0f - 1.0f;
-    float t = ((v + 0.5f) / res) * 2.0f - 1.0f;
+// The unit direction through face coordinates s, t ∈ [−1, 1] of cube face `face`.
+glm::vec3 CubePoint(int face, float s, float t) {
     glm::vec3 d;
     switch (face) {
         case 0:
@@ -61,6 +60,10 @@ glm::vec3 CubeTexelCentre(int face, int u, int v, int res) {
             break;
     }
     return glm::normalize(d);
+}
+
+glm::vec3 CubeTexelCentre(int face, int u, int v, int res) {
+    return CubePoint(face, ((u + 0.5f) / res) * 2.0f - 1.0f, ((v + 0.5f) / res) * 2.0f - 1.0f);
 }
 
 float AngleBetween(const glm::vec3& a, const glm::vec3& b) {
@@ -116,6 +119,34 @@ Directions::Directions(int count) : count_(count) {
                 }
                 cube_[(f * cubeRes_ + v) * cubeRes_ + u] = best;
             }
+    // Lookup's own table: a cube map twice as fine (finer tables miss the cache more), each texel
+    // listing every bin that is the nearest somewhere in it. For p in a texel, |p − c| ≤ ρ (c its
+    // centre, ρ the chord to its farthest corner), so |p·x − c·x| ≤ ρ for any unit x: a bin nearest
+    // at some p has c·ω_b ≥ c·ω_best − 2ρ. Those lie next to the centre's nearest bin (within its
+    // adjacency). The lookup is then the best of one to a few dot products.
+    lookupRes_ = 2 * cubeRes_;
+    const int res = lookupRes_;
+    candidateFirst_.assign(size_t(6) * res * res + 1, 0);
+    for (int f = 0; f < 6; ++f)
+        for (int v = 0; v < res; ++v)
+            for (int u = 0; u < res; ++u) {
+                const glm::vec3 c = CubeTexelCentre(f, u, v, res);
+                float rho = 0.0f;
+                for (const float du : {0.0f, 1.0f})
+                    for (const float dv : {0.0f, 1.0f}) {
+                        const glm::vec3 corner = CubePoint(f, 2.0f * (u + du) / res - 1.0f,
+                                                           2.0f * (v + dv) / res - 1.0f);
+                        rho = std::max(rho, glm::length(corner - c));
+                    }
+                rho *= 1.05f;  // float rounding's margin
+                const uint32_t best = Walk(c);
+                const float bestDot = glm::dot(c, dirs_[best]);
+                candidates_.push_back(uint16_t(best));
+                for (uint32_t j : adjacent_[best])
+                    if (glm::dot(c, dirs_[j]) >= bestDot - 2.0f * rho)
+                        candidates_.push_back(uint16_t(j));
+                candidateFirst_[size_t(f * res + v) * res + u + 1] = uint32_t(candidates_.size());
+            }
     opposite_.resize(count);
     for (int b = 0; b < count; ++b) opposite_[b] = Lookup(-dirs_[b]);
 
@@ -159,6 +190,21 @@ Directions::Directions(int count) : count_(count) {
 }
 
 uint32_t Directions::Lookup(const glm::vec3& d) const {
+    int face, u, v;
+    CubeCoords(d, lookupRes_, face, u, v);
+    const size_t texel = size_t(face * lookupRes_ + v) * lookupRes_ + u;
+    const uint16_t* c = candidates_.data() + candidateFirst_[texel];
+    const uint16_t* end = candidates_.data() + candidateFirst_[texel + 1];
+    uint32_t best = *c;
+    float bestDot = glm::dot(d, dirs_[best]);
+    for (++c; c != end; ++c) {
+        const float dd = glm::dot(d, dirs_[*c]);
+        if (dd > bestDot) bestDot = dd, best = *c;
+    }
+    return best;
+}
+
+uint32_t Directions::Walk(const glm::vec3& d) const {
     int face, u, v;
     CubeCoords(d, cubeRes_, face, u, v);
     uint32_t best = cube_[(face * cubeRes_ + v) * cubeRes_ + u];

@@ -97,6 +97,16 @@ class Directions {
     // greedy walk over `adjacent_` to the exact nearest bin.
     int cubeRes_;
     std::vector<uint32_t> cube_;
+    // Lookup's table on the CPU: a cube map of lookupRes_² texels a face, texel t's
+    // candidate bins candidates_[candidateFirst_[t], candidateFirst_[t + 1]) (the constructor
+    // says why they hold the nearest bin of every direction in the texel).
+    int lookupRes_;
+    std::vector<uint32_t> candidateFirst_;
+    std::vector<uint16_t> candidates_;
+    static_assert(kMaxBins <= 65536, "candidates_ holds bins as 16 bits");
+    // The nearest bin by the device's way: the coarse table's bin, then a greedy walk over
+    // `adjacent_` (builds the candidate lists).
+    uint32_t Walk(const glm::vec3& d) const;
     std::vector<uint32_t> opposite_;
     std::vector<std::vector<uint32_t>> adjacent_;
     std::vector<uint32_t> offsets_;

@@ -4,6 +4,7 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <numbers>
+#include <random>
 
 #include "bundled_scenes.h"
 #include "gather/gather_stage.h"
@@ -81,6 +82,34 @@ Scene BoxOnGroundUnderASky() {
     Scene scene = b.Build();
     scene.environment = ConstantEnvironment(glm::vec3(1.0f));
     return scene;
+}
+
+// Directions::Lookup (every pair of the link creation looks its bins up) reads candidate
+// lists of a fine cube map: it finds the nearest bin, as a search over all bins does, also on
+// the cube's face edges and corners, at the fewest and the most bins and the paper's 864.
+TEST(Directions, LookupFindsTheNearestBin) {
+    std::mt19937 rng(7);
+    std::normal_distribution<float> n01;
+    for (int count : {Directions::kMinBins, 128, 864, Directions::kMaxBins}) {
+        const Directions dirs(count);
+        std::vector<glm::vec3> probes;
+        for (int i = 0; i < 200000; ++i) {
+            const glm::vec3 d(n01(rng), n01(rng), n01(rng));
+            if (glm::length(d) > 1e-6f) probes.push_back(glm::normalize(d));
+        }
+        for (float a : {-1.0f, 0.0f, 1.0f})
+            for (float b : {-1.0f, 0.0f, 1.0f})
+                for (float c : {-1.0f, 0.0f, 1.0f})
+                    if (a != 0.0f || b != 0.0f || c != 0.0f)
+                        probes.push_back(glm::normalize(glm::vec3(a, b, c)));
+        size_t wrong = 0;
+        for (const glm::vec3& d : probes) {
+            float best = -2.0f;
+            for (const glm::vec3& w : dirs.All()) best = std::max(best, glm::dot(d, w));
+            if (glm::dot(d, dirs.Direction(dirs.Lookup(d))) < best - 1e-6f) ++wrong;
+        }
+        EXPECT_EQ(wrong, 0u) << count << " bins";
+    }
 }
 
 // An open plane under a constant sky of radiance 1: nothing stands above it, every front bin
