@@ -120,14 +120,16 @@ float LensArea(float d, float r, float R) {
 // An end wider than half a bin's spacing: each bin its disc overlaps, with the overlap.
 const float kMinOverlap = 0.2;  // implicit_links.cpp
 
-// `cosReach`: cos(ρ + r_bin), below which a bin does not overlap the disc.
+// `cosReach`: cos(ρ + r_bin), below which a bin does not overlap the disc; `cosInside`:
+// cos|ρ − r_bin|, above which the overlap is `inside` (LensArea's first case).
 void Spread(uint row, uint b, uint sender, PairNode from, vec3 at, vec3 dir, float dist,
-            float rho, float cosReach) {
+            float rho, float cosReach, float cosInside, float inside) {
     vec3 w = dirs[b].xyz;
     float c = dot(w, dir);
     if (c < cosReach) return;
-    float theta = acos(clamp(c, -1.0, 1.0));
-    float a = min(pc.binSolidAngle, LensArea(theta, rho, pc.binRadius));
+    float a = c >= cosInside
+                  ? inside
+                  : min(pc.binSolidAngle, LensArea(acos(clamp(c, -1.0, 1.0)), rho, pc.binRadius));
     if (a > kMinOverlap * pc.binSolidAngle) Emit(row + b, sender, Depth(from, at, w, dist), a);
 }
 
@@ -138,17 +140,20 @@ void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist
     if (sinRadius > pc.splat) {
         float rho = asin(min(1.0, sinRadius));
         float cosReach = cos(min(kPi, rho + pc.binRadius));
+        float small = min(rho, pc.binRadius);
+        float cosInside = cos(abs(rho - pc.binRadius));
+        float inside = min(pc.binSolidAngle, kPi * small * small);
         float theta = acos(clamp(dot(dir, dirs[centre].xyz), -1.0, 1.0));
         if (theta + rho + pc.binRadius <= pc.adjacentAngle - 1e-3) {
             // The padding repeats the centre bin, which is taken first.
-            Spread(row, centre, sender, from, at, dir, dist, rho, cosReach);
+            Spread(row, centre, sender, from, at, dir, dist, rho, cosReach, cosInside, inside);
             for (uint k = 0u; k < pc.adjacentWidth; ++k) {
                 uint b = adjacent[centre * pc.adjacentWidth + k];
-                if (b != centre) Spread(row, b, sender, from, at, dir, dist, rho, cosReach);
+                if (b != centre) Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside);
             }
         } else {
             for (uint b = 0u; b < pc.bins; ++b)
-                Spread(row, b, sender, from, at, dir, dist, rho, cosReach);
+                Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside);
         }
         return;
     }

@@ -550,12 +550,19 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
         // Bins farther than ρ + r_bin from `dir` do not overlap it (a cosine test before the
         // arc cosine).
         const float cosReach = std::cos(std::min(std::numbers::pi_v<float>, rho + binRadius_));
+        // Bins nearer than |ρ − r_bin| lie inside the disc (or hold it) whole: LensArea's
+        // first case, without the arc cosine.
+        const float small = std::min(rho, binRadius_);
+        const float cosInside = std::cos(std::abs(rho - binRadius_));
+        const float inside = std::min(omegaBin, std::numbers::pi_v<float> * small * small);
         auto spread = [&](uint32_t b) {
             const glm::vec3& w = dirs_.Direction(b);
             const float c = glm::dot(w, dir);
             if (c < cosReach) return;
-            const float theta = std::acos(std::clamp(c, -1.0f, 1.0f));
-            const float a = std::min(omegaBin, LensArea(theta, rho, binRadius_));
+            const float a = c >= cosInside
+                                ? inside
+                                : std::min(omegaBin, LensArea(std::acos(std::clamp(c, -1.0f, 1.0f)),
+                                                              rho, binRadius_));
             if (a > kMinOverlap * omegaBin)
                 ends.push_back({uint32_t(row + b), sender, depth(w), a});
         };
