@@ -31,18 +31,26 @@ void AddSolverOptions(CLI::App* command, std::string& solver, SolverOptions& opt
             "SOLVER", "solver"));
     // One command-line option per name, whichever solvers declare it.
     std::vector<std::string> order;
-    std::map<std::string, std::vector<const SolverEntry*>> takers;
+    std::map<std::string, std::vector<std::pair<const SolverEntry*, const OptionSpec*>>> takers;
     std::map<std::string, const OptionSpec*> first;
     for (const SolverEntry& e : Solvers())
         for (const OptionSpec& spec : e.options) {
             if (!first.count(spec.name)) order.push_back(spec.name), first[spec.name] = &spec;
-            takers[spec.name].push_back(&e);
+            takers[spec.name].push_back({&e, &spec});
         }
     for (const std::string& name : order) {
         const OptionSpec& spec = *first[name];
-        std::string who;
-        for (const SolverEntry* e : takers[name]) who += (who.empty() ? "" : ", ") + e->name;
-        std::string help = spec.help + " [" + who + "; default " + spec.defaultText + "]";
+        // Solvers that share a name but not its meaning (what `--bins 0` picks) say theirs each.
+        std::string who, each;
+        bool same = true;
+        for (const auto& [e, own] : takers[name]) {
+            who += (who.empty() ? "" : ", ") + e->name;
+            each += (each.empty() ? "" : "; ") + e->name + ": " + own->help + " (default " +
+                    own->defaultText + ")";
+            same = same && own->help == spec.help && own->defaultText == spec.defaultText;
+        }
+        std::string help =
+            same ? spec.help + " [" + who + "; default " + spec.defaultText + "]" : each;
         const char* type = spec.kind == OptionKind::kInt     ? "INT"
                            : spec.kind == OptionKind::kFloat ? "FLOAT"
                                                              : "TEXT";
