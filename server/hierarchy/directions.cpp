@@ -12,30 +12,6 @@
 namespace penumbra {
 namespace {
 
-// Cube face and texel coordinates of a direction.
-void CubeCoords(const glm::vec3& d, int res, int& face, int& u, int& v) {
-    glm::vec3 a = glm::abs(d);
-    float s, t, m;
-    if (a.x >= a.y && a.x >= a.z) {
-        face = d.x > 0 ? 0 : 1;
-        m = a.x;
-        s = d.y;
-        t = d.z;
-    } else if (a.y >= a.z) {
-        face = d.y > 0 ? 2 : 3;
-        m = a.y;
-        s = d.x;
-        t = d.z;
-    } else {
-        face = d.z > 0 ? 4 : 5;
-        m = a.z;
-        s = d.x;
-        t = d.y;
-    }
-    u = std::clamp(static_cast<int>((s / m * 0.5f + 0.5f) * res), 0, res - 1);
-    v = std::clamp(static_cast<int>((t / m * 0.5f + 0.5f) * res), 0, res - 1);
-}
-
 // The unit direction through face coordinates s, t ∈ [−1, 1] of cube face `face`.
 glm::vec3 CubePoint(int face, float s, float t) {
     glm::vec3 d;
@@ -187,21 +163,6 @@ Directions::Directions(int count) : count_(count) {
                            BinWeight{static_cast<uint32_t>(b), 0.0f});
         }
     }
-}
-
-uint32_t Directions::Lookup(const glm::vec3& d) const {
-    int face, u, v;
-    CubeCoords(d, lookupRes_, face, u, v);
-    const size_t texel = size_t(face * lookupRes_ + v) * lookupRes_ + u;
-    const uint16_t* c = candidates_.data() + candidateFirst_[texel];
-    const uint16_t* end = candidates_.data() + candidateFirst_[texel + 1];
-    uint32_t best = *c;
-    float bestDot = glm::dot(d, dirs_[best]);
-    for (++c; c != end; ++c) {
-        const float dd = glm::dot(d, dirs_[*c]);
-        if (dd > bestDot) bestDot = dd, best = *c;
-    }
-    return best;
 }
 
 uint32_t Directions::Walk(const glm::vec3& d) const {

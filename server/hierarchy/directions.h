@@ -2,6 +2,7 @@
 // a direction→bin lookup, and per-bin Gaussian neighbour lists for several cone sizes σ.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <glm/glm.hpp>
 #include <span>
@@ -41,8 +42,40 @@ class Directions {
     const float* Y() const { return y_.data(); }
     const float* Z() const { return z_.data(); }
 
-    // Nearest bin centre to unit direction `d`.
-    uint32_t Lookup(const glm::vec3& d) const;
+    // Nearest bin centre to unit direction `d` (inline: the link creation's pair loop makes
+    // two a pair).
+    uint32_t Lookup(const glm::vec3& d) const {
+        int face, u, v;
+        CubeCoords(d, lookupRes_, face, u, v);
+        const size_t texel = size_t(face * lookupRes_ + v) * lookupRes_ + u;
+        const uint16_t* c = candidates_.data() + candidateFirst_[texel];
+        const uint16_t* end = candidates_.data() + candidateFirst_[texel + 1];
+        uint32_t best = *c;
+        float bestDot = glm::dot(d, dirs_[best]);
+        for (++c; c != end; ++c) {
+            const float dd = glm::dot(d, dirs_[*c]);
+            if (dd > bestDot) bestDot = dd, best = *c;
+        }
+        return best;
+    }
+    // Cube face (±x, ±y, ±z: 0…5) and texel coordinates of direction `d` on a cube of res²
+    // texels a face.
+    static void CubeCoords(const glm::vec3& d, int res, int& face, int& u, int& v) {
+        const glm::vec3 a = glm::abs(d);
+        float s, t, m;
+        if (a.x >= a.y && a.x >= a.z) {
+            face = d.x > 0 ? 0 : 1;
+            m = a.x, s = d.y, t = d.z;
+        } else if (a.y >= a.z) {
+            face = d.y > 0 ? 2 : 3;
+            m = a.y, s = d.x, t = d.z;
+        } else {
+            face = d.z > 0 ? 4 : 5;
+            m = a.z, s = d.x, t = d.y;
+        }
+        u = std::clamp(static_cast<int>((s / m * 0.5f + 0.5f) * res), 0, res - 1);
+        v = std::clamp(static_cast<int>((t / m * 0.5f + 0.5f) * res), 0, res - 1);
+    }
     // The other bins within AdjacentAngle() of bin `bin`'s direction, in bin order.
     std::span<const uint32_t> Adjacent(uint32_t bin) const { return adjacent_[bin]; }
     float AdjacentAngle() const { return 2.0f * spacing_; }
