@@ -93,7 +93,7 @@ TEST(Directions, LookupFindsTheNearestBin) {
     for (int count : {Directions::kMinBins, 128, 864, Directions::kMaxBins}) {
         const Directions dirs(count);
         std::vector<glm::vec3> probes;
-        for (int i = 0; i < 200000; ++i) {
+        for (int i = 0; i < 50000; ++i) {
             const glm::vec3 d(n01(rng), n01(rng), n01(rng));
             if (glm::length(d) > 1e-6f) probes.push_back(glm::normalize(d));
         }
