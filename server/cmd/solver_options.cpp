@@ -32,14 +32,13 @@ void AddSolverOptions(CLI::App* command, std::string& solver, SolverOptions& opt
     // One command-line option per name, whichever solvers declare it.
     std::vector<std::string> order;
     std::map<std::string, std::vector<std::pair<const SolverEntry*, const OptionSpec*>>> takers;
-    std::map<std::string, const OptionSpec*> first;
     for (const SolverEntry& e : Solvers())
         for (const OptionSpec& spec : e.options) {
-            if (!first.count(spec.name)) order.push_back(spec.name), first[spec.name] = &spec;
+            if (!takers.count(spec.name)) order.push_back(spec.name);
             takers[spec.name].push_back({&e, &spec});
         }
     for (const std::string& name : order) {
-        const OptionSpec& spec = *first[name];
+        const OptionSpec& spec = *takers[name].front().second;  // the first solver's
         // Solvers that share a name but not its meaning (what `--bins 0` picks) say theirs each.
         std::string who, each;
         bool same = true;

@@ -112,10 +112,10 @@ class Directions {
     }
     const std::vector<BinWeight>& PaddedWeights() const { return padded_; }
 
-    // Lookup's tables, for its device twin (shaders/links.comp): a cube map of CubeRes()²
-    // texels a face, each holding a bin near the texel centre (face-major, then v, then u),
-    // and every bin's neighbours within two spacings, padded with the bin itself to
-    // `width` entries a bin.
+    // The tables of Lookup's device twin (LookupBin in shaders/directions.glsl, the same
+    // nearest bin by a walk): a cube map of CubeRes()² texels a face, each holding a bin near
+    // the texel centre (face-major, then v, then u), and every bin's neighbours within two
+    // spacings, padded with the bin itself to `width` entries a bin.
     int CubeRes() const { return cubeRes_; }
     const std::vector<uint32_t>& CubeTable() const { return cube_; }
     std::vector<uint32_t> PaddedAdjacency(uint32_t& width) const;
