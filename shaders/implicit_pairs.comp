@@ -117,7 +117,19 @@ float LensArea(float d, float r, float R) {
     return a + b - 0.5 * sqrt(max(0.0, k));
 }
 
-// An end wider than half a bin's spacing: each bin its disc overlaps, with the overlap.
+// MeetsFlatSender (implicit_links.cpp): bin w's axis meets the flat sender's plane in front of
+// `at`, within its disc widened by the bin's footprint there.
+bool MeetsFlatSender(vec3 c, vec3 n, float r, vec3 at, vec3 w) {
+    float cosPhi = dot(n, w);
+    if (abs(cosPhi) < 1e-4) return false;
+    float t = dot(n, c - at) / cosPhi;
+    if (!(t > 0.0)) return false;
+    float foot = t * pc.binRadius / sqrt(abs(cosPhi));
+    return length(at + t * w - c) < r + foot;
+}
+
+// An end wider than half a bin's spacing: each bin its disc overlaps, with the overlap (a
+// flat sender's only where the bin meets it).
 const float kMinOverlap = 0.2;  // implicit_links.cpp
 
 // `cosReach`: cos(ρ + r_bin), below which a bin does not overlap the disc; `cosInside`:
@@ -127,6 +139,9 @@ void Spread(uint row, uint b, uint sender, PairNode from, vec3 at, vec3 dir, flo
     vec3 w = dirs[b].xyz;
     float c = dot(w, dir);
     if (c < cosReach) return;
+    if (from.coneCos >= kFlatCone &&
+        !MeetsFlatSender(from.center, from.normal, min(from.radius, sqrt(from.area / kPi)), at, w))
+        return;
     float a = c >= cosInside
                   ? inside
                   : min(pc.binSolidAngle, LensArea(acos(clamp(c, -1.0, 1.0)), rho, pc.binRadius));

@@ -67,6 +67,23 @@ float LensArea(float d, float r, float R) {
     return a + b - 0.5f * std::sqrt(std::max(0.0f, k));
 }
 
+// Whether bin w's axis (from `at`, unit w) meets a flat sender's plane (centre c, unit normal
+// n) in front of `at` within its disc of radius r, widened by the bin's footprint there (a
+// cone of angular radius rBin meets the plane in an ellipse of area π (t rBin)² / |⟨n, w⟩|,
+// taken as a disc of that area). A flat sender seen nearly edge-on from close by (the other
+// wall at a room's corner, a box's side at a floor leaf beside it) spans a wide cone around
+// its bounding sphere, but only the bins that meet its plane see it: the others look past it
+// into the room.
+bool MeetsFlatSender(const glm::vec3& c, const glm::vec3& n, float r, const glm::vec3& at,
+                     const glm::vec3& w, float rBin) {
+    const float cosPhi = glm::dot(n, w);
+    if (std::abs(cosPhi) < 1e-4f) return false;
+    const float t = glm::dot(n, c - at) / cosPhi;
+    if (!(t > 0.0f)) return false;
+    const float foot = t * rBin / std::sqrt(std::abs(cosPhi));
+    return glm::length(at + t * w - c) < r + foot;
+}
+
 struct Pair {
     uint32_t a, b;
     uint32_t root;  // the kept pair whose descendant it is (ImplicitLinker::Build)
@@ -542,7 +559,10 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
     // between the discs of a wall's small leaves near a floor empty (the maze: 5.5% of the
     // leaves' cosine weight seeing nothing above the horizon). A bin the disc overlaps lies
     // within ρ + r_bin of `dir`: when that and the centre bin's angle θ stay inside the centre
-    // bin's adjacency (Directions::Adjacent), that list holds every such bin.
+    // bin's adjacency (Directions::Adjacent), that list holds every such bin. A flat sender
+    // covers only the bins whose axes meet its plane near its disc (MeetsFlatSender): seen
+    // edge-on from a corner, its bounding sphere's cone would also take the bins that look
+    // past it into the room (a room's edges were half as bright as the truth's, session 36).
     const float sinRadius = from.radius / dist;
     if (sinRadius > splat_) {
         const float rho = std::asin(std::min(1.0f, sinRadius));
@@ -555,10 +575,13 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
         const float small = std::min(rho, binRadius_);
         const float cosInside = std::cos(std::abs(rho - binRadius_));
         const float inside = std::min(omegaBin, std::numbers::pi_v<float> * small * small);
+        const bool flat = from.coneCos >= kFlatCone;
+        const float disc = std::min(from.radius, std::sqrt(from.area / std::numbers::pi_v<float>));
         auto spread = [&](uint32_t b) {
             const glm::vec3& w = dirs_.Direction(b);
             const float c = glm::dot(w, dir);
             if (c < cosReach) return;
+            if (flat && !MeetsFlatSender(from.center, from.normal, disc, at, w, binRadius_)) return;
             const float a = c >= cosInside
                                 ? inside
                                 : std::min(omegaBin, LensArea(std::acos(std::clamp(c, -1.0f, 1.0f)),
