@@ -261,7 +261,9 @@ int main(int argc, char** argv) {
     std::vector<std::string> scenes{"cornell-box", "blocker", "maze", "glossy-box", "office"};
     std::string resultName = "accuracy";
     int truthSamples = 16384;
-    app.add_option("--scenes", scenes, "bundled scene names")->capture_default_str();
+    app.add_option("--scenes", scenes, "bundled scene names (space- or comma-separated)")
+        ->delimiter(',')
+        ->capture_default_str();
     app.add_option("--scene-dir", sceneDir, "folder of the scenes")->capture_default_str();
     app.add_option("--out", out, "folder for accuracy.md and accuracy.json")->capture_default_str();
     app.add_option("--truth-samples", truthSamples, "reference samples per vertex")
