@@ -22,7 +22,7 @@ struct PairNode {
     float area;
     uint right;  // the second child (the first is the node after it); 0 for a leaf
     uint leaf;   // 1 for a leaf
-    uint pad;
+    float discRadius;
 };
 // ImplicitLinker::End.
 struct End {
@@ -117,12 +117,12 @@ float LensArea(float d, float r, float R) {
     return a + b - 0.5 * sqrt(max(0.0, k));
 }
 
-// MeetsFlatSender (implicit_links.cpp): bin w's axis meets the flat sender's plane in front of
-// `at`, within its disc widened by the bin's footprint there.
-bool MeetsFlatSender(vec3 c, vec3 n, float r, vec3 at, vec3 w) {
+// MeetsFlatSender (implicit_links.cpp): bin w's axis meets the flat sender's plane
+// (`height` = ⟨n, c − at⟩) in front of `at`, within its disc widened by the bin's footprint.
+bool MeetsFlatSender(float height, vec3 c, vec3 n, float r, vec3 at, vec3 w) {
     float cosPhi = dot(n, w);
     if (abs(cosPhi) < 1e-4) return false;
-    float t = dot(n, c - at) / cosPhi;
+    float t = height / cosPhi;
     if (!(t > 0.0)) return false;
     float foot = t * pc.binRadius / sqrt(abs(cosPhi));
     return length(at + t * w - c) < r + foot;
@@ -134,13 +134,14 @@ const float kMinOverlap = 0.2;  // implicit_links.cpp
 
 // `cosReach`: cos(ρ + r_bin), below which a bin does not overlap the disc; `cosInside`:
 // cos|ρ − r_bin|, above which the overlap is `inside` (LensArea's first case).
+// `height`: ⟨n, c − at⟩ of a flat sender (MeetsFlatSender).
 void Spread(uint row, uint b, uint sender, PairNode from, vec3 at, vec3 dir, float dist,
-            float rho, float cosReach, float cosInside, float inside) {
+            float rho, float cosReach, float cosInside, float inside, float height) {
     vec3 w = dirs[b].xyz;
     float c = dot(w, dir);
     if (c < cosReach) return;
     if (from.coneCos >= kFlatCone &&
-        !MeetsFlatSender(from.center, from.normal, min(from.radius, sqrt(from.area / kPi)), at, w))
+        !MeetsFlatSender(height, from.center, from.normal, from.discRadius, at, w))
         return;
     float a = c >= cosInside
                   ? inside
@@ -158,17 +159,18 @@ void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist
         float small = min(rho, pc.binRadius);
         float cosInside = cos(abs(rho - pc.binRadius));
         float inside = min(pc.binSolidAngle, kPi * small * small);
+        float height = dot(from.normal, from.center - at);
         float theta = acos(clamp(dot(dir, dirs[centre].xyz), -1.0, 1.0));
         if (theta + rho + pc.binRadius <= pc.adjacentAngle - 1e-3) {
             // The padding repeats the centre bin, which is taken first.
-            Spread(row, centre, sender, from, at, dir, dist, rho, cosReach, cosInside, inside);
+            Spread(row, centre, sender, from, at, dir, dist, rho, cosReach, cosInside, inside, height);
             for (uint k = 0u; k < pc.adjacentWidth; ++k) {
                 uint b = adjacent[centre * pc.adjacentWidth + k];
-                if (b != centre) Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside);
+                if (b != centre) Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside, height);
             }
         } else {
             for (uint b = 0u; b < pc.bins; ++b)
-                Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside);
+                Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside, height);
         }
         return;
     }

@@ -68,17 +68,18 @@ float LensArea(float d, float r, float R) {
 }
 
 // Whether bin w's axis (from `at`, unit w) meets a flat sender's plane (centre c, unit normal
-// n) in front of `at` within its disc of radius r, widened by the bin's footprint there (a
+// n, `height` = ⟨n, c − at⟩, the same for every bin of an end) in front of `at` within its disc
+// of radius r, widened by the bin's footprint there (a
 // cone of angular radius rBin meets the plane in an ellipse of area π (t rBin)² / |⟨n, w⟩|,
 // taken as a disc of that area). A flat sender seen nearly edge-on from close by (the other
 // wall at a room's corner, a box's side at a floor leaf beside it) spans a wide cone around
 // its bounding sphere, but only the bins that meet its plane see it: the others look past it
 // into the room.
-bool MeetsFlatSender(const glm::vec3& c, const glm::vec3& n, float r, const glm::vec3& at,
-                     const glm::vec3& w, float rBin) {
+bool MeetsFlatSender(float height, const glm::vec3& c, const glm::vec3& n, float r,
+                     const glm::vec3& at, const glm::vec3& w, float rBin) {
     const float cosPhi = glm::dot(n, w);
     if (std::abs(cosPhi) < 1e-4f) return false;
-    const float t = glm::dot(n, c - at) / cosPhi;
+    const float t = height / cosPhi;
     if (!(t > 0.0f)) return false;
     const float foot = t * rBin / std::sqrt(std::abs(cosPhi));
     return glm::length(at + t * w - c) < r + foot;
@@ -576,12 +577,14 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
         const float cosInside = std::cos(std::abs(rho - binRadius_));
         const float inside = std::min(omegaBin, std::numbers::pi_v<float> * small * small);
         const bool flat = from.coneCos >= kFlatCone;
-        const float disc = std::min(from.radius, std::sqrt(from.area / std::numbers::pi_v<float>));
+        const float height = glm::dot(from.normal, from.center - at);
         auto spread = [&](uint32_t b) {
             const glm::vec3& w = dirs_.Direction(b);
             const float c = glm::dot(w, dir);
             if (c < cosReach) return;
-            if (flat && !MeetsFlatSender(from.center, from.normal, disc, at, w, binRadius_)) return;
+            if (flat && !MeetsFlatSender(height, from.center, from.normal, from.discRadius, at, w,
+                                         binRadius_))
+                return;
             const float a = c >= cosInside
                                 ? inside
                                 : std::min(omegaBin, LensArea(std::acos(std::clamp(c, -1.0f, 1.0f)),

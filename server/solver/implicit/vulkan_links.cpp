@@ -23,7 +23,8 @@ struct PairNode {
     glm::vec3 normal;
     float coneCos;
     float area;
-    uint32_t right, leaf, pad;
+    uint32_t right, leaf;
+    float discRadius;
 };
 PENUMBRA_GPU_FIELD(PairNode, center, 0);
 PENUMBRA_GPU_FIELD(PairNode, radius, 12);
@@ -32,6 +33,7 @@ PENUMBRA_GPU_FIELD(PairNode, coneCos, 28);
 PENUMBRA_GPU_FIELD(PairNode, area, 32);
 PENUMBRA_GPU_FIELD(PairNode, right, 36);
 PENUMBRA_GPU_FIELD(PairNode, leaf, 40);
+PENUMBRA_GPU_FIELD(PairNode, discRadius, 44);
 static_assert(sizeof(PairNode) == 48);
 static_assert(sizeof(ImplicitLinker::End) == 16);
 PENUMBRA_GPU_FIELD(ImplicitLinker::End, slot, 0);
@@ -125,9 +127,9 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
     for (size_t i = 0; i < up.size(); ++i) {
         const HierarchyNode& n = h.nodes[i];
         const bool leaf = n.IsLeaf();
-        up[i] = {n.center,       n.radius, n.normal,
-                 n.coneCos,      n.area,   leaf ? 0u : h.nodes[i + 1].end,
-                 leaf ? 1u : 0u, 0u};
+        up[i] = {n.center,       n.radius,    n.normal,
+                 n.coneCos,      n.area,      leaf ? 0u : h.nodes[i + 1].end,
+                 leaf ? 1u : 0u, n.discRadius};
     }
     if (!s.nodes || s.nodes->Bytes() < up.size() * sizeof(PairNode)) {
         s.nodes = MakeBuffer(s.ctx, up.size() * sizeof(PairNode));
