@@ -4,7 +4,7 @@ BUILD ?= build
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release
 
-.PHONY: all deps build demo check check-asan fuzz bench bench-service bench-direct bench-glossy bench-stability bench-soak bench-lightfield bench-implicit accuracy images format clean
+.PHONY: all deps build demo check check-asan fuzz benches bench bench-service bench-direct bench-glossy bench-stability bench-soak bench-lightfield bench-implicit accuracy images format clean
 
 all: build
 
@@ -36,34 +36,38 @@ check-asan: deps
 fuzz: deps
 	@scripts/fuzz.sh
 
-bench: build
+# The benchmarks are not in the default build (bench/CMakeLists.txt): every rule below builds them.
+benches: build
+	cmake --build $(BUILD) -j $(JOBS) --target penumbra_benches
+
+bench: benches
 	$(BUILD)/bench/penumbra-bench-office --out bench/results
 
-bench-service: build
+bench-service: benches
 	$(BUILD)/bench/penumbra-bench-service --out bench/results
 
-bench-lightfield: build
+bench-lightfield: benches
 	$(BUILD)/bench/penumbra-bench-lightfield --out bench/results
 
-bench-implicit: build
+bench-implicit: benches
 	$(BUILD)/bench/penumbra-bench-implicit --out bench/results
 
-bench-direct: build
+bench-direct: benches
 	$(BUILD)/bench/penumbra-bench-direct --out bench/results
 
-bench-glossy: build
+bench-glossy: benches
 	$(BUILD)/bench/penumbra-bench-glossy --out bench/results
 
-bench-stability: build
+bench-stability: benches
 	$(BUILD)/bench/penumbra-bench-stability --devices cpu,lavapipe --out bench/results
 
 # A live server for SOAK_SECONDS (default 10 minutes) under 64 subscribers, 4 editors, a
 # subscriber SIGKILLed every 30 s, one that stops reading and one sending garbage.
 SOAK_SECONDS ?= 600
-bench-soak: build
+bench-soak: benches
 	$(BUILD)/bench/penumbra-bench-soak --seconds $(SOAK_SECONDS) --out bench/results
 
-accuracy: build
+accuracy: benches
 	$(BUILD)/bench/penumbra-bench-accuracy --out bench/results
 
 # The pictures of docs/BAKING.md: the Cornell box and the office lit by the solver alone and with the
