@@ -126,6 +126,31 @@ Directions::Directions(int count) : count_(count) {
     opposite_.resize(count);
     for (int b = 0; b < count; ++b) opposite_[b] = Lookup(-dirs_[b]);
 
+    // ForEachNear's groups: the cells of a cube map of 4² cells a face (about nine bins a
+    // group at 864 bins), each bin in the cell its direction falls in.
+    {
+        constexpr int kCells = 4;
+        std::vector<std::vector<uint32_t>> members(6 * kCells * kCells);
+        for (int b = 0; b < count; ++b) {
+            int face, u, v;
+            CubeCoords(dirs_[b], kCells, face, u, v);
+            members[(face * kCells + v) * kCells + u].push_back(uint32_t(b));
+        }
+        groupFirst_.push_back(0);
+        for (const auto& m : members) {
+            if (m.empty()) continue;
+            glm::vec3 sum(0.0f);
+            for (uint32_t b : m) sum += dirs_[b];
+            const glm::vec3 centre = glm::normalize(sum);
+            float radius = 0.0f;
+            for (uint32_t b : m) radius = std::max(radius, AngleBetween(centre, dirs_[b]));
+            radius += 2e-3f;  // the rounding of the caller's cosines
+            groups_.push_back({centre, radius, std::cos(radius), std::sin(radius)});
+            groupBins_.insert(groupBins_.end(), m.begin(), m.end());
+            groupFirst_.push_back(uint32_t(groupBins_.size()));
+        }
+    }
+
     // Spreading tables: for each level, bins within 2.5σ with Gaussian weights, Σ = 1.
     offsets_.assign(kLevels * (count + 1), 0);
     for (int k = 0; k < kLevels; ++k) {

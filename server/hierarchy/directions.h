@@ -76,6 +76,25 @@ class Directions {
         u = std::clamp(static_cast<int>((s / m * 0.5f + 0.5f) * res), 0, res - 1);
         v = std::clamp(static_cast<int>((t / m * 0.5f + 0.5f) * res), 0, res - 1);
     }
+    // Calls f(bin) for every bin whose direction lies within angle `reach` (radians) of unit
+    // `d`, and for some others near that cap (the caller tests each bin itself): the bins
+    // grouped by the cube-map cell their direction falls in, a group skipped whole when its
+    // bounding cone lies farther than `reach` from `d`. A cap a tenth of the sphere visits
+    // about a fifth of the bins instead of every one.
+    template <typename F>
+    void ForEachNear(const glm::vec3& d, float reach, F&& f) const {
+        const float cosReach = std::cos(std::min(reach, 3.14159265f)),
+                    sinReach = std::sin(std::min(reach, 3.14159265f));
+        for (size_t g = 0; g + 1 < groupFirst_.size(); ++g) {
+            const Group& G = groups_[g];
+            // Within reach + r_g of the group's centre (no group is wider than π / 2):
+            // cos(reach + r_g) = cos·cos − sin·sin, unless reach + r_g ≥ π.
+            if (reach + G.radius < 3.14159265f &&
+                glm::dot(d, G.centre) < cosReach * G.cosRadius - sinReach * G.sinRadius)
+                continue;
+            for (uint32_t k = groupFirst_[g]; k < groupFirst_[g + 1]; ++k) f(groupBins_[k]);
+        }
+    }
     // The other bins within AdjacentAngle() of bin `bin`'s direction, in bin order.
     std::span<const uint32_t> Adjacent(uint32_t bin) const { return adjacent_[bin]; }
     float AdjacentAngle() const { return 2.0f * spacing_; }
@@ -142,6 +161,14 @@ class Directions {
     uint32_t Walk(const glm::vec3& d) const;
     std::vector<uint32_t> opposite_;
     std::vector<std::vector<uint32_t>> adjacent_;
+    // ForEachNear's groups: the bins of group g are groupBins_[groupFirst_[g],
+    // groupFirst_[g + 1]), around `centre` within `radius` (with a margin for rounding).
+    struct Group {
+        glm::vec3 centre;
+        float radius, cosRadius, sinRadius;
+    };
+    std::vector<Group> groups_;
+    std::vector<uint32_t> groupFirst_, groupBins_;
     std::vector<uint32_t> offsets_;
     std::vector<BinWeight> weights_;
     std::vector<BinWeight> padded_;

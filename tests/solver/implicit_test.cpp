@@ -112,6 +112,38 @@ TEST(Directions, LookupFindsTheNearestBin) {
     }
 }
 
+// ForEachNear (the spread of an end wider than a bin's neighbourhood) visits every bin within
+// its reach once, and, for a cap much smaller than the sphere, far fewer than every bin.
+TEST(Directions, ForEachNearVisitsEveryBinWithinReach) {
+    std::mt19937 rng(11);
+    std::normal_distribution<float> n01;
+    std::uniform_real_distribution<float> angle(0.0f, 3.3f);
+    for (int count : {Directions::kMinBins, 128, 864, Directions::kMaxBins}) {
+        const Directions dirs(count);
+        size_t missed = 0, twice = 0, smallVisits = 0, smallCaps = 0;
+        std::vector<int> seen(count);
+        for (int i = 0; i < 2000; ++i) {
+            const glm::vec3 d = glm::normalize(glm::vec3(n01(rng), n01(rng), n01(rng)));
+            const float reach = i % 4 == 0 ? 0.25f : angle(rng);
+            std::fill(seen.begin(), seen.end(), 0);
+            size_t visits = 0;
+            dirs.ForEachNear(d, reach, [&](uint32_t b) { ++seen[b], ++visits; });
+            for (int b = 0; b < count; ++b) {
+                const float a = std::acos(std::clamp(glm::dot(d, dirs.Direction(b)), -1.0f, 1.0f));
+                if (a <= reach && seen[b] == 0) ++missed;
+                if (seen[b] > 1) ++twice;
+            }
+            if (reach == 0.25f) smallVisits += visits, ++smallCaps;
+        }
+        EXPECT_EQ(missed, 0u) << count << " bins";
+        EXPECT_EQ(twice, 0u) << count << " bins";
+        // A cap of 0.25 rad holds 1.6% of the sphere's bins.
+        if (count >= 128) {
+            EXPECT_LT(double(smallVisits) / smallCaps, 0.3 * count) << count << " bins";
+        }
+    }
+}
+
 // An open plane under a constant sky of radiance 1: nothing stands above it, every front bin
 // reads the sky, E = π everywhere.
 TEST(Implicit, OpenPlaneUnderASkyReceivesPiL) {

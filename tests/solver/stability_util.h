@@ -72,8 +72,7 @@ inline void ExpectConverges(const std::string& name, const Scene& scene, DeviceC
         "  %-26s %s: max |E| %.3g of bound %.3g, change %d→%d %.2g, %d bounces, "
         "%d passes, %d antiradiance steps in the last bounce\n",
         name.c_str(), s.device.c_str(), largest, bound, fourFifths, iterations, change, s.bounces,
-        s.gathers,
-        int(s.Number("last_antiradiance_steps")));
+        s.gathers, int(s.Number("last_antiradiance_steps")));
 }
 
 }  // namespace penumbra::testing

@@ -8,7 +8,9 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <numbers>
+#include <utility>
 
 #include "base/check.h"
 #include "solver/implicit/vulkan_links.h"
@@ -310,35 +312,66 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // full build with `moving` takes its kept ends from kept_ too).
     if (keeps)
         for (uint32_t r = 0; r + 1 < kept_.first.size(); ++r) used.push_back(r);
-    auto keptEnds = [&](auto&& f) {
-        for (uint32_t r : used)
-            for (uint32_t e = kept_.first[r]; e < kept_.first[r + 1]; ++e) f(kept_.ends[e]);
-    };
-
-    // The recorded ends (and the kept ones) by (node, bin), each slot's nearest first.
-    const size_t slots = nodes.size() * bins;
-    std::vector<uint32_t> first(slots + 1, 0);
+    // The recorded ends (and the kept ones) by (node, bin), each slot's nearest first. The
+    // sources (each thread's ends, the kept roots' in chunks) are counted and scattered by
+    // node side by side, then each node's ends by bin and each slot by depth, node by node.
+    // The order the sources are read in never shows: no two ends of a slot tie on depth and
+    // sender.
+    using Range = std::pair<const End*, const End*>;
+    std::vector<std::vector<Range>> sources;
+    for (const auto& v : recorded)
+        if (!v.empty()) sources.push_back({{v.data(), v.data() + v.size()}});
+    const size_t chunk = std::max<size_t>(1, (used.size() + 15) / 16);
+    for (size_t u = 0; u < used.size(); u += chunk) {
+        std::vector<Range>& ranges = sources.emplace_back();
+        for (size_t k = u; k < std::min(used.size(), u + chunk); ++k)
+            ranges.push_back({kept_.ends.data() + kept_.first[used[k]],
+                              kept_.ends.data() + kept_.first[used[k] + 1]});
+    }
+    const uint32_t binCount = uint32_t(bins);
+    const size_t nodeCount = nodes.size(), slots = nodeCount * bins;
+    std::vector<std::vector<uint32_t>> at(sources.size());  // per source and node: its place
+    tbb::parallel_for(size_t(0), sources.size(), [&](size_t s) {
+        at[s].assign(nodeCount, 0);
+        for (const auto& [b, e] : sources[s])
+            for (const End* p = b; p != e; ++p) ++at[s][p->slot / binCount];
+    });
+    std::vector<size_t> nodeFirst(nodeCount + 1);
     size_t total = 0;
-    keptEnds([&](const End& e) { ++first[e.slot + 1], ++total; });
-    for (const auto& v : recorded) {
-        total += v.size();
-        for (const End& e : v) ++first[e.slot + 1];
+    for (size_t n = 0; n < nodeCount; ++n) {
+        nodeFirst[n] = total;
+        for (auto& a : at) total += std::exchange(a[n], uint32_t(total));
     }
-    for (size_t k = 0; k < slots; ++k) first[k + 1] += first[k];
-    std::vector<End> ends(total);
-    {
-        std::vector<uint32_t> fill(first.begin(), first.end() - 1);
-        keptEnds([&](const End& e) { ends[fill[e.slot]++] = e; });
-        for (const auto& v : recorded)
-            for (const End& e : v) ends[fill[e.slot]++] = e;
-    }
-    tbb::parallel_for(size_t(0), slots, [&](size_t k) {
-        if (first[k + 1] - first[k] > 1)
-            std::sort(ends.begin() + first[k], ends.begin() + first[k + 1],
-                      [](const End& x, const End& y) {
-                          // The sender breaks ties: the order never depends on the threads.
-                          return x.dist < y.dist || (x.dist == y.dist && x.sender < y.sender);
-                      });
+    nodeFirst[nodeCount] = total;
+    PENUMBRA_CHECK(total < 0xffffffffu);  // `first` holds them as 32 bits
+    const std::unique_ptr<End[]> byNode(new End[total]), ends(new End[total]);
+    tbb::parallel_for(size_t(0), sources.size(), [&](size_t s) {
+        uint32_t* fill = at[s].data();
+        for (const auto& [b, e] : sources[s])
+            for (const End* p = b; p != e; ++p) byNode[fill[p->slot / binCount]++] = *p;
+    });
+    std::vector<uint32_t> first(slots + 1);
+    first[slots] = uint32_t(total);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nodeCount, 32), [&](const auto& range) {
+        std::vector<uint32_t> fill(bins);
+        for (size_t n = range.begin(); n != range.end(); ++n) {
+            const uint32_t lo = uint32_t(nodeFirst[n]), hi = uint32_t(nodeFirst[n + 1]);
+            const uint32_t base = uint32_t(n) * binCount;
+            uint32_t* f = first.data() + size_t(n) * bins;
+            std::fill(fill.begin(), fill.end(), 0u);
+            for (uint32_t k = lo; k < hi; ++k) ++fill[byNode[k].slot - base];
+            for (uint32_t b = 0, o = lo; b < binCount; ++b)
+                f[b] = o, o += std::exchange(fill[b], o);
+            for (uint32_t k = lo; k < hi; ++k) ends[fill[byNode[k].slot - base]++] = byNode[k];
+            for (uint32_t b = 0; b < binCount; ++b) {
+                const uint32_t end = b + 1 < binCount ? f[b + 1] : hi;
+                if (end - f[b] > 1)
+                    std::sort(ends.get() + f[b], ends.get() + end, [](const End& x, const End& y) {
+                        // The sender breaks ties: the order never depends on the threads.
+                        return x.dist < y.dist || (x.dist == y.dist && x.sender < y.sender);
+                    });
+            }
+        }
     });
     out.msCreate = MsSince(start);
 
@@ -404,7 +437,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 for (uint32_t n : chain) {
                     const size_t slot = size_t(n) * bins + b;
                     if (first[slot] != first[slot + 1])
-                        heads.push_back({ends.data() + first[slot], ends.data() + first[slot + 1]});
+                        heads.push_back({ends.get() + first[slot], ends.get() + first[slot + 1]});
                 }
                 const size_t bin0 = list.size();
                 float left = omegaBin;
@@ -598,7 +631,7 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
             spread(centre);
             for (uint32_t b : dirs_.Adjacent(centre)) spread(b);
         } else {
-            for (uint32_t b = 0; b < uint32_t(bins); ++b) spread(b);
+            dirs_.ForEachNear(dir, rho + binRadius_, spread);
         }
         return;
     }
