@@ -5,7 +5,9 @@
 sanitize_build=${SANITIZE_BUILD:-build-sanitize}
 # SANITIZE_FLAGS replaces the flags for a tree of its own (a fuzz run without ASan, say:
 # scripts/fuzz.sh says when that is worth it); a tree keeps the flags it was configured with.
-sanitize_flags=${SANITIZE_FLAGS:-"-O1 -g -fno-omit-frame-pointer -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all"}
+# Line tables only: reports still name file and line, and the files compile 15% faster
+# (implicit_solver.cpp: 19.5 -> 16.5 s) into objects half the size.
+sanitize_flags=${SANITIZE_FLAGS:-"-O1 -gline-tables-only -fno-omit-frame-pointer -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all"}
 if [ ! -f "$sanitize_build/CMakeCache.txt" ]; then
     cmake -S . -B "$sanitize_build" -DCMAKE_BUILD_TYPE= -DCMAKE_CXX_COMPILER=clang++ \
         -DCMAKE_CXX_FLAGS="$sanitize_flags" -DPENUMBRA_FUZZ=ON -DPENUMBRA_BENCH=OFF >/dev/null
