@@ -103,8 +103,19 @@ bool AboveHorizon(const HierarchyNode& r, const glm::vec3& dir) {
 
 }  // namespace
 
+struct ImplicitLinker::Scratch {
+    std::vector<Pair> round;
+    tbb::enumerable_thread_specific<std::vector<Pair>> next;
+    tbb::enumerable_thread_specific<std::vector<End>> recorded;
+    std::vector<End> byNode, ends;
+    std::vector<uint32_t> first;
+    std::vector<std::vector<Entry>> perLeaf;
+};
+
+ImplicitLinker::~ImplicitLinker() = default;
+
 ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
-    : dirs_(dirs), threshold_(linkThreshold) {
+    : dirs_(dirs), threshold_(linkThreshold), scratch_(std::make_unique<Scratch>()) {
     if (!(linkThreshold > 0.0f)) throw Error("link threshold must be a positive number");
     // Ends wider than half a bin's spacing are spread over the bins they cover.
     splat_ = std::sin(0.5f * dirs.Spacing());
@@ -159,9 +170,13 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // their ends, pairs and links are kept per root; a later build given the same `moving`
     // takes a root's ends where it meets that root, and splits any other kept pair afresh.
     constexpr uint32_t kFresh = 0xffffffffu;
-    std::vector<Pair> round;  // the root's self-pair, below (none: the rounds run on the device)
-    tbb::enumerable_thread_specific<std::vector<Pair>> next;
-    tbb::enumerable_thread_specific<std::vector<End>> recorded;
+    // The root's self-pair, below (none: the rounds run on the device).
+    std::vector<Pair>& round = scratch_->round;
+    auto& next = scratch_->next;
+    auto& recorded = scratch_->recorded;
+    round.clear();
+    for (auto& v : next) v.clear();
+    for (auto& v : recorded) v.clear();
     struct KeptEnd {
         End end;
         uint32_t root;
@@ -344,13 +359,17 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     }
     nodeFirst[nodeCount] = total;
     PENUMBRA_CHECK(total < 0xffffffffu);  // `first` holds them as 32 bits
-    const std::unique_ptr<End[]> byNode(new End[total]), ends(new End[total]);
+    scratch_->byNode.resize(total);
+    scratch_->ends.resize(total);
+    End* const byNode = scratch_->byNode.data();
+    End* const ends = scratch_->ends.data();
     tbb::parallel_for(size_t(0), sources.size(), [&](size_t s) {
         uint32_t* fill = at[s].data();
         for (const auto& [b, e] : sources[s])
             for (const End* p = b; p != e; ++p) byNode[fill[p->slot / binCount]++] = *p;
     });
-    std::vector<uint32_t> first(slots + 1);
+    std::vector<uint32_t>& first = scratch_->first;  // every entry written below
+    first.resize(slots + 1);
     first[slots] = uint32_t(total);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, nodeCount, 32), [&](const auto& range) {
         std::vector<uint32_t> fill(bins);
@@ -366,7 +385,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
             for (uint32_t b = 0; b < binCount; ++b) {
                 const uint32_t end = b + 1 < binCount ? f[b + 1] : hi;
                 if (end - f[b] > 1)
-                    std::sort(ends.get() + f[b], ends.get() + end, [](const End& x, const End& y) {
+                    std::sort(ends + f[b], ends + end, [](const End& x, const End& y) {
                         // The sender breaks ties: the order never depends on the threads.
                         return x.dist < y.dist || (x.dist == y.dist && x.sender < y.sender);
                     });
@@ -383,7 +402,8 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // sees the environment.
     start = std::chrono::steady_clock::now();
     const size_t leaves = h.leaves.size();
-    std::vector<std::vector<Entry>> perLeaf(leaves);
+    std::vector<std::vector<Entry>>& perLeaf = scratch_->perLeaf;
+    perLeaf.resize(leaves);
     // A closed solid's flat senders met in one bin so far: the solid angles of those facing
     // the leaf and of those turned away, the nearest facing one and its depth.
     struct SolidCover {
@@ -422,6 +442,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
             const glm::vec3& centre = nodes[leaf].center;
             const float norm = dirs_.CosineNorm(normal);
             std::vector<Entry>& list = perLeaf[i];
+            list.clear();
             fronts.clear();
             unseen.clear();
             partial.clear();
@@ -437,7 +458,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 for (uint32_t n : chain) {
                     const size_t slot = size_t(n) * bins + b;
                     if (first[slot] != first[slot + 1])
-                        heads.push_back({ends.get() + first[slot], ends.get() + first[slot + 1]});
+                        heads.push_back({ends + first[slot], ends + first[slot + 1]});
                 }
                 const size_t bin0 = list.size();
                 float left = omegaBin;
@@ -564,6 +585,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
         empty += none;
     });
     out.empty = empty;
+    if (!moving) scratch_ = std::make_unique<Scratch>();  // no relink a frame expected
     out.msPush = MsSince(start);
 }
 

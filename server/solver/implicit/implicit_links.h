@@ -17,6 +17,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <unordered_map>
 #include <vector>
 
@@ -71,6 +72,7 @@ class ImplicitLinker {
         float omega;
     };
     ImplicitLinker(const Directions& dirs, float linkThreshold);
+    ~ImplicitLinker();
     // The links of `hierarchy` as it is placed now. `frontArea`: per node and bin, the
     // front-facing projected area Σ A cos⁺(n, ω_b) (what a cluster covers of a bin).
     // `solid`: per node, the closed solid (scene/scene.h ClosedNodes) all its members bound,
@@ -127,6 +129,12 @@ class ImplicitLinker {
     Kept kept_;
     bool incremental_ = false;
     VulkanLinkCreation* device_ = nullptr;
+    // The build's working buffers (the rounds' pairs, the threads' ends, the ends by slot, the
+    // leaves' shares), kept from a build given `moving` to the next: a relink a frame would
+    // otherwise map and fault in their pages (hundreds of megabytes) every frame. A build
+    // without `moving` (a scene's first, a rebuild) hands them back at its end.
+    struct Scratch;
+    std::unique_ptr<Scratch> scratch_;
     float splat_ = 0.0f;      // sin of the angular radius above which an end is spread
     float binRadius_ = 0.0f;  // the radius of a disc of a bin's solid angle
 };
