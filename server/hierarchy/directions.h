@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <glm/glm.hpp>
+#include <numbers>
 #include <span>
 #include <vector>
 
@@ -83,13 +84,14 @@ class Directions {
     // about a fifth of the bins instead of every one.
     template <typename F>
     void ForEachNear(const glm::vec3& d, float reach, F&& f) const {
-        const float cosReach = std::cos(std::min(reach, 3.14159265f)),
-                    sinReach = std::sin(std::min(reach, 3.14159265f));
+        constexpr float pi = std::numbers::pi_v<float>;
+        const float cosReach = std::cos(std::min(reach, pi)),
+                    sinReach = std::sin(std::min(reach, pi));
         for (size_t g = 0; g + 1 < groupFirst_.size(); ++g) {
             const Group& G = groups_[g];
             // Within reach + r_g of the group's centre (no group is wider than π / 2):
             // cos(reach + r_g) = cos·cos − sin·sin, unless reach + r_g ≥ π.
-            if (reach + G.radius < 3.14159265f &&
+            if (reach + G.radius < pi &&
                 glm::dot(d, G.centre) < cosReach * G.cosRadius - sinReach * G.sinRadius)
                 continue;
             for (uint32_t k = groupFirst_[g]; k < groupFirst_[g + 1]; ++k) f(groupBins_[k]);

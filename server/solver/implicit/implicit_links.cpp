@@ -127,7 +127,8 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                            const std::vector<uint8_t>* moving) {
     const auto& nodes = h.nodes;
     PENUMBRA_CHECK(!moving || moving->size() == nodes.size());
-    if (device_) moving = nullptr;  // the device examines every pair
+    const bool perFrame = moving != nullptr;  // a relink given what moves: keep scratch_
+    if (device_) moving = nullptr;            // the device examines every pair
     // With the ends kept for this `moving`: only the pairs with a moving end are examined.
     // Else everything, and the ends of the pairs without one are kept for the next build.
     incremental_ = moving && !keptFor_.empty() && keptFor_ == *moving;
@@ -585,7 +586,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
         empty += none;
     });
     out.empty = empty;
-    if (!moving) scratch_ = std::make_unique<Scratch>();  // no relink a frame expected
+    if (!perFrame) scratch_ = std::make_unique<Scratch>();  // no relink a frame expected
     out.msPush = MsSince(start);
 }
 

@@ -131,8 +131,9 @@ class ImplicitLinker {
     VulkanLinkCreation* device_ = nullptr;
     // The build's working buffers (the rounds' pairs, the threads' ends, the ends by slot, the
     // leaves' shares), kept from a build given `moving` to the next: a relink a frame would
-    // otherwise map and fault in their pages (hundreds of megabytes) every frame. A build
-    // without `moving` (a scene's first, a rebuild) hands them back at its end.
+    // otherwise map and fault in their pages (hundreds of megabytes) every frame (also when
+    // the device creates the ends). A build without `moving` (a scene's first, a rebuild)
+    // hands them back at its end.
     struct Scratch;
     std::unique_ptr<Scratch> scratch_;
     float splat_ = 0.0f;      // sin of the angular radius above which an end is spread
