@@ -11,14 +11,11 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "direct/direct_stage.h"
 
 namespace penumbra::direct {
 namespace {
-
-double MsSince(std::chrono::steady_clock::time_point t) {
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
-}
 
 // An up vector that is not parallel to `forward`.
 glm::vec3 UpFor(const glm::vec3& forward) {

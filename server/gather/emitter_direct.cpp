@@ -9,13 +9,12 @@
 #include <limits>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "base/pcg.h"
 #include "gather/sampling.h"
 
 namespace penumbra {
 namespace {
-
-constexpr float kPi = 3.14159265358979f;
 
 // The power heuristic (Veach 1997) for a sample drawn na times with pdf pa against nb with pb.
 float Power(float na, float pa, float nb, float pb) {

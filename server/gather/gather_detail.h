@@ -1,13 +1,13 @@
 // What the gather stage's files share (gather_stage.cpp, gather_trace.cpp,
-// gather_glossy.cpp): the random streams of its patterns, the short-hit rule, a timer.
+// gather_glossy.cpp): the random streams of its patterns, the short-hit rule.
 #pragma once
 
-#include <chrono>
 #include <cstdint>
+
+#include "base/numeric.h"
 
 namespace penumbra::gather_detail {
 
-inline constexpr float kPi = 3.14159265358979f;
 // Streams of the gather's patterns, apart from the first shot's (which uses stream = surfel).
 inline constexpr uint64_t kGatherStream = 0x9e3779b97f4a7c15ull;
 inline constexpr uint64_t kSecondStream = 0x5851f42d4c957f2dull;
@@ -19,10 +19,5 @@ inline constexpr uint64_t kGlintStream = 0x6a09e667f3bcc909ull;
 // the Cornell box 2.78, 2.15, 2.14, 2.13%; the office (0.37 m elements) 4.01, 3.90, 3.88,
 // 3.88%, its tracing 0.44, 1.1, 1.2, 2.1 s; the white furnace's worst vertex 2.3% without.
 inline constexpr float kShortHit = 0.5f;
-
-inline double Ms(std::chrono::steady_clock::time_point since) {
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since)
-        .count();
-}
 
 }  // namespace penumbra::gather_detail

@@ -114,7 +114,7 @@ void GatherStage::TraceLobes(const Moved* moved) {
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
     lightsFresh_ = false;
-    msTrace_ += Ms(start);
+    msTrace_ += MsSince(start);
 }
 
 void GatherStage::PlaceGlints() {
@@ -201,7 +201,7 @@ void GatherStage::TraceGlints(const Moved* moved) {
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
     lightsFresh_ = false;
-    msTrace_ += Ms(start);
+    msTrace_ += MsSince(start);
 }
 
 size_t GatherStage::See(const glm::vec3& y, const glm::vec3& n, uint32_t* bits, const uint32_t* old,

@@ -221,7 +221,7 @@ void GatherStage::Evaluate() {
         indirect_[i] = (shot_.empty() ? glm::vec3(0.0f) : shot_[i]) + gathered[t];
     }
     fresh_ = true;
-    msEvaluate_ = Ms(start);
+    msEvaluate_ = MsSince(start);
 }
 
 void GatherStage::Iterate(int n) {
@@ -308,7 +308,7 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
             emitterShot_[targets_[t]] += emitterHits_[t];
         }
         Combine();
-        msShot_ = Ms(start);
+        msShot_ = MsSince(start);
         return;
     }
     rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
@@ -349,7 +349,7 @@ void GatherStage::UpdateLights(const Scene& scene) {
             }
         }
         Combine();
-        msShot_ = Ms(start);
+        msShot_ = MsSince(start);
     }
     HandSky(true);
     Relit(before);

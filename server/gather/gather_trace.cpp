@@ -55,7 +55,7 @@ void GatherStage::Shoot(const Moved* moved, bool emitterPart) {
         sunShot_.clear();
     }
     Combine();
-    msShot_ = Ms(start);
+    msShot_ = MsSince(start);
 }
 
 EmitterDirectSettings GatherStage::ShotSettings() const {
@@ -105,9 +105,9 @@ void GatherStage::ShotPart() {
         for (size_t i = first; i < last; ++i)
             if (targetOf_[i] >= 0) emitterShot_[i] += emitterHits_[size_t(targetOf_[i])];
         shotNext_ = last;
-    } while (ShotPending() && Ms(start) < settings_.shotPartMs);
+    } while (ShotPending() && MsSince(start) < settings_.shotPartMs);
     Combine();
-    msShot_ = Ms(start);
+    msShot_ = MsSince(start);
 }
 
 void GatherStage::Combine() {
@@ -465,7 +465,7 @@ void GatherStage::Trace(const Moved* moved) {
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
     lightsFresh_ = false;
-    msTrace_ = Ms(start);
+    msTrace_ = MsSince(start);
 }
 
 void GatherStage::Sky() {

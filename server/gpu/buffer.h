@@ -6,7 +6,9 @@
 // so those go through a readback buffer kept with the buffer.
 #pragma once
 
+#include <algorithm>
 #include <cstring>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -60,5 +62,10 @@ class Buffer {
     mutable size_t readbackBytes_ = 0;
     mutable std::vector<std::pair<vk::Format, vk::raii::BufferView>> views_;
 };
+
+// A buffer of at least 16 bytes: an empty array still gets a buffer to bind.
+inline std::unique_ptr<Buffer> MakeBuffer(Context& ctx, size_t bytes) {
+    return std::make_unique<Buffer>(ctx, std::max<size_t>(bytes, 16));
+}
 
 }  // namespace penumbra::gpu

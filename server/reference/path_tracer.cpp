@@ -19,13 +19,12 @@
 
 #include "base/check.h"
 #include "base/image.h"
+#include "base/numeric.h"
 #include "base/pcg.h"
 #include "gather/ray_scene.h"
 
 namespace penumbra {
 namespace {
-
-constexpr float kPi = std::numbers::pi_v<float>;
 
 using Rng = Pcg32;  // one stream per vertex
 

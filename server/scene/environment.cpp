@@ -6,11 +6,10 @@
 #include <numbers>
 
 #include "base/check.h"
+#include "base/numeric.h"
 
 namespace penumbra {
 namespace {
-
-constexpr float kPi = std::numbers::pi_v<float>;
 
 glm::vec3 RotateY(const glm::vec3& d, float angle) {
     float c = std::cos(angle), s = std::sin(angle);

@@ -21,6 +21,7 @@
 #include <sstream>
 
 #include "base/check.h"
+#include "base/numeric.h"
 
 namespace penumbra {
 namespace {
@@ -60,12 +61,6 @@ glm::mat4 LocalTransform(const tinygltf::Node& node) {
     if (node.scale.size() == 3)
         m = glm::scale(m, glm::vec3(node.scale[0], node.scale[1], node.scale[2]));
     return m;
-}
-
-bool Finite(const glm::mat4& m) {
-    for (int i = 0; i < 16; ++i)
-        if (!std::isfinite(glm::value_ptr(m)[i])) return false;
-    return true;
 }
 
 // The first byte an accessor reads, for `acc.count` elements of `size` bytes each, `stride`

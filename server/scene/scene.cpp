@@ -8,6 +8,7 @@
 #include <unordered_map>
 
 #include "base/check.h"
+#include "base/numeric.h"
 
 namespace penumbra {
 
@@ -128,13 +129,6 @@ int FindNode(const Scene& scene, const std::string& name) {
 
 namespace {
 
-bool IsFinite(const glm::mat4& m) {
-    for (int c = 0; c < 4; ++c)
-        for (int r = 0; r < 4; ++r)
-            if (!std::isfinite(m[c][r])) return false;
-    return true;
-}
-
 // Node `node` of `scene`; throws penumbra::Error when there is none.
 const SceneNode& NodeAt(const Scene& scene, int node) {
     if (node < 0 || node >= static_cast<int>(scene.nodes.size()))
@@ -208,13 +202,13 @@ int FindLight(const Scene& scene, const std::string& name) {
 
 void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
     const SceneNode& n = NodeAt(scene, node);
-    if (!IsFinite(local)) throw Error("transform of '" + n.name + "' has NaN or infinity");
+    if (!Finite(local)) throw Error("transform of '" + n.name + "' has NaN or infinity");
     glm::mat4 parentWorld = n.parent >= 0 ? scene.nodes[n.parent].world : glm::mat4(1.0f);
     // Check every new world matrix before changing anything.
     std::vector<std::pair<int, glm::mat4>> world;
     PlaceSubtree(scene, node, parentWorld, local, world);
     for (const auto& [i, w] : world) {
-        if (!IsFinite(w)) throw Error("transform of '" + n.name + "' overflows to infinity");
+        if (!Finite(w)) throw Error("transform of '" + n.name + "' overflows to infinity");
         for (const PunctualLight& light : scene.lights)
             if (light.node == i) {
                 PunctualLight moved = light;

@@ -7,6 +7,7 @@
 #include <glm/gtx/quaternion.hpp>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "scene/motion.h"
 #include "service/session.h"
 
@@ -15,8 +16,6 @@ namespace penumbra::service {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-bool Finite(glm::vec3 v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
 bool FiniteNonNegative(glm::vec3 v) {
     for (int i = 0; i < 3; ++i)

@@ -12,6 +12,7 @@
 #include <system_error>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gather/gather_stage.h"
 #include "output/irradiance_writer.h"
 
@@ -20,10 +21,6 @@ namespace penumbra::service {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point t) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
 
 }  // namespace
 

@@ -13,6 +13,7 @@
 #include <cmath>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "solver/antiradiance/cpu_walk.h"
 
 namespace penumbra::cpu {
@@ -21,10 +22,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using detail::FloatRows;
 using detail::Rgba;
-
-double MsSince(Clock::time_point t) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
 
 // Pull depth by depth from the deepest clusters up; the clusters of one depth are
 // independent, so each depth is split over the threads.

@@ -7,6 +7,8 @@
 #include <numbers>
 #include <sstream>
 
+#include "base/numeric.h"
+
 namespace penumbra {
 
 LocalMode PassSchedule::Next() const {
@@ -51,7 +53,6 @@ bool PassSchedule::Finished(const std::vector<float>& irradiance) {
 
 float IrradianceBound(const AntiradianceModel& m, float* reflectanceOut) {
     auto maxOf = [](const auto& v) { return std::max({v.x, v.y, v.z}); };
-    constexpr float kPi = std::numbers::pi_v<float>;
     float emission = 0.0f, diffuse = 0.0f, glossy = 0.0f, direct = 0.0f, lobeDirect = 0.0f;
     for (size_t i = 0; i < m.leaves.size(); ++i) {
         const LeafAttributes& leaf = m.leaves[i];

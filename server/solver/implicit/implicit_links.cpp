@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "solver/implicit/vulkan_links.h"
 
 namespace penumbra {
@@ -26,10 +27,6 @@ constexpr float kEdgeCoverage = 0.1f;
 // A spread end covers a bin it overlaps by at least this much of the bin (ImplicitLinker::
 // Record): smaller slivers add shares, not light.
 constexpr float kMinOverlap = 0.2f;
-
-double MsSince(std::chrono::steady_clock::time_point t) {
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
-}
 
 // Whether some member of `r` can receive light from some point of `s`, `d` = s.center −
 // r.center at distance `dist`: a member's front faces part of s's sphere. Conservative

@@ -9,6 +9,7 @@
 #include <numbers>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gpu/context.h"
 #include "solver/implicit/vulkan_links.h"
 
@@ -16,10 +17,6 @@ namespace penumbra {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point t) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
 
 // Sums each node's two children's rows into its own, deepest clusters first (the pull).
 template <typename T>
@@ -37,10 +34,6 @@ void PullRows(const Hierarchy& h, size_t width, std::vector<T>& rows) {
             }
         });
     }
-}
-
-bool Finite(const glm::vec3& v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
 }  // namespace

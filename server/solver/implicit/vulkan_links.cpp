@@ -60,10 +60,6 @@ PENUMBRA_GPU_FIELD(PairPush, binRadius, 40);
 
 constexpr uint32_t kGroup = 64;  // local_size_x
 
-std::unique_ptr<gpu::Buffer> MakeBuffer(gpu::Context& ctx, size_t bytes) {
-    return std::make_unique<gpu::Buffer>(ctx, std::max<size_t>(bytes, 16));
-}
-
 }  // namespace
 
 struct VulkanLinkCreation::Impl {

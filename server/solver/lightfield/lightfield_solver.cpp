@@ -13,20 +13,13 @@
 #include <tuple>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gpu/context.h"
 
 namespace penumbra {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double MsSince(Clock::time_point t) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
-
-bool Finite(const glm::vec3& v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-}
 
 // The ball the lines cover: around the refined mesh's bounding box.
 LineGrid MakeGrid(const Surfels& surfels, float elementSize, int cells) {

@@ -9,13 +9,12 @@
 #include <glm/gtc/quaternion.hpp>
 #include <numbers>
 
+#include "base/numeric.h"
 #include "base/pcg.h"
 #include "gather/sampling.h"
 
 namespace penumbra {
 namespace {
-
-constexpr float kPi = std::numbers::pi_v<float>;
 
 // The lines of one direction that meet something: per line its cell and hit count, in cell
 // order, and their hits.

@@ -40,10 +40,6 @@ PENUMBRA_GPU_FIELD(FlushPush, cellArea, 16);
 PENUMBRA_GPU_FIELD(FlushPush, ratioCells, 20);
 PENUMBRA_GPU_FIELD(FlushPush, glossy, 24);
 
-std::unique_ptr<gpu::Buffer> MakeBuffer(gpu::Context& ctx, size_t bytes) {
-    return std::make_unique<gpu::Buffer>(ctx, std::max<size_t>(bytes, 16));
-}
-
 }  // namespace
 
 struct VulkanWalk::Impl {
