@@ -329,6 +329,54 @@ TEST(Implicit, ThinWallKeepsTheDarkRoomDark) {
     EXPECT_LT(dark, 0.01 * lit);
 }
 
+// A thin slab floating over a glowing floor, seen from above: the slab (2 cm, a fifth of an
+// element) hides the floor behind its outline and no more. Its far face lies within `thin` of
+// its near one, so inside the outline it fills the gaps the near face's ends leave; at the
+// outline it added its coverage to the near face's and made the slab look larger (the
+// blocker's emitter 15% bright with the gather off). E = π L (F_floor − F_slab), the form
+// factors of a point to parallel rectangles (sums of corner rectangles, closed form).
+TEST(Implicit, ThinSlabHidesOnlyItsOutline) {
+    SceneBuilder b;
+    const uint32_t black = b.AddMaterial("black", glm::vec3(0.0f));
+    const uint32_t glow = b.AddMaterial("glow", glm::vec3(0.0f), glm::vec3(1.0f));
+    b.AddQuad("floor", glow, {-2, 0, -2}, {2, 0, -2}, {2, 0, 2}, {-2, 0, 2}, {0, 1, 0}, 16);
+    b.AddBox("slab", black, {0.0f, 0.5f, 0.0f}, {0.6f, 0.02f, 0.6f});
+    b.AddQuad("receiver", black, {-0.01f, 1, -0.01f}, {0.01f, 1, -0.01f}, {0.01f, 1, 0.01f},
+              {-0.01f, 1, 0.01f}, {0, 0, 0});
+    const Scene scene = b.Build();
+    ASSERT_EQ(scene.primitives.back().node, "receiver");
+    auto solver = CreateSolver(scene, Implicit(0.1f, 512));
+    solver->Iterate(2);
+    const std::vector<glm::vec3> e = testing::AllVertices(*solver, scene, Channel::kIndirect);
+    // Form factor from a point at height c over a corner of an a × b rectangle, facing it.
+    auto corner = [](double a, double b2, double c) {
+        const double x = a / c, y = b2 / c, sx = std::sqrt(1 + x * x), sy = std::sqrt(1 + y * y);
+        return (x / sx * std::atan(y / sx) + y / sy * std::atan(x / sy)) / (2 * std::numbers::pi);
+    };
+    // ... of a square of side `side` centred under the point (px, pz) at height c.
+    auto square = [&](double side, double px, double pz, double c) {
+        double f = 0.0;
+        for (double sx : {-1.0, 1.0})
+            for (double sz : {-1.0, 1.0}) f += corner(side / 2 + sx * px, side / 2 + sz * pz, c);
+        return f;
+    };
+    const std::vector<glm::vec3>& at = scene.primitives.back().positions;
+    const size_t first = e.size() - at.size();
+    double got = 0.0, want = 0.0;
+    for (size_t i = 0; i < at.size(); ++i) {
+        got += e[first + i].x;
+        want += std::numbers::pi *
+                (square(4.0, at[i].x, at[i].z, 1.0) - square(0.6, at[i].x, at[i].z, 1.0 - 0.51));
+    }
+    got /= double(at.size());
+    want /= double(at.size());
+    std::printf("over a thin slab: E %.4f, expected %.4f (%+.1f%%)\n", got, want,
+                100.0 * (got / want - 1.0));
+    // Measured −0.6% (−5.0% when the far face added its coverage at the outline too); the
+    // bound leaves the bins' quantisation of the outline its margin.
+    EXPECT_NEAR(got, want, 0.025 * want);
+}
+
 // A room's edges: a 2 m cube room, its floor emitting 1 nit, every surface black, so that a
 // wall receives the floor's light alone, E = ∫ cos θ_r cos θ_e / d² dA over the floor. Along
 // a wall's middle row the corner vertices see the other wall edge-on from a few centimetres:

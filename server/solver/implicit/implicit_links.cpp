@@ -8,12 +8,14 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <utility>
 
 #include "base/check.h"
 #include "base/numeric.h"
+#include "gather/sampling.h"
 #include "solver/implicit/vulkan_links.h"
 
 namespace penumbra {
@@ -96,6 +98,75 @@ bool AboveHorizon(const HierarchyNode& r, const glm::vec3& dir) {
     if (r.coneCos <= -1.0f) return true;
     const float below = std::sqrt(std::max(0.0f, 1.0f - r.coneCos * r.coneCos));
     return glm::dot(r.normal, dir) > 0.01f - below;
+}
+
+// A closed solid's box of its leaves, open (unbounded) across a face that another surface
+// touches: seen through such a face the solid's outline continues into what it stands on.
+struct SolidBox {
+    glm::vec3 lo{std::numeric_limits<float>::max()}, hi{-std::numeric_limits<float>::max()};
+    // Whether the ray from `from` along `dir` meets the box ahead (or starts inside it).
+    bool Meets(const glm::vec3& from, const glm::vec3& dir) const {
+        float near = 0.0f, far = std::numeric_limits<float>::max();
+        for (int a = 0; a < 3; ++a) {
+            if (std::abs(dir[a]) < 1e-12f) {
+                if (from[a] < lo[a] || from[a] > hi[a]) return false;
+                continue;
+            }
+            float t0 = (lo[a] - from[a]) / dir[a], t1 = (hi[a] - from[a]) / dir[a];
+            if (t0 > t1) std::swap(t0, t1);
+            near = std::max(near, t0);
+            far = std::min(far, t1);
+        }
+        return near <= far;
+    }
+    // Whether the cone about `dir` of half angle `radius` lies inside the box's outline seen
+    // from `from` (a receiver with `normal`): its axis and the rays on its rim above the
+    // receiver's horizon meet the box.
+    bool Holds(const glm::vec3& from, const glm::vec3& dir, float radius,
+               const glm::vec3& normal) const {
+        if (!Meets(from, dir)) return false;
+        glm::vec3 t, s;
+        Basis(dir, t, s);
+        const float c = std::cos(radius), r = std::sin(radius);
+        for (const glm::vec3& side : {t, -t, s, -s}) {
+            const glm::vec3 ray = c * dir + r * side;
+            if (glm::dot(ray, normal) > 0.0f && !Meets(from, ray)) return false;
+        }
+        return true;
+    }
+};
+
+// Per closed solid (solid[node], kNoSolid for none) the box of its leaves, opened across each
+// face that a leaf of something else touches (within `thin` of the face's plane, over it).
+std::vector<SolidBox> SolidBoxes(const Hierarchy& h, const std::vector<uint32_t>& solid,
+                                 float thin) {
+    std::vector<SolidBox> boxes;
+    if (solid.empty()) return boxes;
+    for (uint32_t leaf : h.leaves) {
+        const uint32_t of = solid[leaf];
+        if (of == kNoSolid) continue;
+        if (of >= boxes.size()) boxes.resize(size_t(of) + 1);
+        boxes[of].lo = glm::min(boxes[of].lo, h.nodes[leaf].center);
+        boxes[of].hi = glm::max(boxes[of].hi, h.nodes[leaf].center);
+    }
+    std::vector<SolidBox> open = boxes;
+    constexpr float kUnbounded = std::numeric_limits<float>::max();
+    tbb::parallel_for(size_t(0), boxes.size(), [&](size_t of) {
+        const SolidBox& box = boxes[of];
+        if (box.lo.x > box.hi.x) return;  // no such solid
+        const glm::vec3 lo = box.lo - thin, hi = box.hi + thin;
+        for (uint32_t leaf : h.leaves) {
+            const glm::vec3& p = h.nodes[leaf].center;
+            if (solid[leaf] == of || glm::any(glm::lessThan(p, lo)) ||
+                glm::any(glm::greaterThan(p, hi)))
+                continue;
+            for (int a = 0; a < 3; ++a) {
+                if (p[a] <= box.lo[a]) open[of].lo[a] = -kUnbounded;
+                if (p[a] >= box.hi[a]) open[of].hi[a] = kUnbounded;
+            }
+        }
+    });
+    return open;
 }
 
 }  // namespace
@@ -400,6 +471,9 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // sees the environment.
     start = std::chrono::steady_clock::now();
     const size_t leaves = h.leaves.size();
+    // A thin solid's far faces fill a bin only inside the solid's outline, where its near
+    // faces' ends left gaps (SolidBoxes).
+    const std::vector<SolidBox> boxes = SolidBoxes(h, solid, thin);
     std::vector<std::vector<Entry>>& perLeaf = scratch_->perLeaf;
     perLeaf.resize(leaves);
     // A closed solid's flat senders met in one bin so far: the solid angles of those facing
@@ -488,11 +562,15 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                             it->facing += omega;
                         } else if (it->facing > 0.0f) {
                             // Behind the solid's near faces by `thin` or more, across the
-                            // solid (along the far face's normal): it adds only what it
-                            // covers beyond them. Either way what it covers stands for the
+                            // solid (along the far face's normal), or at the outline of a
+                            // thin one (the bin's axis passes its box: at a slab's edge its
+                            // far face would add to the near one's cover of the bin what
+                            // lies beyond the slab): it adds only what it covers beyond
+                            // them. Either way what it covers stands for the
                             // solid as seen from here, its near face (black, it would
                             // darken the gaps the near faces' ends leave).
-                            if ((e.dist - it->near) * std::abs(glm::dot(s.normal, w)) >= thin) {
+                            if ((e.dist - it->near) * std::abs(glm::dot(s.normal, w)) >= thin ||
+                                !boxes[of].Holds(centre, w, binRadius_, normal)) {
                                 const float before = std::max(it->facing, it->away);
                                 it->away += omega;
                                 omega = std::max(it->facing, it->away) - before;
