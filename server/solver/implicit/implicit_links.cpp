@@ -563,12 +563,12 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                         } else if (it->facing > 0.0f) {
                             // Behind the solid's near faces by `thin` or more, across the
                             // solid (along the far face's normal), or at the outline of a
-                            // thin one (the bin's axis passes its box: at a slab's edge its
+                            // thin one (the bin's cone leaves its box: at a slab's edge the
                             // far face would add to the near one's cover of the bin what
                             // lies beyond the slab): it adds only what it covers beyond
-                            // them. Either way what it covers stands for the
-                            // solid as seen from here, its near face (black, it would
-                            // darken the gaps the near faces' ends leave).
+                            // them. Either way what it covers stands for the solid as seen
+                            // from here, its near face (black, it would darken the gaps the
+                            // near faces' ends leave).
                             if ((e.dist - it->near) * std::abs(glm::dot(s.normal, w)) >= thin ||
                                 !boxes[of].Holds(centre, w, binRadius_, normal)) {
                                 const float before = std::max(it->facing, it->away);

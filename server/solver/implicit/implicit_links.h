@@ -81,8 +81,11 @@ class ImplicitLinker {
     // facing ones: seen from outside, a solid's far faces lie behind its near ones (at a
     // silhouette both would count, and the far ones, black, darken the bin); seen from
     // inside (a floor under a box without a bottom) only far faces show, and they block. A
-    // solid thinner than `thin` (a wall thinner than an element) keeps both: its near
-    // faces' ends fall into the bins unevenly, and its far faces fill the gaps.
+    // solid thinner than `thin` (a wall thinner than an element) keeps both inside its
+    // outline: its near faces' ends fall into the bins unevenly, and its far faces fill the
+    // gaps. At the outline (a bin's cone leaves the box of the solid's leaves, whose faces
+    // that other surfaces touch are open) it adds, as a thick one does, only what it covers
+    // beyond them.
     //
     // `moving` (per node, or null): the nodes whose subtree holds an element that moved since
     // the last build, or can move from now on. The ends of every pair of two nodes outside
