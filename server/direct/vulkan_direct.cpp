@@ -8,6 +8,7 @@
 #include <cstring>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "gpu/layout.h"
@@ -158,9 +159,7 @@ struct VulkanDirect::Impl {
             msShadow = ms[0];
             msDirect = ms[1];
         } else {
-            msShadow =
-                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                    .count();
+            msShadow = MsSince(start);
             msDirect = 0.0;
         }
     }

@@ -7,6 +7,8 @@
 #include <cstdint>
 #include <glm/glm.hpp>
 
+#include "base/numeric.h"
+
 namespace penumbra {
 
 // The R2 sequence (Roberts 2018): point i at frac(s + i·(1/φ₂, 1/φ₂²)), φ₂ the plastic
@@ -32,7 +34,6 @@ inline void Basis(const glm::vec3& n, glm::vec3& t, glm::vec3& s) {
 // Shirley and Chiu's concentric map of u in the unit square to the unit disk, as a signed
 // radius and an angle (r < 0: the point at angle phi + π).
 inline void Concentric(const glm::vec2& u, float& r, float& phi) {
-    constexpr float kPi = 3.14159265358979f;
     const float a = 2.0f * u.x - 1.0f, b = 2.0f * u.y - 1.0f;
     r = 0.0f, phi = 0.0f;
     if (a == 0.0f && b == 0.0f) return;
@@ -94,7 +95,6 @@ class CosineCone {
     bool MayContain(const glm::vec2& u) const {
         if (all_) return true;
         if (empty_) return false;
-        constexpr float kPi = 3.14159265358979f;
         // The concentric map's radius is the larger of |a|, |b|: the ring first, no division.
         const float ring = std::max(std::abs(2.0f * u.x - 1.0f), std::abs(2.0f * u.y - 1.0f));
         if (ring < rLo_ || ring > rHi_) return false;

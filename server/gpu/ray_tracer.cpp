@@ -10,6 +10,7 @@
 #include <cstring>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "shaders/trace_rchit_spv.h"
@@ -22,11 +23,6 @@ namespace {
 constexpr uint32_t kBatch = 1u << 20;  // rays a dispatch
 
 vk::DeviceSize Align(vk::DeviceSize x, vk::DeviceSize a) { return (x + a - 1) / a * a; }
-
-double MsSince(std::chrono::steady_clock::time_point start) {
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-        .count();
-}
 
 // Where a buffer's memory lies: the device's own; host-visible for the host to write
 // (uncached, write-combined where the device offers it); host-visible and cached for the host

@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "gpu/layout.h"
@@ -231,8 +232,7 @@ RenderOutput Rasterize(const Mesh& mesh, const Camera& camera, const RenderSetti
     out.image = Image(int(w), int(h));
     for (size_t i = 0; i < out.image.pixels.size(); ++i) out.image.pixels[i] = glm::vec3(rgba[i]);
     out.validationMessages = ctx.ValidationMessages();
-    out.ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    out.ms = MsSince(start);
     return out;
 }
 

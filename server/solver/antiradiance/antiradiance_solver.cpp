@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gpu/context.h"
 #include "solver/antiradiance/cpu_passes.h"
 #include "solver/antiradiance/vulkan_passes.h"
@@ -108,8 +109,7 @@ std::string AntiradianceSolver::UpdateGeometry(const Scene& scene) {
         direct_->Move(scene, LeafReceivers());
         CopyDirect(scene);
     }
-    msGeometry_ =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    msGeometry_ = MsSince(start);
     return std::string("links updated in place on the ") +
            (DeviceLinkUpdate() ? "device" : "host") + " (" + std::to_string(linksUpdated_) +
            " so far, this move " + std::to_string(int(msGeometry_ + 0.5)) + " ms)";
@@ -150,8 +150,7 @@ void AntiradianceSolver::Iterate(int n) {
         if (divergence_.empty()) ++iterations_;
         if (progress_) progress_("iterating", static_cast<double>(i + 1) / n);
     }
-    msTotal_ +=
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    msTotal_ += MsSince(start);
 }
 
 std::vector<glm::vec3> AntiradianceSolver::SurfelIrradiance(Channel channel) {

@@ -155,9 +155,18 @@ std::vector<SolidBox> SolidBoxes(const Hierarchy& h, const std::vector<uint32_t>
         const SolidBox& box = boxes[of];
         if (box.lo.x > box.hi.x) return;  // no such solid
         const glm::vec3 lo = box.lo - thin, hi = box.hi + thin;
-        for (uint32_t leaf : h.leaves) {
-            const glm::vec3& p = h.nodes[leaf].center;
-            if (solid[leaf] == of || glm::any(glm::lessThan(p, lo)) ||
+        // The leaves of other surfaces within the widened box: down the tree (preorder,
+        // `end` skips a subtree) through the nodes whose spheres meet it.
+        for (uint32_t n = 0; n < h.nodes.size();) {
+            const HierarchyNode& node = h.nodes[n];
+            const glm::vec3 off = glm::clamp(node.center, lo, hi) - node.center;
+            if (glm::dot(off, off) > node.radius * node.radius) {
+                n = node.end;
+                continue;
+            }
+            ++n;
+            const glm::vec3& p = node.center;
+            if (!node.IsLeaf() || solid[n - 1] == of || glm::any(glm::lessThan(p, lo)) ||
                 glm::any(glm::greaterThan(p, hi)))
                 continue;
             for (int a = 0; a < 3; ++a) {

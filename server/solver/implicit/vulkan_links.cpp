@@ -7,6 +7,7 @@
 #include <numbers>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "gpu/layout.h"
@@ -215,8 +216,7 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
         }
         std::swap(round, next);
     }
-    msDevice =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    msDevice = MsSince(start);
 }
 
 }  // namespace penumbra

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "gpu/layout.h"
@@ -124,9 +125,7 @@ struct VulkanLines::Impl {
             const size_t before = out.size();
             out.resize(before + size_t(chunk) * texels);
             layers.Download(out.data() + before, size_t(chunk) * slotBytes, slotBytes);
-            ms +=
-                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                    .count();
+            ms += MsSince(start);
             // Go on while some line met a surface in the last layer (it may have more).
             const auto last = out.end() - std::ptrdiff_t(texels);
             const bool more =

@@ -5,6 +5,7 @@
 #include <chrono>
 
 #include "base/check.h"
+#include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "gpu/layout.h"
@@ -210,8 +211,7 @@ void VulkanWalk::Walk(size_t index, const LineBatch& b, float cellArea,
         s.incoming->Download(in.data(), in.size() * sizeof(glm::vec4));
         for (size_t i = 0; i < glossyTexels; ++i) glossy->incoming[i] = glm::vec3(in[i]);
     }
-    msDevice +=
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    msDevice += MsSince(start);
 }
 
 }  // namespace penumbra
