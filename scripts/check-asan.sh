@@ -23,7 +23,16 @@
 # 60 iterations (the antiradiance passes run sanitized in the other Antiradiance tests), the
 # glTF output through the Khronos validator (its bake runs sanitized in the other BakeCli
 # tests; the validator is node) and a bake lit through an opening (Environment's sanitized
-# tests light rooms through openings).
+# tests light rooms through openings). And ten of 23–52 s sanitized (session 39: CI took
+# 1,956 s; ~340 s of one core), each with a smaller sibling run sanitized: the implicit
+# maze furnace, closed room and deformation against a fresh build (the other Implicit tests,
+# the server's deformation over the socket), a moved emitter shot in parts (the emitter edit
+# against a fresh solve), the light field's move (its other tests walk and trace), the
+# half tables in several units (with lights, gloss and sky), the box under a sky (the other
+# Environment tests), the gather's white furnace (the other FinalGather tests), the glossy
+# reference furnace (the other Glossy tests), the Python client (a Python program against
+# the server that ServerProcess starts sanitized) and a light edit's lamp parts (the edit
+# that cuts a frame in progress).
 #   JOBS  build and test jobs (default: the cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -43,6 +52,11 @@ if [ "${1:-}" = "--quick" ]; then
     excluded="$excluded|Implicit\.ADeformingMeshOverAHundredFramesStaysBoundedAndSmooth"
     excluded="$excluded|Antiradiance\.BlockerShadowAppearsWithIterations|BakeCli\.GltfOutputPassesTheKhronosValidator"
     excluded="$excluded|BakeCli\.EnvironmentLightsTheSceneThroughItsOpening"
+    excluded="$excluded|Implicit\.(MazeFurnaceKeepsItsEnergy|ClosedRoomFillsEveryBinAndKeepsTheFurnace|ADeformationIsAsGoodAsAFreshBuild)"
+    excluded="$excluded|FinalGather\.(AMovedEmittersShotInPartsMatchesTheWholeShot|WhiteFurnaceWithinOnePercentAtEveryVertex)"
+    excluded="$excluded|Lightfield\.AMoveTracesAgainWhatAFreshBuildTraces|HalfTables\.MatchFp32WhateverTheUnits"
+    excluded="$excluded|Environment\.BoxOnAPlaneOccludesTheSky|Glossy\.ReferenceKeepsTheFurnaceBoundAndAgreesWithTheSolver"
+    excluded="$excluded|Python\.ClientAgainstALiveServer|Session\.LightEditsChangeOnlyTheLampsEmittingParts"
 fi
 excluded="$excluded)\$"
 cmake --build "$sanitize_build" -j "$jobs"
