@@ -119,6 +119,7 @@ int main(int argc, char** argv) {
 
     std::map<std::string, std::vector<double>> split;
     std::vector<double> frameMs, linksPerSecond;
+    SolverStats previous = solver->Stats();
     for (int f = 0; f < frames; ++f) {
         const float t = float(f + 1) / float(frames);
         if (motion == "rigid") {
@@ -145,11 +146,16 @@ int main(int argc, char** argv) {
         solver->UpdateGeometry(scene);  // update, create, refine and push
         solver->Iterate(1);             // illumination: one bounce
         frameMs.push_back(Ms(frameStart));
+        // The stats' pass times are totals so far: this frame's are the difference.
         const SolverStats s = solver->Stats();
-        for (const auto& [name, ms] : s.passes) {
-            split[name].push_back(ms);
-            if (name == "create" && ms > 0.0) linksPerSecond.push_back(double(s.links) / ms * 1e3);
+        for (size_t p = 0; p < s.passes.size(); ++p) {
+            const double ms = s.passes[p].msTotal -
+                              (p < previous.passes.size() ? previous.passes[p].msTotal : 0.0);
+            split[s.passes[p].name].push_back(ms);
+            if (s.passes[p].name == "create" && ms > 0.0)
+                linksPerSecond.push_back(double(s.links) / ms * 1e3);
         }
+        previous = s;
     }
     const SolverStats s = solver->Stats();
 

@@ -163,8 +163,10 @@ void ImplicitSolver::Relink(const std::vector<uint8_t>* moved) {
             row[b] = n.area * std::max(0.0f, glm::dot(n.normal, dirs_.Direction(uint32_t(b))));
     });
     PullRows(hierarchy_, bins, projected_);
-    msUpdate_ = MsSince(start);
+    msUpdate_ += MsSince(start);
     linker_.Build(hierarchy_, projected_, solid_, elementSize_, links_, moving);
+    msCreate_ += links_.msCreate;
+    msPush_ += links_.msPush;
     ++relinks_;
     if (linker_.Incremental()) ++incrementalRelinks_;
 }
@@ -273,7 +275,7 @@ void ImplicitSolver::Iterate(int n) {
     for (int i = 0; i < n && divergence_.empty(); ++i) {
         const auto t = Clock::now();
         Bounce();
-        msIllumination_ = MsSince(t);
+        msIllumination_ += MsSince(t);
         if (divergence_.empty()) ++iterations_;
         if (progress_) progress_("iterating", static_cast<double>(i + 1) / n);
     }
@@ -389,8 +391,8 @@ SolverStats ImplicitSolver::Stats() const {
     s.setupSeconds = setupSeconds_;
     s.msTotal = msTotal_;
     s.passes = {{"update", msUpdate_},
-                {"create", links_.msCreate},
-                {"refine_push", links_.msPush},
+                {"create", msCreate_},
+                {"refine_push", msPush_},
                 {"illumination", msIllumination_}};
     s.tableBytes = intensity_.size() * sizeof(glm::vec3) + projected_.size() * sizeof(float);
     s.linkBytes = links_.sender.size() * (2 * sizeof(uint32_t) + sizeof(float));

@@ -159,7 +159,11 @@ class ImplicitSolver : public Solver {
     int lights_ = 0, mapSize_ = 0;
     int iterations_ = 0;
     size_t relinks_ = 0;
-    double setupSeconds_ = 0.0, msTotal_ = 0.0, msUpdate_ = 0.0, msIllumination_ = 0.0;
+    double setupSeconds_ = 0.0, msTotal_ = 0.0;
+    // Each part's milliseconds summed over every relink and bounce so far (Stats' passes,
+    // which SolverStats keeps as totals: the service's frames and the benches take the
+    // difference).
+    double msUpdate_ = 0.0, msCreate_ = 0.0, msPush_ = 0.0, msIllumination_ = 0.0;
     double msGeometry_ = 0.0;
     size_t geometryUpdates_ = 0;
     std::string divergence_;
