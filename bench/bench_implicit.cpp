@@ -148,12 +148,9 @@ int main(int argc, char** argv) {
         frameMs.push_back(Ms(frameStart));
         // The stats' pass times are totals so far: this frame's are the difference.
         const SolverStats s = solver->Stats();
-        for (size_t p = 0; p < s.passes.size(); ++p) {
-            const double ms = s.passes[p].msTotal -
-                              (p < previous.passes.size() ? previous.passes[p].msTotal : 0.0);
-            split[s.passes[p].name].push_back(ms);
-            if (s.passes[p].name == "create" && ms > 0.0)
-                linksPerSecond.push_back(double(s.links) / ms * 1e3);
+        for (const auto& [name, ms] : bench::PassDeltas(previous, s)) {
+            split[name].push_back(ms);
+            if (name == "create" && ms > 0.0) linksPerSecond.push_back(double(s.links) / ms * 1e3);
         }
         previous = s;
     }

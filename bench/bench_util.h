@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "output/compare.h"
@@ -66,6 +67,17 @@ inline void AddAccuracy(nlohmann::json& j, const Scene& scene, Solver& solver,
     j["rmse_converged"] = c.converged;
 }
 
+// Each pass's milliseconds between two Stats() of one solver (SolverStats keeps totals).
+inline std::vector<std::pair<std::string, double>> PassDeltas(const SolverStats& before,
+                                                              const SolverStats& after) {
+    std::vector<std::pair<std::string, double>> d;
+    for (size_t p = 0; p < after.passes.size(); ++p)
+        d.push_back({after.passes[p].name,
+                     after.passes[p].msTotal -
+                         (p < before.passes.size() ? before.passes[p].msTotal : 0.0)});
+    return d;
+}
+
 // Builds the solver, runs a warm-up frame, then `frames` frames of `iterationsPerFrame`
 // iterations (bounces): the bake stats plus median frame and per-pass times; with `truth`, the
 // relative RMSE of the answer those settings converge to (AddAccuracy).
@@ -85,9 +97,8 @@ inline nlohmann::json RunDevice(const Scene& scene, SolverSettings settings, int
                 .count());
         SolverStats after = solver->Stats();
         const int passes = std::max(1, after.gathers - before.gathers);
-        for (size_t p = 0; p < after.passes.size(); ++p)
-            passMs[after.passes[p].name].push_back(
-                (after.passes[p].msTotal - before.passes[p].msTotal) / passes);
+        for (const auto& [name, ms] : PassDeltas(before, after))
+            passMs[name].push_back(ms / passes);
         before = after;
     }
     SolverStats s = solver->Stats();

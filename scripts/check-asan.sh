@@ -23,7 +23,7 @@
 # 60 iterations (the antiradiance passes run sanitized in the other Antiradiance tests), the
 # glTF output through the Khronos validator (its bake runs sanitized in the other BakeCli
 # tests; the validator is node) and a bake lit through an opening (Environment's sanitized
-# tests light rooms through openings). And ten of 23–52 s sanitized (session 39: CI took
+# tests light rooms through openings). And eleven of 23–52 s sanitized (session 39: CI took
 # 1,956 s; ~340 s of one core), each with a smaller sibling run sanitized: the implicit
 # maze furnace, closed room and deformation against a fresh build (the other Implicit tests,
 # the server's deformation over the socket), a moved emitter shot in parts (the emitter edit
