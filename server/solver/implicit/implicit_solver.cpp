@@ -167,13 +167,50 @@ void ImplicitSolver::Relink(const std::vector<uint8_t>* moved) {
     linker_.Build(hierarchy_, projected_, solid_, elementSize_, links_, moving);
     msCreate_ += links_.msCreate;
     msPush_ += links_.msPush;
+    // Per share, where Bounce reads its light in intensity_ and the factor on it (the
+    // geometry's part, fixed until the next relink): a sender node seen through a bin shows
+    // I / P, P the larger of its front- and back-facing projected areas there, so its factor
+    // is weight / P (0 where it shows none, and for a flat sender turned away: a dark
+    // blocker); a facing flat sender's mean radiance and the environment's are read with the
+    // weight itself. One read and one product a share, whatever it sees.
+    start = Clock::now();
+    const size_t shares = links_.sender.size(), meanAt = hierarchy_.size() * bins,
+                 environmentAt = meanAt + hierarchy_.size();
+    PENUMBRA_CHECK(environmentAt + bins <= 0xffffffffu);  // gatherAt_ holds 32 bits
+    gatherAt_.resize(shares);
+    gatherFactor_.resize(shares);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, shares, 4096), [&](const auto& range) {
+        for (size_t k = range.begin(); k != range.end(); ++k) {
+            const uint32_t s = links_.sender[k], travel = links_.travel[k];
+            float f = links_.weight[k];
+            size_t at = 0;
+            if (s == kNoSender) {
+                at = environmentAt + travel;
+            } else if (travel == kFacing) {
+                at = meanAt + s;
+            } else if (travel == kAway) {
+                f = 0.0f;
+            } else {
+                at = size_t(s) * bins + travel;
+                const float p =
+                    std::max(projected_[at], projected_[size_t(s) * bins + dirs_.Opposite(travel)]);
+                f = p > 0.0f ? f / p : 0.0f;
+            }
+            gatherAt_[k] = uint32_t(at);
+            gatherFactor_[k] = f;
+        }
+    });
+    msPush_ += MsSince(start);
     ++relinks_;
     if (linker_.Incremental()) ++incrementalRelinks_;
 }
 
 void ImplicitSolver::ExitantTables() {
     const size_t bins = dirs_.Count();
-    intensity_.assign(hierarchy_.size() * bins, glm::vec3(0.0f));
+    // Every row is written below (the leaves', then the clusters' by the pull), then the
+    // tail: the nodes' mean radiance and the environment (Relink's gatherAt_).
+    const size_t meanAt = hierarchy_.size() * bins, environmentAt = meanAt + hierarchy_.size();
+    intensity_.resize(environmentAt + bins);
     tbb::parallel_for(size_t(0), hierarchy_.leaves.size(), [&](size_t i) {
         const HierarchyNode& n = hierarchy_.nodes[hierarchy_.leaves[i]];
         glm::vec3* row = intensity_.data() + size_t(hierarchy_.leaves[i]) * bins;
@@ -206,6 +243,8 @@ void ImplicitSolver::ExitantTables() {
     for (size_t n = 0; n < mean_.size(); ++n)
         mean_[n] =
             hierarchy_.nodes[n].area > 0.0f ? mean_[n] / hierarchy_.nodes[n].area : glm::vec3(0.0f);
+    std::copy(mean_.begin(), mean_.end(), intensity_.begin() + meanAt);
+    std::copy(environment_.begin(), environment_.end(), intensity_.begin() + environmentAt);
 }
 
 void ImplicitSolver::Bounce() {
@@ -223,40 +262,31 @@ void ImplicitSolver::Bounce() {
                 if (mirror) std::fill(arrived, arrived + bins, glm::vec3(0.0f));
                 glm::vec3 e(0.0f);
                 for (uint32_t k = links_.offsets[i]; k < links_.offsets[i + 1]; ++k) {
+                    // weight · L, the light arriving through this share (Relink's gatherAt_).
+                    glm::vec3 got = gatherFactor_[k] * intensity_[gatherAt_[k]];
                     const uint32_t s = links_.sender[k];
-                    const uint32_t travel = links_.travel[k];
-                    glm::vec3 l(0.0f);
-                    if (s == kNoSender) {
-                        l = environment_[travel];
-                    } else if (travel == kFacing) {
-                        l = mean_[s];
-                        // A flat sender's glossy light towards this leaf, through the bin of
-                        // the direction from it (the diffuse part needs none: mean_).
-                        if (glossy && glossyNode_[s]) {
+                    if (glossy && s != kNoSender && glossyNode_[s]) {
+                        // A glossy sender's light towards this leaf, over the larger of its
+                        // front- and back-facing projected areas: through the link's bin, or
+                        // for a flat sender facing the leaf the bin of the direction from it
+                        // (the diffuse part is in `got`; one turned away sends nothing).
+                        uint32_t t = links_.travel[k];
+                        if (t == kFacing) {
                             const glm::vec3 d = receiver.center - hierarchy_.nodes[s].center;
                             const float len = glm::length(d);
-                            if (len > 0.0f) {
-                                const uint32_t t = dirs_.Lookup(d / len);
-                                const size_t row = size_t(s) * bins;
-                                l += GlossySent(s, t,
-                                                std::max(projected_[row + t],
-                                                         projected_[row + dirs_.Opposite(t)]));
-                            }
+                            t = len > 0.0f ? dirs_.Lookup(d / len) : kAway;
                         }
-                    } else if (travel != kAway) {
-                        const size_t row = size_t(s) * bins;
-                        // What the sender shows: the larger of its front- and
-                        // back-facing projected areas (a closed solid hides its
-                        // back faces behind its front ones; a sheet seen from
-                        // behind is a dark blocker).
-                        const float p = std::max(projected_[row + travel],
-                                                 projected_[row + dirs_.Opposite(travel)]);
-                        if (p > 0.0f) l = intensity_[row + travel] / p;
-                        if (glossy && glossyNode_[s]) l += GlossySent(s, travel, p);
+                        if (t != kAway) {
+                            const size_t row = size_t(s) * bins;
+                            got += links_.weight[k] *
+                                   GlossySent(s, t,
+                                              std::max(projected_[row + t],
+                                                       projected_[row + dirs_.Opposite(t)]));
+                        }
                     }
-                    e += links_.weight[k] * l;
+                    e += got;
                     // cos θ · Ω · L arriving from the link's bin, where its mirror image leaves.
-                    if (mirror) arrived[mirror[links_.bin[k]]] += links_.weight[k] * l;
+                    if (mirror) arrived[mirror[links_.bin[k]]] += got;
                 }
                 light_.gathered[i] = e;
                 if (mirror) ReflectGlossy(g);

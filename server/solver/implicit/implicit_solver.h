@@ -124,11 +124,17 @@ class ImplicitSolver : public Solver {
     std::vector<uint32_t> solid_;
     ReceiverLight light_;  // per leaf, in hierarchy leaf order
     std::vector<Material> materials_;
-    // Per node and bin: exitant intensity (RGB, ExitantTables) and front-facing projected
-    // area (Relink).
+    // Per node and bin: exitant intensity (RGB, ExitantTables; after the rows, per node its
+    // mean radiance, then per bin the environment's radiance: every light a share reads) and
+    // front-facing projected area (Relink).
     std::vector<glm::vec3> intensity_;
     std::vector<glm::vec3> mean_;  // per node: its leaves' radiance, area-weighted
     std::vector<float> projected_;
+    // Per share of links_, where Bounce reads the light it sees in intensity_ and the factor
+    // on it (Relink: the weight, over the sender's shown projected area where it is read
+    // through a bin).
+    std::vector<uint32_t> gatherAt_;
+    std::vector<float> gatherFactor_;
     std::vector<glm::vec3> environment_;  // per bin, radiance travelling along it
     // Glossy leaves: per leaf its slot (kNotGlossy: diffuse); per slot its leaf, F0 and lobe
     // (lobes_ over lobeWeights_, bin_lobes.h); per slot and link bin (towards the sender) the
