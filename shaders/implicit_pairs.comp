@@ -206,7 +206,14 @@ void main() {
     float dist2 = max(dist * dist, 1e-30);
     bool splitA = A.leaf == 0u && (overlap || kPi * A.radius * A.radius / dist2 > pc.limit);
     bool splitB = B.leaf == 0u && (overlap || kPi * B.radius * B.radius / dist2 > pc.limit);
-    if (splitB && (!splitA || B.radius >= A.radius)) {
+    if (splitA && splitB) {  // both at once (ImplicitLinker::Build)
+        Split(a + 1u, b + 1u);
+        Split(a + 1u, B.right);
+        Split(A.right, b + 1u);
+        Split(A.right, B.right);
+        return;
+    }
+    if (splitB) {
         Split(a, b + 1u);
         Split(a, B.right);
         return;

@@ -147,11 +147,11 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
     push.binRadius = std::sqrt(omegaBin / std::numbers::pi_v<float>);
 
     // The rounds: the pairs of a round go up in chunks that fit the device's storage-buffer
-    // limit with their next pairs (3 at most a pair) and ends; a chunk whose ends overflow
-    // runs again with a larger end list, or, at the limit, as two halves.
+    // limit with their next pairs (4 at most a pair: both ends split) and ends; a chunk whose ends
+    // overflow runs again with a larger end list, or, at the limit, as two halves.
     const size_t limit = s.bufferBytes;
     const size_t endLimit = limit / sizeof(ImplicitLinker::End);
-    const size_t chunkLimit = limit / (3 * sizeof(glm::uvec2));
+    const size_t chunkLimit = limit / (4 * sizeof(glm::uvec2));
     std::vector<glm::uvec2> round{{0u, 0u}}, next;
     pairs = 0;
     linked = 0;
@@ -163,7 +163,7 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
         for (size_t at = 0; at < round.size();) {
             const size_t n = std::min(chunk, round.size() - at);
             s.Reserve(s.round, s.roundCapacity, n, sizeof(glm::uvec2), limit);
-            s.Reserve(s.next, s.nextCapacity, 3 * n, sizeof(glm::uvec2), limit);
+            s.Reserve(s.next, s.nextCapacity, 4 * n, sizeof(glm::uvec2), limit);
             s.Reserve(s.ends, s.endCapacity, std::min(4 * n, endLimit), sizeof(ImplicitLinker::End),
                       limit);
             s.round->Upload(round.data() + at, n * sizeof(glm::uvec2));
