@@ -425,7 +425,8 @@ SolverStats ImplicitSolver::Stats() const {
                 {"refine_push", msPush_},
                 {"illumination", msIllumination_}};
     s.tableBytes = intensity_.size() * sizeof(glm::vec3) + projected_.size() * sizeof(float);
-    s.linkBytes = links_.sender.size() * (2 * sizeof(uint32_t) + sizeof(float));
+    // Per share: bin, sender, weight and travel, and the bounce's index and factor.
+    s.linkBytes = links_.sender.size() * (4 * sizeof(uint32_t) + 2 * sizeof(float));
     s.lights = lights_;
     direct::DescribeLighting(directStage_.get(), mapSize_, sky_, s);
     s.geometryUpdates = geometryUpdates_;
