@@ -12,6 +12,7 @@
 #include "reference/path_tracer.h"
 #include "scene/scene_builder.h"
 #include "solver/implicit/implicit_solver.h"
+#include "solver/implicit/vulkan_bounce.h"
 #include "solver/implicit/vulkan_links.h"
 #include "solver/registry.h"
 #include "test_util.h"
@@ -481,8 +482,8 @@ TEST(Implicit, HierarchicalLinksMatchBruteForce) {
     EXPECT_LT(shotRel, 0.02);
 }
 
-// The Vulkan back end creates the links on the device (lavapipe here, validation on), the
-// rest of the frame on the CPU: the same links and answers as the CPU's, up to the device's
+// The Vulkan back end creates the links and bounces on the device (lavapipe here, validation
+// on), the compositing on the CPU: the same links and answers as the CPU's, up to the device's
 // float rounding at a split or bin boundary, at rest (the Cornell box) and after a move (a box
 // on a floor under a sky, moved and turned: the device examines every pair again).
 TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
@@ -504,6 +505,8 @@ TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
         const SolverStats stats = device.Stats();
         EXPECT_NE(stats.Text("link_device"), "cpu");
         EXPECT_GT(stats.Number("device_rounds"), 10.0);
+        EXPECT_EQ(stats.Text("bounce_device"), stats.Text("link_device"));
+        EXPECT_EQ(stats.Number("device_bounces"), double(stats.iterations)) << what;
         for (const auto& m : device.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
     };
     SolverSettings onDevice = Implicit(0.06f);
@@ -533,6 +536,87 @@ TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
         s->Iterate(20);
     }
     compare(scene, *cpu, *device, "moved box");
+}
+
+// The device's bounce (shaders/implicit_bounce.comp) against its definition, on a hierarchy
+// of a real scene with shares of every kind drawn at random: each leaf's row of exitant
+// intensity A L cos⁺(n, ω_b), the clusters' rows and Σ A L the sums of their children's, the
+// environment after them; a leaf gathers Σ factor · table[index] over its shares. Then the
+// solver on lavapipe with glossy leaves bounces on the host and says why.
+TEST(Implicit, VulkanBounceMatchesItsDefinition) {
+    Scene scene = scenes::CornellBox().Build();
+    const Surfels surfels = RefineScene(scene, 0.15f);
+    const Hierarchy h = BuildHierarchy(surfels);
+    const Directions dirs(64);
+    const size_t bins = size_t(dirs.Count()), nodes = h.size(), leaves = h.leaves.size();
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    std::vector<glm::vec3> radiance(leaves), environment(bins);
+    for (auto& l : radiance) l = {unit(rng), unit(rng), unit(rng)};
+    for (auto& l : environment) l = {unit(rng), unit(rng), unit(rng)};
+    // The table as defined, on the host.
+    std::vector<glm::dvec3> table(nodes * bins + nodes + bins);
+    for (size_t i = 0; i < leaves; ++i) {
+        const HierarchyNode& n = h.nodes[h.leaves[i]];
+        for (size_t b = 0; b < bins; ++b)
+            table[h.leaves[i] * bins + b] = glm::dvec3(
+                n.area * std::max(0.0f, glm::dot(n.normal, dirs.Direction(uint32_t(b)))) *
+                radiance[i]);
+        table[nodes * bins + h.leaves[i]] = glm::dvec3(n.area * radiance[i]);
+    }
+    for (size_t n = nodes; n-- > 0;) {  // preorder: children after their parent
+        if (h.nodes[n].IsLeaf()) continue;
+        const size_t l = n + 1, r = h.nodes[n + 1].end;
+        for (size_t b = 0; b < bins; ++b)
+            table[n * bins + b] = table[l * bins + b] + table[r * bins + b];
+        table[nodes * bins + n] = table[nodes * bins + l] + table[nodes * bins + r];
+    }
+    for (size_t b = 0; b < bins; ++b) table[nodes * bins + nodes + b] = glm::dvec3(environment[b]);
+    std::vector<uint32_t> offsets{0}, at;
+    std::vector<float> factor;
+    std::uniform_int_distribution<uint32_t> pick(0, uint32_t(table.size() - 1));
+    for (size_t i = 0; i < leaves; ++i) {
+        const uint32_t count = pick(rng) % 40;  // some leaves without shares
+        for (uint32_t k = 0; k < count; ++k) at.push_back(pick(rng)), factor.push_back(unit(rng));
+        offsets.push_back(uint32_t(at.size()));
+    }
+    gpu::Context ctx(gpu::DeviceKind::kLavapipe, true);
+    VulkanBounce bounce(ctx, dirs, h);
+    ASSERT_EQ(bounce.Unfit(at.size()), "");
+    bounce.SetShares(h, offsets, at, factor);
+    for (int round = 0; round < 2; ++round) {  // the table rewritten whole by the second
+        const std::vector<glm::vec3> got = bounce.Gather(radiance, environment);
+        ASSERT_EQ(got.size(), leaves);
+        double worst = 0.0;
+        for (size_t i = 0; i < leaves; ++i) {
+            glm::dvec3 e(0.0);
+            for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k)
+                e += double(factor[k]) * table[at[k]];
+            for (int c = 0; c < 3; ++c)
+                worst =
+                    std::max(worst, std::abs(got[i][c] - e[c]) / std::max(1e-3, std::abs(e[c])));
+        }
+        std::printf("device bounce against its definition: %zu leaves, %zu shares, worst %.2e\n",
+                    leaves, at.size(), worst);
+        EXPECT_LT(worst, 1e-4);  // float sums in another order
+        for (auto& l : radiance) l *= 0.5f;
+        for (size_t n = 0; n < nodes * bins + nodes; ++n) table[n] *= 0.5;
+    }
+    for (const auto& m : ctx.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
+
+    SceneBuilder b;
+    const Scene glossy =
+        testing::SkyFurnaceRoom(b, b.AddPbrMaterial("white", glm::vec3(1.0f), 1.0f, 0.5f), 4);
+    SolverSettings onDevice = Implicit(0.2f);
+    onDevice.device = DeviceChoice::kLavapipe;
+    onDevice.validation = true;
+    auto solver = CreateSolver(glossy, onDevice);
+    solver->Iterate(2);
+    const SolverStats stats = solver->Stats();
+    EXPECT_EQ(stats.Text("bounce_device"), "cpu");
+    EXPECT_EQ(stats.Text("bounce_on_host"), "glossy leaves");
+    EXPECT_EQ(stats.Number("device_bounces"), 0.0);
+    for (const auto& m : solver->ValidationMessages()) ADD_FAILURE() << "validation: " << m;
 }
 
 // The device's rounds in chunks (a list of pairs or ends held to 64 KiB, so that a round goes

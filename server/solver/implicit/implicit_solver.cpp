@@ -11,6 +11,7 @@
 #include "base/check.h"
 #include "base/numeric.h"
 #include "gpu/context.h"
+#include "solver/implicit/vulkan_bounce.h"
 #include "solver/implicit/vulkan_links.h"
 
 namespace penumbra {
@@ -62,6 +63,7 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
     surfels_ = RefineScene(scene, h);
     if (progress) progress("clustering", 0.0);
     hierarchy_ = BuildHierarchy(surfels_);
+    if (device_) vulkanBounce_ = std::make_unique<VulkanBounce>(*device_, dirs_, hierarchy_);
     FindSolids(scene);
     sky_.Update(scene.environment, dirs_, environment_);
     std::vector<uint32_t> order;
@@ -171,11 +173,12 @@ void ImplicitSolver::Relink(const std::vector<uint8_t>* moved) {
     // geometry's part, fixed until the next relink): a sender node seen through a bin shows
     // I / P, P the larger of its front- and back-facing projected areas there, so its factor
     // is weight / P (0 where it shows none, and for a flat sender turned away: a dark
-    // blocker); a facing flat sender's mean radiance and the environment's are read with the
-    // weight itself. One read and one product a share, whatever it sees.
+    // blocker); a facing flat sender its mean radiance Σ A L / Σ A, so weight / Σ A on its
+    // Σ A L; the environment's radiance the weight itself. One read and one product a share,
+    // whatever it sees.
     start = Clock::now();
-    const size_t shares = links_.sender.size(), meanAt = hierarchy_.size() * bins,
-                 environmentAt = meanAt + hierarchy_.size();
+    const size_t shares = links_.sender.size(), sumsAt = hierarchy_.size() * bins,
+                 environmentAt = sumsAt + hierarchy_.size();
     PENUMBRA_CHECK(environmentAt + bins <= 0xffffffffu);  // gatherAt_ holds 32 bits
     gatherAt_.resize(shares);
     gatherFactor_.resize(shares);
@@ -187,7 +190,9 @@ void ImplicitSolver::Relink(const std::vector<uint8_t>* moved) {
             if (s == kNoSender) {
                 at = environmentAt + travel;
             } else if (travel == kFacing) {
-                at = meanAt + s;
+                at = sumsAt + s;
+                const float area = hierarchy_.nodes[s].area;
+                f = area > 0.0f ? f / area : 0.0f;
             } else if (travel == kAway) {
                 f = 0.0f;
             } else {
@@ -200,6 +205,12 @@ void ImplicitSolver::Relink(const std::vector<uint8_t>* moved) {
             gatherFactor_[k] = f;
         }
     });
+    // The same shares on the device, when it bounces there (vulkan_bounce.h).
+    if (vulkanBounce_) {
+        bounceUnfit_ = vulkanBounce_->Unfit(shares);
+        if (bounceUnfit_.empty())
+            vulkanBounce_->SetShares(hierarchy_, links_.offsets, gatherAt_, gatherFactor_);
+    }
     msPush_ += MsSince(start);
     ++relinks_;
     if (linker_.Incremental()) ++incrementalRelinks_;
@@ -208,8 +219,8 @@ void ImplicitSolver::Relink(const std::vector<uint8_t>* moved) {
 void ImplicitSolver::ExitantTables() {
     const size_t bins = dirs_.Count();
     // Every row is written below (the leaves', then the clusters' by the pull), then the
-    // tail: the nodes' mean radiance and the environment (Relink's gatherAt_).
-    const size_t meanAt = hierarchy_.size() * bins, environmentAt = meanAt + hierarchy_.size();
+    // tail: the nodes' Σ A L and the environment (Relink's gatherAt_).
+    const size_t sumsAt = hierarchy_.size() * bins, environmentAt = sumsAt + hierarchy_.size();
     intensity_.resize(environmentAt + bins);
     tbb::parallel_for(size_t(0), hierarchy_.leaves.size(), [&](size_t i) {
         const HierarchyNode& n = hierarchy_.nodes[hierarchy_.leaves[i]];
@@ -234,20 +245,28 @@ void ImplicitSolver::ExitantTables() {
     } else {
         glossyIntensity_.clear();
     }
-    // Mean radiance per node, area-weighted: Σ A L up the tree, then over Σ A.
-    mean_.assign(hierarchy_.size(), glm::vec3(0.0f));
+    // Σ A L per node: the leaves', summed up the tree (a facing flat sender's mean radiance
+    // is this over Σ A, folded into its shares' factors).
+    sums_.assign(hierarchy_.size(), glm::vec3(0.0f));
     for (size_t i = 0; i < hierarchy_.leaves.size(); ++i)
-        mean_[hierarchy_.leaves[i]] =
+        sums_[hierarchy_.leaves[i]] =
             hierarchy_.nodes[hierarchy_.leaves[i]].area * light_.radiance[i];
-    PullRows(hierarchy_, 1, mean_);
-    for (size_t n = 0; n < mean_.size(); ++n)
-        mean_[n] =
-            hierarchy_.nodes[n].area > 0.0f ? mean_[n] / hierarchy_.nodes[n].area : glm::vec3(0.0f);
-    std::copy(mean_.begin(), mean_.end(), intensity_.begin() + meanAt);
+    PullRows(hierarchy_, 1, sums_);
+    std::copy(sums_.begin(), sums_.end(), intensity_.begin() + sumsAt);
     std::copy(environment_.begin(), environment_.end(), intensity_.begin() + environmentAt);
 }
 
+bool ImplicitSolver::BouncesOnDevice() const {
+    return vulkanBounce_ && bounceUnfit_.empty() && glossy_.empty();
+}
+
 void ImplicitSolver::Bounce() {
+    if (BouncesOnDevice()) {
+        light_.gathered = vulkanBounce_->Gather(light_.radiance, environment_);
+        ++deviceBounces_;
+        Reradiate();
+        return;
+    }
     ExitantTables();
     const size_t bins = dirs_.Count();
     const bool glossy = !glossy_.empty();
@@ -292,6 +311,10 @@ void ImplicitSolver::Bounce() {
                 if (mirror) ReflectGlossy(g);
             }
         });
+    Reradiate();
+}
+
+void ImplicitSolver::Reradiate() {
     light_.Reradiate();
     for (const glm::vec3& l : light_.radiance)
         if (divergence_.empty() && !Finite(l))
@@ -446,6 +469,15 @@ SolverStats ImplicitSolver::Stats() const {
     if (vulkanLinks_) {
         s.SetDetail("device_create_ms", vulkanLinks_->msDevice);
         s.SetDetail("device_rounds", double(vulkanLinks_->rounds));
+    }
+    // Where the bounces run, and why on the host where a device was asked for.
+    s.SetDetail("bounce_device", BouncesOnDevice() ? device_->DeviceName() : std::string("cpu"));
+    if (vulkanBounce_ && !BouncesOnDevice())
+        s.SetDetail("bounce_on_host",
+                    !bounceUnfit_.empty() ? bounceUnfit_ : std::string("glossy leaves"));
+    if (vulkanBounce_) {
+        s.SetDetail("device_bounces", double(deviceBounces_));
+        s.SetDetail("device_bounce_ms", vulkanBounce_->msDevice);
     }
     return s;
 }

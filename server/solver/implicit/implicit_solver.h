@@ -32,6 +32,8 @@
 
 namespace penumbra {
 
+class VulkanBounce;
+
 class ImplicitSolver : public Solver {
   public:
     ImplicitSolver(const Scene& scene, const SolverSettings& settings, const ImplicitSettings& own,
@@ -77,7 +79,11 @@ class ImplicitSolver : public Solver {
     // last relink; the pairs of what never moved since the first move keep their links
     // (ImplicitLinker::Build's `moving`).
     void Relink(const std::vector<uint8_t>* moved = nullptr);
-    void Bounce();  // one gather over the links and the pull of the new light
+    void Bounce();     // one gather over the links and the pull of the new light
+    void Reradiate();  // the leaves' radiance from what they gathered; divergence checked
+    // Whether Bounce runs on the device: one was asked for, the shares fit on it, and no leaf
+    // is glossy (the glossy leaves' bounces run here only).
+    bool BouncesOnDevice() const;
     void ReadMaterials(const Scene& scene);  // the scene's materials, then the leaves' light
     void FindSolids(const Scene& scene);     // solid_ from the scene's closed nodes
     // E_d per leaf from the direct stage, the lights' glossy rows (GlossyDirectRows) with the
@@ -112,6 +118,11 @@ class ImplicitSolver : public Solver {
     // With --device gpu or lavapipe: the device the links are created on (the rest runs here).
     std::unique_ptr<gpu::Context> device_;
     std::unique_ptr<VulkanLinkCreation> vulkanLinks_;
+    // With a device: the bounces there (vulkan_bounce.h), unless bounceUnfit_ says why the
+    // last relink's shares do not fit on it; how many ran there.
+    std::unique_ptr<VulkanBounce> vulkanBounce_;
+    std::string bounceUnfit_;
+    size_t deviceBounces_ = 0;
     ImplicitLinker linker_;
     ImplicitLinks links_;
     // Per node: its subtree holds an element that moved since the first move (the linker
@@ -128,7 +139,7 @@ class ImplicitSolver : public Solver {
     // mean radiance, then per bin the environment's radiance: every light a share reads) and
     // front-facing projected area (Relink).
     std::vector<glm::vec3> intensity_;
-    std::vector<glm::vec3> mean_;  // per node: its leaves' radiance, area-weighted
+    std::vector<glm::vec3> sums_;  // per node: Σ A L over its leaves
     std::vector<float> projected_;
     // Per share of links_, where Bounce reads the light it sees in intensity_ and the factor
     // on it (Relink: the weight, over the sender's shown projected area where it is read

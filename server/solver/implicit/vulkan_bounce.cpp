@@ -1,0 +1,177 @@
+// The implicit solver's bounces on a Vulkan device (vulkan_bounce.h).
+#include "solver/implicit/vulkan_bounce.h"
+
+#include <algorithm>
+#include <chrono>
+
+#include "base/check.h"
+#include "base/numeric.h"
+#include "gpu/buffer.h"
+#include "gpu/context.h"
+#include "gpu/layout.h"
+#include "gpu/pipeline.h"
+#include "shaders/implicit_bounce_spv.h"
+
+namespace penumbra {
+namespace {
+
+// shaders/implicit_bounce.comp (push constants).
+struct BouncePush {
+    uint32_t mode, bins, leaves, first, count, sumsAt, environmentAt;
+};
+PENUMBRA_GPU_FIELD(BouncePush, mode, 0);
+PENUMBRA_GPU_FIELD(BouncePush, bins, 4);
+PENUMBRA_GPU_FIELD(BouncePush, leaves, 8);
+PENUMBRA_GPU_FIELD(BouncePush, first, 12);
+PENUMBRA_GPU_FIELD(BouncePush, count, 16);
+PENUMBRA_GPU_FIELD(BouncePush, sumsAt, 20);
+PENUMBRA_GPU_FIELD(BouncePush, environmentAt, 24);
+
+constexpr uint32_t kGroup = 64;         // local_size_x
+constexpr uint32_t kMaxGroups = 65535;  // the least maxComputeWorkGroupCount[0] Vulkan allows
+
+uint32_t Groups(size_t items) {
+    return uint32_t(std::clamp<size_t>((items + kGroup - 1) / kGroup, 1, kMaxGroups));
+}
+
+}  // namespace
+
+struct VulkanBounce::Impl {
+    gpu::Context& ctx;
+    const Directions& dirs;
+    gpu::Pipeline pipeline;
+    gpu::Buffer dirBuffer;
+    size_t nodes = 0, leaves = 0, bins = 0;
+    // The pull's levels, deepest first: each level's first entry and count in `levels`.
+    std::vector<std::pair<uint32_t, uint32_t>> levelRanges;
+    std::unique_ptr<gpu::Buffer> table, leafNormalArea, leafNode, radiance, levels, offsets, at,
+        factor, gathered;
+    size_t shareCapacity = 0;
+
+    Impl(gpu::Context& c, const Directions& d, const Hierarchy& h)
+        : ctx(c),
+          dirs(d),
+          pipeline(c, gpu::Words(kSpirv_implicit_bounce), 10, std::span<const uint32_t>{},
+                   sizeof(BouncePush)),
+          dirBuffer(c, size_t(d.Count()) * sizeof(glm::vec4)) {
+        std::vector<glm::vec4> up;
+        for (const glm::vec3& w : d.All()) up.emplace_back(w, 0.0f);
+        dirBuffer.Upload(up);
+        nodes = h.size();
+        leaves = h.leaves.size();
+        bins = size_t(d.Count());
+        std::vector<glm::uvec2> all;
+        for (size_t depth = h.byDepth.size(); depth-- > 0;) {
+            const uint32_t first = uint32_t(all.size());
+            for (uint32_t n : h.byDepth[depth])
+                if (!h.nodes[n].IsLeaf()) all.push_back({n, h.nodes[n + 1].end});
+            if (all.size() > first) levelRanges.push_back({first, uint32_t(all.size()) - first});
+        }
+        levels = MakeBuffer(c, std::max<size_t>(1, all.size()) * sizeof(glm::uvec2));
+        if (!all.empty()) levels->Upload(all);
+        table = MakeBuffer(c, TableEntries() * sizeof(glm::vec4));
+        leafNormalArea = MakeBuffer(c, leaves * sizeof(glm::vec4));
+        leafNode = MakeBuffer(c, leaves * sizeof(uint32_t));
+        leafNode->Upload(h.leaves);
+        radiance = MakeBuffer(c, (leaves + bins) * sizeof(glm::vec4));
+        offsets = MakeBuffer(c, (leaves + 1) * sizeof(uint32_t));
+        gathered = MakeBuffer(c, leaves * sizeof(glm::vec4));
+    }
+    // The table: per node a row of bins, then per node Σ A L, then per bin the environment.
+    size_t TableEntries() const { return nodes * bins + nodes + bins; }
+};
+
+VulkanBounce::VulkanBounce(gpu::Context& ctx, const Directions& dirs, const Hierarchy& h)
+    : impl_(std::make_unique<Impl>(ctx, dirs, h)) {}
+
+VulkanBounce::~VulkanBounce() = default;
+
+std::string VulkanBounce::Unfit(size_t shares) const {
+    const Impl& s = *impl_;
+    const size_t range = s.ctx.Limits().maxStorageBufferRange;
+    if (s.TableEntries() * sizeof(glm::vec4) > range)
+        return "the bounce's table (" + std::to_string(s.TableEntries() * sizeof(glm::vec4) >> 20) +
+               " MiB) exceeds the device's storage-buffer range";
+    if (shares * sizeof(uint32_t) > range)
+        return "the shares' list exceeds the device's storage-buffer range";
+    return {};
+}
+
+void VulkanBounce::SetShares(const Hierarchy& h, const std::vector<uint32_t>& offsets,
+                             const std::vector<uint32_t>& at, const std::vector<float>& factor) {
+    Impl& s = *impl_;
+    PENUMBRA_CHECK_EQ(h.leaves.size(), s.leaves);
+    PENUMBRA_CHECK_EQ(offsets.size(), s.leaves + 1);
+    PENUMBRA_CHECK_EQ(at.size(), factor.size());
+    PENUMBRA_CHECK(Unfit(at.size()).empty());
+    std::vector<glm::vec4> leaves(s.leaves);
+    for (size_t i = 0; i < s.leaves; ++i) {
+        const HierarchyNode& n = h.nodes[h.leaves[i]];
+        leaves[i] = glm::vec4(n.normal, n.area);
+    }
+    s.leafNormalArea->Upload(leaves);
+    s.offsets->Upload(offsets);
+    if (!s.at || s.shareCapacity < at.size()) {
+        s.shareCapacity = std::max<size_t>(1, at.size() + at.size() / 8);
+        s.at = MakeBuffer(s.ctx, s.shareCapacity * sizeof(uint32_t));
+        s.factor = MakeBuffer(s.ctx, s.shareCapacity * sizeof(float));
+    }
+    if (!at.empty()) {
+        s.at->Upload(at);
+        s.factor->Upload(factor);
+    }
+}
+
+std::vector<glm::vec3> VulkanBounce::Gather(const std::vector<glm::vec3>& radiance,
+                                            const std::vector<glm::vec3>& environment) {
+    Impl& s = *impl_;
+    PENUMBRA_CHECK(s.at);  // SetShares first
+    PENUMBRA_CHECK_EQ(radiance.size(), s.leaves);
+    PENUMBRA_CHECK_EQ(environment.size(), s.bins);
+    const auto start = std::chrono::steady_clock::now();
+    std::vector<glm::vec4> up;
+    up.reserve(s.leaves + s.bins);
+    for (const glm::vec3& l : radiance) up.emplace_back(l, 0.0f);
+    for (const glm::vec3& l : environment) up.emplace_back(l, 0.0f);
+    s.radiance->Upload(up);
+    const gpu::Buffer* buffers[] = {s.table.get(),    s.leafNormalArea.get(), s.leafNode.get(),
+                                    s.radiance.get(), s.levels.get(),         s.offsets.get(),
+                                    s.at.get(),       s.factor.get(),         s.gathered.get(),
+                                    &s.dirBuffer};
+    vk::raii::DescriptorSet set = s.pipeline.MakeSet(buffers);
+    BouncePush push{};
+    push.bins = uint32_t(s.bins);
+    push.leaves = uint32_t(s.leaves);
+    push.sumsAt = uint32_t(s.nodes * s.bins);
+    push.environmentAt = uint32_t(s.nodes * s.bins + s.nodes);
+    s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+        cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.pipeline.Handle());
+        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.pipeline.Layout(), 0, {*set}, {});
+        auto run = [&](uint32_t mode, size_t items) {
+            push.mode = mode;
+            cb.pushConstants<BouncePush>(s.pipeline.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
+                                         push);
+            cb.dispatch(Groups(items), 1, 1);
+            gpu::ComputeBarrier(cb);
+        };
+        run(0, s.leaves * (s.bins + 1) + s.bins);
+        for (const auto& [first, count] : s.levelRanges) {
+            push.first = first;
+            push.count = count;
+            run(1, size_t(count) * (s.bins + 1));
+        }
+        run(2, s.leaves);
+        const vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,
+                                       vk::AccessFlagBits::eHostRead);
+        cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
+                           vk::PipelineStageFlagBits::eHost, {}, toHost, {}, {});
+    });
+    std::vector<glm::vec4> down(s.leaves);
+    s.gathered->Download(down.data(), down.size() * sizeof(glm::vec4));
+    std::vector<glm::vec3> out(s.leaves);
+    for (size_t i = 0; i < s.leaves; ++i) out[i] = glm::vec3(down[i]);
+    msDevice = MsSince(start);
+    return out;
+}
+
+}  // namespace penumbra
