@@ -59,6 +59,16 @@ struct ImplicitLinks {
     size_t Count() const { return sender.size() - empty; }  // shares from a sender
 };
 
+// The table a bounce reads every share's light from (ImplicitSolver::ExitantTables and its
+// device twin, vulkan_bounce.h): per node a row of `bins` exitant intensities, then per node
+// its Σ A L, then per bin the environment's radiance.
+struct ShareTable {
+    size_t nodes, bins;
+    size_t SumsAt() const { return nodes * bins; }
+    size_t EnvironmentAt() const { return nodes * bins + nodes; }
+    size_t Entries() const { return nodes * bins + nodes + bins; }
+};
+
 class VulkanLinkCreation;
 
 class ImplicitLinker {

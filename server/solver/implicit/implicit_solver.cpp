@@ -177,9 +177,10 @@ void ImplicitSolver::Relink(const std::vector<uint8_t>* moved) {
     // Σ A L; the environment's radiance the weight itself. One read and one product a share,
     // whatever it sees.
     start = Clock::now();
-    const size_t shares = links_.sender.size(), sumsAt = hierarchy_.size() * bins,
-                 environmentAt = sumsAt + hierarchy_.size();
-    PENUMBRA_CHECK(environmentAt + bins <= 0xffffffffu);  // gatherAt_ holds 32 bits
+    const ShareTable table{hierarchy_.size(), bins};
+    const size_t shares = links_.sender.size(), sumsAt = table.SumsAt(),
+                 environmentAt = table.EnvironmentAt();
+    PENUMBRA_CHECK(table.Entries() <= 0xffffffffu);  // gatherAt_ holds 32 bits
     gatherAt_.resize(shares);
     gatherFactor_.resize(shares);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, shares, 4096), [&](const auto& range) {
@@ -220,8 +221,8 @@ void ImplicitSolver::ExitantTables() {
     const size_t bins = dirs_.Count();
     // Every row is written below (the leaves', then the clusters' by the pull), then the
     // tail: the nodes' Σ A L and the environment (Relink's gatherAt_).
-    const size_t sumsAt = hierarchy_.size() * bins, environmentAt = sumsAt + hierarchy_.size();
-    intensity_.resize(environmentAt + bins);
+    const ShareTable table{hierarchy_.size(), bins};
+    intensity_.resize(table.Entries());
     tbb::parallel_for(size_t(0), hierarchy_.leaves.size(), [&](size_t i) {
         const HierarchyNode& n = hierarchy_.nodes[hierarchy_.leaves[i]];
         glm::vec3* row = intensity_.data() + size_t(hierarchy_.leaves[i]) * bins;
@@ -252,8 +253,8 @@ void ImplicitSolver::ExitantTables() {
         sums_[hierarchy_.leaves[i]] =
             hierarchy_.nodes[hierarchy_.leaves[i]].area * light_.radiance[i];
     PullRows(hierarchy_, 1, sums_);
-    std::copy(sums_.begin(), sums_.end(), intensity_.begin() + sumsAt);
-    std::copy(environment_.begin(), environment_.end(), intensity_.begin() + environmentAt);
+    std::copy(sums_.begin(), sums_.end(), intensity_.begin() + table.SumsAt());
+    std::copy(environment_.begin(), environment_.end(), intensity_.begin() + table.EnvironmentAt());
 }
 
 bool ImplicitSolver::BouncesOnDevice() const {

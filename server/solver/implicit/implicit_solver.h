@@ -135,15 +135,15 @@ class ImplicitSolver : public Solver {
     std::vector<uint32_t> solid_;
     ReceiverLight light_;  // per leaf, in hierarchy leaf order
     std::vector<Material> materials_;
-    // Per node and bin: exitant intensity (RGB, ExitantTables; after the rows, per node its
-    // mean radiance, then per bin the environment's radiance: every light a share reads) and
+    // Per node and bin: exitant intensity (RGB, ExitantTables; laid out as a ShareTable, its
+    // rows followed by the nodes' Σ A L and the environment: every light a share reads) and
     // front-facing projected area (Relink).
     std::vector<glm::vec3> intensity_;
     std::vector<glm::vec3> sums_;  // per node: Σ A L over its leaves
     std::vector<float> projected_;
     // Per share of links_, where Bounce reads the light it sees in intensity_ and the factor
     // on it (Relink: the weight, over the sender's shown projected area where it is read
-    // through a bin).
+    // through a bin, over a facing flat sender's area where its Σ A L is read).
     std::vector<uint32_t> gatherAt_;
     std::vector<float> gatherFactor_;
     std::vector<glm::vec3> environment_;  // per bin, radiance travelling along it

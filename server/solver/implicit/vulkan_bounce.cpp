@@ -11,6 +11,7 @@
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
 #include "shaders/implicit_bounce_spv.h"
+#include "solver/implicit/implicit_links.h"
 
 namespace penumbra {
 namespace {
@@ -69,7 +70,7 @@ struct VulkanBounce::Impl {
         }
         levels = MakeBuffer(c, std::max<size_t>(1, all.size()) * sizeof(glm::uvec2));
         if (!all.empty()) levels->Upload(all);
-        table = MakeBuffer(c, TableEntries() * sizeof(glm::vec4));
+        table = MakeBuffer(c, Table().Entries() * sizeof(glm::vec4));
         leafNormalArea = MakeBuffer(c, leaves * sizeof(glm::vec4));
         leafNode = MakeBuffer(c, leaves * sizeof(uint32_t));
         leafNode->Upload(h.leaves);
@@ -77,8 +78,7 @@ struct VulkanBounce::Impl {
         offsets = MakeBuffer(c, (leaves + 1) * sizeof(uint32_t));
         gathered = MakeBuffer(c, leaves * sizeof(glm::vec4));
     }
-    // The table: per node a row of bins, then per node Σ A L, then per bin the environment.
-    size_t TableEntries() const { return nodes * bins + nodes + bins; }
+    ShareTable Table() const { return {nodes, bins}; }
 };
 
 VulkanBounce::VulkanBounce(gpu::Context& ctx, const Directions& dirs, const Hierarchy& h)
@@ -89,8 +89,9 @@ VulkanBounce::~VulkanBounce() = default;
 std::string VulkanBounce::Unfit(size_t shares) const {
     const Impl& s = *impl_;
     const size_t range = s.ctx.Limits().maxStorageBufferRange;
-    if (s.TableEntries() * sizeof(glm::vec4) > range)
-        return "the bounce's table (" + std::to_string(s.TableEntries() * sizeof(glm::vec4) >> 20) +
+    const size_t tableBytes = s.Table().Entries() * sizeof(glm::vec4);
+    if (tableBytes > range)
+        return "the bounce's table (" + std::to_string(tableBytes >> 20) +
                " MiB) exceeds the device's storage-buffer range";
     if (shares * sizeof(uint32_t) > range)
         return "the shares' list exceeds the device's storage-buffer range";
@@ -142,8 +143,8 @@ std::vector<glm::vec3> VulkanBounce::Gather(const std::vector<glm::vec3>& radian
     BouncePush push{};
     push.bins = uint32_t(s.bins);
     push.leaves = uint32_t(s.leaves);
-    push.sumsAt = uint32_t(s.nodes * s.bins);
-    push.environmentAt = uint32_t(s.nodes * s.bins + s.nodes);
+    push.sumsAt = uint32_t(s.Table().SumsAt());
+    push.environmentAt = uint32_t(s.Table().EnvironmentAt());
     s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
         cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.pipeline.Handle());
         cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.pipeline.Layout(), 0, {*set}, {});
