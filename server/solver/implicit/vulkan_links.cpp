@@ -59,7 +59,7 @@ PENUMBRA_GPU_FIELD(PairPush, splat, 32);
 PENUMBRA_GPU_FIELD(PairPush, adjacentAngle, 36);
 PENUMBRA_GPU_FIELD(PairPush, binRadius, 40);
 
-constexpr uint32_t kGroup = 64;  // local_size_x
+constexpr uint32_t kPairGroup = 64;  // local_size_x
 
 }  // namespace
 
@@ -184,7 +184,7 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
                                       {});
                 cb.pushConstants<PairPush>(s.pairs.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
                                            push);
-                cb.dispatch(uint32_t((n + kGroup - 1) / kGroup), 1, 1);
+                cb.dispatch(uint32_t((n + kPairGroup - 1) / kPairGroup), 1, 1);
                 const vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,
                                                vk::AccessFlagBits::eHostRead);
                 cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
