@@ -21,7 +21,7 @@ struct PairNode {
     float coneCos;
     float area;
     uint right;  // the second child (the first is the node after it); 0 for a leaf
-    uint leaf;   // 1 for a leaf
+    float slab;  // the slab holding its members, half height over radius (Build's SlabThickness)
     float discRadius;
 };
 // ImplicitLinker::End.
@@ -82,6 +82,13 @@ bool AboveHorizon(PairNode r, vec3 dir) {
     return dot(r.normal, dir) > 0.01 - below;
 }
 
+// Foreshortening (implicit_links.cpp): how much of its sphere's disc a cluster shows along
+// `dir`.
+float Foreshortening(PairNode n, vec3 dir) {
+    float c = min(1.0, abs(dot(n.normal, dir)));
+    return min(1.0, c + 4.0 / kPi * n.slab * sqrt(1.0 - c * c));
+}
+
 // The solid angle sender `s` covers seen along `dir` at `dist` (Build's `covered`): `ahead`
 // and `back` the bins of the direction between the ends and of its opposite.
 float Covered(uint s, vec3 dir, float dist, uint ahead, uint back) {
@@ -135,22 +142,32 @@ const float kMinOverlap = 0.2;  // implicit_links.cpp
 // `cosReach`: cos(ρ + r_bin), below which a bin does not overlap the disc; `cosInside`:
 // cos|ρ − r_bin|, above which the overlap is `inside` (LensArea's first case).
 // `height`: ⟨n, c − at⟩ of a flat sender (MeetsFlatSender).
+// `shows` < 1 (a cluster foreshortened, Record's squeeze): `m` its normal off `dir`.
 void Spread(uint row, uint b, uint sender, PairNode from, vec3 at, vec3 dir, float dist,
-            float rho, float cosReach, float cosInside, float inside, float height) {
+            float rho, float cosReach, float cosInside, float inside, float height, float shows,
+            vec3 m) {
     vec3 w = dirs[b].xyz;
     float c = dot(w, dir);
     if (c < cosReach) return;
     if (from.coneCos >= kFlatCone &&
         !MeetsFlatSender(height, from.center, from.normal, from.discRadius, at, w))
         return;
-    float a = c >= cosInside
-                  ? inside
-                  : min(pc.binSolidAngle, LensArea(acos(clamp(c, -1.0, 1.0)), rho, pc.binRadius));
+    float a;
+    if (shows < 0.999) {
+        vec3 o = w - dir;
+        float across = dot(o, m);
+        float apart = sqrt(max(0.0, dot(o, o) - across * across) + across * across / (shows * shows));
+        a = min(pc.binSolidAngle, shows * LensArea(apart, rho, pc.binRadius / sqrt(shows)));
+    } else {
+        a = c >= cosInside
+                ? inside
+                : min(pc.binSolidAngle, LensArea(acos(clamp(c, -1.0, 1.0)), rho, pc.binRadius));
+    }
     if (a > kMinOverlap * pc.binSolidAngle) Emit(row + b, sender, Depth(from, at, w, dist), a);
 }
 
 void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist, float omega,
-            uint centre) {
+            uint centre, float shows) {
     uint row = node * pc.bins;
     float sinRadius = from.radius / dist;
     if (sinRadius > pc.splat) {
@@ -160,17 +177,19 @@ void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist
         float cosInside = cos(abs(rho - pc.binRadius));
         float inside = min(pc.binSolidAngle, kPi * small * small);
         float height = dot(from.normal, from.center - at);
+        if (from.right == 0u) shows = 1.0;  // a leaf keeps its whole disc
+        vec3 m = shows < 0.999 ? normalize(from.normal - dot(from.normal, dir) * dir) : vec3(0.0);
         float theta = acos(clamp(dot(dir, dirs[centre].xyz), -1.0, 1.0));
         if (theta + rho + pc.binRadius <= pc.adjacentAngle - 1e-3) {
             // The padding repeats the centre bin, which is taken first.
-            Spread(row, centre, sender, from, at, dir, dist, rho, cosReach, cosInside, inside, height);
+            Spread(row, centre, sender, from, at, dir, dist, rho, cosReach, cosInside, inside, height, shows, m);
             for (uint k = 0u; k < pc.adjacentWidth; ++k) {
                 uint b = adjacent[centre * pc.adjacentWidth + k];
-                if (b != centre) Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside, height);
+                if (b != centre) Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside, height, shows, m);
             }
         } else {
             for (uint b = 0u; b < pc.bins; ++b)
-                Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside, height);
+                Spread(row, b, sender, from, at, dir, dist, rho, cosReach, cosInside, inside, height, shows, m);
         }
         return;
     }
@@ -188,7 +207,7 @@ void main() {
     uint a = round[k].x, b = round[k].y;
     PairNode A = nodes[a];
     if (a == b) {  // a self-pair: its children's self-pairs and their pair
-        if (A.leaf != 0u) return;
+        if (A.right == 0u) return;
         uint l = a + 1u, r = A.right;
         Split(l, l);
         Split(r, r);
@@ -204,8 +223,11 @@ void main() {
     // Sec. 4.2.2: an end that looks bigger than a bin from the other is split.
     bool overlap = dist <= A.radius + B.radius;
     float dist2 = max(dist * dist, 1e-30);
-    bool splitA = A.leaf == 0u && (overlap || kPi * A.radius * A.radius / dist2 > pc.limit);
-    bool splitB = B.leaf == 0u && (overlap || kPi * B.radius * B.radius / dist2 > pc.limit);
+    vec3 unit = dist > 0.0 ? d / dist : vec3(0.0);
+    float showsA = A.right == 0u ? 1.0 : Foreshortening(A, unit);
+    float showsB = B.right == 0u ? 1.0 : Foreshortening(B, unit);
+    bool splitA = A.right != 0u && (overlap || kPi * A.radius * A.radius * showsA / dist2 > pc.limit);
+    bool splitB = B.right != 0u && (overlap || kPi * B.radius * B.radius * showsB / dist2 > pc.limit);
     if (splitA && splitB) {  // both at once (ImplicitLinker::Build)
         Split(a + 1u, b + 1u);
         Split(a + 1u, B.right);
@@ -224,16 +246,16 @@ void main() {
         return;
     }
     if (!(dist > 0.0)) return;
-    vec3 dir = d / dist;
+    vec3 dir = unit;
     bool aRecords = aGets && AboveHorizon(A, dir);
     bool bRecords = bGets && AboveHorizon(B, -dir);
     if (aRecords || bRecords) {
         uint ahead = LookupBin(dir, pc.cubeRes, pc.adjacentWidth);
         uint back = LookupBin(-dir, pc.cubeRes, pc.adjacentWidth);
         if (aRecords)
-            Record(a, b, B, A.center, dir, dist, Covered(b, dir, dist, ahead, back), ahead);
+            Record(a, b, B, A.center, dir, dist, Covered(b, dir, dist, ahead, back), ahead, showsB);
         if (bRecords)
-            Record(b, a, A, B.center, -dir, dist, Covered(a, -dir, dist, back, ahead), back);
+            Record(b, a, A, B.center, -dir, dist, Covered(a, -dir, dist, back, ahead), back, showsA);
     }
     atomicAdd(counts[2], 1u);
 }

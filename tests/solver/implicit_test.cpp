@@ -458,16 +458,18 @@ TEST(Implicit, HierarchicalLinksMatchBruteForce) {
                              testing::AllVertices(brute, scene, Channel::kIndirect));
     std::printf("hierarchical (%zu pairs) against every pair (%zu): %.4f relative RMS\n",
                 hierarchical.Links().pairs, brute.Links().pairs, rel);
-    EXPECT_LT(hierarchical.Links().pairs, brute.Links().pairs / 2);
-    // Measured 7.5% (7.9% before session 36, 8.7% before session 27's solids' rule; the issue's
-    // goal is 1%): a cluster's link, measured from the cluster's centre, stands for all its leaves
-    // in one bin and one layer order. Against the truth the brute force is 12.5% off, the
-    // hierarchy 13.8% (docs/STATUS.md, issue 21). This bound catches a regression.
-    EXPECT_LT(rel, 0.10);
+    // Measured 54% (605,937 of 1,127,879): the default threshold (0.2) splits finely, and in a
+    // box this coarse few pairs lie far apart.
+    EXPECT_LT(hierarchical.Links().pairs, brute.Links().pairs * 6 / 10);
+    // Measured 4.2% (7.4% at session 40's threshold 0.5 with the sphere's whole disc as an end's
+    // size): a cluster's link, measured from the cluster's centre, stands for all its leaves in
+    // one bin and one layer order. Against the truth the brute force is 12.5% off, the
+    // hierarchy 13.8% (docs/STATUS.md, issue 21; session 36). This bound catches a regression.
+    EXPECT_LT(rel, 0.06);
 
     // At the defaults the emitters' direct light is the first shot and the links carry the
-    // bounces only: measured 1.33% (1.35% before session 36; the goal is 1%; 0.94% at a link
-    // threshold of 0.35).
+    // bounces only: measured 0.94% (the issue's goal is 1%; 1.30% in session 40, at a threshold
+    // of 0.5 without the foreshortening, 549K pairs).
     GatherSettings shot;
     shot.gatherRays = 0;
     auto withShot = [&](const ImplicitSettings& own) {
@@ -479,7 +481,7 @@ TEST(Implicit, HierarchicalLinksMatchBruteForce) {
     const double shotRel =
         testing::RelativeRms(withShot(ReadImplicitSettings(settings)), withShot(every));
     std::printf("with the first shot: %.4f relative RMS\n", shotRel);
-    EXPECT_LT(shotRel, 0.02);
+    EXPECT_LT(shotRel, 0.01);
 }
 
 // The Vulkan back end creates the links and bounces on the device (lavapipe here, validation
@@ -726,12 +728,12 @@ TEST(Implicit, ADeformationIsAsGoodAsAFreshBuild) {
 // A mesh deforming over 100 frames, one relink and one bounce a frame (the paper's Table 1
 // loop): every frame finite and within the furnace bound, and no more temporal aliasing than
 // the bounds stated in docs/SOLVER.md ("Deformations"): the room's frame-to-frame change at
-// most 2.5% (relative RMS; measured 2.0%: 1.2% before a thick closed solid's far faces
-// added only what they cover beyond its near ones, which made the blob's coverage of a bin
-// hang on its near faces' ends alone), the whole answer's at most 20% (measured 15.3%:
-// the blob's own vertices jump when its surface passes through convex and neighbouring
-// elements leave each other's horizon), and once the mesh stops, the answer settles within
-// 3% of a fresh build.
+// most 3% (relative RMS; measured 2.56%, 2.0% before session 41's foreshortened ends: the
+// blob's clusters seen edge-on from the room now link whole, and their links change as the
+// blob bends), the whole answer's at most 5% (measured 3.3%, 15.3% before them: the blob's
+// own vertices jumped when its surface passed through convex and neighbouring elements left
+// each other's horizon), and once the mesh stops, the answer settles within 3% of a fresh
+// build.
 TEST(Implicit, ADeformingMeshOverAHundredFramesStaysBoundedAndSmooth) {
     Scene scene = scenes::MorphRoom().Build();
     const SolverSettings settings = Implicit(0.15f, 64);
@@ -776,8 +778,8 @@ TEST(Implicit, ADeformingMeshOverAHundredFramesStaysBoundedAndSmooth) {
     }
     std::printf("largest frame-to-frame change: the room %.4f, everything %.4f\n", worstRoom,
                 worstAll);
-    EXPECT_LT(worstRoom, 0.025);
-    EXPECT_LT(worstAll, 0.2);
+    EXPECT_LT(worstRoom, 0.03);
+    EXPECT_LT(worstAll, 0.05);
     // Every relink after the first deformation kept the links of the pairs away from the blob.
     EXPECT_EQ(solver->Stats().Number("relinks_kept"), 99.0);
     solver->Iterate(20);

@@ -54,6 +54,46 @@ float ConeSine(const HierarchyNode& r) {
     return std::sqrt(1.0f - cosCone * cosCone);
 }
 
+// Per node, how thick the slab about its centre across its normal is that holds its members'
+// discs, as a fraction of its radius (at most 1; 0 for a leaf, a disc): half the slab's height,
+// the largest |⟨n, c_k − c⟩| + r_k sin∠(n, n_k) over its leaves k. A cluster of one flat or
+// gently curved surface is thin; one holding a tabletop and the floor under it is not, though
+// every normal agrees.
+std::vector<float> SlabThickness(const Hierarchy& h) {
+    const auto& nodes = h.nodes;
+    std::vector<float> slab(nodes.size(), 0.0f);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes.size(), 64), [&](const auto& range) {
+        for (size_t i = range.begin(); i != range.end(); ++i) {
+            const HierarchyNode& n = nodes[i];
+            if (n.IsLeaf()) continue;
+            if (!(glm::dot(n.normal, n.normal) > 0.5f) || !(n.radius > 0.0f)) {
+                slab[i] = 1.0f;  // no axis: as thick as it is wide
+                continue;
+            }
+            float half = 0.0f;
+            for (size_t k = i + 1; k < n.end && half < n.radius; ++k) {
+                const HierarchyNode& m = nodes[k];
+                if (!m.IsLeaf()) continue;
+                const float c = glm::dot(n.normal, m.normal);
+                half = std::max(half, std::abs(glm::dot(n.normal, m.center - n.center)) +
+                                          m.radius * std::sqrt(std::max(0.0f, 1.0f - c * c)));
+            }
+            slab[i] = std::min(1.0f, half / n.radius);
+        }
+    });
+    return slab;
+}
+
+// How much of the disc of its bounding sphere a cluster shows along `dir` (unit): its members
+// lie in the cylinder of the sphere's radius R and half height h = `slab` · R about its normal
+// n, which projects to a rectangle 2R by 2h sin θ between two half ellipses of axes R and
+// R |cos θ| (θ = ∠(n, dir)): π R² |cos θ| + 4 R h sin θ, at most the disc π R² (a thick
+// cluster). A flat cluster seen edge-on subtends a sliver, not its sphere's disc.
+float Foreshortening(const HierarchyNode& n, float slab, const glm::vec3& dir) {
+    const float c = std::min(1.0f, std::abs(glm::dot(n.normal, dir)));
+    return std::min(1.0f, c + 4.0f / std::numbers::pi_v<float> * slab * std::sqrt(1.0f - c * c));
+}
+
 // The area where two discs of radii `r` and `R` with centres `d` apart overlap (angles on the
 // sphere taken as flat: the overlap of an end's disc and a bin's).
 float LensArea(float d, float r, float R) {
@@ -223,6 +263,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     PENUMBRA_CHECK(solid.empty() || solid.size() == nodes.size());
     auto start = std::chrono::steady_clock::now();
     std::vector<float> sinCone(nodes.size());  // per node, ConeSine (the CPU's rounds)
+    const std::vector<float> slab = SlabThickness(h);
 
     // The solid angle sender `s` covers seen from `r` along `dir` (unit, r → s) at `dist`: a
     // flat node's area times |cos| (turned away it still hides what is behind it), another
@@ -271,7 +312,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // from the root's self-pair.
     if (device_) {
         size_t devicePairs = 0, deviceLinked = 0;
-        device_->Create(h, frontArea, recorded.local(), devicePairs, deviceLinked);
+        device_->Create(h, frontArea, slab, recorded.local(), devicePairs, deviceLinked);
         pairs = devicePairs;
         linked = deviceLinked;
     } else {
@@ -325,13 +366,19 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 const bool aGets = CanReceive(A, sinCone[a], B, d, dist);
                 const bool bGets = CanReceive(B, sinCone[b], A, -d, dist);
                 if (!aGets && !bGets) continue;  // a pair's only use is what its ends receive
-                // Sec. 4.2.2: an end that looks bigger than a bin from the other is split.
+                // Sec. 4.2.2: an end that looks bigger than a bin from the other is split. How
+                // big: its sphere's disc, foreshortened as far as its slab allows (a wall or a
+                // cloth seen edge-on is a sliver; its sphere would split it down to the leaves
+                // for bins it hardly touches).
                 const bool overlap = dist <= A.radius + B.radius;
                 const float dist2 = std::max(dist * dist, 1e-30f);
+                const glm::vec3 unit = dist > 0.0f ? d / dist : glm::vec3(0.0f);
+                const float showsA = A.IsLeaf() ? 1.0f : Foreshortening(A, slab[a], unit);
+                const float showsB = B.IsLeaf() ? 1.0f : Foreshortening(B, slab[b], unit);
                 const bool splitA =
-                    !A.IsLeaf() && (overlap || pi * A.radius * A.radius / dist2 > limit);
+                    !A.IsLeaf() && (overlap || pi * A.radius * A.radius * showsA / dist2 > limit);
                 const bool splitB =
-                    !B.IsLeaf() && (overlap || pi * B.radius * B.radius / dist2 > limit);
+                    !B.IsLeaf() && (overlap || pi * B.radius * B.radius * showsB / dist2 > limit);
                 // Both ends too wide for each other: both split at once (each of the four
                 // child pairs is examined afresh), instead of the wider one now and the other
                 // in the next round, through two pairs examined only to be split again
@@ -355,7 +402,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                     continue;
                 }
                 if (!(dist > 0.0f)) continue;  // coincident ends: no direction between them
-                const glm::vec3 dir = d / dist;
+                const glm::vec3& dir = unit;
                 const size_t before = fresh.size();
                 const bool aRecords = aGets && AboveHorizon(A, dir);
                 const bool bRecords = bGets && AboveHorizon(B, -dir);
@@ -363,10 +410,10 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                     const uint32_t ahead = dirs_.Lookup(dir), back = dirs_.Lookup(-dir);
                     if (aRecords)
                         Record(a, b, B, A.center, dir, dist, covered(b, dir, dist, ahead, back),
-                               ahead, fresh);
+                               ahead, showsB, fresh);
                     if (bRecords)
                         Record(b, a, A, B.center, -dir, dist, covered(a, -dir, dist, back, ahead),
-                               back, fresh);
+                               back, showsA, fresh);
                 }
                 if (keeps && root != kFresh) {  // this pair's ends are kept with its root
                     for (size_t e = before; e < fresh.size(); ++e)
@@ -688,7 +735,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
 
 void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode& from,
                             const glm::vec3& at, const glm::vec3& dir, float dist, float omega,
-                            uint32_t centre, std::vector<End>& ends) const {
+                            uint32_t centre, float shows, std::vector<End>& ends) const {
     const size_t bins = static_cast<size_t>(dirs_.Count());
     const size_t row = size_t(node) * bins;
     // How far along `w` from the receiver's centre the sender lies, for the bin's front-to-
@@ -730,6 +777,14 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
         const float inside = std::min(omegaBin, std::numbers::pi_v<float> * small * small);
         const bool flat = from.coneCos >= kFlatCone;
         const float height = glm::dot(from.normal, from.center - at);
+        // A cluster seen foreshortened (`shows` < 1) covers of each bin its overlap with the
+        // ellipse its disc projects to, the minor axis ρ · shows along m (its normal off
+        // `dir`): squeezed by 1 / shows along m, the ellipse is the disc, and a bin an ellipse
+        // the area of a disc of radius r_bin / √shows. A leaf keeps its whole disc (a contact).
+        const bool squeeze = !from.IsLeaf() && shows < 0.999f;
+        glm::vec3 m(0.0f);
+        if (squeeze) m = glm::normalize(from.normal - glm::dot(from.normal, dir) * dir);
+        const float squeezedBin = squeeze ? binRadius_ / std::sqrt(shows) : binRadius_;
         auto spread = [&](uint32_t b) {
             const glm::vec3& w = dirs_.Direction(b);
             const float c = glm::dot(w, dir);
@@ -737,10 +792,19 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
             if (flat && !MeetsFlatSender(height, from.center, from.normal, from.discRadius, at, w,
                                          binRadius_))
                 return;
-            const float a = c >= cosInside
-                                ? inside
-                                : std::min(omegaBin, LensArea(std::acos(std::clamp(c, -1.0f, 1.0f)),
-                                                              rho, binRadius_));
+            float a;
+            if (squeeze) {
+                const glm::vec3 o = w - dir;
+                const float across = glm::dot(o, m);
+                const float apart = std::sqrt(std::max(0.0f, glm::dot(o, o) - across * across) +
+                                              across * across / (shows * shows));
+                a = std::min(omegaBin, shows * LensArea(apart, rho, squeezedBin));
+            } else {
+                a = c >= cosInside
+                        ? inside
+                        : std::min(omegaBin, LensArea(std::acos(std::clamp(c, -1.0f, 1.0f)), rho,
+                                                      binRadius_));
+            }
             if (a > kMinOverlap * omegaBin)
                 ends.push_back({uint32_t(row + b), sender, depth(w), a});
         };

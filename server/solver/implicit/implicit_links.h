@@ -6,7 +6,8 @@
 // CPU back end (TBB), link creation also on a Vulkan device (vulkan_links.h).
 // CreateHierarchicalLinks walks candidate pairs level by level from the
 // root's self-pair (the data-parallel link creation of Meyer et al. 2009): a pair is split
-// while an end subtends more than linkThreshold × ω_bin from the other (Sec. 4.2.2), else it
+// while an end subtends more than linkThreshold × ω_bin from the other (Sec. 4.2.2: its
+// bounding sphere's disc, foreshortened as far as the slab holding its members allows), else it
 // becomes a link at both ends, recorded in the end's (node, bin) slot with its distance and
 // the solid angle the other end covers. RefineHierarchicalLinks and PushdownLinks fold into
 // one pass per leaf (Sec. 4.2.3, 4.2.4): each front bin takes the links of the leaf and its
@@ -123,9 +124,9 @@ class ImplicitLinker {
     // Records the link (`node`, centred at `at`, receives from `sender`, node `from`, along
     // `dir` at `dist`) in the slot of `dir`'s bin `centre` with the solid angle `omega` it
     // covers, or, when the sender looks wider than a bin, in every bin its disc spans,
-    // covering each.
+    // covering each (a cluster's disc foreshortened to `shows` of it across, Foreshortening).
     void Record(uint32_t node, uint32_t sender, const HierarchyNode& from, const glm::vec3& at,
-                const glm::vec3& dir, float dist, float omega, uint32_t centre,
+                const glm::vec3& dir, float dist, float omega, uint32_t centre, float shows,
                 std::vector<End>& ends) const;
     const Directions& dirs_;
     float threshold_;

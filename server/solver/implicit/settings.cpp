@@ -13,8 +13,9 @@ std::vector<OptionSpec> Options() {
         BinsOption("128 (the paper's 6×12×12 cube map is 864)"),
         {"link-threshold",
          K::kFloat,
-         "0.5",
-         "refine a link end while it subtends more than this many bins' solid angle",
+         "0.2",
+         "refine a link end while it subtends more than this many bins' solid angle (its "
+         "bounding sphere's disc, foreshortened as far as its members' slab allows)",
          0.05,
          4,
          {}},

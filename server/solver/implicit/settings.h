@@ -8,11 +8,12 @@ namespace penumbra {
 
 struct ImplicitSettings {
     int bins = 128;  // direction bins (Directions): the paper's cube-map texels, near-uniform
-    // Refine a link end while its bounding sphere subtends more than this × ω_bin (Sec. 4.2.2:
+    // Refine a link end while its bounding sphere's disc, foreshortened as far as the slab
+    // holding its members allows, subtends more than this × ω_bin (Sec. 4.2.2:
     // "bigger than the solid angle of the link's respective bin"): below 1, an end smaller
     // than a bin, so that every bin it overlaps gets a part of it (fewer empty bins, a leak
     // under a sky), at more links.
-    float linkThreshold = 0.5f;
+    float linkThreshold = 0.2f;
 };
 
 inline constexpr int kImplicitDefaultBins = 128;

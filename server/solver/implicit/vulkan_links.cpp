@@ -24,7 +24,8 @@ struct PairNode {
     glm::vec3 normal;
     float coneCos;
     float area;
-    uint32_t right, leaf;
+    uint32_t right;  // the second child; 0 for a leaf
+    float slab;      // ImplicitLinker::Build's slab thickness (0 for a leaf)
     float discRadius;
 };
 PENUMBRA_GPU_FIELD(PairNode, center, 0);
@@ -33,7 +34,7 @@ PENUMBRA_GPU_FIELD(PairNode, normal, 16);
 PENUMBRA_GPU_FIELD(PairNode, coneCos, 28);
 PENUMBRA_GPU_FIELD(PairNode, area, 32);
 PENUMBRA_GPU_FIELD(PairNode, right, 36);
-PENUMBRA_GPU_FIELD(PairNode, leaf, 40);
+PENUMBRA_GPU_FIELD(PairNode, slab, 40);
 PENUMBRA_GPU_FIELD(PairNode, discRadius, 44);
 static_assert(sizeof(PairNode) == 48);
 static_assert(sizeof(ImplicitLinker::End) == 16);
@@ -114,19 +115,20 @@ VulkanLinkCreation::VulkanLinkCreation(gpu::Context& ctx, const Directions& dirs
 VulkanLinkCreation::~VulkanLinkCreation() = default;
 
 void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& frontArea,
+                                const std::vector<float>& slab,
                                 std::vector<ImplicitLinker::End>& ends, size_t& pairs,
                                 size_t& linked) {
     Impl& s = *impl_;
     const auto start = std::chrono::steady_clock::now();
     const size_t bins = size_t(s.dirs.Count());
     PENUMBRA_CHECK_EQ(frontArea.size(), h.nodes.size() * bins);
+    PENUMBRA_CHECK_EQ(slab.size(), h.nodes.size());
     std::vector<PairNode> up(h.nodes.size());
     for (size_t i = 0; i < up.size(); ++i) {
         const HierarchyNode& n = h.nodes[i];
         const bool leaf = n.IsLeaf();
-        up[i] = {n.center,       n.radius,    n.normal,
-                 n.coneCos,      n.area,      leaf ? 0u : h.nodes[i + 1].end,
-                 leaf ? 1u : 0u, n.discRadius};
+        up[i] = {n.center, n.radius,    n.normal, n.coneCos, n.area, leaf ? 0u : h.nodes[i + 1].end,
+                 slab[i],  n.discRadius};
     }
     if (!s.nodes || s.nodes->Bytes() < up.size() * sizeof(PairNode)) {
         s.nodes = MakeBuffer(s.ctx, up.size() * sizeof(PairNode));

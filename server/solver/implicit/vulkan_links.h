@@ -28,10 +28,11 @@ class VulkanLinkCreation {
     VulkanLinkCreation& operator=(const VulkanLinkCreation&) = delete;
 
     // Every pair from the root's self-pair for `h` as placed now (`frontArea` per node and bin,
-    // ImplicitLinker::Build's): appends the ends to `ends`; `pairs` the candidate pairs
-    // examined, `linked` those that became links.
+    // `slab` per node, ImplicitLinker::Build's): appends the ends to `ends`; `pairs` the
+    // candidate pairs examined, `linked` those that became links.
     void Create(const Hierarchy& h, const std::vector<float>& frontArea,
-                std::vector<ImplicitLinker::End>& ends, size_t& pairs, size_t& linked);
+                const std::vector<float>& slab, std::vector<ImplicitLinker::End>& ends,
+                size_t& pairs, size_t& linked);
 
     double msDevice = 0.0;  // uploads, rounds and readbacks of the last Create
     size_t rounds = 0;      // dispatches of the last Create
