@@ -265,7 +265,8 @@ int main(int argc, char** argv) {
         ->delimiter(',')
         ->capture_default_str();
     app.add_option("--scene-dir", sceneDir, "folder of the scenes")->capture_default_str();
-    app.add_option("--out", out, "folder for accuracy.md and accuracy.json")->capture_default_str();
+    app.add_option("--out", out, "folder for accuracy.md and accuracy.json (empty: print only)")
+        ->capture_default_str();
     app.add_option("--truth-samples", truthSamples, "reference samples per vertex")
         ->capture_default_str();
     app.add_option("--name", resultName, "results are written to OUT/NAME.md and OUT/NAME.json")
@@ -465,12 +466,14 @@ int main(int argc, char** argv) {
                               {"path_tracer_seconds", ptSeconds}};
             report["scenes"][name] = js;
         }
-        std::filesystem::create_directories(out);
-        std::ofstream(out + "/" + resultName + ".md") << md.str();
-        std::ofstream(out + "/" + resultName + ".json") << report.dump(1) << "\n";
         std::printf("%s", md.str().c_str());
-        std::fprintf(stderr, "wrote %s/%s.md and %s.json\n", out.c_str(), resultName.c_str(),
-                     resultName.c_str());
+        if (!out.empty()) {
+            std::filesystem::create_directories(out);
+            std::ofstream(out + "/" + resultName + ".md") << md.str();
+            std::ofstream(out + "/" + resultName + ".json") << report.dump(1) << "\n";
+            std::fprintf(stderr, "wrote %s/%s.md and %s.json\n", out.c_str(), resultName.c_str(),
+                         resultName.c_str());
+        }
     } catch (const penumbra::Error& e) {
         std::fprintf(stderr, "bench: %s\n", e.what());
         return 1;

@@ -62,7 +62,8 @@ int main(int argc, char** argv) {
     SetOption(settings.options, "link-oracle", "paper");
     SetOption(settings.options, "oracle", 2.15f);
     app.add_option("--scene", scenePath, "office-scale glTF")->capture_default_str();
-    app.add_option("--out", out, "folder for the results JSON")->capture_default_str();
+    app.add_option("--out", out, "folder for the results JSON (empty: print only)")
+        ->capture_default_str();
     app.add_option("--devices", devices, "cpu, lavapipe, gpu")->capture_default_str();
     app.add_option("--map-sizes", mapSizes, "shadow map sizes to run")->capture_default_str();
     app.add_option("--updates", updates, "light updates timed per case")->capture_default_str();

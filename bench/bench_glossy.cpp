@@ -30,7 +30,8 @@ int main(int argc, char** argv) {
     int bins = 128;
     settings.elementSize = 0.25f;
     app.add_option("--scene", scenePath, "glTF with glossy materials")->capture_default_str();
-    app.add_option("--out", out, "folder for the results JSON")->capture_default_str();
+    app.add_option("--out", out, "folder for the results JSON (empty: print only)")
+        ->capture_default_str();
     app.add_option("--devices", devices, "devices to run: cpu, lavapipe, gpu")
         ->capture_default_str();
     app.add_option("--frames", frames, "frames measured per case")->capture_default_str();

@@ -47,7 +47,8 @@ int main(int argc, char** argv) {
     bool quick = false;
     std::vector<std::string> devices{"cpu"};
     std::string name = "lightfield.json";
-    app.add_option("--out", out, "folder for the results JSON")->capture_default_str();
+    app.add_option("--out", out, "folder for the results JSON (empty: print only)")
+        ->capture_default_str();
     app.add_option("--name", name, "the results file's name")->capture_default_str();
     app.add_option("--devices", devices, "devices to run each case on: cpu, lavapipe, gpu")
         ->capture_default_str();

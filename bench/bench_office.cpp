@@ -32,7 +32,8 @@ int main(int argc, char** argv) {
     settings.elementSize = 0.5f;
     float oracle = 2.15f;  // 626K links: the paper office has 632K
     app.add_option("--scene", scenePath, "office-scale glTF")->capture_default_str();
-    app.add_option("--out", out, "folder for the results JSON")->capture_default_str();
+    app.add_option("--out", out, "folder for the results JSON (empty: print only)")
+        ->capture_default_str();
     app.add_option("--devices", devices, "devices to run: cpu, lavapipe, gpu")
         ->capture_default_str();
     app.add_option("--frames", frames, "frames measured per device")->capture_default_str();

@@ -346,7 +346,7 @@ int main(int argc, char** argv) {
     double seconds = 4.0;
     int edits = 30, moves = 5, deforms = 20, samples = 1024, gatherRays = 256, directRays = 256;
     std::string name = "service";
-    app.add_option("--out", outDir, "results folder")->capture_default_str();
+    app.add_option("--out", outDir, "results folder (empty: print only)")->capture_default_str();
     app.add_option("--solver", solver,
                    "the solver (the office's oracle settings apply to antiradiance only)")
         ->capture_default_str();
@@ -425,8 +425,11 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "penumbra-bench-service: %s\n", e.what());
         return 1;
     }
-    fs::create_directories(outDir);
-    std::ofstream(fs::path(outDir) / (name + ".json")) << report.dump(2) << "\n";
-    std::printf("wrote %s/%s.json\n", outDir.c_str(), name.c_str());
+    try {
+        bench::WriteReport(report, outDir, name + ".json");
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "penumbra-bench-service: %s\n", e.what());
+        return 1;
+    }
     return 0;
 }

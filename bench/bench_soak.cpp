@@ -496,7 +496,7 @@ int main(int argc, char** argv) {
     app.add_option("--scene", o.scene, "glTF under scenes/")->capture_default_str();
     app.add_option("--samples", o.samples, "reference paths per vertex for the RMSE (0: none)")
         ->capture_default_str();
-    app.add_option("--out", o.outDir, "results folder")->capture_default_str();
+    app.add_option("--out", o.outDir, "results folder (empty: print only)")->capture_default_str();
     app.add_option("--name", o.name, "results go to OUT/NAME.json")->capture_default_str();
     app.add_option("--server", o.server, "penumbra-server program")->capture_default_str();
     app.add_option("--cli", o.cli, "penumbra program")->capture_default_str();

@@ -35,9 +35,14 @@ inline double Median(std::vector<double> v) {
     return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
-// Writes `report` as `folder/name` (pretty JSON) and says so; throws on failure.
+// Writes `report` as `folder/name` (pretty JSON) and says so; throws on failure. An empty
+// `folder` (`--out ""`) writes nothing: the table printed is the result.
 inline void WriteReport(const nlohmann::json& report, const std::string& folder,
                         const std::string& name) {
+    if (folder.empty()) {
+        std::printf("%s not written (--out is empty)\n", name.c_str());
+        return;
+    }
     std::filesystem::create_directories(folder);
     std::string path = folder + "/" + name;
     std::ofstream file(path);
