@@ -8,6 +8,7 @@
 #include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
+#include "gpu/dispatch.h"
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
 #include "shaders/implicit_bounce_spv.h"
@@ -27,14 +28,6 @@ PENUMBRA_GPU_FIELD(BouncePush, first, 12);
 PENUMBRA_GPU_FIELD(BouncePush, count, 16);
 PENUMBRA_GPU_FIELD(BouncePush, sumsAt, 20);
 PENUMBRA_GPU_FIELD(BouncePush, environmentAt, 24);
-
-constexpr uint32_t kBounceGroup = 64;         // local_size_x
-constexpr uint32_t kMaxBounceGroups = 65535;  // the least maxComputeWorkGroupCount[0] Vulkan allows
-
-uint32_t BounceGroups(size_t items) {
-    return uint32_t(
-        std::clamp<size_t>((items + kBounceGroup - 1) / kBounceGroup, 1, kMaxBounceGroups));
-}
 
 }  // namespace
 
@@ -153,7 +146,7 @@ std::vector<glm::vec3> VulkanBounce::Gather(const std::vector<glm::vec3>& radian
             push.mode = mode;
             cb.pushConstants<BouncePush>(s.pipeline.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
                                          push);
-            cb.dispatch(BounceGroups(items), 1, 1);
+            cb.dispatch(gpu::StridedGroups(items), 1, 1);
             gpu::ComputeBarrier(cb);
         };
         run(0, s.leaves * (s.bins + 1) + s.bins);

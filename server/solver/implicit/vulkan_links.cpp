@@ -10,6 +10,7 @@
 #include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
+#include "gpu/dispatch.h"
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
 #include "shaders/implicit_pairs_spv.h"
@@ -59,8 +60,6 @@ PENUMBRA_GPU_FIELD(PairPush, binSolidAngle, 28);
 PENUMBRA_GPU_FIELD(PairPush, splat, 32);
 PENUMBRA_GPU_FIELD(PairPush, adjacentAngle, 36);
 PENUMBRA_GPU_FIELD(PairPush, binRadius, 40);
-
-constexpr uint32_t kPairGroup = 64;  // local_size_x
 
 }  // namespace
 
@@ -186,7 +185,7 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
                                       {});
                 cb.pushConstants<PairPush>(s.pairs.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
                                            push);
-                cb.dispatch(uint32_t((n + kPairGroup - 1) / kPairGroup), 1, 1);
+                cb.dispatch(gpu::Groups(n), 1, 1);
                 const vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,
                                                vk::AccessFlagBits::eHostRead);
                 cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
