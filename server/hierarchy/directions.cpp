@@ -79,6 +79,12 @@ Directions::Directions(int count) : count_(count) {
         for (int j = 0; j < count; ++j)
             if (i != j && AngleBetween(dirs_[i], dirs_[j]) < AdjacentAngle())
                 adjacent_[i].push_back(j);
+    byAngle_.resize(count);
+    for (int i = 0; i < count; ++i) {
+        for (uint32_t j : adjacent_[i]) byAngle_[i].push_back({j, glm::dot(dirs_[i], dirs_[j])});
+        std::stable_sort(byAngle_[i].begin(), byAngle_[i].end(),
+                         [](const Near& a, const Near& b) { return a.cos > b.cos; });
+    }
 
     // Cube-map table, brute force at build time (≤ 6·64²·1024 dot products).
     cubeRes_ = std::max(8, static_cast<int>(std::ceil(std::sqrt(count / 6.0f) * 2.0f)));
@@ -97,9 +103,10 @@ Directions::Directions(int count) : count_(count) {
             }
     // Lookup's own table: a cube map twice as fine (finer tables miss the cache more), each texel
     // listing every bin that is the nearest somewhere in it. For p in a texel, |p − c| ≤ ρ (c its
-    // centre, ρ the chord to its farthest corner), so |p·x − c·x| ≤ ρ for any unit x: a bin nearest
-    // at some p has c·ω_b ≥ c·ω_best − 2ρ. Those lie next to the centre's nearest bin (within its
-    // adjacency). The lookup is then the best of one to a few dot products.
+    // centre, ρ the chord to its farthest corner), so |p·x − c·x| ≤ ρ |x| for any x: a bin b
+    // nearest at some p has p·(ω_b − ω_best) ≥ 0, so c·(ω_b − ω_best) ≥ −ρ |ω_b − ω_best|. Those
+    // lie next to the centre's nearest bin (within its adjacency). The lookup is then the best
+    // of one to a few dot products (the bound c·ω_b ≥ c·ω_best − 2ρ took the whole adjacency).
     lookupRes_ = 2 * cubeRes_;
     const int res = lookupRes_;
     candidateFirst_.assign(size_t(6) * res * res + 1, 0);
@@ -116,17 +123,18 @@ Directions::Directions(int count) : count_(count) {
                     }
                 rho *= 1.05f;  // float rounding's margin
                 const uint32_t best = Walk(c);
-                const float bestDot = glm::dot(c, dirs_[best]);
                 candidates_.push_back(uint16_t(best));
-                for (uint32_t j : adjacent_[best])
-                    if (glm::dot(c, dirs_[j]) >= bestDot - 2.0f * rho)
+                for (uint32_t j : adjacent_[best]) {
+                    const glm::vec3 apart = dirs_[j] - dirs_[best];
+                    if (glm::dot(c, apart) >= -rho * glm::length(apart))
                         candidates_.push_back(uint16_t(j));
+                }
                 candidateFirst_[size_t(f * res + v) * res + u + 1] = uint32_t(candidates_.size());
             }
     opposite_.resize(count);
     for (int b = 0; b < count; ++b) opposite_[b] = Lookup(-dirs_[b]);
 
-    // ForEachNear's groups: the cells of a cube map of 4² cells a face (about nine bins a
+    // ForEachWithin's groups: the cells of a cube map of 4² cells a face (about nine bins a
     // group at 864 bins), each bin in the cell its direction falls in.
     {
         constexpr int kCells = 4;
@@ -148,6 +156,27 @@ Directions::Directions(int count) : count_(count) {
             groups_.push_back({centre, radius, std::cos(radius), std::sin(radius)});
             groupBins_.insert(groupBins_.end(), m.begin(), m.end());
             groupFirst_.push_back(uint32_t(groupBins_.size()));
+        }
+        for (uint32_t b : groupBins_)
+            groupX_.push_back(dirs_[b].x), groupY_.push_back(dirs_[b].y),
+                groupZ_.push_back(dirs_[b].z);
+        const size_t groups = groups_.size();
+        for (size_t g = 0; g < groups; ++g)
+            PENUMBRA_CHECK(groupFirst_[g + 1] - groupFirst_[g] <= kMaxGroupBins);
+        PENUMBRA_CHECK(groups <= 256);  // groupOrder_ holds them as bytes
+        groupOrder_.resize(size_t(count) * groups);
+        groupLower_.resize(size_t(count) * groups);
+        std::vector<std::pair<float, uint8_t>> byLower(groups);
+        for (int b = 0; b < count; ++b) {
+            for (size_t g = 0; g < groups; ++g)
+                byLower[g] = {
+                    std::max(0.0f, AngleBetween(dirs_[b], groups_[g].centre) - groups_[g].radius),
+                    uint8_t(g)};
+            std::sort(byLower.begin(), byLower.end());
+            for (size_t g = 0; g < groups; ++g) {
+                groupLower_[size_t(b) * groups + g] = byLower[g].first;
+                groupOrder_[size_t(b) * groups + g] = byLower[g].second;
+            }
         }
     }
 

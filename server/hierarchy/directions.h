@@ -77,28 +77,65 @@ class Directions {
         u = std::clamp(static_cast<int>((s / m * 0.5f + 0.5f) * res), 0, res - 1);
         v = std::clamp(static_cast<int>((t / m * 0.5f + 0.5f) * res), 0, res - 1);
     }
-    // Calls f(bin) for every bin whose direction lies within angle `reach` (radians) of unit
-    // `d`, and for some others near that cap (the caller tests each bin itself): the bins
-    // grouped by the cube-map cell their direction falls in, a group skipped whole when its
-    // bounding cone lies farther than `reach` from `d`. A cap a tenth of the sphere visits
-    // about a fifth of the bins instead of every one.
+    // Calls f(b, ω_b, c) for exactly the bins b with c = ⟨d, ω_b⟩ ≥ cos `reach` (in no set
+    // order), for unit `d` within angle `offset` of bin `bin`'s direction (its nearest bin,
+    // say). A cap inside the bin's adjacency walks that nearest first, stopping at the first
+    // bin outside the cap; a wider one walks groups of bins (a cube-map cell's) nearest `bin`
+    // first, stopping at the first group that lies farther than reach + offset from it, the
+    // cosines of a group's bins taken together.
     template <typename F>
-    void ForEachNear(const glm::vec3& d, float reach, F&& f) const {
+    void ForEachWithin(uint32_t bin, float offset, const glm::vec3& d, float reach, F&& f) const {
         constexpr float pi = std::numbers::pi_v<float>;
-        const float cosReach = std::cos(std::min(reach, pi)),
-                    sinReach = std::sin(std::min(reach, pi));
-        for (size_t g = 0; g + 1 < groupFirst_.size(); ++g) {
+        constexpr float margin = 1e-3f;  // the rounding of the angles compared
+        const float cosReach = std::cos(std::min(reach, pi));
+        auto visit = [&](uint32_t b) {
+            const glm::vec3& w = dirs_[b];
+            const float c = glm::dot(d, w);
+            if (c >= cosReach) f(b, w, c);
+        };
+        if (offset + reach <= AdjacentAngle() - margin) {
+            // A bin farther than offset + reach from `bin` lies farther than reach from `d`,
+            // as does every one after it.
+            const float cosStop = std::cos(offset + reach + margin);
+            visit(bin);
+            for (const Near& n : byAngle_[bin]) {
+                if (n.cos < cosStop) break;
+                visit(n.bin);
+            }
+            return;
+        }
+        const float sinReach = std::sin(std::min(reach, pi));
+        const size_t groups = groups_.size();
+        const uint8_t* order = groupOrder_.data() + size_t(bin) * groups;
+        const float* lower = groupLower_.data() + size_t(bin) * groups;
+        const float stop = reach + offset + margin;
+        float cs[kMaxGroupBins];
+        for (size_t k = 0; k < groups && lower[k] <= stop; ++k) {
+            const uint8_t g = order[k];
             const Group& G = groups_[g];
-            // Within reach + r_g of the group's centre (no group is wider than π / 2):
-            // cos(reach + r_g) = cos·cos − sin·sin, unless reach + r_g ≥ π.
             if (reach + G.radius < pi &&
                 glm::dot(d, G.centre) < cosReach * G.cosRadius - sinReach * G.sinRadius)
                 continue;
-            for (uint32_t k = groupFirst_[g]; k < groupFirst_[g + 1]; ++k) f(groupBins_[k]);
+            const uint32_t first = groupFirst_[g], n = groupFirst_[g + 1] - first;
+            const float *x = groupX_.data() + first, *y = groupY_.data() + first,
+                        *z = groupZ_.data() + first;
+            for (uint32_t j = 0; j < n; ++j) cs[j] = d.x * x[j] + d.y * y[j] + d.z * z[j];
+            for (uint32_t j = 0; j < n; ++j)
+                if (cs[j] >= cosReach) {
+                    const uint32_t b = groupBins_[first + j];
+                    f(b, dirs_[b], cs[j]);
+                }
         }
     }
     // The other bins within AdjacentAngle() of bin `bin`'s direction, in bin order.
     std::span<const uint32_t> Adjacent(uint32_t bin) const { return adjacent_[bin]; }
+    // The same bins nearest first, each with the cosine of its angle to bin `bin`: a walk
+    // over a cap about `bin` stops at the first one outside it.
+    struct Near {
+        uint32_t bin;
+        float cos;
+    };
+    std::span<const Near> AdjacentByAngle(uint32_t bin) const { return byAngle_[bin]; }
     float AdjacentAngle() const { return 2.0f * spacing_; }
     // Nearest bin to `d` among those with dot(ω_b, a) > 0 and dot(ω_b, b) > 0 (a zero
     // vector imposes nothing), searched around the nearest bin; the nearest bin if none.
@@ -163,7 +200,8 @@ class Directions {
     uint32_t Walk(const glm::vec3& d) const;
     std::vector<uint32_t> opposite_;
     std::vector<std::vector<uint32_t>> adjacent_;
-    // ForEachNear's groups: the bins of group g are groupBins_[groupFirst_[g],
+    std::vector<std::vector<Near>> byAngle_;  // AdjacentByAngle
+    // ForEachWithin's groups: the bins of group g are groupBins_[groupFirst_[g],
     // groupFirst_[g + 1]), around `centre` within `radius` (with a margin for rounding).
     struct Group {
         glm::vec3 centre;
@@ -171,6 +209,12 @@ class Directions {
     };
     std::vector<Group> groups_;
     std::vector<uint32_t> groupFirst_, groupBins_;
+    // Per bin, every group by how near it comes to the bin's direction (the angle to the
+    // group's centre less its radius, at least 0), ascending: ForEachWithin.
+    std::vector<uint8_t> groupOrder_;
+    std::vector<float> groupX_, groupY_, groupZ_;  // the groups' bins' directions, in their order
+    static constexpr uint32_t kMaxGroupBins = 64;  // the most bins a group holds (checked)
+    std::vector<float> groupLower_;
     std::vector<uint32_t> offsets_;
     std::vector<BinWeight> weights_;
     std::vector<BinWeight> padded_;

@@ -113,35 +113,41 @@ TEST(Directions, LookupFindsTheNearestBin) {
     }
 }
 
-// ForEachNear (the spread of an end wider than a bin's neighbourhood) visits every bin within
-// its reach once, and, for a cap much smaller than the sphere, far fewer than every bin.
-TEST(Directions, ForEachNearVisitsEveryBinWithinReach) {
+// ForEachWithin (the spread of an end wider than half a bin) calls back exactly the bins within
+// its reach, each once with its cosine, through the centre bin's neighbours nearest first (a
+// small cap) or the groups nearest it first (a wider one), from the nearest bin or another
+// one near `d`.
+TEST(Directions, ForEachWithinVisitsExactlyTheBinsWithinReach) {
     std::mt19937 rng(11);
     std::normal_distribution<float> n01;
     std::uniform_real_distribution<float> angle(0.0f, 3.3f);
     for (int count : {Directions::kMinBins, 128, 864, Directions::kMaxBins}) {
         const Directions dirs(count);
-        size_t missed = 0, twice = 0, smallVisits = 0, smallCaps = 0;
+        size_t wrong = 0, twice = 0, badCosine = 0, calls = 0;
         std::vector<int> seen(count);
         for (int i = 0; i < 2000; ++i) {
             const glm::vec3 d = glm::normalize(glm::vec3(n01(rng), n01(rng), n01(rng)));
-            const float reach = i % 4 == 0 ? 0.25f : angle(rng);
+            const float reach = i % 3 == 0 ? 0.5f * dirs.Spacing() : angle(rng);
+            uint32_t from = dirs.Lookup(d);
+            if (i % 2 == 1) from = dirs.Adjacent(from)[i % dirs.Adjacent(from).size()];
+            const float offset =
+                std::acos(std::clamp(glm::dot(d, dirs.Direction(from)), -1.0f, 1.0f));
             std::fill(seen.begin(), seen.end(), 0);
-            size_t visits = 0;
-            dirs.ForEachNear(d, reach, [&](uint32_t b) { ++seen[b], ++visits; });
+            dirs.ForEachWithin(
+                from, offset, d, reach, [&](uint32_t b, const glm::vec3& w, float c) {
+                    ++seen[b], ++calls;
+                    if (w != dirs.Direction(b) || c != glm::dot(d, dirs.Direction(b))) ++badCosine;
+                });
+            const float cosReach = std::cos(std::min(reach, std::numbers::pi_v<float>));
             for (int b = 0; b < count; ++b) {
-                const float a = std::acos(std::clamp(glm::dot(d, dirs.Direction(b)), -1.0f, 1.0f));
-                if (a <= reach && seen[b] == 0) ++missed;
+                if ((glm::dot(d, dirs.Direction(b)) >= cosReach) != (seen[b] > 0)) ++wrong;
                 if (seen[b] > 1) ++twice;
             }
-            if (reach == 0.25f) smallVisits += visits, ++smallCaps;
         }
-        EXPECT_EQ(missed, 0u) << count << " bins";
+        EXPECT_EQ(wrong, 0u) << count << " bins";
         EXPECT_EQ(twice, 0u) << count << " bins";
-        // A cap of 0.25 rad holds 1.6% of the sphere's bins.
-        if (count >= 128) {
-            EXPECT_LT(double(smallVisits) / smallCaps, 0.3 * count) << count << " bins";
-        }
+        EXPECT_EQ(badCosine, 0u) << count << " bins";
+        EXPECT_GT(calls, 0u);
     }
 }
 

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -225,7 +226,9 @@ struct ImplicitLinker::Scratch {
     tbb::enumerable_thread_specific<std::vector<Pair>> next;
     tbb::enumerable_thread_specific<std::vector<End>> recorded;
     std::vector<End> byNode, ends;
-    std::vector<uint32_t> first;
+    // Each node's runs of ends by bin (ImplicitLinker::Build).
+    std::vector<uint64_t> occupied;
+    std::vector<uint32_t> runFirst, runs;
     std::vector<std::vector<Entry>> perLeaf;
 };
 
@@ -481,12 +484,19 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                               kept_.ends.data() + kept_.first[used[k] + 1]});
     }
     const uint32_t binCount = uint32_t(bins);
-    const size_t nodeCount = nodes.size(), slots = nodeCount * bins;
+    // An end's node, slot / bins, as a multiply (the division was a tenth of the counting and
+    // the scatter below): exact for every 32-bit slot with m = ⌊2⁴²/bins⌋ + 1, as bins ≤ 2¹⁰.
+    static_assert(Directions::kMaxBins <= 1024);
+    const uint64_t magic = (uint64_t(1) << 42) / bins + 1;
+    auto nodeOf = [magic](uint32_t slot) {
+        return uint32_t((static_cast<unsigned __int128>(slot) * magic) >> 42);
+    };
+    const size_t nodeCount = nodes.size();
     std::vector<std::vector<uint32_t>> at(sources.size());  // per source and node: its place
     tbb::parallel_for(size_t(0), sources.size(), [&](size_t s) {
         at[s].assign(nodeCount, 0);
         for (const auto& [b, e] : sources[s])
-            for (const End* p = b; p != e; ++p) ++at[s][p->slot / binCount];
+            for (const End* p = b; p != e; ++p) ++at[s][nodeOf(p->slot)];
     });
     std::vector<size_t> nodeFirst(nodeCount + 1);
     size_t total = 0;
@@ -503,30 +513,62 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     tbb::parallel_for(size_t(0), sources.size(), [&](size_t s) {
         uint32_t* fill = at[s].data();
         for (const auto& [b, e] : sources[s])
-            for (const End* p = b; p != e; ++p) byNode[fill[p->slot / binCount]++] = *p;
+            for (const End* p = b; p != e; ++p) byNode[fill[nodeOf(p->slot)]++] = *p;
     });
-    std::vector<uint32_t>& first = scratch_->first;  // every entry written below
-    first.resize(slots + 1);
-    first[slots] = uint32_t(total);
+    // Each node's ends by bin, each bin's run nearest first. A node's occupied bins are bits
+    // (`occupied`), and run j of node n (its j-th occupied bin) spans ends[runs[runFirst[n] +
+    // j], runs[runFirst[n] + j + 1]): a few megabytes, where a start for every (node, bin)
+    // slot was 30 MB a frame to write.
+    const size_t words = (bins + 63) / 64;
+    std::vector<uint64_t>& occupied = scratch_->occupied;  // every word written below
+    occupied.resize(nodeCount * words);
+    std::vector<uint32_t>& runFirst = scratch_->runFirst;
+    runFirst.resize(nodeCount + 1);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nodeCount, 64), [&](const auto& range) {
+        for (size_t n = range.begin(); n != range.end(); ++n) {
+            uint64_t* occ = occupied.data() + n * words;
+            std::fill(occ, occ + words, uint64_t(0));
+            const uint32_t base = uint32_t(n) * binCount;
+            for (size_t k = nodeFirst[n]; k < nodeFirst[n + 1]; ++k) {
+                const uint32_t b = byNode[k].slot - base;
+                occ[b >> 6] |= uint64_t(1) << (b & 63);
+            }
+            uint32_t count = 0;
+            for (size_t w = 0; w < words; ++w) count += uint32_t(std::popcount(occ[w]));
+            runFirst[n] = count + 1;  // its runs' starts and its end, summed below
+        }
+    });
+    for (size_t n = 0, sum = 0; n <= nodeCount; ++n)
+        sum += std::exchange(runFirst[n], uint32_t(sum));
+    std::vector<uint32_t>& runs = scratch_->runs;
+    runs.resize(runFirst[nodeCount]);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, nodeCount, 32), [&](const auto& range) {
-        std::vector<uint32_t> fill(bins);
+        std::vector<uint32_t> fill(bins, 0u);  // per bin: its count, then where its next end goes
         for (size_t n = range.begin(); n != range.end(); ++n) {
             const uint32_t lo = uint32_t(nodeFirst[n]), hi = uint32_t(nodeFirst[n + 1]);
             const uint32_t base = uint32_t(n) * binCount;
-            uint32_t* f = first.data() + size_t(n) * bins;
-            std::fill(fill.begin(), fill.end(), 0u);
+            const uint64_t* occ = occupied.data() + n * words;
+            uint32_t* run = runs.data() + runFirst[n];
             for (uint32_t k = lo; k < hi; ++k) ++fill[byNode[k].slot - base];
-            for (uint32_t b = 0, o = lo; b < binCount; ++b)
-                f[b] = o, o += std::exchange(fill[b], o);
+            uint32_t j = 0, o = lo;
+            for (size_t w = 0; w < words; ++w)
+                for (uint64_t bits = occ[w]; bits; bits &= bits - 1) {
+                    const uint32_t b = uint32_t(w * 64 + std::countr_zero(bits));
+                    run[j++] = o;
+                    o += std::exchange(fill[b], o);
+                }
+            run[j] = hi;
             for (uint32_t k = lo; k < hi; ++k) ends[fill[byNode[k].slot - base]++] = byNode[k];
-            for (uint32_t b = 0; b < binCount; ++b) {
-                const uint32_t end = b + 1 < binCount ? f[b + 1] : hi;
-                if (end - f[b] > 1)
-                    std::sort(ends + f[b], ends + end, [](const End& x, const End& y) {
+            for (uint32_t r = 0; r < j; ++r) {
+                if (run[r + 1] - run[r] > 1)
+                    std::sort(ends + run[r], ends + run[r + 1], [](const End& x, const End& y) {
                         // The sender breaks ties: the order never depends on the threads.
                         return x.dist < y.dist || (x.dist == y.dist && x.sender < y.sender);
                     });
             }
+            for (size_t w = 0; w < words; ++w)  // `fill` back to zeros for the next node
+                for (uint64_t bits = occ[w]; bits; bits &= bits - 1)
+                    fill[w * 64 + std::countr_zero(bits)] = 0;
         }
     });
     out.msCreate = MsSince(start);
@@ -551,9 +593,32 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
         float facing, away, near;
         uint32_t front;
     };
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves, 16), [&](const auto& range) {
+    using Head = std::pair<const End*, const End*>;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves, 64), [&](const auto& range) {
+        // The leaf's chain (its ancestors and itself, root first), and per bin the runs of the
+        // chain's nodes that hold ends there, in the same order. The leaves come in the
+        // hierarchy's pre-order (a node's subtree is [n, end)), so the next leaf's chain keeps
+        // the part it shares: a node's runs are pushed when the walk enters it and popped
+        // when it leaves, not looked up again for every leaf and bin.
         std::vector<uint32_t> chain;
-        std::vector<std::pair<const End*, const End*>> heads;
+        std::vector<std::vector<Head>> atBin(bins);
+        auto enter = [&](uint32_t n) {
+            chain.push_back(n);
+            const uint32_t* run = runs.data() + runFirst[n];
+            const uint64_t* occ = occupied.data() + n * words;
+            for (size_t w = 0; w < words; ++w)
+                for (uint64_t bits = occ[w]; bits; bits &= bits - 1, ++run)
+                    atBin[w * 64 + std::countr_zero(bits)].push_back(
+                        {ends + run[0], ends + run[1]});
+        };
+        auto leave = [&]() {
+            const uint64_t* occ = occupied.data() + size_t(chain.back()) * words;
+            chain.pop_back();
+            for (size_t w = 0; w < words; ++w)
+                for (uint64_t bits = occ[w]; bits; bits &= bits - 1)
+                    atBin[w * 64 + std::countr_zero(bits)].pop_back();
+        };
+        std::vector<Head> heads;
         std::vector<SolidCover> solids;
         // Per leaf: the bins where each solid's near faces were met (solid, bin, sender), and
         // the shares of its far faces in bins without them (share index, solid).
@@ -576,8 +641,14 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
         const float aboveHorizon = std::sin(dirs_.Spacing());
         for (size_t i = range.begin(); i != range.end(); ++i) {
             const uint32_t leaf = h.leaves[i];
-            chain.clear();
-            for (uint32_t n = leaf; n != kNoParent; n = nodes[n].parent) chain.push_back(n);
+            while (!chain.empty() && !(chain.back() <= leaf && leaf < nodes[chain.back()].end))
+                leave();
+            if (chain.empty()) enter(0);
+            for (uint32_t n = chain.back(); n != leaf;) {
+                const uint32_t left = n + 1, right = nodes[left].end;
+                n = leaf < right ? left : right;
+                enter(n);
+            }
             const glm::vec3& normal = nodes[leaf].normal;
             const glm::vec3& centre = nodes[leaf].center;
             const float norm = dirs_.CosineNorm(normal);
@@ -594,12 +665,8 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 if (!(c > 0.0f)) continue;
                 // The chain's slots for this bin, each sorted nearest first, merged until
                 // the bin is full (most fill after a few links).
-                heads.clear();
-                for (uint32_t n : chain) {
-                    const size_t slot = size_t(n) * bins + b;
-                    if (first[slot] != first[slot + 1])
-                        heads.push_back({ends + first[slot], ends + first[slot + 1]});
-                }
+                // (The leaf's first: of two ends at one depth, the nearer node's is taken.)
+                heads.assign(atBin[b].rbegin(), atBin[b].rend());
                 const size_t bin0 = list.size();
                 float left = omegaBin;
                 solids.clear();
@@ -758,8 +825,7 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
     // bin). Covering only the bins whose centres the disc holds, each whole, left the bins
     // between the discs of a wall's small leaves near a floor empty (the maze: 5.5% of the
     // leaves' cosine weight seeing nothing above the horizon). A bin the disc overlaps lies
-    // within ρ + r_bin of `dir`: when that and the centre bin's angle θ stay inside the centre
-    // bin's adjacency (Directions::Adjacent), that list holds every such bin. A flat sender
+    // within ρ + r_bin of `dir` (Directions::ForEachWithin finds those). A flat sender
     // covers only the bins whose axes meet its plane near its disc (MeetsFlatSender): seen
     // edge-on from a corner, its bounding sphere's cone would also take the bins that look
     // past it into the room (a room's edges were half as bright as the truth's, session 36).
@@ -767,9 +833,6 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
     if (sinRadius > splat_) {
         const float rho = std::asin(std::min(1.0f, sinRadius));
         const float omegaBin = dirs_.BinSolidAngle();
-        // Bins farther than ρ + r_bin from `dir` do not overlap it (a cosine test before the
-        // arc cosine).
-        const float cosReach = std::cos(std::min(std::numbers::pi_v<float>, rho + binRadius_));
         // Bins nearer than |ρ − r_bin| lie inside the disc (or hold it) whole: LensArea's
         // first case, without the arc cosine.
         const float small = std::min(rho, binRadius_);
@@ -785,10 +848,9 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
         glm::vec3 m(0.0f);
         if (squeeze) m = glm::normalize(from.normal - glm::dot(from.normal, dir) * dir);
         const float squeezedBin = squeeze ? binRadius_ / std::sqrt(shows) : binRadius_;
-        auto spread = [&](uint32_t b) {
-            const glm::vec3& w = dirs_.Direction(b);
-            const float c = glm::dot(w, dir);
-            if (c < cosReach) return;
+        // Every bin within reach (ρ + r_bin of `dir`, near the centre bin): whether its axis
+        // meets a flat sender, then its overlap.
+        auto spread = [&](uint32_t b, const glm::vec3& w, float c) {
             if (flat && !MeetsFlatSender(height, from.center, from.normal, from.discRadius, at, w,
                                          binRadius_))
                 return;
@@ -810,12 +872,7 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
         };
         const float theta =
             std::acos(std::clamp(glm::dot(dir, dirs_.Direction(centre)), -1.0f, 1.0f));
-        if (theta + rho + binRadius_ <= dirs_.AdjacentAngle() - 1e-3f) {
-            spread(centre);
-            for (uint32_t b : dirs_.Adjacent(centre)) spread(b);
-        } else {
-            dirs_.ForEachNear(dir, rho + binRadius_, spread);
-        }
+        dirs_.ForEachWithin(centre, theta, dir, rho + binRadius_, spread);
         return;
     }
     ends.push_back({uint32_t(row + centre), sender, depth(dir), omega});
