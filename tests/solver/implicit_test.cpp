@@ -151,6 +151,41 @@ TEST(Directions, ForEachWithinVisitsExactlyTheBinsWithinReach) {
     }
 }
 
+// OverlapReach (how far out a spread end's bins are walked) keeps every bin the end's disc
+// overlaps by more than kMinOverlap of a bin, and leaves out the ring of slivers beyond: the
+// overlap of two discs on the plane, in doubles, against the reach over a fine sweep of the
+// disc's radius, at the fewest bins, the paper's 864 and the most.
+TEST(Implicit, OverlapReachKeepsEveryBinTheEndCovers) {
+    auto lens = [](double d, double r, double R) {
+        if (d >= r + R) return 0.0;
+        const double small = std::min(r, R), large = std::max(r, R);
+        if (d <= large - small) return std::numbers::pi * small * small;
+        const double a = r * r * std::acos((d * d + r * r - R * R) / (2 * d * r));
+        const double b = R * R * std::acos((d * d + R * R - r * r) / (2 * d * R));
+        return a + b - 0.5 * std::sqrt((-d + r + R) * (d + r - R) * (d - r + R) * (d + r + R));
+    };
+    for (int count : {Directions::kMinBins, 864, Directions::kMaxBins}) {
+        const Directions dirs(count);
+        const ImplicitLinker linker(dirs, 0.2f);
+        const double R = linker.BinRadius();
+        const double least = ImplicitLinker::kMinOverlap * std::numbers::pi * R * R;
+        size_t missed = 0, shorter = 0, tried = 0;
+        for (double rho = 0.5 * dirs.Spacing(); rho < std::numbers::pi / 2; rho += 0.0037) {
+            const double reach = linker.OverlapReach(float(rho));
+            EXPECT_LE(reach, rho + R + 1e-6) << count << " bins, rho " << rho;
+            // Every distance out to the whole disc's reach: beyond OverlapReach, slivers only.
+            for (double d = 0.0; d < rho + R; d += 0.002 * R)
+                if (d > reach && lens(d, rho, R) > least) ++missed;
+            if (reach < rho + R - 0.05 * R) ++shorter;
+            ++tried;
+        }
+        EXPECT_EQ(missed, 0u) << count << " bins";
+        // It is not the whole reach in disguise: the ring it leaves out is a tenth of a bin's
+        // radius or more, for nearly every disc.
+        EXPECT_GT(shorter, tried * 9 / 10) << count << " bins";
+    }
+}
+
 // An open plane under a constant sky of radiance 1: nothing stands above it, every front bin
 // reads the sky, E = π everywhere.
 TEST(Implicit, OpenPlaneUnderASkyReceivesPiL) {

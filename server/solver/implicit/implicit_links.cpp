@@ -27,9 +27,6 @@ constexpr float kFillCoverage = 0.25f;
 // A front bin covered less than this shows mostly the environment: the bins next to it lie
 // at the edge of what is there, and are not filled.
 constexpr float kEdgeCoverage = 0.1f;
-// A spread end covers a bin it overlaps by at least this much of the bin (ImplicitLinker::
-// Record): smaller slivers add shares, not light.
-constexpr float kMinOverlap = 0.2f;
 
 // Whether some member of `r` can receive light from some point of `s`, `d` = s.center −
 // r.center at distance `dist`: a member's front faces part of s's sphere. Conservative
@@ -240,6 +237,40 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
     // Ends wider than half a bin's spacing are spread over the bins they cover.
     splat_ = std::sin(0.5f * dirs.Spacing());
     binRadius_ = std::sqrt(dirs.BinSolidAngle() / std::numbers::pi_v<float>);
+    // LensArea(x R, y R, R) = R² LensArea(x, y, 1) falls as x grows: per y_k, the x where it
+    // falls to kMinOverlap π (bisection, in doubles), every disc up to a hemisphere's.
+    const double minArea = kMinOverlap * std::numbers::pi;
+    auto lens = [](double d, double r) {  // LensArea(d, r, 1) in doubles
+        if (d >= r + 1.0) return 0.0;
+        const double small = std::min(r, 1.0), large = std::max(r, 1.0);
+        if (d <= large - small) return std::numbers::pi * small * small;
+        const double a =
+            r * r * std::acos(std::clamp((d * d + r * r - 1.0) / (2 * d * r), -1.0, 1.0));
+        const double b = std::acos(std::clamp((d * d + 1.0 - r * r) / (2 * d), -1.0, 1.0));
+        const double k = (-d + r + 1.0) * (d + r - 1.0) * (d - r + 1.0) * (d + r + 1.0);
+        return a + b - 0.5 * std::sqrt(std::max(0.0, k));
+    };
+    const double yMost = std::numbers::pi / 2 / binRadius_ + 1.0;
+    for (int k = 0; kReachFirst + double(k - 1) / kReachSteps <= yMost; ++k) {
+        const double y = kReachFirst + double(k) / kReachSteps;
+        double lo = 0.0, hi = y + 1.0;  // lens(lo) > minArea unless the disc is that small
+        if (!(lens(0.0, y) > minArea)) {
+            overlapReach_.push_back(0.0f);
+            continue;
+        }
+        for (int i = 0; i < 60; ++i)
+            (lens(0.5 * (lo + hi), y) > minArea ? lo : hi) = 0.5 * (lo + hi);
+        overlapReach_.push_back(float(hi));
+    }
+}
+
+float ImplicitLinker::OverlapReach(float rho) const {
+    const float y = rho / binRadius_;
+    // The table's entry at or above y (the reach grows with y), with a margin for rounding;
+    // beyond it, or below its first entry, the disc's whole reach.
+    const float at = std::ceil((y - kReachFirst) * kReachSteps);
+    if (!(at >= 0.0f) || at >= float(overlapReach_.size())) return rho + binRadius_;
+    return std::min(rho + binRadius_, overlapReach_[size_t(at)] * binRadius_ * 1.001f + 1e-4f);
 }
 
 void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontArea,
@@ -872,7 +903,10 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
         };
         const float theta =
             std::acos(std::clamp(glm::dot(dir, dirs_.Direction(centre)), -1.0f, 1.0f));
-        dirs_.ForEachWithin(centre, theta, dir, rho + binRadius_, spread);
+        // A bin farther than OverlapReach overlaps a disc by less than kMinOverlap (squeezed,
+        // by less than the disc does).
+        dirs_.ForEachWithin(centre, theta, dir, squeeze ? rho + binRadius_ : OverlapReach(rho),
+                            spread);
         return;
     }
     ends.push_back({uint32_t(row + centre), sender, depth(dir), omega});

@@ -109,6 +109,16 @@ class ImplicitLinker {
                const std::vector<uint8_t>* moving = nullptr);
     // Whether the last build took kept ends (the pairs examined are in ImplicitLinks::pairs).
     bool Incremental() const { return incremental_; }
+    // How far (an angle) from the centre of a spread end's disc of angular radius `rho` a
+    // bin's centre may lie and the bin still overlap the disc by more than kMinOverlap of a
+    // bin: at most rho + the bin's radius, less where that ring's overlaps are slivers. Read
+    // from a table over rho (in bin radii: y = kReachFirst + k / kReachSteps, each entry the
+    // reach at the next y up, as it grows with y); Record walks no bin beyond it.
+    float OverlapReach(float rho) const;
+    // The bin's radius (a disc of its solid angle), and how much of a bin a spread end must
+    // overlap to cover it (Record: smaller slivers add shares, not light).
+    float BinRadius() const { return binRadius_; }
+    static constexpr float kMinOverlap = 0.2f;
 
     // Creates the links' ends on `device` (vulkan_links.h) from now on, null: on the CPU. The
     // device examines every pair each build: `moving` is not used, nothing is kept.
@@ -152,6 +162,9 @@ class ImplicitLinker {
     std::unique_ptr<Scratch> scratch_;
     float splat_ = 0.0f;      // sin of the angular radius above which an end is spread
     float binRadius_ = 0.0f;  // the radius of a disc of a bin's solid angle
+    static constexpr float kReachFirst = 0.25f;
+    static constexpr int kReachSteps = 64;
+    std::vector<float> overlapReach_;  // OverlapReach's table, in bin radii
 };
 
 }  // namespace penumbra
