@@ -177,7 +177,9 @@ class Client {
         std::optional<float> intensity, rotation;
     };
     uint64_t SetEnvironment(const EnvironmentChange& change, const std::string& scene = "");
-    // Frames arrive on the client's reader thread; keep the callback short.
+    // Frames arrive on the client's reader thread; keep the callback short. The callback
+    // stays registered until Close (which joins that thread) or the client's destruction:
+    // whatever it uses must outlive that, or be owned by the callback (a shared_ptr).
     using FrameCallback = std::function<void(const Frame&)>;
     void Subscribe(FrameCallback callback, Channel channel = Channel::kIndirect,
                    Format format = Format::kFloat32, const std::string& scene = "");

@@ -40,9 +40,16 @@ int main(int argc, char** argv) {
             ++seen;
             cv.notify_all();
         });
-        std::unique_lock lock(m);
-        cv.wait(lock, [&] { return seen >= wanted || !client.Connected(); });
-        return seen >= wanted ? 0 : 1;
+        bool enough = false;
+        {
+            std::unique_lock lock(m);
+            cv.wait(lock, [&] { return seen >= wanted || !client.Connected(); });
+            enough = seen >= wanted;
+        }
+        // No frame reaches the callback after Close (it joins the reader thread): the locals
+        // the callback uses, declared after `client`, would otherwise be gone before it.
+        client.Close();
+        return enough ? 0 : 1;
     } catch (const penumbra::client::ClientError& e) {
         std::fprintf(stderr, "penumbra: %s\n", e.what());
         return 1;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <glm/gtc/matrix_transform.hpp>
+#include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <thread>
@@ -155,44 +156,53 @@ int ServiceCommands::State::RunInfo(client::Client& c) {
 }
 
 int ServiceCommands::State::RunWatch(client::Client& c) {
-    std::mutex m;
-    std::condition_variable cv;
-    int seen = 0;
-    bool done = false;
-    std::deque<Clock::time_point> arrivals;
+    // What the reader thread's callback shares with this function, owned by both: the
+    // callback stays registered with the client after this returns, and a frame arriving
+    // then (the client is closed later) must find a live mutex and `done`, not this stack
+    // frame's remains (a glibc mutex assertion aborted `watch --frames 1` now and then).
+    struct Shared {
+        std::mutex m;
+        std::condition_variable cv;
+        int seen = 0;
+        bool done = false;
+        std::deque<Clock::time_point> arrivals;
+    };
+    const auto shared = std::make_shared<Shared>();
     c.Subscribe(
-        [&](const client::Frame& f) {
-            std::lock_guard lock(m);
-            if (done) return;
+        [this, shared](const client::Frame& f) {
+            Shared& s = *shared;
+            std::lock_guard lock(s.m);
+            if (s.done) return;
             auto now = Clock::now();
-            arrivals.push_back(now);
-            while (arrivals.size() > 10) arrivals.pop_front();
+            s.arrivals.push_back(now);
+            while (s.arrivals.size() > 10) s.arrivals.pop_front();
             double fps = 0.0;
-            if (arrivals.size() > 1)
-                fps = (arrivals.size() - 1) /
-                      std::chrono::duration<double>(arrivals.back() - arrivals.front()).count();
+            if (s.arrivals.size() > 1)
+                fps = (s.arrivals.size() - 1) /
+                      std::chrono::duration<double>(s.arrivals.back() - s.arrivals.front()).count();
             PrintFrame(f, fps, watchJson);
-            ++seen;
-            if ((watchFrames > 0 && seen >= watchFrames) ||
+            ++s.seen;
+            if ((watchFrames > 0 && s.seen >= watchFrames) ||
                 (untilConverged && f.converged && f.lastEdit >= minEdit))
-                done = true;
-            cv.notify_all();
+                s.done = true;
+            s.cv.notify_all();
         },
         ParseClientChannel(channel), ParseFormat(format), session);
-    std::unique_lock lock(m);
-    auto stop = [&] { return done || !c.Connected(); };
+    Shared& s = *shared;
+    std::unique_lock lock(s.m);
+    auto stop = [&] { return s.done || !c.Connected(); };
     if (timeout > 0.0) {
-        if (!cv.wait_for(lock, std::chrono::duration<double>(timeout), stop)) {
-            done = true;
+        if (!s.cv.wait_for(lock, std::chrono::duration<double>(timeout), stop)) {
+            s.done = true;
             if (!quiet)  // on stderr when stdout is JSON Lines
                 std::fprintf(watchJson ? stderr : stdout, "watch: %.1f s passed, %d frames\n",
-                             timeout, seen);
+                             timeout, s.seen);
             return kExitOk;
         }
     } else {
-        while (!stop()) cv.wait_for(lock, std::chrono::milliseconds(200));
+        while (!stop()) s.cv.wait_for(lock, std::chrono::milliseconds(200));
     }
-    done = true;
+    s.done = true;
     if (!c.Connected()) {
         std::fprintf(stderr, "penumbra: watch: the server closed the connection\n");
         return kExitConnection;
