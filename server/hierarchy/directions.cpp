@@ -157,12 +157,7 @@ Directions::Directions(int count) : count_(count) {
             groupBins_.insert(groupBins_.end(), m.begin(), m.end());
             groupFirst_.push_back(uint32_t(groupBins_.size()));
         }
-        for (uint32_t b : groupBins_)
-            groupX_.push_back(dirs_[b].x), groupY_.push_back(dirs_[b].y),
-                groupZ_.push_back(dirs_[b].z);
         const size_t groups = groups_.size();
-        for (size_t g = 0; g < groups; ++g)
-            PENUMBRA_CHECK(groupFirst_[g + 1] - groupFirst_[g] <= kMaxGroupBins);
         PENUMBRA_CHECK(groups <= 256);  // groupOrder_ holds them as bytes
         groupOrder_.resize(size_t(count) * groups);
         groupLower_.resize(size_t(count) * groups);

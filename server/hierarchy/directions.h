@@ -81,8 +81,7 @@ class Directions {
     // order), for unit `d` within angle `offset` of bin `bin`'s direction (its nearest bin,
     // say). A cap inside the bin's adjacency walks that nearest first, stopping at the first
     // bin outside the cap; a wider one walks groups of bins (a cube-map cell's) nearest `bin`
-    // first, stopping at the first group that lies farther than reach + offset from it, the
-    // cosines of a group's bins taken together.
+    // first, stopping at the first group that lies farther than reach + offset from it.
     template <typename F>
     void ForEachWithin(uint32_t bin, float offset, const glm::vec3& d, float reach, F&& f) const {
         constexpr float pi = std::numbers::pi_v<float>;
@@ -109,22 +108,13 @@ class Directions {
         const uint8_t* order = groupOrder_.data() + size_t(bin) * groups;
         const float* lower = groupLower_.data() + size_t(bin) * groups;
         const float stop = reach + offset + margin;
-        float cs[kMaxGroupBins];
         for (size_t k = 0; k < groups && lower[k] <= stop; ++k) {
             const uint8_t g = order[k];
             const Group& G = groups_[g];
             if (reach + G.radius < pi &&
                 glm::dot(d, G.centre) < cosReach * G.cosRadius - sinReach * G.sinRadius)
                 continue;
-            const uint32_t first = groupFirst_[g], n = groupFirst_[g + 1] - first;
-            const float *x = groupX_.data() + first, *y = groupY_.data() + first,
-                        *z = groupZ_.data() + first;
-            for (uint32_t j = 0; j < n; ++j) cs[j] = d.x * x[j] + d.y * y[j] + d.z * z[j];
-            for (uint32_t j = 0; j < n; ++j)
-                if (cs[j] >= cosReach) {
-                    const uint32_t b = groupBins_[first + j];
-                    f(b, dirs_[b], cs[j]);
-                }
+            for (uint32_t j = groupFirst_[g]; j < groupFirst_[g + 1]; ++j) visit(groupBins_[j]);
         }
     }
     // The other bins within AdjacentAngle() of bin `bin`'s direction, in bin order.
@@ -212,8 +202,6 @@ class Directions {
     // Per bin, every group by how near it comes to the bin's direction (the angle to the
     // group's centre less its radius, at least 0), ascending: ForEachWithin.
     std::vector<uint8_t> groupOrder_;
-    std::vector<float> groupX_, groupY_, groupZ_;  // the groups' bins' directions, in their order
-    static constexpr uint32_t kMaxGroupBins = 64;  // the most bins a group holds (checked)
     std::vector<float> groupLower_;
     std::vector<uint32_t> offsets_;
     std::vector<BinWeight> weights_;

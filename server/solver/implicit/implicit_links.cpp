@@ -93,17 +93,17 @@ float Foreshortening(const HierarchyNode& n, float slab, const glm::vec3& dir) {
 }
 
 // The area where two discs of radii `r` and `R` with centres `d` apart overlap (angles on the
-// sphere taken as flat: the overlap of an end's disc and a bin's).
-float LensArea(float d, float r, float R) {
-    if (d >= r + R) return 0.0f;
-    const float small = std::min(r, R), large = std::max(r, R);
-    if (d <= large - small) return std::numbers::pi_v<float> * small * small;
-    const float a =
-        r * r * std::acos(std::clamp((d * d + r * r - R * R) / (2 * d * r), -1.0f, 1.0f));
-    const float b =
-        R * R * std::acos(std::clamp((d * d + R * R - r * r) / (2 * d * R), -1.0f, 1.0f));
-    const float k = (-d + r + R) * (d + r - R) * (d - r + R) * (d + r + R);
-    return a + b - 0.5f * std::sqrt(std::max(0.0f, k));
+// sphere taken as flat: the overlap of an end's disc and a bin's). In floats for the spread,
+// in doubles for OverlapReach's table.
+template <typename T>
+T LensArea(T d, T r, T R) {
+    if (d >= r + R) return T(0);
+    const T small = std::min(r, R), large = std::max(r, R);
+    if (d <= large - small) return std::numbers::pi_v<T> * small * small;
+    const T a = r * r * std::acos(std::clamp((d * d + r * r - R * R) / (2 * d * r), T(-1), T(1)));
+    const T b = R * R * std::acos(std::clamp((d * d + R * R - r * r) / (2 * d * R), T(-1), T(1)));
+    const T k = (-d + r + R) * (d + r - R) * (d - r + R) * (d + r + R);
+    return a + b - T(0.5) * std::sqrt(std::max(T(0), k));
 }
 
 // Whether bin w's axis (from `at`, unit w) meets a flat sender's plane (centre c, unit normal
@@ -226,6 +226,9 @@ struct ImplicitLinker::Scratch {
     // Each node's runs of ends by bin (ImplicitLinker::Build).
     std::vector<uint64_t> occupied;
     std::vector<uint32_t> runFirst, runs;
+    // Per thread, the compositing's per-bin stacks of runs (empty between tasks).
+    tbb::enumerable_thread_specific<std::vector<std::vector<std::pair<const End*, const End*>>>>
+        stacks;
     std::vector<std::vector<Entry>> perLeaf;
 };
 
@@ -240,16 +243,7 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
     // LensArea(x R, y R, R) = R² LensArea(x, y, 1) falls as x grows: per y_k, the x where it
     // falls to kMinOverlap π (bisection, in doubles), every disc up to a hemisphere's.
     const double minArea = kMinOverlap * std::numbers::pi;
-    auto lens = [](double d, double r) {  // LensArea(d, r, 1) in doubles
-        if (d >= r + 1.0) return 0.0;
-        const double small = std::min(r, 1.0), large = std::max(r, 1.0);
-        if (d <= large - small) return std::numbers::pi * small * small;
-        const double a =
-            r * r * std::acos(std::clamp((d * d + r * r - 1.0) / (2 * d * r), -1.0, 1.0));
-        const double b = std::acos(std::clamp((d * d + 1.0 - r * r) / (2 * d), -1.0, 1.0));
-        const double k = (-d + r + 1.0) * (d + r - 1.0) * (d - r + 1.0) * (d + r + 1.0);
-        return a + b - 0.5 * std::sqrt(std::max(0.0, k));
-    };
+    auto lens = [](double d, double r) { return LensArea(d, r, 1.0); };
     const double yMost = std::numbers::pi / 2 / binRadius_ + 1.0;
     for (int k = 0; kReachFirst + double(k - 1) / kReachSteps <= yMost; ++k) {
         const double y = kReachFirst + double(k) / kReachSteps;
@@ -632,7 +626,8 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
         // the part it shares: a node's runs are pushed when the walk enters it and popped
         // when it leaves, not looked up again for every leaf and bin.
         std::vector<uint32_t> chain;
-        std::vector<std::vector<Head>> atBin(bins);
+        std::vector<std::vector<Head>>& atBin = scratch_->stacks.local();
+        atBin.resize(bins);
         auto enter = [&](uint32_t n) {
             chain.push_back(n);
             const uint32_t* run = runs.data() + runFirst[n];
@@ -792,6 +787,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                     }
             }
         }
+        while (!chain.empty()) leave();  // the thread's stacks empty for its next task
     });
     out.offsets.assign(leaves + 1, 0);
     for (size_t i = 0; i < leaves; ++i)
