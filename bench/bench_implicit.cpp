@@ -21,6 +21,7 @@
 #include "bench_util.h"
 #include "clutter_scenes.h"
 #include "scene/scene_builder.h"
+#include "solver/implicit/settings.h"
 #include "solver/solver.h"
 
 namespace {
@@ -64,7 +65,7 @@ int main(int argc, char** argv) {
     std::string out = "bench/results";
     int samples = 1024, frames = 20, bins = 864, side = 57;
     std::string motion = "deform", device = "cpu";
-    float elementSize = 0.25f;
+    float elementSize = 0.25f, threshold = 0.0f;
     app.add_option("--out", out, "folder for implicit.json (empty: print only)")
         ->capture_default_str();
     app.add_option("--samples", samples, "reference paths per vertex (0: no reference)")
@@ -81,6 +82,10 @@ int main(int argc, char** argv) {
     app.add_flag("--tile-soup", soup,
                  "the mesh as separate tiles, each with its own 4 vertices (sessions 25–34's "
                  "bench: each inner corner is four coincident surfels)");
+    app.add_option("--link-threshold", threshold,
+                   "the solver's link-threshold option (0: its default; the paper refines a "
+                   "sender while it subtends more than a bin: 1)")
+        ->capture_default_str();
     app.add_option("--element-size", elementSize,
                    "metres: the room's walls in elements this size (the mesh keeps its "
                    "vertices; the paper's room is a few quads)")
@@ -111,6 +116,7 @@ int main(int argc, char** argv) {
                       : device == "lavapipe" ? DeviceChoice::kLavapipe
                                              : DeviceChoice::kCpu;
     SetOption(settings.options, "bins", bins);
+    if (threshold > 0.0f) SetOption(settings.options, "link-threshold", threshold);
     settings.elementSize = elementSize;
     auto start = Clock::now();
     auto solver = CreateSolver(scene, settings);
@@ -173,6 +179,7 @@ int main(int argc, char** argv) {
                                      : "deforming (SetVertices a frame: a travelling "
                                        "wave of 8 cm)"}};
     report["settings"] = {{"bins", bins},
+                          {"link_threshold", ReadImplicitSettings(settings).linkThreshold},
                           {"frames", frames},
                           {"bounces_per_frame", 1},
                           {"element_size", s.elementSize}};
