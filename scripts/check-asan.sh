@@ -40,7 +40,11 @@
 # link update of a move and warm start), the light field's lavapipe lines through a thin
 # wall (its peeled layers and device walk on lavapipe), a sky changed in a loaded session
 # (the environment at load) and the shadow edges on the element grid (the other DirectLight
-# tests).
+# tests). And five of 8–19 s sanitized (session 43's clean-clone `make check` took 1,828 s):
+# the implicit links created on lavapipe (their creation in chunks), the gather through a
+# glossy floor, interrupted antiradiance iterations, the sky map's sun (the other
+# FinalGather, Antiradiance and FirstShot tests) and the reference's white furnace (its
+# closed forms).
 #   JOBS  build and test jobs (default: the cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -68,6 +72,9 @@ if [ "${1:-}" = "--quick" ]; then
     excluded="$excluded|Implicit\.GlossySkyFurnaceKeepsItsBoundAndAgreesWithTheReference"
     excluded="$excluded|VulkanPasses/MovedSolver\..*|Lightfield\.LavapipeLinesKeepTheThinWallDark"
     excluded="$excluded|ServerProcess\.SkyChangedInALoadedSession|DirectLight\.ShadowEdgesDoNotAliasOnTheElementGrid"
+    excluded="$excluded|Implicit\.VulkanLinkCreationMatchesTheCpu|FinalGather\.PunctualLightThroughAGlossyFloorMatchesTheReference"
+    excluded="$excluded|Antiradiance\.InterruptedIterationsResumeWhereTheyStopped|FirstShot\.TheSkyMapsSunIsTracedAsALight"
+    excluded="$excluded|Reference\.WhiteFurnace"
 fi
 excluded="$excluded)\$"
 cmake --build "$sanitize_build" -j "$jobs"

@@ -16,7 +16,7 @@ using testing::ExpectConverges;
 // symmetric iteration diverges and the adaptive scheme takes the most antiradiance steps,
 // with validation on. Both have settled by then (at 250 iterations their last 50 changed the
 // answer by 0 and 7.5e-6; on the CPU no iteration after the 22nd changes them by 10⁻⁴; the
-// change over the last 20 of 100 is checked below 1e-3); the CPU suite runs every scene 300
+// change over the last 20 of 100 is checked below 1e-3); the CPU suite runs every scene 200
 // iterations. The bounds of the local pass (shaders/local.comp, Blocked)
 // are what keeps them finite.
 TEST(Stability, ClutterRowOf15Boxes5mmApartConvergesOnLavapipe) {

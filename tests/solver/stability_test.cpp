@@ -1,7 +1,7 @@
 // Issue 18: the iteration never diverges. Every scene of the clutter suite (rows and stacks
 // of boxes 0–10 cm apart, bookshelves, chairs under desks, random boxes; tools/
-// clutter_scenes.h) runs 300 iterations; every surfel stays within the furnace bound of its
-// scene and the last 60 change the answer by less than 0.1%. The symmetric scheme, which
+// clutter_scenes.h) runs 200 iterations; every surfel stays within the furnace bound of its
+// scene and the last 40 change the answer by less than 0.1%. The symmetric scheme, which
 // diverges on these scenes, is kept as the proof that the test can fail and that the guard
 // catches it.
 #include <gtest/gtest.h>
