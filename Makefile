@@ -24,7 +24,7 @@ demo: build
 
 # Every test; then each fuzz target for CHECK_FUZZ_SECONDS (scripts/fuzz.sh); then the tests
 # again with ASan and UBSan, but for the slowest (scripts/check-asan.sh --quick lists them).
-CHECK_FUZZ_SECONDS ?= 20
+CHECK_FUZZ_SECONDS ?= 10
 check: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 	FUZZ_SECONDS=$(CHECK_FUZZ_SECONDS) FUZZ_SEED=1 JOBS=$(JOBS) scripts/fuzz.sh

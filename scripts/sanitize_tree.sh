@@ -16,7 +16,7 @@ sanitize_build=${SANITIZE_BUILD:-build-sanitize}
 # 44.7 s without pointer-overflow alone): the targets are x86-64, where a misaligned load is
 # not a fault, the readers of untrusted bytes copy them out (memcpy, FlatBuffers' verifier),
 # and ASan still catches a pointer that arithmetic took out of its allocation when it is read.
-# The tests' own files are built with ASan alone (tests/CMakeLists.txt).
+# The tests' own files are built without the sanitizers (tests/CMakeLists.txt says why).
 sanitize_flags=${SANITIZE_FLAGS:-"-O3 -DNDEBUG -gline-tables-only -fno-omit-frame-pointer -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize=alignment,pointer-overflow -fno-sanitize-recover=all"}
 if [ ! -f "$sanitize_build/CMakeCache.txt" ]; then
     cmake -S . -B "$sanitize_build" -DCMAKE_BUILD_TYPE=Sanitize -DCMAKE_UNITY_BUILD=ON -DCMAKE_CXX_COMPILER=clang++ \
