@@ -14,8 +14,8 @@
 namespace penumbra::testing {
 
 // CI-sized settings: 64 bins and 0.2 m elements keep 200 iterations of the whole suite
-// within about three minutes of ctest's slots (243 s at 300 iterations in session 43's
-// clean-clone `make check`, 350 s at 500). The boxes' 8 cm faces and 5 mm gaps stay
+// within about three minutes of ctest's slots (185 s in session 43's clean-clone `make
+// check`; 243 s at 300 iterations, 350 s at 500). The boxes' 8 cm faces and 5 mm gaps stay
 // finer than the elements, so the stacks are as deep as at the default settings (the
 // symmetric scheme diverges here too, in 42 iterations on a row of ten boxes 2 cm apart);
 // the coarser elements are the room's walls, which hold most of the elements and links
