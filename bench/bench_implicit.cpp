@@ -94,8 +94,8 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"deform", "rigid"}))
         ->capture_default_str();
     app.add_option("--device", device,
-                   "cpu, or lavapipe / gpu: the links created on that Vulkan device (the rest "
-                   "of the frame on the CPU); writes implicit-DEVICE.json then")
+                   "cpu, or lavapipe / gpu: the links created, composited and bounced on that "
+                   "Vulkan device; writes implicit-DEVICE.json then")
         ->check(CLI::IsMember({"cpu", "lavapipe", "gpu"}))
         ->capture_default_str();
     CLI11_PARSE(app, argc, argv);
@@ -170,7 +170,8 @@ int main(int argc, char** argv) {
     report["machine"] = {
         {"cpu", bench::CpuModel()},
         {"device", "cpu (" + std::to_string(std::thread::hardware_concurrency()) + " cores, TBB)"},
-        {"link_device", s.device}};
+        {"link_device", s.device},
+        {"composite_device", s.Text("composite_device")}};
     report["scene"] = {
         {"room", "the clutter suite's 2 m room, ceiling panel"},
         {"moving_mesh_vertices", clothVertices},

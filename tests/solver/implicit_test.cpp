@@ -13,6 +13,7 @@
 #include "scene/scene_builder.h"
 #include "solver/implicit/implicit_solver.h"
 #include "solver/implicit/vulkan_bounce.h"
+#include "solver/implicit/vulkan_composite.h"
 #include "solver/implicit/vulkan_links.h"
 #include "solver/registry.h"
 #include "test_util.h"
@@ -525,8 +526,8 @@ TEST(Implicit, HierarchicalLinksMatchBruteForce) {
     EXPECT_LT(shotRel, 0.01);
 }
 
-// The Vulkan back end creates the links and bounces on the device (lavapipe here, validation
-// on), the compositing on the CPU: the same links and answers as the CPU's, up to the device's
+// The Vulkan back end creates the links, composites the leaves' bins and bounces on the device
+// (lavapipe here, validation on): the same links and answers as the CPU's, up to the device's
 // float rounding at a split or bin boundary, at rest (the Cornell box) and after a move (a box
 // on a floor under a sky, moved and turned: the device examines every pair again).
 TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
@@ -548,6 +549,7 @@ TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
         const SolverStats stats = device.Stats();
         EXPECT_NE(stats.Text("link_device"), "cpu");
         EXPECT_GT(stats.Number("device_rounds"), 10.0);
+        EXPECT_EQ(stats.Text("composite_device"), stats.Text("link_device")) << what;
         EXPECT_EQ(stats.Text("bounce_device"), stats.Text("link_device"));
         EXPECT_EQ(stats.Number("device_bounces"), double(stats.iterations)) << what;
         for (const auto& m : device.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
@@ -690,6 +692,75 @@ TEST(Implicit, VulkanLinkCreationInChunksMatchesTheCpu) {
     EXPECT_EQ(chunked.pairs, cpu.pairs);
     EXPECT_EQ(chunked.linked, cpu.linked);
     EXPECT_NEAR(double(chunked.Count()), double(cpu.Count()), 1e-4 * double(cpu.Count()));
+    for (const std::string& m : ctx.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
+}
+
+// The device's compositing (vulkan_composite.h) against the CPU's, from the same ends (the
+// device's rounds): the Cornell box, whose blocks are closed solids (their far faces, their
+// outlines), and a box on a floor under a sky (bins partly covered at its silhouette, the
+// environment). The same shares in the same order, each with the same bin, sender and travel,
+// the weights within float rounding.
+TEST(Implicit, VulkanCompositingMatchesTheCpu) {
+    gpu::Context ctx(gpu::DeviceKind::kLavapipe, /*validation=*/true);
+    auto check = [&](const Scene& scene, float element, const char* what) {
+        ImplicitSolver solver(scene, Implicit(element), ReadImplicitSettings(Implicit(element)),
+                              {});
+        const Directions& dirs = solver.GetDirections();
+        VulkanLinkCreation creation(ctx, dirs, 0.5f);
+        ImplicitLinker onHost(dirs, 0.5f), onDevice(dirs, 0.5f);
+        onHost.UseDevice(&creation);
+        onDevice.UseDevice(&creation);
+        VulkanCompositing composite(ctx, dirs, onDevice.BinRadius());
+        onDevice.UseDeviceCompositing(&composite);
+        ImplicitLinks a, b;
+        onHost.Build(solver.GetHierarchy(), solver.ProjectedAreas(), solver.Solids(), element, a);
+        onDevice.Build(solver.GetHierarchy(), solver.ProjectedAreas(), solver.Solids(), element, b);
+        EXPECT_FALSE(onHost.CompositedOnDevice());
+        ASSERT_TRUE(onDevice.CompositedOnDevice()) << onDevice.CompositedOnHostBecause();
+        ASSERT_EQ(a.sender.size(), b.sender.size()) << what;
+        EXPECT_EQ(a.offsets, b.offsets) << what;
+        size_t other = 0;
+        double worst = 0.0;
+        for (size_t k = 0; k < a.sender.size(); ++k) {
+            if (a.bin[k] != b.bin[k] || a.sender[k] != b.sender[k] || a.travel[k] != b.travel[k]) {
+                if (other++ < 5)
+                    ADD_FAILURE() << what << ": share " << k << ": bin " << a.bin[k] << " / "
+                                  << b.bin[k] << ", sender " << a.sender[k] << " / " << b.sender[k]
+                                  << ", travel " << a.travel[k] << " / " << b.travel[k];
+                continue;
+            }
+            worst = std::max(worst, double(std::abs(a.weight[k] - b.weight[k])) /
+                                        std::max(1e-12, double(std::abs(a.weight[k]))));
+        }
+        std::printf("%s: %zu shares (%zu of the environment), %zu differ, weights %.2e apart\n",
+                    what, a.sender.size(), a.empty, other, worst);
+        EXPECT_EQ(other, 0u) << what;
+        EXPECT_EQ(a.empty, b.empty) << what;
+        EXPECT_LT(worst, 1e-5) << what;
+        EXPECT_FALSE(solver.Solids().empty() && std::string(what) == "Cornell box");
+    };
+    check(scenes::CornellBox().Build(), 0.08f, "Cornell box");
+    check(BoxOnGroundUnderASky(), 0.1f, "box under a sky");
+    // A bin that meets more closed solids than the device tracks (one here: the Cornell box's
+    // two blocks seen through one bin) is composited on the host, the same shares, and the
+    // linker says why.
+    Scene cornell = scenes::CornellBox().Build();
+    ImplicitSolver solver(cornell, Implicit(0.08f), ReadImplicitSettings(Implicit(0.08f)), {});
+    const Directions& dirs = solver.GetDirections();
+    VulkanLinkCreation creation(ctx, dirs, 0.5f);
+    ImplicitLinker onHost(dirs, 0.5f), fallsBack(dirs, 0.5f);
+    onHost.UseDevice(&creation);
+    fallsBack.UseDevice(&creation);
+    VulkanCompositing one(ctx, dirs, fallsBack.BinRadius(), /*mostSolids=*/1);
+    fallsBack.UseDeviceCompositing(&one);
+    ImplicitLinks a, b;
+    onHost.Build(solver.GetHierarchy(), solver.ProjectedAreas(), solver.Solids(), 0.08f, a);
+    fallsBack.Build(solver.GetHierarchy(), solver.ProjectedAreas(), solver.Solids(), 0.08f, b);
+    EXPECT_FALSE(fallsBack.CompositedOnDevice());
+    EXPECT_NE(fallsBack.CompositedOnHostBecause().find("closed solids"), std::string::npos)
+        << fallsBack.CompositedOnHostBecause();
+    EXPECT_EQ(one.runs, 0u);
+    ExpectSameLinks(a, b);
     for (const std::string& m : ctx.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
 }
 

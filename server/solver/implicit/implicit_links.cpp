@@ -12,11 +12,13 @@
 #include <limits>
 #include <memory>
 #include <numbers>
+#include <span>
 #include <utility>
 
 #include "base/check.h"
 #include "base/numeric.h"
 #include "gather/sampling.h"
+#include "solver/implicit/vulkan_composite.h"
 #include "solver/implicit/vulkan_links.h"
 
 namespace penumbra {
@@ -488,6 +490,40 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     for (uint32_t r : used) pairsSum += kept_.pairs[r], linkedSum += kept_.linked[r];
     out.pairs = pairsSum;
     out.linked = linkedSum;
+    // The device's ends composited there (vulkan_composite.h), where they fit.
+    compositedOnDevice_ = false;
+    compositeOnHost_.clear();
+    if (device_ && composite_) {
+        std::vector<End> joined;
+        std::span<const End> all;
+        for (const auto& v : recorded) {
+            if (v.empty()) continue;
+            if (all.empty() && joined.empty()) {
+                all = v;
+            } else {
+                if (joined.empty()) joined.assign(all.begin(), all.end());
+                joined.insert(joined.end(), v.begin(), v.end());
+                all = joined;
+            }
+        }
+        compositeOnHost_ = composite_->Unfit(h, all.size());
+        if (compositeOnHost_.empty()) {
+            out.msCreate = MsSince(start);
+            const auto composing = std::chrono::steady_clock::now();
+            std::vector<glm::vec4> corners;
+            for (const SolidBox& box : SolidBoxes(h, solid, thin)) {
+                corners.emplace_back(box.lo, 0.0f);
+                corners.emplace_back(box.hi, 0.0f);
+            }
+            if (composite_->Composite(h, solid, corners, thin, all, out)) {
+                compositedOnDevice_ = true;
+                if (!perFrame) scratch_ = std::make_unique<Scratch>();
+                out.msPush = MsSince(composing);
+                return;
+            }
+            compositeOnHost_ = composite_->Why();
+        }
+    }
     // The ends of this build: the kept ones of the roots it met, then the fresh ones (a
     // full build with `moving` takes its kept ends from kept_ too).
     if (keeps)

@@ -3,7 +3,8 @@
 // closest element in a bin covers it, so whatever lies behind it is hidden). Visibility is
 // never tested; it falls out of the closest-link rule.
 //
-// CPU back end (TBB), link creation also on a Vulkan device (vulkan_links.h).
+// CPU back end (TBB), link creation and compositing also on a Vulkan device (vulkan_links.h,
+// vulkan_composite.h).
 // CreateHierarchicalLinks walks candidate pairs level by level from the
 // root's self-pair (the data-parallel link creation of Meyer et al. 2009): a pair is split
 // while an end subtends more than linkThreshold × ω_bin from the other (Sec. 4.2.2: its
@@ -19,6 +20,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -71,6 +73,7 @@ struct ShareTable {
 };
 
 class VulkanLinkCreation;
+class VulkanCompositing;
 
 class ImplicitLinker {
   public:
@@ -123,6 +126,14 @@ class ImplicitLinker {
     // Creates the links' ends on `device` (vulkan_links.h) from now on, null: on the CPU. The
     // device examines every pair each build: `moving` is not used, nothing is kept.
     void UseDevice(VulkanLinkCreation* device) { device_ = device; }
+    // With the ends created on the device (UseDevice), composites the leaves' bins there too
+    // (vulkan_composite.h), null: on the CPU. A build whose compositing does not fit the
+    // device, or that meets more closed solids in a bin than it holds, composites here.
+    void UseDeviceCompositing(VulkanCompositing* composite) { composite_ = composite; }
+    // Whether the last build composited on the device, and if one was given and it did not,
+    // why.
+    bool CompositedOnDevice() const { return compositedOnDevice_; }
+    const std::string& CompositedOnHostBecause() const { return compositeOnHost_; }
 
   private:
     // One front bin's share of a leaf's light: from a sender (or kNoSender: the environment)
@@ -153,6 +164,9 @@ class ImplicitLinker {
     Kept kept_;
     bool incremental_ = false;
     VulkanLinkCreation* device_ = nullptr;
+    VulkanCompositing* composite_ = nullptr;
+    bool compositedOnDevice_ = false;
+    std::string compositeOnHost_;
     // The build's working buffers (the rounds' pairs, the threads' ends, the ends by slot, the
     // leaves' shares), kept from a build given `moving` to the next: a relink a frame would
     // otherwise map and fault in their pages (hundreds of megabytes) every frame (also when

@@ -12,6 +12,7 @@
 #include "base/numeric.h"
 #include "gpu/context.h"
 #include "solver/implicit/vulkan_bounce.h"
+#include "solver/implicit/vulkan_composite.h"
 #include "solver/implicit/vulkan_links.h"
 
 namespace penumbra {
@@ -55,6 +56,9 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
                                                  settings.validation);
         vulkanLinks_ = std::make_unique<VulkanLinkCreation>(*device_, dirs_, own.linkThreshold);
         linker_.UseDevice(vulkanLinks_.get());
+        vulkanComposite_ =
+            std::make_unique<VulkanCompositing>(*device_, dirs_, linker_.BinRadius());
+        linker_.UseDeviceCompositing(vulkanComposite_.get());
     }
     ValidateEnvironment(scene.environment);
     const float h = ElementSize(scene, settings);
@@ -470,6 +474,15 @@ SolverStats ImplicitSolver::Stats() const {
     if (vulkanLinks_) {
         s.SetDetail("device_create_ms", vulkanLinks_->msDevice);
         s.SetDetail("device_rounds", double(vulkanLinks_->rounds));
+    }
+    // Where the leaves' bins are composited, and why on the host where a device was asked for.
+    s.SetDetail("composite_device",
+                linker_.CompositedOnDevice() ? device_->DeviceName() : std::string("cpu"));
+    if (vulkanComposite_) {
+        if (!linker_.CompositedOnDevice())
+            s.SetDetail("composite_on_host", linker_.CompositedOnHostBecause());
+        s.SetDetail("device_composites", double(vulkanComposite_->runs));
+        s.SetDetail("device_composite_ms", vulkanComposite_->msDevice);
     }
     // Where the bounces run, and why on the host where a device was asked for.
     s.SetDetail("bounce_device", BouncesOnDevice() ? device_->DeviceName() : std::string("cpu"));

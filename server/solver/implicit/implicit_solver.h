@@ -1,5 +1,6 @@
 // The implicit-visibility solver (Dong, Kautz, Theobalt, Seidel, PG 2007) behind the Solver
-// interface, CPU back end (with a Vulkan device, the links are created there). Algorithm 1: the
+// interface, CPU back end (with a Vulkan device, the links are created, composited and bounced
+// there). Algorithm 1: the
 // surfels and their hierarchy are made once; every frame that geometry changed, the hierarchy is
 // refitted (UpdateElements) and the links are built anew (implicit_links.h); every bounce, each
 // leaf gathers the light of the closest sender in each of its front bins (Eq. 5) and the exitant
@@ -33,6 +34,7 @@
 namespace penumbra {
 
 class VulkanBounce;
+class VulkanCompositing;
 
 class ImplicitSolver : public Solver {
   public:
@@ -61,6 +63,9 @@ class ImplicitSolver : public Solver {
     // Per node and bin, Σ A cos⁺(n, ω_b) at the last relink (ImplicitLinker::Build's
     // `frontArea`).
     const std::vector<float>& ProjectedAreas() const { return projected_; }
+    // Per node the closed solid its members bound, or kNoSolid; empty: none in the scene
+    // (ImplicitLinker::Build's `solid`).
+    const std::vector<uint32_t>& Solids() const { return solid_; }
 
   private:
     // The last geometry that passed GeometryMismatch: every primitive's positions and
@@ -118,6 +123,8 @@ class ImplicitSolver : public Solver {
     // With --device gpu or lavapipe: the device the links are created on (the rest runs here).
     std::unique_ptr<gpu::Context> device_;
     std::unique_ptr<VulkanLinkCreation> vulkanLinks_;
+    // With a device: the leaves' bins composited there too (vulkan_composite.h), where they fit.
+    std::unique_ptr<VulkanCompositing> vulkanComposite_;
     // With a device: the bounces there (vulkan_bounce.h), unless bounceUnfit_ says why the
     // last relink's shares do not fit on it; how many ran there.
     std::unique_ptr<VulkanBounce> vulkanBounce_;

@@ -28,7 +28,8 @@ SolverEntry ImplicitEntry() {
     return {"implicit",
             "implicit visibility (Dong et al. 2007), in progress: links rebuilt every frame, the "
             "closest surfaces in each direction bin, any move taken in place; on the CPU (on a "
-            "Vulkan device the link creation and the bounces), slower than its goals "
+            "Vulkan device the link creation, the compositing and the bounces), slower than "
+            "its goals "
             "(docs/SOLVER.md)",
             Options(),
             [](const Scene& scene, const SolverSettings& settings,

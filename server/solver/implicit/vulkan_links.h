@@ -2,9 +2,9 @@
 // rounds of candidate pairs of ImplicitLinker::Build (CreateHierarchicalLinks, level by level
 // as in Meyer et al. 2009's data-parallel link creation), one dispatch a round, the next
 // round's pairs and the recorded ends appended with atomic counters. The ends come back to
-// the host, where ImplicitLinker::Build orders each (node, bin) slot and composites the
-// leaves' bins as it does for the CPU's ends: the same links, up to float rounding of the
-// device's arithmetic near a split or bin boundary.
+// the host, which hands them to the device's compositing (vulkan_composite.h), or composites
+// them itself as it does the CPU's ends: the same links, up to float rounding of the device's
+// arithmetic near a split or bin boundary.
 #pragma once
 
 #include <memory>

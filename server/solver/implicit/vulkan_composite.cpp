@@ -1,0 +1,333 @@
+// The implicit solver's compositing on a Vulkan device (vulkan_composite.h).
+#include "solver/implicit/vulkan_composite.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "base/check.h"
+#include "base/numeric.h"
+#include "gpu/buffer.h"
+#include "gpu/context.h"
+#include "gpu/dispatch.h"
+#include "gpu/layout.h"
+#include "gpu/pipeline.h"
+#include "shaders/implicit_composite_spv.h"
+
+namespace penumbra {
+namespace {
+
+// shaders/implicit_composite.comp: struct CompositeNode, Leaf, Share.
+struct CompositeNode {
+    glm::vec3 center;
+    float coneCos;
+    glm::vec3 normal;
+    uint32_t right;  // the second child; 0 for a leaf
+    uint32_t solid;
+    uint32_t pad[3];
+};
+PENUMBRA_GPU_FIELD(CompositeNode, center, 0);
+PENUMBRA_GPU_FIELD(CompositeNode, coneCos, 12);
+PENUMBRA_GPU_FIELD(CompositeNode, normal, 16);
+PENUMBRA_GPU_FIELD(CompositeNode, right, 28);
+PENUMBRA_GPU_FIELD(CompositeNode, solid, 32);
+static_assert(sizeof(CompositeNode) == 48);
+struct CompositeLeaf {
+    glm::vec3 center;
+    float norm;
+    glm::vec3 normal;
+    uint32_t node;
+};
+PENUMBRA_GPU_FIELD(CompositeLeaf, center, 0);
+PENUMBRA_GPU_FIELD(CompositeLeaf, norm, 12);
+PENUMBRA_GPU_FIELD(CompositeLeaf, normal, 16);
+PENUMBRA_GPU_FIELD(CompositeLeaf, node, 28);
+static_assert(sizeof(CompositeLeaf) == 32);
+struct Share {
+    uint32_t bin, sender;
+    float weight;
+    uint32_t mark;
+};
+PENUMBRA_GPU_FIELD(Share, bin, 0);
+PENUMBRA_GPU_FIELD(Share, sender, 4);
+PENUMBRA_GPU_FIELD(Share, weight, 8);
+PENUMBRA_GPU_FIELD(Share, mark, 12);
+
+// shaders/implicit_composite.comp (push constants).
+struct CompositePush {
+    uint32_t mode, bins, leafCount, endCount, slots, scanFirst, scanCount, mergedAt, environmentAt,
+        cubeRes, adjacentWidth, hasSolids;
+    float binSolidAngle, thin, cosBinRadius, sinBinRadius, aboveHorizon;
+};
+PENUMBRA_GPU_FIELD(CompositePush, mode, 0);
+PENUMBRA_GPU_FIELD(CompositePush, bins, 4);
+PENUMBRA_GPU_FIELD(CompositePush, leafCount, 8);
+PENUMBRA_GPU_FIELD(CompositePush, endCount, 12);
+PENUMBRA_GPU_FIELD(CompositePush, slots, 16);
+PENUMBRA_GPU_FIELD(CompositePush, scanFirst, 20);
+PENUMBRA_GPU_FIELD(CompositePush, scanCount, 24);
+PENUMBRA_GPU_FIELD(CompositePush, mergedAt, 28);
+PENUMBRA_GPU_FIELD(CompositePush, environmentAt, 32);
+PENUMBRA_GPU_FIELD(CompositePush, cubeRes, 36);
+PENUMBRA_GPU_FIELD(CompositePush, adjacentWidth, 40);
+PENUMBRA_GPU_FIELD(CompositePush, hasSolids, 44);
+PENUMBRA_GPU_FIELD(CompositePush, binSolidAngle, 48);
+PENUMBRA_GPU_FIELD(CompositePush, thin, 52);
+PENUMBRA_GPU_FIELD(CompositePush, cosBinRadius, 56);
+PENUMBRA_GPU_FIELD(CompositePush, sinBinRadius, 60);
+PENUMBRA_GPU_FIELD(CompositePush, aboveHorizon, 64);
+
+// The shader's limits: the deepest chain, a scan's block.
+constexpr size_t kMaxDepth = 64;
+constexpr uint32_t kBlock = 4096;
+
+}  // namespace
+
+struct VulkanCompositing::Impl {
+    gpu::Context& ctx;
+    const Directions& dirs;
+    float binRadius;
+    uint32_t adjacentWidth = 0;
+    gpu::Pipeline pipeline;
+    gpu::Buffer dirBuffer, cube, opposite;
+    std::unique_ptr<gpu::Buffer> adjacent, status;
+    // Grown as needed (each with its capacity in bytes).
+    struct Grown {
+        std::unique_ptr<gpu::Buffer> buffer;
+        size_t bytes = 0;
+    };
+    Grown ends, scattered, counts, blockSums, nodes, leaves, cover, partial, boxes, shares, travel,
+        offsets;
+
+    Impl(gpu::Context& c, const Directions& d, float r, uint32_t mostSolids)
+        : ctx(c),
+          dirs(d),
+          binRadius(r),
+          pipeline(c, gpu::Words(kSpirv_implicit_composite), 17,
+                   std::span<const uint32_t>(&mostSolids, 1), sizeof(CompositePush)),
+          dirBuffer(c, size_t(d.Count()) * sizeof(glm::vec4)),
+          cube(c, d.CubeTable().size() * sizeof(uint32_t)),
+          opposite(c, size_t(d.Count()) * sizeof(uint32_t)) {
+        std::vector<glm::vec4> up;
+        for (const glm::vec3& w : d.All()) up.emplace_back(w, 0.0f);
+        dirBuffer.Upload(up);
+        cube.Upload(d.CubeTable());
+        std::vector<uint32_t> opp(size_t(d.Count()));
+        for (uint32_t b = 0; b < opp.size(); ++b) opp[b] = d.Opposite(b);
+        opposite.Upload(opp);
+        const std::vector<uint32_t> adj = d.PaddedAdjacency(adjacentWidth);
+        adjacent = MakeBuffer(c, adj.size() * sizeof(uint32_t));
+        adjacent->Upload(adj);
+        status = MakeBuffer(c, 4 * sizeof(uint32_t));
+    }
+
+    gpu::Buffer& Reserve(Grown& g, size_t bytes) {
+        if (!g.buffer || g.bytes < bytes) {
+            g.bytes = std::max<size_t>(bytes + bytes / 4, 64);
+            g.buffer = MakeBuffer(ctx, g.bytes);
+        }
+        return *g.buffer;
+    }
+};
+
+VulkanCompositing::VulkanCompositing(gpu::Context& ctx, const Directions& dirs, float binRadius,
+                                     uint32_t mostSolids)
+    : impl_(std::make_unique<Impl>(ctx, dirs, binRadius, mostSolids)) {
+    PENUMBRA_CHECK(mostSolids > 0);
+}
+
+VulkanCompositing::~VulkanCompositing() = default;
+
+std::string VulkanCompositing::Unfit(const Hierarchy& h, size_t ends) const {
+    const Impl& s = *impl_;
+    if (h.byDepth.size() > kMaxDepth)
+        return "the hierarchy is " + std::to_string(h.byDepth.size()) +
+               " levels deep (the device's compositing holds " + std::to_string(kMaxDepth) + ")";
+    const size_t range = s.ctx.Limits().maxStorageBufferRange;
+    const size_t bins = size_t(s.dirs.Count());
+    const size_t counts = h.size() * bins + 1 + 2 * (h.leaves.size() * bins + 1);
+    if (counts >= 0xffffffffu || counts * sizeof(uint32_t) > range)
+        return "the compositing's slot counts exceed the device's storage-buffer range";
+    if (ends >= 0xffffffffu || ends * sizeof(ImplicitLinker::End) > range)
+        return "the links' ends exceed the device's storage-buffer range";
+    return {};
+}
+
+bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t>& solid,
+                                  const std::vector<glm::vec4>& boxes, float thin,
+                                  std::span<const ImplicitLinker::End> ends, ImplicitLinks& out) {
+    Impl& s = *impl_;
+    const auto start = std::chrono::steady_clock::now();
+    PENUMBRA_CHECK(Unfit(h, ends.size()).empty());
+    PENUMBRA_CHECK(solid.empty() || solid.size() == h.size());
+    why_.clear();
+    const size_t bins = size_t(s.dirs.Count()), nodeCount = h.size(), leafCount = h.leaves.size();
+    const size_t slots = nodeCount * bins, cells = leafCount * bins;
+    std::vector<CompositeNode> nodes(nodeCount);
+    for (size_t i = 0; i < nodeCount; ++i) {
+        const HierarchyNode& n = h.nodes[i];
+        nodes[i] = {n.center,
+                    n.coneCos,
+                    n.normal,
+                    n.IsLeaf() ? 0u : h.nodes[i + 1].end,
+                    solid.empty() ? kNoSolid : solid[i],
+                    {0, 0, 0}};
+    }
+    std::vector<CompositeLeaf> leaves(leafCount);
+    for (size_t i = 0; i < leafCount; ++i) {
+        const HierarchyNode& n = h.nodes[h.leaves[i]];
+        leaves[i] = {n.center, s.dirs.CosineNorm(n.normal), n.normal, h.leaves[i]};
+    }
+    s.Reserve(s.nodes, nodes.size() * sizeof(CompositeNode)).Upload(nodes);
+    s.Reserve(s.leaves, leaves.size() * sizeof(CompositeLeaf)).Upload(leaves);
+    if (!boxes.empty()) s.Reserve(s.boxes, boxes.size() * sizeof(glm::vec4)).Upload(boxes);
+    s.Reserve(s.boxes, sizeof(glm::vec4));
+    s.Reserve(s.ends, ends.size() * sizeof(ImplicitLinker::End))
+        .Upload(ends.data(), ends.size() * sizeof(ImplicitLinker::End));
+    s.Reserve(s.scattered, ends.size() * sizeof(ImplicitLinker::End));
+    const size_t mergedAt = slots + 1, environmentAt = mergedAt + cells + 1;
+    s.Reserve(s.counts, (environmentAt + cells + 1) * sizeof(uint32_t));
+    const size_t mostBlocks = (std::max(slots, cells) + kBlock - 1) / kBlock;
+    s.Reserve(s.blockSums, (mostBlocks + 1) * sizeof(uint32_t));
+    s.Reserve(s.cover, cells * sizeof(float));
+    s.Reserve(s.partial, cells * sizeof(uint32_t));
+    s.Reserve(s.offsets, (leafCount + 1) * sizeof(uint32_t));
+    s.Reserve(s.shares, sizeof(Share));
+    s.Reserve(s.travel, sizeof(uint32_t));
+
+    CompositePush push{};
+    push.bins = uint32_t(bins);
+    push.leafCount = uint32_t(leafCount);
+    push.endCount = uint32_t(ends.size());
+    push.slots = uint32_t(slots);
+    push.mergedAt = uint32_t(mergedAt);
+    push.environmentAt = uint32_t(environmentAt);
+    push.cubeRes = uint32_t(s.dirs.CubeRes());
+    push.adjacentWidth = s.adjacentWidth;
+    push.hasSolids = solid.empty() ? 0u : 1u;
+    push.binSolidAngle = s.dirs.BinSolidAngle();
+    push.thin = thin;
+    // As SolidBox::Holds and Build's compositing compute them.
+    push.cosBinRadius = std::cos(s.binRadius);
+    push.sinBinRadius = std::sin(s.binRadius);
+    push.aboveHorizon = std::sin(s.dirs.Spacing());
+
+    auto record = [&](const vk::raii::CommandBuffer& cb, const vk::raii::DescriptorSet& set) {
+        cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.pipeline.Handle());
+        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.pipeline.Layout(), 0, {*set}, {});
+    };
+    auto run = [&](const vk::raii::CommandBuffer& cb, uint32_t mode, uint32_t groups) {
+        push.mode = mode;
+        cb.pushConstants<CompositePush>(s.pipeline.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
+                                        push);
+        cb.dispatch(groups, 1, 1);
+        gpu::ComputeBarrier(cb);
+    };
+    // An exclusive scan of counts[first, first + n), the total after it.
+    auto scan = [&](const vk::raii::CommandBuffer& cb, size_t first, size_t n) {
+        push.scanFirst = uint32_t(first);
+        push.scanCount = uint32_t(n);
+        const size_t blocks = (n + kBlock - 1) / kBlock;
+        run(cb, 1, uint32_t(std::clamp<size_t>(blocks, 1, gpu::kMaxGroups)));
+        run(cb, 2, 1);
+        run(cb, 3, gpu::StridedGroups(n + 1));
+    };
+    auto toHost = [](const vk::raii::CommandBuffer& cb) {
+        const vk::MemoryBarrier barrier(vk::AccessFlagBits::eShaderWrite,
+                                        vk::AccessFlagBits::eHostRead);
+        cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
+                           vk::PipelineStageFlagBits::eHost, {}, barrier, {}, {});
+    };
+    auto buffers = [&]() {
+        return std::vector<const gpu::Buffer*>{s.ends.buffer.get(),
+                                               s.scattered.buffer.get(),
+                                               s.counts.buffer.get(),
+                                               s.blockSums.buffer.get(),
+                                               s.nodes.buffer.get(),
+                                               s.leaves.buffer.get(),
+                                               s.cover.buffer.get(),
+                                               s.partial.buffer.get(),
+                                               s.boxes.buffer.get(),
+                                               &s.dirBuffer,
+                                               &s.cube,
+                                               s.adjacent.get(),
+                                               &s.opposite,
+                                               s.shares.buffer.get(),
+                                               s.travel.buffer.get(),
+                                               s.offsets.buffer.get(),
+                                               s.status.get()};
+    };
+    {
+        const std::vector<const gpu::Buffer*> bound = buffers();
+        vk::raii::DescriptorSet set = s.pipeline.MakeSet(bound);
+        s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+            cb.fillBuffer(s.counts.buffer->Handle(), 0, VK_WHOLE_SIZE, 0);
+            cb.fillBuffer(s.status->Handle(), 0, VK_WHOLE_SIZE, 0);
+            gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
+                         vk::AccessFlagBits::eTransferWrite,
+                         vk::PipelineStageFlagBits::eComputeShader);
+            record(cb, set);
+            run(cb, 0, gpu::StridedGroups(ends.size()));  // the slots' counts
+            scan(cb, 0, slots);                           // their starts
+            run(cb, 4, gpu::StridedGroups(ends.size()));  // the ends by slot
+            run(cb, 5, gpu::StridedGroups(ends.size()));  // each slot nearest first
+            run(cb, 6, gpu::StridedGroups(cells));        // the merges counted
+            run(cb, 7, gpu::StridedGroups(cells));        // the bins showing the environment
+            scan(cb, mergedAt, cells);
+            scan(cb, environmentAt, cells);
+            toHost(cb);
+        });
+    }
+    uint32_t state[3] = {0, 0, 0}, merged = 0, shown = 0;
+    s.status->Download(state, sizeof(state));
+    if (state[1] != 0 || state[2] != 0) {
+        why_ = state[1] != 0 ? "a bin met more closed solids than the device's compositing holds"
+                             : "a (node, bin) slot holds more ends than the device's sort takes";
+        msDevice = MsSince(start);
+        return false;
+    }
+    s.counts.buffer->Download(&merged, sizeof(uint32_t), (mergedAt + cells) * sizeof(uint32_t));
+    s.counts.buffer->Download(&shown, sizeof(uint32_t), (environmentAt + cells) * sizeof(uint32_t));
+    const size_t total = size_t(merged) + shown;
+    if (total >= 0xffffffffu || total * sizeof(Share) > s.ctx.Limits().maxStorageBufferRange) {
+        why_ = "the shares exceed the device's storage-buffer range";
+        msDevice = MsSince(start);
+        return false;
+    }
+    s.Reserve(s.shares, total * sizeof(Share));
+    s.Reserve(s.travel, total * sizeof(uint32_t));
+    {
+        const std::vector<const gpu::Buffer*> bound = buffers();
+        vk::raii::DescriptorSet set = s.pipeline.MakeSet(bound);
+        s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+            record(cb, set);
+            run(cb, 8, gpu::StridedGroups(cells));          // the shares written
+            run(cb, 9, gpu::StridedGroups(leafCount + 1));  // the leaves' first shares
+            run(cb, 10, gpu::StridedGroups(total));         // the far faces' fronts, travel
+            toHost(cb);
+        });
+    }
+    std::vector<Share> shares(total);
+    if (total > 0) s.shares.buffer->Download(shares.data(), total * sizeof(Share));
+    out.offsets.resize(leafCount + 1);
+    s.offsets.buffer->Download(out.offsets.data(), (leafCount + 1) * sizeof(uint32_t));
+    PENUMBRA_CHECK_EQ(out.offsets[leafCount], total);
+    out.bin.resize(total);
+    out.sender.resize(total);
+    out.weight.resize(total);
+    out.travel.resize(total);
+    if (total > 0) s.travel.buffer->Download(out.travel.data(), total * sizeof(uint32_t));
+    size_t empty = 0;
+    for (size_t k = 0; k < total; ++k) {
+        out.bin[k] = shares[k].bin;
+        out.sender[k] = shares[k].sender;
+        out.weight[k] = shares[k].weight;
+        empty += shares[k].sender == kNoSender;
+    }
+    out.empty = empty;
+    ++runs;
+    msDevice = MsSince(start);
+    return true;
+}
+
+}  // namespace penumbra
