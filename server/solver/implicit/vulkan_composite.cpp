@@ -228,9 +228,9 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
         push.scanFirst = uint32_t(first);
         push.scanCount = uint32_t(n);
         const size_t blocks = (n + kBlock - 1) / kBlock;
-        run(cb, 1, uint32_t(std::clamp<size_t>(blocks, 1, gpu::kMaxGroups)));
+        run(cb, 1, gpu::StridedGroups(blocks));
         run(cb, 2, 1);
-        run(cb, 3, gpu::StridedGroups(n + 1));
+        run(cb, 3, gpu::StridedGroups(blocks));
     };
     auto toHost = [](const vk::raii::CommandBuffer& cb) {
         const vk::MemoryBarrier barrier(vk::AccessFlagBits::eShaderWrite,
@@ -278,7 +278,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
             toHost(cb);
         });
     }
-    uint32_t state[3] = {0, 0, 0}, merged = 0, shown = 0;
+    uint32_t state[4] = {0, 0, 0, 0}, merged = 0, shown = 0;
     s.status->Download(state, sizeof(state));
     if (state[1] != 0 || state[2] != 0) {
         why_ = state[1] != 0 ? "a bin met more closed solids than the device's compositing holds"
@@ -306,6 +306,12 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
             run(cb, 10, gpu::StridedGroups(total));         // the far faces' fronts, travel
             toHost(cb);
         });
+    }
+    s.status->Download(state, sizeof(state));
+    if (state[3] != 0) {
+        why_ = "the device's merges wrote other counts than they counted";
+        msDevice = MsSince(start);
+        return false;
     }
     std::vector<Share> shares(total);
     if (total > 0) s.shares.buffer->Download(shares.data(), total * sizeof(Share));

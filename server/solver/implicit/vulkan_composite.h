@@ -40,8 +40,10 @@ class VulkanCompositing {
     // bin, sender, weight, travel and empty, as ImplicitLinker::Build does: `solid` per node
     // (or empty), `boxes` per closed solid its box's lo and hi, `thin` Build's. Returns false,
     // leaving `out` as it was, when a bin met more closed solids than `mostSolids`, a
-    // slot holds more ends than its sort takes (8,192), or the shares overflow the
-    // storage-buffer range (`Why()` says which): then the host composites.
+    // slot holds more ends than its sort takes (4,096), the shares overflow the
+    // storage-buffer range, or a bin's two merges (the count, then the write) disagree (a
+    // loop cut short: lavapipe ends a shader's loops after 65,535 iterations in all)
+    // (`Why()` says which): then the host composites.
     bool Composite(const Hierarchy& h, const std::vector<uint32_t>& solid,
                    const std::vector<glm::vec4>& boxes, float thin,
                    std::span<const ImplicitLinker::End> ends, ImplicitLinks& out);
