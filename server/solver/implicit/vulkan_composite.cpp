@@ -12,6 +12,7 @@
 #include "gpu/dispatch.h"
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
+#include "hierarchy/directions_device.h"
 #include "shaders/implicit_composite_spv.h"
 
 namespace penumbra {
@@ -87,10 +88,10 @@ struct VulkanCompositing::Impl {
     gpu::Context& ctx;
     const Directions& dirs;
     float binRadius;
-    uint32_t adjacentWidth = 0;
     gpu::Pipeline pipeline;
-    gpu::Buffer dirBuffer, cube, opposite;
-    std::unique_ptr<gpu::Buffer> adjacent, status;
+    DeviceDirections tables;
+    gpu::Buffer opposite;
+    std::unique_ptr<gpu::Buffer> status;
     // Grown as needed (each with its capacity in bytes).
     struct Grown {
         std::unique_ptr<gpu::Buffer> buffer;
@@ -105,19 +106,11 @@ struct VulkanCompositing::Impl {
           binRadius(r),
           pipeline(c, gpu::Words(kSpirv_implicit_composite), 17,
                    std::span<const uint32_t>(&mostSolids, 1), sizeof(CompositePush)),
-          dirBuffer(c, size_t(d.Count()) * sizeof(glm::vec4)),
-          cube(c, d.CubeTable().size() * sizeof(uint32_t)),
+          tables(c, d),
           opposite(c, size_t(d.Count()) * sizeof(uint32_t)) {
-        std::vector<glm::vec4> up;
-        for (const glm::vec3& w : d.All()) up.emplace_back(w, 0.0f);
-        dirBuffer.Upload(up);
-        cube.Upload(d.CubeTable());
         std::vector<uint32_t> opp(size_t(d.Count()));
         for (uint32_t b = 0; b < opp.size(); ++b) opp[b] = d.Opposite(b);
         opposite.Upload(opp);
-        const std::vector<uint32_t> adj = d.PaddedAdjacency(adjacentWidth);
-        adjacent = MakeBuffer(c, adj.size() * sizeof(uint32_t));
-        adjacent->Upload(adj);
         status = MakeBuffer(c, 4 * sizeof(uint32_t));
     }
 
@@ -203,7 +196,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     push.mergedAt = uint32_t(mergedAt);
     push.environmentAt = uint32_t(environmentAt);
     push.cubeRes = uint32_t(s.dirs.CubeRes());
-    push.adjacentWidth = s.adjacentWidth;
+    push.adjacentWidth = s.tables.adjacentWidth;
     push.hasSolids = solid.empty() ? 0u : 1u;
     push.binSolidAngle = s.dirs.BinSolidAngle();
     push.thin = thin;
@@ -239,22 +232,14 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
                            vk::PipelineStageFlagBits::eHost, {}, barrier, {}, {});
     };
     auto buffers = [&]() {
-        return std::vector<const gpu::Buffer*>{s.ends.buffer.get(),
-                                               s.scattered.buffer.get(),
-                                               s.counts.buffer.get(),
-                                               s.blockSums.buffer.get(),
-                                               s.nodes.buffer.get(),
-                                               s.leaves.buffer.get(),
-                                               s.cover.buffer.get(),
-                                               s.partial.buffer.get(),
-                                               s.boxes.buffer.get(),
-                                               &s.dirBuffer,
-                                               &s.cube,
-                                               s.adjacent.get(),
-                                               &s.opposite,
-                                               s.shares.buffer.get(),
-                                               s.travel.buffer.get(),
-                                               s.offsets.buffer.get(),
+        return std::vector<const gpu::Buffer*>{s.ends.buffer.get(),   s.scattered.buffer.get(),
+                                               s.counts.buffer.get(), s.blockSums.buffer.get(),
+                                               s.nodes.buffer.get(),  s.leaves.buffer.get(),
+                                               s.cover.buffer.get(),  s.partial.buffer.get(),
+                                               s.boxes.buffer.get(),  &s.tables.dirs,
+                                               &s.tables.cube,        s.tables.adjacent.get(),
+                                               &s.opposite,           s.shares.buffer.get(),
+                                               s.travel.buffer.get(), s.offsets.buffer.get(),
                                                s.status.get()};
     };
     {

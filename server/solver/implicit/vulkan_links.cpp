@@ -13,6 +13,7 @@
 #include "gpu/dispatch.h"
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
+#include "hierarchy/directions_device.h"
 #include "shaders/implicit_pairs_spv.h"
 
 namespace penumbra {
@@ -68,10 +69,8 @@ struct VulkanLinkCreation::Impl {
     const Directions& dirs;
     float threshold;
     size_t bufferBytes;
-    uint32_t adjacentWidth = 0;
     gpu::Pipeline pairs;
-    gpu::Buffer dirBuffer, cube;
-    std::unique_ptr<gpu::Buffer> adjacent;
+    DeviceDirections tables;
     // The nodes and their projected areas; a chunk of a round's pairs, its next pairs and
     // ends; the three counters.
     std::unique_ptr<gpu::Buffer> nodes, frontArea, round, next, ends, counts;
@@ -85,15 +84,7 @@ struct VulkanLinkCreation::Impl {
                                 : c.Limits().maxStorageBufferRange),
           pairs(c, gpu::Words(kSpirv_implicit_pairs), 9, std::span<const uint32_t>{},
                 sizeof(PairPush)),
-          dirBuffer(c, size_t(d.Count()) * sizeof(glm::vec4)),
-          cube(c, d.CubeTable().size() * sizeof(uint32_t)) {
-        std::vector<glm::vec4> up;
-        for (const glm::vec3& w : d.All()) up.emplace_back(w, 0.0f);
-        dirBuffer.Upload(up);
-        cube.Upload(d.CubeTable());
-        const std::vector<uint32_t> adj = d.PaddedAdjacency(adjacentWidth);
-        adjacent = MakeBuffer(c, adj.size() * sizeof(uint32_t));
-        adjacent->Upload(adj);
+          tables(c, d) {
         counts = MakeBuffer(c, 4 * sizeof(uint32_t));
     }
 
@@ -140,7 +131,7 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
     PairPush push{};
     push.bins = uint32_t(bins);
     push.cubeRes = uint32_t(s.dirs.CubeRes());
-    push.adjacentWidth = s.adjacentWidth;
+    push.adjacentWidth = s.tables.adjacentWidth;
     push.limit = s.threshold * omegaBin;
     push.binSolidAngle = omegaBin;
     push.splat = std::sin(0.5f * s.dirs.Spacing());
@@ -171,9 +162,10 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
             push.count = uint32_t(n);
             push.nextCapacity = uint32_t(s.nextCapacity);
             push.endCapacity = uint32_t(s.endCapacity);
-            const gpu::Buffer* buffers[] = {s.nodes.get(), s.round.get(),  s.next.get(),
-                                            s.ends.get(),  s.counts.get(), s.frontArea.get(),
-                                            &s.dirBuffer,  &s.cube,        s.adjacent.get()};
+            const gpu::Buffer* buffers[] = {
+                s.nodes.get(),  s.round.get(),  s.next.get(),
+                s.ends.get(),   s.counts.get(), s.frontArea.get(),
+                &s.tables.dirs, &s.tables.cube, s.tables.adjacent.get()};
             vk::raii::DescriptorSet set = s.pairs.MakeSet(buffers);
             s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
                 cb.fillBuffer(s.counts->Handle(), 0, VK_WHOLE_SIZE, 0);
