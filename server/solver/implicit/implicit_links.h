@@ -127,8 +127,8 @@ class ImplicitLinker {
     // device examines every pair each build: `moving` is not used, nothing is kept.
     void UseDevice(VulkanLinkCreation* device) { device_ = device; }
     // With the ends created on the device (UseDevice), composites the leaves' bins there too
-    // (vulkan_composite.h), null: on the CPU. A build whose compositing does not fit the
-    // device, or that meets more closed solids in a bin than it holds, composites here.
+    // (vulkan_composite.h), null: on the CPU. A build the device cannot composite whole
+    // (VulkanCompositing::Unfit and Composite say when) composites here.
     void UseDeviceCompositing(VulkanCompositing* composite) { composite_ = composite; }
     // Whether the last build composited on the device, and if one was given and it did not,
     // why.
