@@ -81,6 +81,9 @@ PENUMBRA_GPU_FIELD(CompositePush, aboveHorizon, 64);
 // The shader's limits: the deepest chain, a scan's block.
 constexpr size_t kMaxDepth = 64;
 constexpr uint32_t kBlock = 4096;
+constexpr size_t kMostBlocks = 32768;
+// Share::mark keeps a closed solid's number in its low 30 bits.
+constexpr uint32_t kMostSolid = 0x3fffffffu;
 
 }  // namespace
 
@@ -141,6 +144,10 @@ std::string VulkanCompositing::Unfit(const Hierarchy& h, size_t ends) const {
     const size_t counts = h.size() * bins + 1 + 2 * (h.leaves.size() * bins + 1);
     if (counts >= 0xffffffffu || counts * sizeof(uint32_t) > range)
         return "the compositing's slot counts exceed the device's storage-buffer range";
+    // The scan's one invocation walks the blocks' sums: kept well inside the 65,535 loop
+    // iterations llvmpipe allows a shader.
+    if (counts / kBlock > kMostBlocks)
+        return "the compositing's slot counts exceed what its scan takes";
     if (ends >= 0xffffffffu || ends * sizeof(ImplicitLinker::End) > range)
         return "the links' ends exceed the device's storage-buffer range";
     return {};
@@ -154,6 +161,11 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     PENUMBRA_CHECK(Unfit(h, ends.size()).empty());
     PENUMBRA_CHECK(solid.empty() || solid.size() == h.size());
     why_.clear();
+    for (uint32_t of : solid)
+        if (of != kNoSolid && of >= kMostSolid) {
+            why_ = "a closed solid's number exceeds what the device's shares mark";
+            return false;
+        }
     const size_t bins = size_t(s.dirs.Count()), nodeCount = h.size(), leafCount = h.leaves.size();
     const size_t slots = nodeCount * bins, cells = leafCount * bins;
     std::vector<CompositeNode> nodes(nodeCount);
