@@ -107,7 +107,10 @@ void VulkanBounce::SetShares(const Hierarchy& h, const std::vector<uint32_t>& of
     s.leafNormalArea->Upload(leaves);
     s.offsets->Upload(offsets);
     if (!s.at || s.shareCapacity < at.size()) {
-        s.shareCapacity = std::max<size_t>(1, at.size() + at.size() / 8);
+        // With room, inside the storage-buffer range (Unfit held the shares to it).
+        const size_t most = s.ctx.Limits().maxStorageBufferRange / sizeof(uint32_t);
+        s.shareCapacity =
+            std::max<size_t>({1, std::min(at.size() + at.size() / 8, most), at.size()});
         s.at = MakeBuffer(s.ctx, s.shareCapacity * sizeof(uint32_t));
         s.factor = MakeBuffer(s.ctx, s.shareCapacity * sizeof(float));
     }

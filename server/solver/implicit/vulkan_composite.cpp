@@ -117,9 +117,12 @@ struct VulkanCompositing::Impl {
         status = MakeBuffer(c, 4 * sizeof(uint32_t));
     }
 
+    // Grows `g` to hold `bytes` with room, the room kept inside the device's storage-buffer
+    // range (each buffer is bound whole).
     gpu::Buffer& Reserve(Grown& g, size_t bytes) {
         if (!g.buffer || g.bytes < bytes) {
-            g.bytes = std::max<size_t>(bytes + bytes / 4, 64);
+            const size_t range = ctx.Limits().maxStorageBufferRange;
+            g.bytes = std::max<size_t>({std::min(bytes + bytes / 4, range), bytes, 64});
             g.buffer = MakeBuffer(ctx, g.bytes);
         }
         return *g.buffer;
