@@ -66,30 +66,43 @@ struct Share {
 };
 
 // The ends as the rounds made them, then (mode 5) in slot order, each slot nearest first.
-layout(std430, binding = 0) buffer Ends { End ends[]; };
-layout(std430, binding = 1) buffer Scattered { End scattered[]; };
+// The ends as the rounds made them, then (mode 5) in slot order, each slot nearest first; and
+// the ends scattered to their slots (mode 4). Each field its own array: a list of 4-byte
+// entries fits the storage-buffer range four times as long (lavapipe's is 128 MiB).
+layout(std430, binding = 0) buffer EndSlot { uint endSlot[]; };
+layout(std430, binding = 1) buffer EndSender { uint endSender[]; };
+layout(std430, binding = 2) buffer EndDist { float endDist[]; };
+layout(std430, binding = 3) buffer EndOmega { float endOmega[]; };
+layout(std430, binding = 4) buffer ScatteredSlot { uint scatteredSlot[]; };
+layout(std430, binding = 5) buffer ScatteredSender { uint scatteredSender[]; };
+layout(std430, binding = 6) buffer ScatteredDist { float scatteredDist[]; };
+layout(std430, binding = 7) buffer ScatteredOmega { float scatteredOmega[]; };
 // The slots' counts (nodes × bins + 1), then per (leaf, bin) the shares merged and the
 // environment's (leaves × bins + 1 each), each scanned in place.
-layout(std430, binding = 2) buffer Counts { uint counts[]; };
-layout(std430, binding = 3) buffer BlockSums { uint blockSums[]; };
-layout(std430, binding = 4) readonly buffer Nodes { CompositeNode nodes[]; };
-layout(std430, binding = 5) readonly buffer Leaves { Leaf leaves[]; };
+layout(std430, binding = 8) buffer Counts { uint counts[]; };
+layout(std430, binding = 9) buffer BlockSums { uint blockSums[]; };
+layout(std430, binding = 10) readonly buffer Nodes { CompositeNode nodes[]; };
+layout(std430, binding = 11) readonly buffer Leaves { Leaf leaves[]; };
 // Per (leaf, bin): the solid angle covered (-1: not a front bin), and 1 where partly covered.
-layout(std430, binding = 6) buffer Cover { float cover[]; };
-layout(std430, binding = 7) buffer Partial { uint partial[]; };
+layout(std430, binding = 12) buffer Cover { float cover[]; };
+layout(std430, binding = 13) buffer Partial { uint partial[]; };
 // Per closed solid the box of its leaves (ImplicitLinker's SolidBoxes): lo, then hi.
-layout(std430, binding = 8) readonly buffer Boxes { vec4 boxes[]; };
-layout(std430, binding = 9) readonly buffer Dirs { vec4 dirs[]; };
-layout(std430, binding = 10) readonly buffer Cube { uint cube[]; };
-layout(std430, binding = 11) readonly buffer Adjacent { uint adjacent[]; };
-layout(std430, binding = 12) readonly buffer Opposite { uint opposite[]; };
-layout(std430, binding = 13) buffer Shares { Share shares[]; };
-layout(std430, binding = 14) writeonly buffer Travel { uint travel[]; };
+layout(std430, binding = 14) readonly buffer Boxes { vec4 boxes[]; };
+layout(std430, binding = 15) readonly buffer Dirs { vec4 dirs[]; };
+layout(std430, binding = 16) readonly buffer Cube { uint cube[]; };
+layout(std430, binding = 17) readonly buffer Adjacent { uint adjacent[]; };
+layout(std430, binding = 18) readonly buffer Opposite { uint opposite[]; };
+// The shares, a field an array.
+layout(std430, binding = 19) buffer ShareBin { uint shareBin[]; };
+layout(std430, binding = 20) buffer ShareSender { uint shareSender[]; };
+layout(std430, binding = 21) buffer ShareWeight { float shareWeight[]; };
+layout(std430, binding = 22) buffer ShareMark { uint shareMark[]; };
+layout(std430, binding = 23) writeonly buffer Travel { uint travel[]; };
 // Per leaf its first share, then the shares' count.
-layout(std430, binding = 15) buffer Offsets { uint offsets[]; };
+layout(std430, binding = 24) buffer Offsets { uint offsets[]; };
 // [1]: 1 where a bin met more solids than kMaxSolids; [2]: 1 where a slot held more ends than
 // kMostInSlot; [3]: 1 where a bin's merge wrote another count of shares than it counted.
-layout(std430, binding = 16) buffer Status { uint status[]; };
+layout(std430, binding = 25) buffer Status { uint status[]; };
 
 layout(push_constant) uniform Push {
     uint mode;
@@ -134,6 +147,30 @@ const uint kBlock = 4096u;  // the scan's blocks
 const float kFloatMax = 3.402823466e38;
 
 uint SlotBegin(uint s) { return s == 0u ? 0u : counts[s - 1u]; }
+
+End LoadEnd(uint k) { return End(endSlot[k], endSender[k], endDist[k], endOmega[k]); }
+void StoreEnd(uint k, End e) {
+    endSlot[k] = e.slot;
+    endSender[k] = e.sender;
+    endDist[k] = e.dist;
+    endOmega[k] = e.omega;
+}
+End LoadScattered(uint k) {
+    return End(scatteredSlot[k], scatteredSender[k], scatteredDist[k], scatteredOmega[k]);
+}
+void StoreScattered(uint k, End e) {
+    scatteredSlot[k] = e.slot;
+    scatteredSender[k] = e.sender;
+    scatteredDist[k] = e.dist;
+    scatteredOmega[k] = e.omega;
+}
+Share LoadShare(uint k) { return Share(shareBin[k], shareSender[k], shareWeight[k], shareMark[k]); }
+void StoreShare(uint k, Share s) {
+    shareBin[k] = s.bin;
+    shareSender[k] = s.sender;
+    shareWeight[k] = s.weight;
+    shareMark[k] = s.mark;
+}
 
 // SolidBox::Meets: whether the ray from `from` along `dir` meets the box ahead.
 bool Meets(vec3 lo, vec3 hi, vec3 from, vec3 dir) {
@@ -181,7 +218,7 @@ bool Holds(uint of, vec3 from, vec3 dir, vec3 normal) {
 
 // Leaf i's bin b merged from its chain's slots nearest first (Build's per-leaf loop): returns
 // its shares' count, `cover` the solid angle they cover (-1: not a front bin) and `part`
-// whether it is left partly uncovered. With `write`, the shares go to shares[at...].
+// whether it is left partly uncovered. With `write`, the shares go to at, at + 1, ...
 uint Merge(uint i, uint b, bool write, uint at, out float coverOut, out bool part) {
     Leaf L = leaves[i];
     vec3 w = dirs[b].xyz;
@@ -216,12 +253,12 @@ uint Merge(uint i, uint b, bool write, uint at, out float coverOut, out bool par
         int next = -1;
         float nextDist = 0.0;
         for (int j = int(heads) - 1; j >= 0; --j)
-            if (headAt[j] != headEnd[j] && (next < 0 || ends[headAt[j]].dist < nextDist)) {
+            if (headAt[j] != headEnd[j] && (next < 0 || endDist[headAt[j]] < nextDist)) {
                 next = j;
-                nextDist = ends[headAt[j]].dist;
+                nextDist = endDist[headAt[j]];
             }
         if (next < 0) break;
-        End e = ends[headAt[next]];
+        End e = LoadEnd(headAt[next]);
         headAt[next] += 1u;
         float omega = e.omega;
         uint sender = e.sender;
@@ -267,7 +304,7 @@ uint Merge(uint i, uint b, bool write, uint at, out float coverOut, out bool par
         float take = min(left, omega);
         if (!(take > 0.0)) continue;
         if (farOnly) mark = kFarOnly | of;
-        if (write) shares[at + count] = Share(b, sender, c * L.norm * take, mark);
+        if (write) StoreShare(at + count, Share(b, sender, c * L.norm * take, mark));
         ++count;
         left -= take;
     }
@@ -303,7 +340,7 @@ void main() {
     const uint id = gl_GlobalInvocationID.x;
     const uint lid = gl_LocalInvocationID.x;
     if (pc.mode == 0u) {
-        for (uint k = id; k < pc.endCount; k += stride) atomicAdd(counts[ends[k].slot], 1u);
+        for (uint k = id; k < pc.endCount; k += stride) atomicAdd(counts[endSlot[k]], 1u);
     } else if (pc.mode == 1u) {
         uint blocks = (pc.scanCount + kBlock - 1u) / kBlock;
         for (uint block = id; block < blocks; block += stride) {
@@ -338,12 +375,12 @@ void main() {
         }
     } else if (pc.mode == 4u) {
         for (uint k = id; k < pc.endCount; k += stride) {
-            End e = ends[k];
-            scattered[atomicAdd(counts[e.slot], 1u)] = e;
+            End e = LoadEnd(k);
+            StoreScattered(atomicAdd(counts[e.slot], 1u), e);
         }
     } else if (pc.mode == 5u) {
         for (uint k = id; k < pc.endCount; k += stride) {
-            End e = scattered[k];
+            End e = LoadScattered(k);
             uint lo = SlotBegin(e.slot), hi = counts[e.slot];
             if (hi - lo > kMostInSlot) {
                 status[2] = 1u;
@@ -351,12 +388,12 @@ void main() {
             }
             uint rank = 0u;
             for (uint j = lo; j < hi; ++j) {
-                End o = scattered[j];
-                if (o.dist < e.dist || (o.dist == e.dist && (o.sender < e.sender ||
-                                                              (o.sender == e.sender && j < k))))
+                float d = scatteredDist[j];
+                uint sender = scatteredSender[j];
+                if (d < e.dist || (d == e.dist && (sender < e.sender || (sender == e.sender && j < k))))
                     ++rank;
             }
-            ends[lo + rank] = e;
+            StoreEnd(lo + rank, e);
         }
     } else if (pc.mode == 6u) {
         for (uint k = id; k < pc.leafCount * pc.bins; k += stride) {
@@ -391,7 +428,7 @@ void main() {
             if (!part) continue;
             if (Fills(i, b)) {
                 float scale = pc.binSolidAngle / covered;
-                for (uint j = 0u; j < n; ++j) shares[at + j].weight *= scale;
+                for (uint j = 0u; j < n; ++j) shareWeight[at + j] *= scale;
                 continue;
             }
             float left = pc.binSolidAngle - covered;
@@ -399,7 +436,7 @@ void main() {
                 float rise = dot(leaves[i].normal, dirs[b].xyz);
                 uint env = start + merged + counts[pc.environmentAt + k] -
                            counts[pc.environmentAt + row];
-                shares[env] = Share(b, kNoSender, rise * leaves[i].norm * left, 0u);
+                StoreShare(env, Share(b, kNoSender, rise * leaves[i].norm * left, 0u));
             }
         }
     } else if (pc.mode == 9u) {
@@ -414,7 +451,7 @@ void main() {
                 if (offsets[mid] <= k) lo = mid; else hi = mid;
             }
             uint i = lo, first = offsets[i], end = offsets[i + 1u];
-            Share sh = shares[k];
+            Share sh = LoadShare(k);
             if ((sh.mark & kFarOnly) != 0u) {
                 // A solid's far face where none of its near faces were met: the near face met
                 // in the closest bin stands for it (Build's `unseen`).
@@ -422,15 +459,15 @@ void main() {
                 vec3 w = dirs[sh.bin].xyz;
                 float best = -2.0;
                 for (uint j = first; j < end; ++j) {
-                    Share f = shares[j];
-                    if ((f.mark & kFront) == 0u || (f.mark & kSolidBits) != of) continue;
-                    float cw = dot(w, dirs[f.bin].xyz);
+                    uint mark = shareMark[j];
+                    if ((mark & kFront) == 0u || (mark & kSolidBits) != of) continue;
+                    float cw = dot(w, dirs[shareBin[j]].xyz);
                     if (cw > best) {
                         best = cw;
-                        sh.sender = f.sender;
+                        sh.sender = shareSender[j];
                     }
                 }
-                shares[k].sender = sh.sender;
+                shareSender[k] = sh.sender;
             }
             uint t;
             if (sh.sender == kNoSender) {

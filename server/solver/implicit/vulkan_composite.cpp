@@ -2,6 +2,7 @@
 #include "solver/implicit/vulkan_composite.h"
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 
@@ -18,7 +19,7 @@
 namespace penumbra {
 namespace {
 
-// shaders/implicit_composite.comp: struct CompositeNode, Leaf, Share.
+// shaders/implicit_composite.comp: struct CompositeNode, Leaf.
 struct CompositeNode {
     glm::vec3 center;
     float coneCos;
@@ -44,16 +45,6 @@ PENUMBRA_GPU_FIELD(CompositeLeaf, norm, 12);
 PENUMBRA_GPU_FIELD(CompositeLeaf, normal, 16);
 PENUMBRA_GPU_FIELD(CompositeLeaf, node, 28);
 static_assert(sizeof(CompositeLeaf) == 32);
-struct Share {
-    uint32_t bin, sender;
-    float weight;
-    uint32_t mark;
-};
-PENUMBRA_GPU_FIELD(Share, bin, 0);
-PENUMBRA_GPU_FIELD(Share, sender, 4);
-PENUMBRA_GPU_FIELD(Share, weight, 8);
-PENUMBRA_GPU_FIELD(Share, mark, 12);
-
 // shaders/implicit_composite.comp (push constants).
 struct CompositePush {
     uint32_t mode, bins, leafCount, endCount, slots, scanFirst, scanCount, mergedAt, environmentAt,
@@ -82,7 +73,7 @@ PENUMBRA_GPU_FIELD(CompositePush, aboveHorizon, 64);
 constexpr size_t kMaxDepth = 64;
 constexpr uint32_t kBlock = 4096;
 constexpr size_t kMostBlocks = 32768;
-// Share::mark keeps a closed solid's number in its low 30 bits.
+// A share's mark keeps a closed solid's number in its low 30 bits.
 constexpr uint32_t kMostSolid = 0x3fffffffu;
 
 }  // namespace
@@ -100,14 +91,16 @@ struct VulkanCompositing::Impl {
         std::unique_ptr<gpu::Buffer> buffer;
         size_t bytes = 0;
     };
-    Grown ends, scattered, counts, blockSums, nodes, leaves, cover, partial, boxes, shares, travel,
-        offsets;
+    // The ends and the scattered ends field by field (slot, sender, dist, omega), the shares'
+    // fields (bin, sender, weight, mark): 4 bytes an entry, each list in its own buffer.
+    Grown ends[4], scattered[4], shares[4];
+    Grown counts, blockSums, nodes, leaves, cover, partial, boxes, travel, offsets;
 
     Impl(gpu::Context& c, const Directions& d, float r, uint32_t mostSolids)
         : ctx(c),
           dirs(d),
           binRadius(r),
-          pipeline(c, gpu::Words(kSpirv_implicit_composite), 17,
+          pipeline(c, gpu::Words(kSpirv_implicit_composite), 26,
                    std::span<const uint32_t>(&mostSolids, 1), sizeof(CompositePush)),
           tables(c, d),
           opposite(c, size_t(d.Count()) * sizeof(uint32_t)) {
@@ -151,7 +144,7 @@ std::string VulkanCompositing::Unfit(const Hierarchy& h, size_t ends) const {
     // iterations llvmpipe allows a shader.
     if (counts / kBlock > kMostBlocks)
         return "the compositing's slot counts exceed what its scan takes";
-    if (ends >= 0xffffffffu || ends * sizeof(ImplicitLinker::End) > range)
+    if (ends >= 0xffffffffu || ends * sizeof(uint32_t) > range)  // a field of the ends
         return "the links' ends exceed the device's storage-buffer range";
     return {};
 }
@@ -190,9 +183,21 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     s.Reserve(s.leaves, leaves.size() * sizeof(CompositeLeaf)).Upload(leaves);
     if (!boxes.empty()) s.Reserve(s.boxes, boxes.size() * sizeof(glm::vec4)).Upload(boxes);
     s.Reserve(s.boxes, sizeof(glm::vec4));
-    s.Reserve(s.ends, ends.size() * sizeof(ImplicitLinker::End))
-        .Upload(ends.data(), ends.size() * sizeof(ImplicitLinker::End));
-    s.Reserve(s.scattered, ends.size() * sizeof(ImplicitLinker::End));
+    {
+        std::vector<uint32_t> field(ends.size());
+        for (int f = 0; f < 4; ++f) {
+            for (size_t k = 0; k < ends.size(); ++k) {
+                const ImplicitLinker::End& e = ends[k];
+                field[k] = f == 0   ? e.slot
+                           : f == 1 ? e.sender
+                           : f == 2 ? std::bit_cast<uint32_t>(e.dist)
+                                    : std::bit_cast<uint32_t>(e.omega);
+            }
+            s.Reserve(s.ends[f], ends.size() * sizeof(uint32_t))
+                .Upload(field.data(), field.size() * sizeof(uint32_t));
+            s.Reserve(s.scattered[f], ends.size() * sizeof(uint32_t));
+        }
+    }
     const size_t mergedAt = slots + 1, environmentAt = mergedAt + cells + 1;
     s.Reserve(s.counts, (environmentAt + cells + 1) * sizeof(uint32_t));
     const size_t mostBlocks = (std::max(slots, cells) + kBlock - 1) / kBlock;
@@ -200,7 +205,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     s.Reserve(s.cover, cells * sizeof(float));
     s.Reserve(s.partial, cells * sizeof(uint32_t));
     s.Reserve(s.offsets, (leafCount + 1) * sizeof(uint32_t));
-    s.Reserve(s.shares, sizeof(Share));
+    for (auto& field : s.shares) s.Reserve(field, sizeof(uint32_t));
     s.Reserve(s.travel, sizeof(uint32_t));
 
     CompositePush push{};
@@ -247,15 +252,20 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
                            vk::PipelineStageFlagBits::eHost, {}, barrier, {}, {});
     };
     auto buffers = [&]() {
-        return std::vector<const gpu::Buffer*>{s.ends.buffer.get(),   s.scattered.buffer.get(),
-                                               s.counts.buffer.get(), s.blockSums.buffer.get(),
-                                               s.nodes.buffer.get(),  s.leaves.buffer.get(),
-                                               s.cover.buffer.get(),  s.partial.buffer.get(),
-                                               s.boxes.buffer.get(),  &s.tables.dirs,
-                                               &s.tables.cube,        s.tables.adjacent.get(),
-                                               &s.opposite,           s.shares.buffer.get(),
-                                               s.travel.buffer.get(), s.offsets.buffer.get(),
-                                               s.status.get()};
+        std::vector<const gpu::Buffer*> b;
+        for (auto& f : s.ends) b.push_back(f.buffer.get());
+        for (auto& f : s.scattered) b.push_back(f.buffer.get());
+        for (const auto* g :
+             {&s.counts, &s.blockSums, &s.nodes, &s.leaves, &s.cover, &s.partial, &s.boxes})
+            b.push_back(g->buffer.get());
+        for (const gpu::Buffer* t : {&s.tables.dirs, &s.tables.cube}) b.push_back(t);
+        b.push_back(s.tables.adjacent.get());
+        b.push_back(&s.opposite);
+        for (auto& f : s.shares) b.push_back(f.buffer.get());
+        b.push_back(s.travel.buffer.get());
+        b.push_back(s.offsets.buffer.get());
+        b.push_back(s.status.get());
+        return b;
     };
     {
         const std::vector<const gpu::Buffer*> bound = buffers();
@@ -289,12 +299,12 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     s.counts.buffer->Download(&merged, sizeof(uint32_t), (mergedAt + cells) * sizeof(uint32_t));
     s.counts.buffer->Download(&shown, sizeof(uint32_t), (environmentAt + cells) * sizeof(uint32_t));
     const size_t total = size_t(merged) + shown;
-    if (total >= 0xffffffffu || total * sizeof(Share) > s.ctx.Limits().maxStorageBufferRange) {
+    if (total >= 0xffffffffu || total * sizeof(uint32_t) > s.ctx.Limits().maxStorageBufferRange) {
         why_ = "the shares exceed the device's storage-buffer range";
         msDevice = MsSince(start);
         return false;
     }
-    s.Reserve(s.shares, total * sizeof(Share));
+    for (auto& field : s.shares) s.Reserve(field, total * sizeof(uint32_t));
     s.Reserve(s.travel, total * sizeof(uint32_t));
     {
         const std::vector<const gpu::Buffer*> bound = buffers();
@@ -313,8 +323,6 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
         msDevice = MsSince(start);
         return false;
     }
-    std::vector<Share> shares(total);
-    if (total > 0) s.shares.buffer->Download(shares.data(), total * sizeof(Share));
     out.offsets.resize(leafCount + 1);
     s.offsets.buffer->Download(out.offsets.data(), (leafCount + 1) * sizeof(uint32_t));
     PENUMBRA_CHECK_EQ(out.offsets[leafCount], total);
@@ -323,13 +331,13 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     out.weight.resize(total);
     out.travel.resize(total);
     if (total > 0) s.travel.buffer->Download(out.travel.data(), total * sizeof(uint32_t));
-    size_t empty = 0;
-    for (size_t k = 0; k < total; ++k) {
-        out.bin[k] = shares[k].bin;
-        out.sender[k] = shares[k].sender;
-        out.weight[k] = shares[k].weight;
-        empty += shares[k].sender == kNoSender;
+    if (total > 0) {
+        s.shares[0].buffer->Download(out.bin.data(), total * sizeof(uint32_t));
+        s.shares[1].buffer->Download(out.sender.data(), total * sizeof(uint32_t));
+        s.shares[2].buffer->Download(out.weight.data(), total * sizeof(float));
     }
+    size_t empty = 0;
+    for (uint32_t sender : out.sender) empty += sender == kNoSender;
     out.empty = empty;
     ++runs;
     msDevice = MsSince(start);
