@@ -139,7 +139,7 @@ const uint kSolidBits = 0x3fffffffu;
 // The deepest chain a leaf may have (the host composites deeper hierarchies itself), and the
 // most closed solids one bin may meet (a bin that meets more sets status[1]; the host sets it).
 const uint kMaxDepth = 64u;
-layout(constant_id = 0) const uint kMaxSolids = 8u;
+layout(constant_id = 0) const uint kMaxSolids = 32u;
 // The most ends one slot may hold (mode 5 ranks each against all of them; a slot with more
 // sets status[2]).
 const uint kMostInSlot = 4096u;

@@ -28,7 +28,7 @@ class VulkanCompositing {
     // `binRadius`: ImplicitLinker::BinRadius(). `mostSolids`: how many closed solids the
     // device tracks in one bin (a bin that meets more is composited on the host).
     VulkanCompositing(gpu::Context& ctx, const Directions& dirs, float binRadius,
-                      uint32_t mostSolids = 8);
+                      uint32_t mostSolids = 32);
     ~VulkanCompositing();
     VulkanCompositing(const VulkanCompositing&) = delete;
     VulkanCompositing& operator=(const VulkanCompositing&) = delete;
