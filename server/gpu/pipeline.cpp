@@ -160,4 +160,10 @@ void Barrier(const vk::raii::CommandBuffer& cb, vk::PipelineStageFlags from,
     cb.pipelineBarrier(from, to, {}, barrier, {}, {});
 }
 
+void HostReadBarrier(const vk::raii::CommandBuffer& cb, vk::PipelineStageFlags from,
+                     vk::AccessFlags fromAccess) {
+    const vk::MemoryBarrier barrier(fromAccess, vk::AccessFlagBits::eHostRead);
+    cb.pipelineBarrier(from, vk::PipelineStageFlagBits::eHost, {}, barrier, {}, {});
+}
+
 }  // namespace penumbra::gpu

@@ -93,4 +93,10 @@ void ComputeBarrier(const vk::raii::CommandBuffer& cb);
 void Barrier(const vk::raii::CommandBuffer& cb, vk::PipelineStageFlags from,
              vk::AccessFlags fromAccess, vk::PipelineStageFlags to);
 
+// Orders writes of stage `from` (compute shaders' by default) before the host reads them
+// (after the submission's fence).
+void HostReadBarrier(const vk::raii::CommandBuffer& cb,
+                     vk::PipelineStageFlags from = vk::PipelineStageFlagBits::eComputeShader,
+                     vk::AccessFlags fromAccess = vk::AccessFlagBits::eShaderWrite);
+
 }  // namespace penumbra::gpu

@@ -13,6 +13,7 @@
 #include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
+#include "gpu/pipeline.h"
 #include "shaders/trace_rchit_spv.h"
 #include "shaders/trace_rgen_spv.h"
 #include "shaders/trace_rmiss_spv.h"
@@ -274,10 +275,7 @@ struct RayTracer::Impl {
                 cb.pushConstants<uint32_t>(*layout, vk::ShaderStageFlagBits::eRaygenKHR, 0, count);
                 cb.traceRaysKHR(raygen, miss, hit, callable, count, 1, 1);
                 // The host reads the hits after the fence.
-                vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,
-                                         vk::AccessFlagBits::eHostRead);
-                cb.pipelineBarrier(vk::PipelineStageFlagBits::eRayTracingShaderKHR,
-                                   vk::PipelineStageFlagBits::eHost, {}, toHost, {}, {});
+                HostReadBarrier(cb, vk::PipelineStageFlagBits::eRayTracingShaderKHR);
             });
             std::memcpy(out.data() + first, hits.mapped, count * sizeof(TraceHit));
         }

@@ -112,9 +112,7 @@ void RenderTarget::EndAndCopy(const vk::raii::CommandBuffer& cb, const Buffer& o
                                {0, 0, 0}, {width_, height_, 1});
     cb.copyImageToBuffer(*color_.image, vk::ImageLayout::eTransferSrcOptimal, out.Handle(), region);
     // The copy lands before the host reads the buffer (SubmitAndWait waits on the fence).
-    vk::MemoryBarrier toHost(vk::AccessFlagBits::eTransferWrite, vk::AccessFlagBits::eHostRead);
-    cb.pipelineBarrier(vk::PipelineStageFlagBits::eTransfer, vk::PipelineStageFlagBits::eHost, {},
-                       toHost, {}, {});
+    HostReadBarrier(cb, vk::PipelineStageFlagBits::eTransfer, vk::AccessFlagBits::eTransferWrite);
 }
 
 }  // namespace penumbra::gpu

@@ -737,7 +737,9 @@ TEST(Implicit, VulkanCompositingMatchesTheCpu) {
         EXPECT_EQ(other, 0u) << what;
         EXPECT_EQ(a.empty, b.empty) << what;
         EXPECT_LT(worst, 1e-5) << what;
-        EXPECT_FALSE(solver.Solids().empty() && std::string(what) == "Cornell box");
+        if (std::string(what) == "Cornell box") {  // its blocks: the solids' rules ran
+            EXPECT_FALSE(solver.Solids().empty());
+        }
     };
     check(scenes::CornellBox().Build(), 0.08f, "Cornell box");
     check(BoxOnGroundUnderASky(), 0.1f, "box under a sky");

@@ -494,17 +494,17 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     compositedOnDevice_ = false;
     compositeOnHost_.clear();
     if (device_ && composite_) {
+        // The device's ends are in the calling thread's list; joined if ever in several.
+        std::vector<const std::vector<End>*> filled;
+        for (const auto& v : recorded)
+            if (!v.empty()) filled.push_back(&v);
         std::vector<End> joined;
         std::span<const End> all;
-        for (const auto& v : recorded) {
-            if (v.empty()) continue;
-            if (all.empty() && joined.empty()) {
-                all = v;
-            } else {
-                if (joined.empty()) joined.assign(all.begin(), all.end());
-                joined.insert(joined.end(), v.begin(), v.end());
-                all = joined;
-            }
+        if (filled.size() == 1) {
+            all = *filled[0];
+        } else {
+            for (const auto* v : filled) joined.insert(joined.end(), v->begin(), v->end());
+            all = joined;
         }
         compositeOnHost_ = composite_->Unfit(h, all.size());
         if (compositeOnHost_.empty()) {

@@ -159,10 +159,7 @@ std::vector<glm::vec3> VulkanBounce::Gather(const std::vector<glm::vec3>& radian
             run(1, size_t(count) * (s.bins + 1));
         }
         run(2, s.leaves);
-        const vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,
-                                       vk::AccessFlagBits::eHostRead);
-        cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
-                           vk::PipelineStageFlagBits::eHost, {}, toHost, {}, {});
+        gpu::HostReadBarrier(cb);
     });
     std::vector<glm::vec4> down(s.leaves);
     s.gathered->Download(down.data(), down.size() * sizeof(glm::vec4));

@@ -157,11 +157,14 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     PENUMBRA_CHECK(Unfit(h, ends.size()).empty());
     PENUMBRA_CHECK(solid.empty() || solid.size() == h.size());
     why_.clear();
+    auto fail = [&](const char* why) {
+        why_ = why;
+        msDevice = MsSince(start);
+        return false;
+    };
     for (uint32_t of : solid)
-        if (of != kNoSolid && of >= kMostSolid) {
-            why_ = "a closed solid's number exceeds what the device's shares mark";
-            return false;
-        }
+        if (of != kNoSolid && of >= kMostSolid)
+            return fail("a closed solid's number exceeds what the device's shares mark");
     const size_t bins = size_t(s.dirs.Count()), nodeCount = h.size(), leafCount = h.leaves.size();
     const size_t slots = nodeCount * bins, cells = leafCount * bins;
     std::vector<CompositeNode> nodes(nodeCount);
@@ -181,8 +184,8 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     }
     s.Reserve(s.nodes, nodes.size() * sizeof(CompositeNode)).Upload(nodes);
     s.Reserve(s.leaves, leaves.size() * sizeof(CompositeLeaf)).Upload(leaves);
-    if (!boxes.empty()) s.Reserve(s.boxes, boxes.size() * sizeof(glm::vec4)).Upload(boxes);
-    s.Reserve(s.boxes, sizeof(glm::vec4));
+    s.Reserve(s.boxes, std::max<size_t>(1, boxes.size()) * sizeof(glm::vec4));
+    if (!boxes.empty()) s.boxes.buffer->Upload(boxes);
     {
         std::vector<uint32_t> field(ends.size());
         for (int f = 0; f < 4; ++f) {
@@ -245,12 +248,6 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
         run(cb, 2, 1);
         run(cb, 3, gpu::StridedGroups(blocks));
     };
-    auto toHost = [](const vk::raii::CommandBuffer& cb) {
-        const vk::MemoryBarrier barrier(vk::AccessFlagBits::eShaderWrite,
-                                        vk::AccessFlagBits::eHostRead);
-        cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
-                           vk::PipelineStageFlagBits::eHost, {}, barrier, {}, {});
-    };
     auto buffers = [&]() {
         std::vector<const gpu::Buffer*> b;
         for (auto& f : s.ends) b.push_back(f.buffer.get());
@@ -285,25 +282,20 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
             run(cb, 7, gpu::StridedGroups(cells));        // the bins showing the environment
             scan(cb, mergedAt, cells);
             scan(cb, environmentAt, cells);
-            toHost(cb);
+            gpu::HostReadBarrier(cb);
         });
     }
     uint32_t state[4] = {0, 0, 0, 0}, merged = 0, shown = 0;
     s.status->Download(state, sizeof(state));
-    if (state[1] != 0 || state[2] != 0) {
-        why_ = state[1] != 0 ? "a bin met more closed solids than the device's compositing holds"
-                             : "a (node, bin) slot holds more ends than the device's sort takes";
-        msDevice = MsSince(start);
-        return false;
-    }
+    if (state[1] != 0)
+        return fail("a bin met more closed solids than the device's compositing holds");
+    if (state[2] != 0)
+        return fail("a (node, bin) slot holds more ends than the device's sort takes");
     s.counts.buffer->Download(&merged, sizeof(uint32_t), (mergedAt + cells) * sizeof(uint32_t));
     s.counts.buffer->Download(&shown, sizeof(uint32_t), (environmentAt + cells) * sizeof(uint32_t));
     const size_t total = size_t(merged) + shown;
-    if (total >= 0xffffffffu || total * sizeof(uint32_t) > s.ctx.Limits().maxStorageBufferRange) {
-        why_ = "the shares exceed the device's storage-buffer range";
-        msDevice = MsSince(start);
-        return false;
-    }
+    if (total >= 0xffffffffu || total * sizeof(uint32_t) > s.ctx.Limits().maxStorageBufferRange)
+        return fail("the shares exceed the device's storage-buffer range");
     for (auto& field : s.shares) s.Reserve(field, total * sizeof(uint32_t));
     s.Reserve(s.travel, total * sizeof(uint32_t));
     {
@@ -314,15 +306,11 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
             run(cb, 8, gpu::StridedGroups(cells));          // the shares written
             run(cb, 9, gpu::StridedGroups(leafCount + 1));  // the leaves' first shares
             run(cb, 10, gpu::StridedGroups(total));         // the far faces' fronts, travel
-            toHost(cb);
+            gpu::HostReadBarrier(cb);
         });
     }
     s.status->Download(state, sizeof(state));
-    if (state[3] != 0) {
-        why_ = "the device's merges wrote other counts than they counted";
-        msDevice = MsSince(start);
-        return false;
-    }
+    if (state[3] != 0) return fail("the device's merges wrote other counts than they counted");
     out.offsets.resize(leafCount + 1);
     s.offsets.buffer->Download(out.offsets.data(), (leafCount + 1) * sizeof(uint32_t));
     PENUMBRA_CHECK_EQ(out.offsets[leafCount], total);

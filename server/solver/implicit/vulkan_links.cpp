@@ -178,10 +178,7 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
                 cb.pushConstants<PairPush>(s.pairs.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
                                            push);
                 cb.dispatch(gpu::Groups(n), 1, 1);
-                const vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,
-                                               vk::AccessFlagBits::eHostRead);
-                cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
-                                   vk::PipelineStageFlagBits::eHost, {}, toHost, {}, {});
+                gpu::HostReadBarrier(cb);
             });
             ++rounds;
             uint32_t got[3] = {0, 0, 0};  // next pairs, ends, pairs linked

@@ -199,10 +199,7 @@ void VulkanWalk::Walk(size_t index, const LineBatch& b, float cellArea,
             cb.dispatch(uint32_t((s.surfels + 63) / 64), 1, 1);
             gpu::ComputeBarrier(cb);
         }
-        const vk::MemoryBarrier toHost(vk::AccessFlagBits::eShaderWrite,
-                                       vk::AccessFlagBits::eHostRead);
-        cb.pipelineBarrier(vk::PipelineStageFlagBits::eComputeShader,
-                           vk::PipelineStageFlagBits::eHost, {}, toHost, {}, {});
+        gpu::HostReadBarrier(cb);
     });
     s.weighted->Download(up.data(), up.size() * sizeof(glm::vec4));
     for (size_t i = 0; i < s.surfels; ++i) weighted[i] += glm::vec3(up[i]), sampled[i] += up[i].w;
