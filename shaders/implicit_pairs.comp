@@ -104,13 +104,16 @@ void Emit(uint slot, uint sender, float dist, float omega) {
     if (i < pc.endCapacity) ends[i] = End(slot, sender, dist, omega);
 }
 
-// A flat sender's depth along `w` from the receiver's centre `at` (Record's `depth`).
+// A flat sender's depth along bin axis `w` from the receiver's centre `at` (Record's
+// `depth`: its plane met along the axis, a leaf's within dist ± its radius, a cluster's at
+// most dist).
 float Depth(PairNode from, vec3 at, vec3 w, float dist) {
     if (from.coneCos < kFlatCone) return dist;
     float facing = dot(from.normal, w);
     if (abs(facing) < 0.2) return dist;
     float t = dot(from.normal, from.center - at) / facing;
-    return t > 0.0 ? min(t, dist) : dist;
+    if (!(t > 0.0)) return dist;
+    return from.right == 0u ? clamp(t, dist - from.radius, dist + from.radius) : min(t, dist);
 }
 
 // LensArea (implicit_links.cpp): the overlap of discs of radii r and R, centres d apart.
@@ -193,7 +196,7 @@ void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist
         }
         return;
     }
-    Emit(row + centre, sender, Depth(from, at, dir, dist), omega);
+    Emit(row + centre, sender, Depth(from, at, dirs[centre].xyz, dist), omega);
 }
 
 void Split(uint a, uint b) {

@@ -868,17 +868,29 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
                             uint32_t centre, float shows, std::vector<End>& ends) const {
     const size_t bins = static_cast<size_t>(dirs_.Count());
     const size_t row = size_t(node) * bins;
-    // How far along `w` from the receiver's centre the sender lies, for the bin's front-to-
-    // back order: a flat sender's plane is met at dot(n, c − at) / dot(n, w), so that two
-    // coplanar or stacked faces (a lamp 2 mm in front of its housing, a light set in a
-    // ceiling) sort by their planes, not by where their centres happen to lie; a cluster,
-    // or a face seen edge-on, by its centre's distance.
+    // How far along bin axis `w` from the receiver's centre the sender lies, for the bin's
+    // front-to-back order: a flat sender's plane is met at dot(n, c − at) / dot(n, w). A leaf
+    // (a disc) is ordered by its plane along the axis of the bin, the same axis for every end
+    // of the bin, wherever its centre lies: two stacked faces (a lamp 1 cm under the ceiling,
+    // books on a shelf) sort by their planes. By its own direction (its centre's distance),
+    // a ceiling leaf beside the lamp came before a lamp leaf farther out, and the closest
+    // layer gave the ceiling the lamp's share of the bin: a panel 1 cm under a black ceiling
+    // lit the floor 0.82 of its light at 128 bins, 0.72 at 864
+    // (Implicit.LampUnderACeilingLightsTheFloor). Within dist ± its radius, where every
+    // point of it lies: a plane met far beyond the disc (the axis nearly along it) does not
+    // put the leaf behind what it hides. A flat cluster's members lie about its plane, not
+    // on it: its plane along the axis, at most its centre's distance (measured: beyond it,
+    // the deforming room of Implicit.ADeformingMeshOverAHundredFramesStaysBoundedAndSmooth
+    // changed 3.5% between frames, against 2.4%). Another cluster, or a face seen edge-on, by
+    // its centre's distance.
     auto depth = [&](const glm::vec3& w) {
         if (from.coneCos < kFlatCone) return dist;
         const float facing = glm::dot(from.normal, w);
         if (std::abs(facing) < 0.2f) return dist;
         const float t = glm::dot(from.normal, from.center - at) / facing;
-        return t > 0.0f ? std::min(t, dist) : dist;
+        if (!(t > 0.0f)) return dist;
+        return from.IsLeaf() ? std::clamp(t, dist - from.radius, dist + from.radius)
+                             : std::min(t, dist);
     };
     // An end that cannot be split and still looks wider than half a bin's spacing (a leaf
     // next to its receiver: a contact, a corner) covers every bin its disc (the angular
@@ -941,7 +953,7 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
                             spread);
         return;
     }
-    ends.push_back({uint32_t(row + centre), sender, depth(dir), omega});
+    ends.push_back({uint32_t(row + centre), sender, depth(dirs_.Direction(centre)), omega});
 }
 
 }  // namespace penumbra
