@@ -53,6 +53,7 @@ bench-lightfield: benches
 
 bench-implicit: benches
 	$(BUILD)/bench/penumbra-bench-implicit --out bench/results
+	$(BUILD)/bench/penumbra-bench-implicit --out bench/results --bin-cover closest --link-threshold 1
 
 bench-direct: benches
 	$(BUILD)/bench/penumbra-bench-direct --out bench/results

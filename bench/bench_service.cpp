@@ -97,6 +97,7 @@ struct Case {
     std::string light, mover;
     std::string deformer = {};  // a node with morph targets, posed by the deformation edits
     std::string solver = "antiradiance";  // the antiradiance oracle settings apply to it only
+    SolverOptions options = {};           // --solver-option NAME=VALUE, given to every case
 };
 
 nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int edits, int moves,
@@ -111,6 +112,7 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
         if (!c.oracle.empty()) o.solverOptions["link-oracle"] = c.oracle;
         SetOption(o.solverOptions, "oracle", c.oracleValue);
     }
+    for (const auto& [key, value] : c.options) o.solverOptions[key] = value;
     o.convergedChange = 0.0f;  // stream continuously: every frame is a frame to deliver
     o.reload = true;
     o.gatherRays = gatherRays;
@@ -123,6 +125,7 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
                 info.device.c_str(), info.elements, (unsigned long long)info.links, loadS);
     nlohmann::json out;
     out["scene"] = c.name;
+    if (!c.options.empty()) out["solver_options"] = c.options;
     out["device"] = info.device;
     out["solver"] = c.solver;
     out["gather_rays"] = gatherRays;
@@ -368,7 +371,20 @@ int main(int argc, char** argv) {
                    "LoadScene emitter_rays: the first shot (0: off; default on, as the service)")
         ->capture_default_str();
     app.add_option("--name", name, "results go to OUT/NAME.json")->capture_default_str();
+    std::vector<std::string> solverOptions;
+    app.add_option("--solver-option", solverOptions,
+                   "NAME=VALUE: a LoadScene solver option for every case (repeatable), e.g. "
+                   "bin-cover=closest for --solver implicit");
     CLI11_PARSE(app, argc, argv);
+    SolverOptions given;
+    for (const std::string& kv : solverOptions) {
+        const size_t eq = kv.find('=');
+        if (eq == std::string::npos || eq == 0) {
+            std::fprintf(stderr, "--solver-option %s: expected NAME=VALUE\n", kv.c_str());
+            return 2;
+        }
+        given[kv.substr(0, eq)] = kv.substr(eq + 1);
+    }
 
     auto has = [](const std::string& list, const std::string& x) {
         return ("," + list + ",").find("," + x + ",") != std::string::npos;
@@ -396,6 +412,7 @@ int main(int argc, char** argv) {
     try {
         for (auto c : cases) {
             c.solver = solver;
+            c.options = given;
             // A server of its own per case: no other session competes for the cores.
             InProcessServer srv(fs::path(PENUMBRA_SOURCE_DIR) / "scenes");
             if (c.light.empty()) {

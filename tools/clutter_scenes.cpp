@@ -29,8 +29,8 @@ std::string Cm(float metres) {
 
 }  // namespace
 
-void AddClutterRoom(SceneBuilder& b, float emission) {
-    const uint32_t wall = b.AddMaterial("room", glm::vec3(0.7f));
+void AddClutterRoom(SceneBuilder& b, float emission, float albedo) {
+    const uint32_t wall = b.AddMaterial("room", glm::vec3(albedo));
     const uint32_t lamp = b.AddMaterial("panel", glm::vec3(0.0f), glm::vec3(emission));
     const float R = kRoom;
     const glm::vec3 inside(R / 2, R / 2, R / 2);

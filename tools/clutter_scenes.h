@@ -11,9 +11,10 @@
 
 namespace penumbra::scenes {
 
-// A closed 2 × 2 × 2 m room (albedo 0.7, one-sided walls facing in) lit by a 0.6 m square
-// ceiling panel emitting `emission` nits: what every clutter scene stands in.
-void AddClutterRoom(SceneBuilder& b, float emission = 30.0f);
+// A closed 2 × 2 × 2 m room (albedo `albedo`, one-sided walls facing in) lit by a 0.6 m
+// square ceiling panel emitting `emission` nits, 1 cm under the ceiling, facing down: what
+// every clutter scene stands in.
+void AddClutterRoom(SceneBuilder& b, float emission = 30.0f, float albedo = 0.7f);
 
 // `count` boxes 0.27 × 0.25 × 0.08 m (albedo 0.6) standing on the floor in a row along z,
 // their 8 cm-apart faces parallel with `gap` metres between neighbours (0: faces in contact).

@@ -7,6 +7,7 @@
 #include <random>
 
 #include "bundled_scenes.h"
+#include "clutter_scenes.h"
 #include "gather/gather_stage.h"
 #include "gpu/context.h"
 #include "reference/path_tracer.h"
@@ -204,15 +205,20 @@ TEST(Implicit, OpenPlaneUnderASkyReceivesPiL) {
 // A closed room: every front bin of every leaf sees a wall, and with every surface emitting
 // L_e = 1 at albedo 0.5 the light converges to L = 2, E = 2π (a white furnace), with boxes
 // in the room.
-TEST(Implicit, ClosedRoomFillsEveryBinAndKeepsTheFurnace) {
+// The unit room with two boxes in it, every surface emitting L_e = 1 at albedo 0.5 (E = 2π
+// everywhere once converged). The boxes are held off the floor, so that every vertex sees the
+// room (a floor vertex under a box standing on it receives nothing, rightly).
+Scene FurnaceRoomWithBoxes() {
     SceneBuilder b;
     uint32_t glow = b.AddMaterial("glow", glm::vec3(0.5f), glm::vec3(1.0f));
     testing::AddUnitRoom(b, glow, glow, 4);
-    // Boxes held off the floor, so that every vertex sees the room (a floor vertex under a
-    // box standing on it receives nothing, rightly).
     b.AddBox("box", glow, {0.3f, 0.3f, 0.3f}, {0.2f, 0.3f, 0.2f});
     b.AddBox("tall", glow, {0.7f, 0.45f, 0.6f}, {0.15f, 0.6f, 0.15f}, 20.0f);
-    Scene scene = b.Build();
+    return b.Build();
+}
+
+TEST(Implicit, ClosedRoomFillsEveryBinAndKeepsTheFurnace) {
+    Scene scene = FurnaceRoomWithBoxes();
     auto solver = CreateSolver(scene, Implicit(0.06f));
     auto& implicit = dynamic_cast<ImplicitSolver&>(*solver);
     double mean = 0.0, worst = 1.0;
@@ -238,6 +244,62 @@ TEST(Implicit, ClosedRoomFillsEveryBinAndKeepsTheFurnace) {
     // near ones: ImplicitLinker::Build's `solid`); the rest: docs/STATUS.md, issue 21. The
     // goal is 2%; this bound catches a regression.
     EXPECT_NEAR(sum, 2 * kPi, 0.05 * 2 * kPi);
+}
+
+// `bin-cover closest`, the paper's Eq. 5 as written: each front bin of a leaf is one share,
+// its closest link's (pushed down from the leaf's ancestors) covering the whole bin, or the
+// environment; on a Vulkan device (the links made on the CPU, the bounces on the device) the
+// answer is the CPU's. The rule's known loss, in the closed furnace room above: 23% low at
+// 128 bins (a leaf wider than a bin marks only its centre's bin, and its neighbours see the
+// environment, 6.6% of the shares here, or what lies behind; where a box's near faces' centres
+// fell into other bins, its far face is the closest and blocks, black). The bounds catch a
+// regression (the layered default keeps this room within 5%).
+TEST(Implicit, ClosestLinkCoversItsBin) {
+    Scene scene = FurnaceRoomWithBoxes();
+    SolverSettings settings = Implicit(0.08f);
+    SetOption(settings.options, "bin-cover", "closest");
+    auto solver = CreateSolver(scene, settings);
+    auto& implicit = dynamic_cast<ImplicitSolver&>(*solver);
+    const ImplicitLinks& links = implicit.Links();
+    const Hierarchy& h = implicit.GetHierarchy();
+    const Directions dirs(128);
+    size_t wrong = 0, empty = 0;
+    for (size_t i = 0; i < h.leaves.size(); ++i) {
+        const glm::vec3& n = h.nodes[h.leaves[i]].normal;
+        size_t front = 0;
+        for (uint32_t k = 0; k < uint32_t(dirs.Count()); ++k)
+            front += glm::dot(n, dirs.Direction(k)) > 0.0f;
+        std::vector<uint8_t> seen(dirs.Count(), 0);
+        for (uint32_t k = links.offsets[i]; k < links.offsets[i + 1]; ++k) {
+            wrong += seen[links.bin[k]]++ > 0;  // at most one share a bin
+            empty += links.sender[k] == kNoSender;
+        }
+        wrong += links.offsets[i + 1] - links.offsets[i] != front;  // one every front bin
+    }
+    std::printf("closest link: %zu leaves, %zu shares, %zu of the environment\n", h.leaves.size(),
+                links.sender.size(), empty);
+    EXPECT_EQ(wrong, 0u);
+    EXPECT_EQ(solver->Stats().Text("bin_cover"), "closest");
+    solver->Iterate(40);
+    const std::vector<glm::vec3> e = testing::AllVertices(*solver, scene, Channel::kIndirect);
+    double sum = 0.0;
+    for (const glm::vec3& v : e) sum += v.x / e.size();
+    std::printf("closest link, furnace: mean E %.4f (2π = %.4f)\n", sum, 2 * kPi);
+    EXPECT_GT(sum, 0.7 * 2 * kPi);
+    EXPECT_LT(sum, 1.02 * 2 * kPi);
+    settings.device = DeviceChoice::kLavapipe;
+    settings.validation = true;
+    auto device = CreateSolver(scene, settings);
+    device->Iterate(40);
+    EXPECT_EQ(device->Stats().Text("link_device"), "cpu");
+    EXPECT_NE(device->Stats().Text("bounce_device"), "cpu");
+    for (const auto& m : device->ValidationMessages()) ADD_FAILURE() << "validation: " << m;
+    const std::vector<glm::vec3> d = testing::AllVertices(*device, scene, Channel::kIndirect);
+    double num = 0.0, den = 0.0;
+    for (size_t i = 0; i < e.size(); ++i)
+        num += glm::dot(d[i] - e[i], d[i] - e[i]), den += glm::dot(e[i], e[i]);
+    std::printf("closest link on lavapipe: %.2e from the CPU's\n", std::sqrt(num / den));
+    EXPECT_LT(std::sqrt(num / den), 1e-4);
 }
 
 // The bundled maze as a white furnace (every surface emitting 1 at albedo 0.5): thin
@@ -328,24 +390,15 @@ TEST(Implicit, SmallPatchCoversItsOwnSolidAngle) {
 // shelf): the lamp's faces lie in front of the ceiling's along every bin's axis, so they take
 // the bins they cover before the ceiling behind them does. Ordered by their centres' distance
 // instead, ceiling leaves beside the lamp came before lamp leaves farther out in the same
-// bin, and the floor got 0.82 of the lamp's light at 128 bins, 0.72 at 864. Everything but
+// bin, and the floor got 0.82 of the lamp's light at 128 bins, 0.70 at 864. Everything but
 // the lamp is black and the solver carries the lamp's light itself (no first shot): the
 // floor's light against the exact irradiance from the lamp's rectangle (Lambert's polygon
 // formula), over the floor's surfels.
 TEST(Implicit, LampUnderACeilingLightsTheFloor) {
     SceneBuilder b;
-    const uint32_t black = b.AddMaterial("black", glm::vec3(0.0f));
-    const uint32_t lamp = b.AddMaterial("lamp", glm::vec3(0.0f), glm::vec3(1.0f));
-    const float R = 2.0f, y = R - 0.01f, lo = R / 2 - 0.3f, hi = R / 2 + 0.3f;
-    const glm::vec3 inside(R / 2);
-    b.AddQuad("floor", black, {0, 0, 0}, {R, 0, 0}, {R, 0, R}, {0, 0, R}, inside, 4);
-    b.AddQuad("ceiling", black, {0, R, 0}, {R, R, 0}, {R, R, R}, {0, R, R}, inside, 4);
-    b.AddQuad("wall_south", black, {0, 0, 0}, {R, 0, 0}, {R, R, 0}, {0, R, 0}, inside, 4);
-    b.AddQuad("wall_north", black, {0, 0, R}, {R, 0, R}, {R, R, R}, {0, R, R}, inside, 4);
-    b.AddQuad("wall_west", black, {0, 0, 0}, {0, 0, R}, {0, R, R}, {0, R, 0}, inside, 4);
-    b.AddQuad("wall_east", black, {R, 0, 0}, {R, 0, R}, {R, R, R}, {R, R, 0}, inside, 4);
+    scenes::AddClutterRoom(b, 1.0f, 0.0f);  // the panel: 0.6 m, 1 cm under the 2 m ceiling
+    const float y = 1.99f, lo = 0.7f, hi = 1.3f;
     const std::vector<glm::vec3> panel = {{lo, y, lo}, {hi, y, lo}, {hi, y, hi}, {lo, y, hi}};
-    b.AddQuad("panel", lamp, panel[0], panel[1], panel[2], panel[3], inside, 2);
     const Scene scene = b.Build();
     // E = L/2 Σ over the rectangle's edges of the angle the edge subtends times the cosine
     // between the receiver's normal and the normal of the plane through the edge and the

@@ -232,12 +232,16 @@ struct ImplicitLinker::Scratch {
     tbb::enumerable_thread_specific<std::vector<std::vector<std::pair<const End*, const End*>>>>
         stacks;
     std::vector<std::vector<Entry>> perLeaf;
+    std::vector<uint64_t> closest;  // BuildClosest's slots
 };
 
 ImplicitLinker::~ImplicitLinker() = default;
 
-ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
-    : dirs_(dirs), threshold_(linkThreshold), scratch_(std::make_unique<Scratch>()) {
+ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold, bool closest)
+    : dirs_(dirs),
+      threshold_(linkThreshold),
+      closest_(closest),
+      scratch_(std::make_unique<Scratch>()) {
     if (!(linkThreshold > 0.0f)) throw Error("link threshold must be a positive number");
     // Ends wider than half a bin's spacing are spread over the bins they cover.
     splat_ = std::sin(0.5f * dirs.Spacing());
@@ -258,6 +262,11 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold)
             (lens(0.5 * (lo + hi), y) > minArea ? lo : hi) = 0.5 * (lo + hi);
         overlapReach_.push_back(float(hi));
     }
+}
+
+void ImplicitLinker::UseDevice(VulkanLinkCreation* device) {
+    if (device && closest_) throw Error("the closest-link rule creates its links on the CPU");
+    device_ = device;
 }
 
 float ImplicitLinker::OverlapReach(float rho) const {
@@ -528,6 +537,20 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // full build with `moving` takes its kept ends from kept_ too).
     if (keeps)
         for (uint32_t r = 0; r + 1 < kept_.first.size(); ++r) used.push_back(r);
+    if (closest_) {
+        std::vector<const End*> firsts, lasts;
+        for (const auto& v : recorded)
+            firsts.push_back(v.data()), lasts.push_back(v.data() + v.size());
+        for (uint32_t r : used)
+            firsts.push_back(kept_.ends.data() + kept_.first[r]),
+                lasts.push_back(kept_.ends.data() + kept_.first[r + 1]);
+        out.msCreate = MsSince(start);
+        start = std::chrono::steady_clock::now();
+        BuildClosest(h, firsts, lasts, out);
+        if (!perFrame) scratch_ = std::make_unique<Scratch>();
+        out.msPush = MsSince(start);
+        return;
+    }
     // The recorded ends (and the kept ones) by (node, bin), each slot's nearest first. The
     // sources (each thread's ends, the kept roots' in chunks) are counted and scattered by
     // node side by side, then each node's ends by bin and each slot by depth, node by node.
@@ -825,6 +848,17 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
         }
         while (!chain.empty()) leave();  // the thread's stacks empty for its next task
     });
+    WriteShares(h, out);
+    if (!perFrame) scratch_ = std::make_unique<Scratch>();  // no relink a frame expected
+    out.msPush = MsSince(start);
+}
+
+void ImplicitLinker::WriteShares(const Hierarchy& h, ImplicitLinks& out) const {
+    // Each leaf's shares (Scratch::perLeaf) one after another, and how each sender's light is
+    // read (ImplicitLinks::travel).
+    const auto& nodes = h.nodes;
+    const size_t leaves = h.leaves.size();
+    const std::vector<std::vector<Entry>>& perLeaf = scratch_->perLeaf;
     out.offsets.assign(leaves + 1, 0);
     for (size_t i = 0; i < leaves; ++i)
         out.offsets[i + 1] = out.offsets[i] + uint32_t(perLeaf[i].size());
@@ -859,8 +893,90 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
         empty += none;
     });
     out.empty = empty;
-    if (!perFrame) scratch_ = std::make_unique<Scratch>();  // no relink a frame expected
-    out.msPush = MsSince(start);
+}
+
+void ImplicitLinker::BuildClosest(const Hierarchy& h, const std::vector<const End*>& firsts,
+                                  const std::vector<const End*>& lasts, ImplicitLinks& out) {
+    // CreateHierarchicalLinks' per-bin minimum (Sec. 4.2.2): every end keeps its slot's
+    // closest, as a 64-bit (depth bits, sender) key by compare-and-swap (a positive float's
+    // bits order as it does; the sender breaks ties, so the threads' order never shows).
+    const auto& nodes = h.nodes;
+    const size_t bins = static_cast<size_t>(dirs_.Count());
+    const float omegaBin = dirs_.BinSolidAngle();
+    constexpr uint64_t kNone = ~uint64_t(0);
+    auto start = std::chrono::steady_clock::now();
+    std::vector<uint64_t>& best = scratch_->closest;
+    best.resize(nodes.size() * bins);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, best.size(), 1 << 16), [&](const auto& r) {
+        std::fill(best.begin() + r.begin(), best.begin() + r.end(), kNone);
+    });
+    tbb::parallel_for(size_t(0), firsts.size(), [&](size_t l) {
+        const size_t n = size_t(lasts[l] - firsts[l]);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const auto& r) {
+            for (size_t k = r.begin(); k != r.end(); ++k) {
+                // The slots are scattered over the table: fetch a few ends ahead.
+                constexpr size_t kAhead = 16;
+                if (k + kAhead < r.end()) __builtin_prefetch(&best[firsts[l][k + kAhead].slot], 1);
+                const End& e = firsts[l][k];
+                const uint64_t key = uint64_t(std::bit_cast<uint32_t>(e.dist)) << 32 | e.sender;
+                std::atomic_ref<uint64_t> slot(best[e.slot]);
+                uint64_t old = slot.load(std::memory_order_relaxed);
+                while (key < old &&
+                       !slot.compare_exchange_weak(old, key, std::memory_order_relaxed)) {
+                }
+            }
+        });
+    });
+    out.msCreate += MsSince(start);
+    // RefineHierarchicalLinks + PushdownLinks (Sec. 4.2.3–4.2.4): each node's slots take its
+    // parent's where those are closer, top down; then each leaf's front bins are its closest
+    // links, each covering the bin, or the environment where there is none. The nodes above
+    // kSplit levels one after another, then each subtree below them in a task of its own, in
+    // pre-order (a parent's row before its children's, still in cache), its leaves' shares
+    // made as the walk reaches them.
+    constexpr uint32_t kSplit = 6;
+    auto push = [&](uint32_t n) {
+        uint64_t* row = best.data() + size_t(n) * bins;
+        const uint64_t* up = best.data() + size_t(nodes[n].parent) * bins;
+        for (size_t b = 0; b < bins; ++b) row[b] = std::min(row[b], up[b]);
+    };
+    std::vector<uint32_t> tasks;  // the subtrees' roots
+    for (uint32_t n = 0; n < nodes.size();) {
+        if (nodes[n].depth < kSplit && !nodes[n].IsLeaf()) {
+            if (n != 0) push(n);
+            ++n;
+        } else {
+            tasks.push_back(n);
+            n = nodes[n].end;
+        }
+    }
+    const size_t leaves = h.leaves.size();
+    std::vector<std::vector<Entry>>& perLeaf = scratch_->perLeaf;
+    perLeaf.resize(leaves);
+    tbb::parallel_for(size_t(0), tasks.size(), [&](size_t t) {
+        const uint32_t root = tasks[t];
+        size_t i = size_t(std::lower_bound(h.leaves.begin(), h.leaves.end(), root) -
+                          h.leaves.begin());  // the subtree's first leaf
+        for (uint32_t n = root; n < std::max(nodes[root].end, root + 1); ++n) {
+            if (n != 0) push(n);
+            if (!nodes[n].IsLeaf()) continue;
+            const uint64_t* row = best.data() + size_t(n) * bins;
+            std::vector<Entry>& list = perLeaf[i++];
+            list.clear();
+            for (size_t b = 0; b < bins; ++b) {  // cos⁺ a front bin, normalised below
+                const float c = glm::dot(nodes[n].normal, dirs_.Direction(uint32_t(b)));
+                if (!(c > 0.0f)) continue;
+                const uint32_t sender = row[b] == kNone ? kNoSender : uint32_t(row[b]);
+                list.push_back({uint32_t(b), sender, c});
+            }
+            // Directions::CosineNorm, from the same cosines: Σ weight = π.
+            double sum = 0.0;
+            for (const Entry& e : list) sum += e.weight;
+            const float scale = sum > 0.0 ? float(std::numbers::pi / (sum * omegaBin)) : 0.0f;
+            for (Entry& e : list) e.weight *= scale * omegaBin;
+        }
+    });
+    WriteShares(h, out);
 }
 
 void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode& from,
@@ -905,7 +1021,7 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
     // edge-on from a corner, its bounding sphere's cone would also take the bins that look
     // past it into the room (a room's edges were half as bright as the truth's, session 36).
     const float sinRadius = from.radius / dist;
-    if (sinRadius > splat_) {
+    if (!closest_ && sinRadius > splat_) {
         const float rho = std::asin(std::min(1.0f, sinRadius));
         const float omegaBin = dirs_.BinSolidAngle();
         // Bins nearer than |ρ − r_bin| lie inside the disc (or hold it) whole: LensArea's

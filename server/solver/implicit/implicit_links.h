@@ -85,7 +85,10 @@ class ImplicitLinker {
         float dist;
         float omega;
     };
-    ImplicitLinker(const Directions& dirs, float linkThreshold);
+    // `closest`: each (node, bin) slot keeps its closest link only, which covers the bin
+    // (Eq. 5 as the paper writes it; ImplicitSettings::closest): no end is spread, no layer
+    // composited. Links on the CPU only (UseDevice is refused).
+    ImplicitLinker(const Directions& dirs, float linkThreshold, bool closest = false);
     ~ImplicitLinker();
     // The links of `hierarchy` as it is placed now. `frontArea`: per node and bin, the
     // front-facing projected area Σ A cos⁺(n, ω_b) (what a cluster covers of a bin).
@@ -125,7 +128,7 @@ class ImplicitLinker {
 
     // Creates the links' ends on `device` (vulkan_links.h) from now on, null: on the CPU. The
     // device examines every pair each build: `moving` is not used, nothing is kept.
-    void UseDevice(VulkanLinkCreation* device) { device_ = device; }
+    void UseDevice(VulkanLinkCreation* device);
     // With the ends created on the device (UseDevice), composites the leaves' bins there too
     // (vulkan_composite.h), null: on the CPU. A build the device cannot composite whole
     // (VulkanCompositing::Unfit and Composite say when) composites here.
@@ -149,8 +152,15 @@ class ImplicitLinker {
     void Record(uint32_t node, uint32_t sender, const HierarchyNode& from, const glm::vec3& at,
                 const glm::vec3& dir, float dist, float omega, uint32_t centre, float shows,
                 std::vector<End>& ends) const;
+    // The closest-link rule's shares (Build, `closest`): per (node, bin) slot the closest
+    // end's (depth bits << 32 | sender) by atomic minimum, pushed down level by level.
+    void BuildClosest(const Hierarchy& h, const std::vector<const End*>& firsts,
+                      const std::vector<const End*>& lasts, ImplicitLinks& out);
+    // Scratch::perLeaf's shares into `out`, with each share's travel.
+    void WriteShares(const Hierarchy& h, ImplicitLinks& out) const;
     const Directions& dirs_;
     float threshold_;
+    bool closest_;
     // The ends of the pairs with no moving end, for `keptFor_` (empty: none kept), per root
     // (the first such pair of a lineage, Build): its descendants' ends in ends[first[r],
     // first[r + 1]), the pairs examined and the pairs linked below it, the roots by pair

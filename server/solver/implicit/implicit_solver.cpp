@@ -46,7 +46,7 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
       own_(own),
       progress_(progress),
       dirs_(own.bins),
-      linker_(dirs_, own.linkThreshold) {
+      linker_(dirs_, own.linkThreshold, own.closest) {
     const auto start = Clock::now();
     if (settings.device == DeviceChoice::kGpu || settings.device == DeviceChoice::kLavapipe) {
         // The links are created on the device (vulkan_links.h); the rest of the frame runs here.
@@ -54,11 +54,15 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
                                                      ? gpu::DeviceKind::kLavapipe
                                                      : gpu::DeviceKind::kRealGpu,
                                                  settings.validation);
-        vulkanLinks_ = std::make_unique<VulkanLinkCreation>(*device_, dirs_, own.linkThreshold);
-        linker_.UseDevice(vulkanLinks_.get());
-        vulkanComposite_ =
-            std::make_unique<VulkanCompositing>(*device_, dirs_, linker_.BinRadius());
-        linker_.UseDeviceCompositing(vulkanComposite_.get());
+        // The closest-link rule is the CPU's only (the device's rounds spread wide ends): its
+        // links are made here, the bounces on the device.
+        if (!own.closest) {
+            vulkanLinks_ = std::make_unique<VulkanLinkCreation>(*device_, dirs_, own.linkThreshold);
+            linker_.UseDevice(vulkanLinks_.get());
+            vulkanComposite_ =
+                std::make_unique<VulkanCompositing>(*device_, dirs_, linker_.BinRadius());
+            linker_.UseDeviceCompositing(vulkanComposite_.get());
+        }
     }
     ValidateEnvironment(scene.environment);
     const float h = ElementSize(scene, settings);
@@ -464,13 +468,14 @@ SolverStats ImplicitSolver::Stats() const {
     // bound); infinite: none is checked, only that the light stays finite.
     s.irradianceBound = std::numeric_limits<float>::infinity();
     s.SetDetail("link_threshold", own_.linkThreshold);
+    s.SetDetail("bin_cover", std::string(own_.closest ? "closest" : "layer"));
     s.SetDetail("candidate_pairs", double(links_.pairs));
     s.SetDetail("empty_bins", double(links_.empty));
     s.SetDetail("relinks", double(relinks_));
     s.SetDetail("relinks_kept", double(incrementalRelinks_));
     s.SetDetail("refinements", double(refinements_));
     // Where the links are created: the device's rounds (uploads, dispatches, readbacks).
-    s.SetDetail("link_device", device_ ? device_->DeviceName() : std::string("cpu"));
+    s.SetDetail("link_device", vulkanLinks_ ? device_->DeviceName() : std::string("cpu"));
     if (vulkanLinks_) {
         s.SetDetail("device_create_ms", vulkanLinks_->msDevice);
         s.SetDetail("device_rounds", double(vulkanLinks_->rounds));
@@ -483,6 +488,8 @@ SolverStats ImplicitSolver::Stats() const {
             s.SetDetail("composite_on_host", linker_.CompositedOnHostBecause());
         s.SetDetail("device_composites", double(vulkanComposite_->runs));
         s.SetDetail("device_composite_ms", vulkanComposite_->msDevice);
+    } else if (device_) {
+        s.SetDetail("composite_on_host", std::string("bin-cover closest: links on the CPU"));
     }
     // Where the bounces run, and why on the host where a device was asked for.
     s.SetDetail("bounce_device", BouncesOnDevice() ? device_->DeviceName() : std::string("cpu"));

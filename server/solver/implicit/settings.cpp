@@ -19,6 +19,16 @@ std::vector<OptionSpec> Options() {
          0.05,
          4,
          {}},
+        {"bin-cover",
+         K::kChoice,
+         "layer",
+         "layer: each bin takes the nearest links until it is full, each covering its own "
+         "solid angle; closest: the paper's rule, the closest link covers the whole bin (faster; "
+         "a light smaller than a bin lights it whole, an element wider than a bin leaves its "
+         "neighbours empty; links created on the CPU)",
+         0,
+         0,
+         {"layer", "closest"}},
     };
 }
 
@@ -47,6 +57,7 @@ ImplicitSettings ReadImplicitSettings(const SolverSettings& settings) {
     if (bins != 0) Directions::Check(bins);
     s.bins = bins > 0 ? bins : kImplicitDefaultBins;
     s.linkThreshold = r.Float("link-threshold");
+    s.closest = r.Choice("bin-cover") == "closest";
     return s;
 }
 

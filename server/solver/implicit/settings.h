@@ -14,6 +14,11 @@ struct ImplicitSettings {
     // than a bin, so that every bin it overlaps gets a part of it (fewer empty bins, a leak
     // under a sky), at more links.
     float linkThreshold = 0.2f;
+    // How a leaf's bin is covered (Sec. 4.2.3–4.2.4): false, the closest layer (the links of
+    // the leaf and its ancestors in the bin, nearest first, each its own solid angle, until
+    // the bin is full); true, the paper's Eq. 5 as written (the closest link of the (node, bin)
+    // slot covers the bin, pushed down the tree; no end spread over the bins it overlaps).
+    bool closest = false;
 };
 
 inline constexpr int kImplicitDefaultBins = 128;
