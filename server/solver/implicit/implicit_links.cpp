@@ -991,7 +991,7 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
     // books on a shelf) sort by their planes. By its own direction (its centre's distance),
     // a ceiling leaf beside the lamp came before a lamp leaf farther out, and the closest
     // layer gave the ceiling the lamp's share of the bin: a panel 1 cm under a black ceiling
-    // lit the floor 0.82 of its light at 128 bins, 0.72 at 864
+    // lit the floor 0.82 of its light at 128 bins, 0.70 at 864
     // (Implicit.LampUnderACeilingLightsTheFloor). Within dist ± its radius, where every
     // point of it lies: a plane met far beyond the disc (the axis nearly along it) does not
     // put the leaf behind what it hides. A flat cluster's members lie about its plane, not

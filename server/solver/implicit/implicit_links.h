@@ -152,8 +152,9 @@ class ImplicitLinker {
     void Record(uint32_t node, uint32_t sender, const HierarchyNode& from, const glm::vec3& at,
                 const glm::vec3& dir, float dist, float omega, uint32_t centre, float shows,
                 std::vector<End>& ends) const;
-    // The closest-link rule's shares (Build, `closest`): per (node, bin) slot the closest
-    // end's (depth bits << 32 | sender) by atomic minimum, pushed down level by level.
+    // The closest-link rule's shares (Build, `closest`) from the ends in [firsts[k],
+    // lasts[k]): per (node, bin) slot the closest end's (depth bits << 32 | sender) by atomic
+    // minimum, pushed down the tree, each leaf's front bin its closest link's whole.
     void BuildClosest(const Hierarchy& h, const std::vector<const End*>& firsts,
                       const std::vector<const End*>& lasts, ImplicitLinks& out);
     // Scratch::perLeaf's shares into `out`, with each share's travel.
