@@ -262,7 +262,11 @@ uint32_t Directions::LookupWithin(const glm::vec3& d, const glm::vec3& a,
 float Directions::CosineNorm(const glm::vec3& n) const {
     double sum = 0.0;
     for (const auto& d : dirs_) sum += std::max(0.0f, glm::dot(n, d));
-    sum *= solidAngle_;
+    return CosineNormOfSum(sum);
+}
+
+float Directions::CosineNormOfSum(double cosineSum) const {
+    const double sum = cosineSum * solidAngle_;
     return sum > 0.0 ? static_cast<float>(std::numbers::pi / sum) : 0.0f;
 }
 

@@ -132,6 +132,8 @@ class Directions {
     uint32_t LookupWithin(const glm::vec3& d, const glm::vec3& a, const glm::vec3& b) const;
     // π / Σ_b ω_bin max(0, n·ω_b): corrects the discrete cosine integral over one side.
     float CosineNorm(const glm::vec3& n) const;
+    // The same from `cosineSum` = Σ_b max(0, n·ω_b), for a caller that has the cosines.
+    float CosineNormOfSum(double cosineSum) const;
     // The bin of bin `bin`'s opposite direction (Lookup(−ω_bin): the bins need not come in
     // opposite pairs).
     uint32_t Opposite(uint32_t bin) const { return opposite_[bin]; }

@@ -262,7 +262,7 @@ TEST(Implicit, ClosestLinkCoversItsBin) {
     auto& implicit = dynamic_cast<ImplicitSolver&>(*solver);
     const ImplicitLinks& links = implicit.Links();
     const Hierarchy& h = implicit.GetHierarchy();
-    const Directions dirs(128);
+    const Directions& dirs = implicit.GetDirections();
     size_t wrong = 0, empty = 0;
     for (size_t i = 0; i < h.leaves.size(); ++i) {
         const glm::vec3& n = h.nodes[h.leaves[i]].normal;

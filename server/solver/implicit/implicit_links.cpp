@@ -537,35 +537,28 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // full build with `moving` takes its kept ends from kept_ too).
     if (keeps)
         for (uint32_t r = 0; r + 1 < kept_.first.size(); ++r) used.push_back(r);
-    if (closest_) {
-        std::vector<const End*> firsts, lasts;
-        for (const auto& v : recorded)
-            firsts.push_back(v.data()), lasts.push_back(v.data() + v.size());
-        for (uint32_t r : used)
-            firsts.push_back(kept_.ends.data() + kept_.first[r]),
-                lasts.push_back(kept_.ends.data() + kept_.first[r + 1]);
-        out.msCreate = MsSince(start);
-        start = std::chrono::steady_clock::now();
-        BuildClosest(h, firsts, lasts, out);
-        if (!perFrame) scratch_ = std::make_unique<Scratch>();
-        out.msPush = MsSince(start);
-        return;
-    }
     // The recorded ends (and the kept ones) by (node, bin), each slot's nearest first. The
     // sources (each thread's ends, the kept roots' in chunks) are counted and scattered by
     // node side by side, then each node's ends by bin and each slot by depth, node by node.
     // The order the sources are read in never shows: no two ends of a slot tie on depth and
     // sender.
-    using Range = std::pair<const End*, const End*>;
-    std::vector<std::vector<Range>> sources;
+    std::vector<std::vector<EndRange>> sources;
     for (const auto& v : recorded)
         if (!v.empty()) sources.push_back({{v.data(), v.data() + v.size()}});
     const size_t chunk = std::max<size_t>(1, (used.size() + 15) / 16);
     for (size_t u = 0; u < used.size(); u += chunk) {
-        std::vector<Range>& ranges = sources.emplace_back();
+        std::vector<EndRange>& ranges = sources.emplace_back();
         for (size_t k = u; k < std::min(used.size(), u + chunk); ++k)
             ranges.push_back({kept_.ends.data() + kept_.first[used[k]],
                               kept_.ends.data() + kept_.first[used[k] + 1]});
+    }
+    if (closest_) {  // the paper's closest link a slot instead of the layer below
+        out.msCreate = MsSince(start);
+        start = std::chrono::steady_clock::now();
+        BuildClosest(h, sources, out);
+        if (!perFrame) scratch_ = std::make_unique<Scratch>();
+        out.msPush = MsSince(start);
+        return;
     }
     const uint32_t binCount = uint32_t(bins);
     // An end's node, slot / bins, as a multiply (the division was a tenth of the counting and
@@ -895,8 +888,9 @@ void ImplicitLinker::WriteShares(const Hierarchy& h, ImplicitLinks& out) const {
     out.empty = empty;
 }
 
-void ImplicitLinker::BuildClosest(const Hierarchy& h, const std::vector<const End*>& firsts,
-                                  const std::vector<const End*>& lasts, ImplicitLinks& out) {
+void ImplicitLinker::BuildClosest(const Hierarchy& h,
+                                  const std::vector<std::vector<EndRange>>& sources,
+                                  ImplicitLinks& out) {
     // CreateHierarchicalLinks' per-bin minimum (Sec. 4.2.2): every end keeps its slot's
     // closest, as a 64-bit (depth bits, sender) key by compare-and-swap (a positive float's
     // bits order as it does; the sender breaks ties, so the threads' order never shows).
@@ -910,22 +904,24 @@ void ImplicitLinker::BuildClosest(const Hierarchy& h, const std::vector<const En
     tbb::parallel_for(tbb::blocked_range<size_t>(0, best.size(), 1 << 16), [&](const auto& r) {
         std::fill(best.begin() + r.begin(), best.begin() + r.end(), kNone);
     });
-    tbb::parallel_for(size_t(0), firsts.size(), [&](size_t l) {
-        const size_t n = size_t(lasts[l] - firsts[l]);
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const auto& r) {
-            for (size_t k = r.begin(); k != r.end(); ++k) {
-                // The slots are scattered over the table: fetch a few ends ahead.
-                constexpr size_t kAhead = 16;
-                if (k + kAhead < r.end()) __builtin_prefetch(&best[firsts[l][k + kAhead].slot], 1);
-                const End& e = firsts[l][k];
-                const uint64_t key = uint64_t(std::bit_cast<uint32_t>(e.dist)) << 32 | e.sender;
-                std::atomic_ref<uint64_t> slot(best[e.slot]);
-                uint64_t old = slot.load(std::memory_order_relaxed);
-                while (key < old &&
-                       !slot.compare_exchange_weak(old, key, std::memory_order_relaxed)) {
-                }
-            }
-        });
+    tbb::parallel_for(size_t(0), sources.size(), [&](size_t l) {
+        for (const auto& [first, last] : sources[l])
+            tbb::parallel_for(
+                tbb::blocked_range<const End*>(first, last, 4096), [&](const auto& r) {
+                    for (const End* p = r.begin(); p != r.end(); ++p) {
+                        // The slots are scattered over the table: fetch a few ends ahead.
+                        constexpr size_t kAhead = 16;
+                        if (size_t(r.end() - p) > kAhead)
+                            __builtin_prefetch(&best[p[kAhead].slot], 1);
+                        const uint64_t key =
+                            uint64_t(std::bit_cast<uint32_t>(p->dist)) << 32 | p->sender;
+                        std::atomic_ref<uint64_t> slot(best[p->slot]);
+                        uint64_t old = slot.load(std::memory_order_relaxed);
+                        while (key < old &&
+                               !slot.compare_exchange_weak(old, key, std::memory_order_relaxed)) {
+                        }
+                    }
+                });
     });
     out.msCreate += MsSince(start);
     // RefineHierarchicalLinks + PushdownLinks (Sec. 4.2.3–4.2.4): each node's slots take its
@@ -969,11 +965,11 @@ void ImplicitLinker::BuildClosest(const Hierarchy& h, const std::vector<const En
                 const uint32_t sender = row[b] == kNone ? kNoSender : uint32_t(row[b]);
                 list.push_back({uint32_t(b), sender, c});
             }
-            // Directions::CosineNorm, from the same cosines: Σ weight = π.
+            // Directions::CosineNorm from the same cosines: Σ weight = π.
             double sum = 0.0;
             for (const Entry& e : list) sum += e.weight;
-            const float scale = sum > 0.0 ? float(std::numbers::pi / (sum * omegaBin)) : 0.0f;
-            for (Entry& e : list) e.weight *= scale * omegaBin;
+            const float scale = dirs_.CosineNormOfSum(sum) * omegaBin;
+            for (Entry& e : list) e.weight *= scale;
         }
     });
     WriteShares(h, out);

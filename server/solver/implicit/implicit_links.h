@@ -22,6 +22,7 @@
 #include <memory>
 #include <string>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "hierarchy/directions.h"
@@ -152,11 +153,13 @@ class ImplicitLinker {
     void Record(uint32_t node, uint32_t sender, const HierarchyNode& from, const glm::vec3& at,
                 const glm::vec3& dir, float dist, float omega, uint32_t centre, float shows,
                 std::vector<End>& ends) const;
-    // The closest-link rule's shares (Build, `closest`) from the ends in [firsts[k],
-    // lasts[k]): per (node, bin) slot the closest end's (depth bits << 32 | sender) by atomic
-    // minimum, pushed down the tree, each leaf's front bin its closest link's whole.
-    void BuildClosest(const Hierarchy& h, const std::vector<const End*>& firsts,
-                      const std::vector<const End*>& lasts, ImplicitLinks& out);
+    // Ends [first, last) of one source (a thread's recorded ends, a kept root's).
+    using EndRange = std::pair<const End*, const End*>;
+    // The closest-link rule's shares (Build, `closest`) from the ends of `sources`: per
+    // (node, bin) slot the closest end's (depth bits << 32 | sender) by atomic minimum, pushed
+    // down the tree, each leaf's front bin its closest link's whole.
+    void BuildClosest(const Hierarchy& h, const std::vector<std::vector<EndRange>>& sources,
+                      ImplicitLinks& out);
     // Scratch::perLeaf's shares into `out`, with each share's travel.
     void WriteShares(const Hierarchy& h, ImplicitLinks& out) const;
     const Directions& dirs_;
