@@ -17,6 +17,7 @@
 #include "solver/implicit/vulkan_composite.h"
 #include "solver/implicit/vulkan_links.h"
 #include "solver/registry.h"
+#include "test_device.h"
 #include "test_util.h"
 
 namespace penumbra {
@@ -287,7 +288,7 @@ TEST(Implicit, ClosestLinkCoversItsBin) {
     std::printf("closest link, furnace: mean E %.4f (2π = %.4f)\n", sum, 2 * kPi);
     EXPECT_GT(sum, 0.7 * 2 * kPi);
     EXPECT_LT(sum, 1.02 * 2 * kPi);
-    settings.device = DeviceChoice::kLavapipe;
+    settings.device = testing::TestVulkanChoice();
     settings.validation = true;
     auto device = CreateSolver(scene, settings);
     device->Iterate(20);
@@ -298,7 +299,7 @@ TEST(Implicit, ClosestLinkCoversItsBin) {
     double num = 0.0, den = 0.0;
     for (size_t i = 0; i < e.size(); ++i)
         num += glm::dot(d[i] - e[i], d[i] - e[i]), den += glm::dot(e[i], e[i]);
-    std::printf("closest link on lavapipe: %.2e from the CPU's\n", std::sqrt(num / den));
+    std::printf("closest link on the device: %.2e from the CPU's\n", std::sqrt(num / den));
     EXPECT_LT(std::sqrt(num / den), 1e-4);
 }
 
@@ -641,9 +642,10 @@ TEST(Implicit, HierarchicalLinksMatchBruteForce) {
 }
 
 // The Vulkan back end creates the links, composites the leaves' bins and bounces on the device
-// (lavapipe here, validation on): the same links and answers as the CPU's, up to the device's
-// float rounding at a split or bin boundary, at rest (the Cornell box) and after a move (a box
-// on a floor under a sky, moved and turned: the device examines every pair again).
+// (lavapipe, or a GPU under PENUMBRA_TEST_VULKAN=gpu; validation on): the same links and answers as
+// the CPU's, up to the device's float rounding at a split or bin boundary, at rest (the Cornell
+// box) and after a move (a box on a floor under a sky, moved and turned: the device examines every
+// pair again).
 TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
     auto compare = [](const Scene& scene, Solver& cpu, Solver& device, const char* what) {
         const auto& a = dynamic_cast<ImplicitSolver&>(cpu).Links();
@@ -653,13 +655,20 @@ TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
                                  testing::AllVertices(cpu, scene, Channel::kIndirect));
         std::printf("%s: pairs %zu / %zu, linked %zu / %zu, shares %zu / %zu, %.2e relative RMS\n",
                     what, b.pairs, a.pairs, b.linked, a.linked, b.Count(), a.Count(), rel);
-        // Measured: the same pairs and links; the device's acos rounds otherwise, so a few
-        // spread ends' overlaps with a bin fall on the other side of the smallest kept (35
-        // of 775,264 shares on the Cornell box), the answers 1.1·10⁻⁴ and 9·10⁻⁶ apart.
+        // Measured on lavapipe: the same pairs and links; the device's acos rounds otherwise,
+        // so a few spread ends' overlaps with a bin fall on the other side of the smallest
+        // kept (35 of 775,264 shares on the Cornell box), the answers 1.1·10⁻⁴ and 9·10⁻⁶
+        // apart. A real GPU's arithmetic is looser still (Vulkan allows a division 2.5 ulp,
+        // and its compiler fuses multiply-adds): on an H200 (session 46) the same pairs and
+        // links, shares 6 of 913,123 and 35 of 277,990 apart, the answers 2.1·10⁻³ and
+        // 3.8·10⁻⁵ apart (ends that tie up to rounding, a lamp's leaves and the ceiling's
+        // about it, order otherwise).
+        const bool gpu = testing::TestOnRealGpu();
         EXPECT_NEAR(double(b.pairs), double(a.pairs), 1e-4 * double(a.pairs)) << what;
         EXPECT_NEAR(double(b.linked), double(a.linked), 1e-4 * double(a.linked)) << what;
-        EXPECT_NEAR(double(b.Count()), double(a.Count()), 1e-4 * double(a.Count())) << what;
-        EXPECT_LT(rel, 5e-4) << what;
+        EXPECT_NEAR(double(b.Count()), double(a.Count()), (gpu ? 3e-4 : 1e-4) * double(a.Count()))
+            << what;
+        EXPECT_LT(rel, gpu ? 5e-3 : 5e-4) << what;
         const SolverStats stats = device.Stats();
         EXPECT_NE(stats.Text("link_device"), "cpu");
         EXPECT_GT(stats.Number("device_rounds"), 10.0);
@@ -669,7 +678,7 @@ TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
         for (const auto& m : device.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
     };
     SolverSettings onDevice = Implicit(0.06f);
-    onDevice.device = DeviceChoice::kLavapipe;
+    onDevice.device = testing::TestVulkanChoice();
     onDevice.validation = true;
     {
         Scene scene = scenes::CornellBox().Build();
@@ -739,7 +748,7 @@ TEST(Implicit, VulkanBounceMatchesItsDefinition) {
         for (uint32_t k = 0; k < count; ++k) at.push_back(pick(rng)), factor.push_back(unit(rng));
         offsets.push_back(uint32_t(at.size()));
     }
-    gpu::Context ctx(gpu::DeviceKind::kLavapipe, true);
+    gpu::Context ctx(testing::TestVulkanKind(), true);
     VulkanBounce bounce(ctx, dirs, h);
     ASSERT_EQ(bounce.Unfit(at.size()), "");
     bounce.SetShares(h, offsets, at, factor);
@@ -767,7 +776,7 @@ TEST(Implicit, VulkanBounceMatchesItsDefinition) {
     const Scene glossy =
         testing::SkyFurnaceRoom(b, b.AddPbrMaterial("white", glm::vec3(1.0f), 1.0f, 0.5f), 4);
     SolverSettings onDevice = Implicit(0.2f);
-    onDevice.device = DeviceChoice::kLavapipe;
+    onDevice.device = testing::TestVulkanChoice();
     onDevice.validation = true;
     auto solver = CreateSolver(glossy, onDevice);
     solver->Iterate(2);
@@ -788,7 +797,7 @@ TEST(Implicit, VulkanLinkCreationInChunksMatchesTheCpu) {
     const Hierarchy& h = solver.GetHierarchy();
     ImplicitLinks cpu, whole, chunked;
     ImplicitLinker(solver.GetDirections(), 0.5f).Build(h, solver.ProjectedAreas(), {}, 0.0f, cpu);
-    gpu::Context ctx(gpu::DeviceKind::kLavapipe, /*validation=*/true);
+    gpu::Context ctx(testing::TestVulkanKind(), /*validation=*/true);
     auto onDevice = [&](size_t bytes, ImplicitLinks& out) {
         VulkanLinkCreation creation(ctx, solver.GetDirections(), 0.5f, bytes);
         ImplicitLinker linker(solver.GetDirections(), 0.5f);
@@ -815,7 +824,7 @@ TEST(Implicit, VulkanLinkCreationInChunksMatchesTheCpu) {
 // environment). The same shares in the same order, each with the same bin, sender and travel,
 // the weights within float rounding.
 TEST(Implicit, VulkanCompositingMatchesTheCpu) {
-    gpu::Context ctx(gpu::DeviceKind::kLavapipe, /*validation=*/true);
+    gpu::Context ctx(testing::TestVulkanKind(), /*validation=*/true);
     auto check = [&](const Scene& scene, float element, const char* what) {
         ImplicitSolver solver(scene, Implicit(element), ReadImplicitSettings(Implicit(element)),
                               {});
@@ -838,9 +847,9 @@ TEST(Implicit, VulkanCompositingMatchesTheCpu) {
         for (size_t k = 0; k < a.sender.size(); ++k) {
             if (a.bin[k] != b.bin[k] || a.sender[k] != b.sender[k] || a.travel[k] != b.travel[k]) {
                 if (other++ < 5)
-                    ADD_FAILURE() << what << ": share " << k << ": bin " << a.bin[k] << " / "
-                                  << b.bin[k] << ", sender " << a.sender[k] << " / " << b.sender[k]
-                                  << ", travel " << a.travel[k] << " / " << b.travel[k];
+                    std::printf("%s: share %zu: bin %u / %u, sender %u / %u, travel %u / %u\n",
+                                what, k, a.bin[k], b.bin[k], a.sender[k], b.sender[k], a.travel[k],
+                                b.travel[k]);
                 continue;
             }
             worst = std::max(worst, double(std::abs(a.weight[k] - b.weight[k])) /
@@ -848,7 +857,13 @@ TEST(Implicit, VulkanCompositingMatchesTheCpu) {
         }
         std::printf("%s: %zu shares (%zu of the environment), %zu differ, weights %.2e apart\n",
                     what, a.sender.size(), a.empty, other, worst);
-        EXPECT_EQ(other, 0u) << what;
+        // On lavapipe the same shares bit for bit. On a real GPU, whose arithmetic is looser
+        // (VulkanLinkCreationMatchesTheCpu), a few ends that tie up to rounding take another
+        // order: on an H200 7 of the Cornell box's 348,434 shares had another sender.
+        if (testing::TestOnRealGpu())
+            EXPECT_LE(double(other), 1e-4 * double(a.sender.size())) << what;
+        else
+            EXPECT_EQ(other, 0u) << what;
         EXPECT_EQ(a.empty, b.empty) << what;
         EXPECT_LT(worst, 1e-5) << what;
         if (std::string(what) == "Cornell box") {  // its blocks: the solids' rules ran
