@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cstring>
+#include <utility>
 
 #include "base/check.h"
 
@@ -73,11 +74,42 @@ std::string RayTracingGaps(const vk::raii::PhysicalDevice& device) {
     return "";
 }
 
+// The drivers' lifetime. The Vulkan loader unloads a driver when the last instance that
+// loaded it is destroyed. NVIDIA's driver (580, session 46 on an H200) leaves threads of its
+// own running ("[vkcf] Analysis"), and a process that destroyed its last context and went on
+// (the service benchmark after its GPU case, before the next) died of a segmentation fault
+// that no handler of ours could report; other projects have met the same on that driver
+// (llama.cpp issue 10528, Halide issue 8497). So the first context opens one instance of the
+// process's own that is never destroyed: the driver stays loaded until the process ends.
+// Instances and devices are also made and destroyed one at a time: the same driver is
+// reported to crash when contexts are made on several threads at once (the service builds a
+// session's solver and its gather's ray tracer on the loading thread, a rebuild on another).
+std::mutex gLifetime;
+// Held for the life of the process, never destroyed: a static's destructor at exit would
+// unload the driver under its threads again.
+vk::raii::Context* gKeptLoader = nullptr;
+vk::raii::Instance* gKeptInstance = nullptr;
+
+void KeepDriversLoaded() {
+    static bool tried = false;
+    if (std::exchange(tried, true)) return;
+    try {
+        gKeptLoader = new vk::raii::Context();
+        vk::ApplicationInfo app("penumbra (keeps the drivers loaded)", 1, "penumbra", 1,
+                                VK_API_VERSION_1_1);
+        gKeptInstance = new vk::raii::Instance(*gKeptLoader, vk::InstanceCreateInfo({}, &app));
+    } catch (const std::exception&) {
+        // No loader or no instance: the context's own set-up says what is missing.
+    }
+}
+
 }  // namespace
 
 Context::Context(DeviceKind kind, bool validation, Capability need)
     : messages_(std::make_unique<Messages>()) {
     const bool rayTracing = need == Capability::kRayTracing;
+    std::lock_guard lifetime(gLifetime);
+    KeepDriversLoaded();
     try {
         context_ = std::make_unique<vk::raii::Context>();
     } catch (const std::exception& e) {
@@ -228,6 +260,7 @@ Context::~Context() {
         if (device_) device_->waitIdle();
     } catch (const vk::SystemError&) {  // a lost device: nothing to wait for
     }
+    std::lock_guard lifetime(gLifetime);
     // Members go in reverse declaration order: pool, queue, device, ..., instance.
     pool_.reset();
     queue_.reset();
