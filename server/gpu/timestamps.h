@@ -33,4 +33,36 @@ class Timestamps {
     vk::raii::QueryPool pool_{nullptr};
 };
 
+// The device's own time of whole submissions, summed: each Run records a stamp before and
+// after what `record` records, submits and waits (Context::RunNow), then adds the time
+// between them. Beside a pass's wall time it says how much of it the device worked and how
+// much went to the host's uploads, submissions, waits and read-backs. Without timestamps
+// the sum stays 0 and `Timed()` is false.
+class BusyTime {
+  public:
+    explicit BusyTime(Context& ctx) : ctx_(ctx), stamps_(ctx, 2) {}
+    template <typename F>
+    void Run(F&& record) {
+        ctx_.RunNow([&](const vk::raii::CommandBuffer& cb) {
+            stamps_.Reset(cb);
+            stamps_.Write(cb, 0, vk::PipelineStageFlagBits::eTopOfPipe);
+            record(cb);
+            stamps_.Write(cb, 1, vk::PipelineStageFlagBits::eBottomOfPipe);
+        });
+        const std::vector<double> ms = stamps_.Milliseconds();
+        if (!ms.empty()) ms_ += ms[0];
+        ++submissions_;
+    }
+    void Clear() { ms_ = 0.0, submissions_ = 0; }
+    bool Timed() const { return static_cast<bool>(stamps_); }
+    double Ms() const { return ms_; }
+    size_t Submissions() const { return submissions_; }
+
+  private:
+    Context& ctx_;
+    Timestamps stamps_;
+    double ms_ = 0.0;
+    size_t submissions_ = 0;
+};
+
 }  // namespace penumbra::gpu

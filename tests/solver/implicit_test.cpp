@@ -675,6 +675,13 @@ TEST(Implicit, VulkanLinkCreationMatchesTheCpu) {
         EXPECT_EQ(stats.Text("composite_device"), stats.Text("link_device")) << what;
         EXPECT_EQ(stats.Text("bounce_device"), stats.Text("link_device"));
         EXPECT_EQ(stats.Number("device_bounces"), double(stats.iterations)) << what;
+        // The device's own time (timestamps around each submission) within each pass's wall
+        // time, which also holds the host's uploads, waits and read-backs.
+        for (const char* pass : {"create", "composite", "bounce"}) {
+            const std::string d = std::string("device_") + pass;
+            EXPECT_GT(stats.Number(d + "_busy_ms"), 0.0) << what << " " << pass;
+            EXPECT_LE(stats.Number(d + "_busy_ms"), stats.Number(d + "_ms")) << what << " " << pass;
+        }
         for (const auto& m : device.ValidationMessages()) ADD_FAILURE() << "validation: " << m;
     };
     SolverSettings onDevice = Implicit(0.06f);

@@ -478,6 +478,7 @@ SolverStats ImplicitSolver::Stats() const {
     s.SetDetail("link_device", vulkanLinks_ ? device_->DeviceName() : std::string("cpu"));
     if (vulkanLinks_) {
         s.SetDetail("device_create_ms", vulkanLinks_->msDevice);
+        s.SetDetail("device_create_busy_ms", vulkanLinks_->msBusy);
         s.SetDetail("device_rounds", double(vulkanLinks_->rounds));
     }
     // Where the leaves' bins are composited, and why on the host where a device was asked for.
@@ -488,6 +489,7 @@ SolverStats ImplicitSolver::Stats() const {
             s.SetDetail("composite_on_host", linker_.CompositedOnHostBecause());
         s.SetDetail("device_composites", double(vulkanComposite_->runs));
         s.SetDetail("device_composite_ms", vulkanComposite_->msDevice);
+        s.SetDetail("device_composite_busy_ms", vulkanComposite_->msBusy);
     } else if (device_) {
         s.SetDetail("composite_on_host", std::string("bin-cover closest: links on the CPU"));
     }
@@ -499,6 +501,7 @@ SolverStats ImplicitSolver::Stats() const {
     if (vulkanBounce_) {
         s.SetDetail("device_bounces", double(deviceBounces_));
         s.SetDetail("device_bounce_ms", vulkanBounce_->msDevice);
+        s.SetDetail("device_bounce_busy_ms", vulkanBounce_->msBusy);
     }
     return s;
 }

@@ -11,6 +11,7 @@
 #include "gpu/dispatch.h"
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
+#include "gpu/timestamps.h"
 #include "shaders/implicit_bounce_spv.h"
 #include "solver/implicit/implicit_links.h"
 
@@ -42,13 +43,15 @@ struct VulkanBounce::Impl {
     std::unique_ptr<gpu::Buffer> table, leafNormalArea, leafNode, radiance, levels, offsets, at,
         factor, gathered;
     size_t shareCapacity = 0;
+    gpu::BusyTime busy;
 
     Impl(gpu::Context& c, const Directions& d, const Hierarchy& h)
         : ctx(c),
           dirs(d),
           pipeline(c, gpu::Words(kSpirv_implicit_bounce), 10, std::span<const uint32_t>{},
                    sizeof(BouncePush)),
-          dirBuffer(c, size_t(d.Count()) * sizeof(glm::vec4)) {
+          dirBuffer(c, size_t(d.Count()) * sizeof(glm::vec4)),
+          busy(c) {
         std::vector<glm::vec4> up;
         for (const glm::vec3& w : d.All()) up.emplace_back(w, 0.0f);
         dirBuffer.Upload(up);
@@ -142,7 +145,8 @@ std::vector<glm::vec3> VulkanBounce::Gather(const std::vector<glm::vec3>& radian
     push.leaves = uint32_t(s.leaves);
     push.sumsAt = uint32_t(s.Table().SumsAt());
     push.environmentAt = uint32_t(s.Table().EnvironmentAt());
-    s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+    s.busy.Clear();
+    s.busy.Run([&](const vk::raii::CommandBuffer& cb) {
         cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.pipeline.Handle());
         cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.pipeline.Layout(), 0, {*set}, {});
         auto run = [&](uint32_t mode, size_t items) {
@@ -166,6 +170,7 @@ std::vector<glm::vec3> VulkanBounce::Gather(const std::vector<glm::vec3>& radian
     std::vector<glm::vec3> out(s.leaves);
     for (size_t i = 0; i < s.leaves; ++i) out[i] = glm::vec3(down[i]);
     msDevice = MsSince(start);
+    msBusy = s.busy.Ms();
     return out;
 }
 

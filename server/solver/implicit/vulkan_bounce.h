@@ -37,6 +37,7 @@ class VulkanBounce {
                                   const std::vector<glm::vec3>& environment);
 
     double msDevice = 0.0;  // the last Gather's upload, dispatches and readback
+    double msBusy = 0.0;    // the device's own time in them (0: no timestamps)
 
   private:
     struct Impl;

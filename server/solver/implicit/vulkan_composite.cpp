@@ -13,6 +13,7 @@
 #include "gpu/dispatch.h"
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
+#include "gpu/timestamps.h"
 #include "hierarchy/directions_device.h"
 #include "shaders/implicit_composite_spv.h"
 
@@ -95,6 +96,7 @@ struct VulkanCompositing::Impl {
     // fields (bin, sender, weight, mark): 4 bytes an entry, each list in its own buffer.
     Grown ends[4], scattered[4], shares[4];
     Grown counts, blockSums, nodes, leaves, cover, partial, boxes, travel, offsets;
+    gpu::BusyTime busy;
 
     Impl(gpu::Context& c, const Directions& d, float r, uint32_t mostSolids)
         : ctx(c),
@@ -103,7 +105,8 @@ struct VulkanCompositing::Impl {
           pipeline(c, gpu::Words(kSpirv_implicit_composite), 26,
                    std::span<const uint32_t>(&mostSolids, 1), sizeof(CompositePush)),
           tables(c, d),
-          opposite(c, size_t(d.Count()) * sizeof(uint32_t)) {
+          opposite(c, size_t(d.Count()) * sizeof(uint32_t)),
+          busy(c) {
         std::vector<uint32_t> opp(size_t(d.Count()));
         for (uint32_t b = 0; b < opp.size(); ++b) opp[b] = d.Opposite(b);
         opposite.Upload(opp);
@@ -157,9 +160,11 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     PENUMBRA_CHECK(Unfit(h, ends.size()).empty());
     PENUMBRA_CHECK(solid.empty() || solid.size() == h.size());
     why_.clear();
+    s.busy.Clear();
     auto fail = [&](const char* why) {
         why_ = why;
         msDevice = MsSince(start);
+        msBusy = s.busy.Ms();
         return false;
     };
     for (uint32_t of : solid)
@@ -267,7 +272,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     {
         const std::vector<const gpu::Buffer*> bound = buffers();
         vk::raii::DescriptorSet set = s.pipeline.MakeSet(bound);
-        s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+        s.busy.Run([&](const vk::raii::CommandBuffer& cb) {
             cb.fillBuffer(s.counts.buffer->Handle(), 0, VK_WHOLE_SIZE, 0);
             cb.fillBuffer(s.status->Handle(), 0, VK_WHOLE_SIZE, 0);
             gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
@@ -301,7 +306,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     {
         const std::vector<const gpu::Buffer*> bound = buffers();
         vk::raii::DescriptorSet set = s.pipeline.MakeSet(bound);
-        s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+        s.busy.Run([&](const vk::raii::CommandBuffer& cb) {
             record(cb, set);
             run(cb, 8, gpu::StridedGroups(cells));          // the shares written
             run(cb, 9, gpu::StridedGroups(leafCount + 1));  // the leaves' first shares
@@ -329,6 +334,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     out.empty = empty;
     ++runs;
     msDevice = MsSince(start);
+    msBusy = s.busy.Ms();
     return true;
 }
 

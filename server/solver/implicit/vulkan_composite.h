@@ -52,6 +52,7 @@ class VulkanCompositing {
     const std::string& Why() const { return why_; }
 
     double msDevice = 0.0;  // uploads, dispatches and readbacks of the last Composite
+    double msBusy = 0.0;    // the device's own time in them (0: no timestamps)
     size_t runs = 0;        // Composites that ran on the device
 
   private:

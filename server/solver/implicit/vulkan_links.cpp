@@ -13,6 +13,7 @@
 #include "gpu/dispatch.h"
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
+#include "gpu/timestamps.h"
 #include "hierarchy/directions_device.h"
 #include "shaders/implicit_pairs_spv.h"
 
@@ -75,6 +76,7 @@ struct VulkanLinkCreation::Impl {
     // ends; the three counters.
     std::unique_ptr<gpu::Buffer> nodes, frontArea, round, next, ends, counts;
     size_t roundCapacity = 0, nextCapacity = 0, endCapacity = 0;
+    gpu::BusyTime busy;
 
     Impl(gpu::Context& c, const Directions& d, float t, size_t bytes)
         : ctx(c),
@@ -84,7 +86,8 @@ struct VulkanLinkCreation::Impl {
                                 : c.Limits().maxStorageBufferRange),
           pairs(c, gpu::Words(kSpirv_implicit_pairs), 9, std::span<const uint32_t>{},
                 sizeof(PairPush)),
-          tables(c, d) {
+          tables(c, d),
+          busy(c) {
         counts = MakeBuffer(c, 4 * sizeof(uint32_t));
     }
 
@@ -148,6 +151,7 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
     pairs = 0;
     linked = 0;
     rounds = 0;
+    s.busy.Clear();
     while (!round.empty()) {
         pairs += round.size();
         next.clear();
@@ -167,7 +171,7 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
                 s.ends.get(),   s.counts.get(), s.frontArea.get(),
                 &s.tables.dirs, &s.tables.cube, s.tables.adjacent.get()};
             vk::raii::DescriptorSet set = s.pairs.MakeSet(buffers);
-            s.ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
+            s.busy.Run([&](const vk::raii::CommandBuffer& cb) {
                 cb.fillBuffer(s.counts->Handle(), 0, VK_WHOLE_SIZE, 0);
                 gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
                              vk::AccessFlagBits::eTransferWrite,
@@ -207,6 +211,7 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
         std::swap(round, next);
     }
     msDevice = MsSince(start);
+    msBusy = s.busy.Ms();
 }
 
 }  // namespace penumbra

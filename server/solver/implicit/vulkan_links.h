@@ -35,6 +35,7 @@ class VulkanLinkCreation {
                 size_t& pairs, size_t& linked);
 
     double msDevice = 0.0;  // uploads, rounds and readbacks of the last Create
+    double msBusy = 0.0;    // the device's own time in them (0: no timestamps)
     size_t rounds = 0;      // dispatches of the last Create
 
   private:
