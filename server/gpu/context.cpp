@@ -82,8 +82,9 @@ std::string RayTracingGaps(const vk::raii::PhysicalDevice& device) {
 // (llama.cpp issue 10528, Halide issue 8497). So the first context opens one instance of the
 // process's own that is never destroyed: the driver stays loaded until the process ends.
 // Instances and devices are also made and destroyed one at a time: the same driver is
-// reported to crash when contexts are made on several threads at once (the service builds a
-// session's solver and its gather's ray tracer on the loading thread, a rebuild on another).
+// reported to crash when contexts are made on several threads at once (kvark/blade issue 336;
+// the service builds a session's solver and its gather's ray tracer on the loading thread, a
+// rebuild on another).
 std::mutex gLifetime;
 // Held for the life of the process, never destroyed: a static's destructor at exit would
 // unload the driver under its threads again.
@@ -311,6 +312,8 @@ std::vector<std::string> Context::ValidationMessages() const {
 }
 
 bool FindRealGpu(std::string* name) {
+    std::lock_guard lifetime(gLifetime);
+    KeepDriversLoaded();
     try {
         vk::raii::Context context;
         vk::ApplicationInfo app("penumbra-probe", 1, "penumbra", 1, VK_API_VERSION_1_1);
