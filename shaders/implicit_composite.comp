@@ -103,6 +103,10 @@ layout(std430, binding = 24) buffer Offsets { uint offsets[]; };
 // [1]: 1 where a bin met more solids than kMaxSolids; [2]: 1 where a slot held more ends than
 // kMostInSlot; [3]: 1 where a bin's merge wrote another count of shares than it counted.
 layout(std430, binding = 25) buffer Status { uint status[]; };
+// Per node and bin the front-facing projected area Σ A cos⁺(n, ω_b) (ImplicitLinker::Build's
+// frontArea): a cluster of a closed solid mostly turned away from the leaf stands as its far
+// faces.
+layout(std430, binding = 26) readonly buffer FrontArea { float frontArea[]; };
 
 layout(push_constant) uniform Push {
     uint mode;
@@ -265,9 +269,12 @@ uint Merge(uint i, uint b, bool write, uint at, out float coverOut, out bool par
         uint mark = 0u;
         bool farOnly = false;
         uint of = pc.hasSolids != 0u ? nodes[e.sender].solid : kNoSolid;
-        if (of != kNoSolid && nodes[e.sender].coneCos >= kFlatCone) {
+        bool flatSender = nodes[e.sender].coneCos >= kFlatCone;
+        if (of != kNoSolid &&
+            (flatSender || frontArea[e.sender * pc.bins + b] >
+                         2.0 * frontArea[e.sender * pc.bins + opposite[b]])) {
             CompositeNode s = nodes[e.sender];
-            bool facing = dot(s.normal, L.center - s.center) > 0.0;
+            bool facing = flatSender && dot(s.normal, L.center - s.center) > 0.0;
             uint k = 0u;
             while (k < solids && solidOf[k] != of) ++k;
             if (k == solids) {

@@ -241,10 +241,10 @@ TEST(Implicit, ClosedRoomFillsEveryBinAndKeepsTheFurnace) {
     }
     std::printf("furnace: mean E %.4f (2π = %.4f), worst vertex %.2f%% off\n", sum, 2 * kPi,
                 100 * far);
-    // Measured 3.6% low at 128 bins (8.7% before a closed solid's far faces stood for its
-    // near ones: ImplicitLinker::Build's `solid`); the rest: docs/STATUS.md, issue 21. The
-    // goal is 2%; this bound catches a regression.
-    EXPECT_NEAR(sum, 2 * kPi, 0.05 * 2 * kPi);
+    // The issue's goal, 2%. Measured 0.3% low at 128 bins (8.7% before a closed solid's far
+    // faces stood for its near ones, ImplicitLinker::Build's `solid`; 2.2% before a cluster of
+    // a solid's far faces did too: read through the tables it was nearly black).
+    EXPECT_NEAR(sum, 2 * kPi, 0.02 * 2 * kPi);
 }
 
 // `bin-cover closest`, the paper's Eq. 5 as written: each front bin of a leaf is one share,

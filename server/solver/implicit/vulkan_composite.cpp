@@ -95,14 +95,14 @@ struct VulkanCompositing::Impl {
     // The ends and the scattered ends field by field (slot, sender, dist, omega), the shares'
     // fields (bin, sender, weight, mark): 4 bytes an entry, each list in its own buffer.
     Grown ends[4], scattered[4], shares[4];
-    Grown counts, blockSums, nodes, leaves, cover, partial, boxes, travel, offsets;
+    Grown counts, blockSums, nodes, leaves, cover, partial, boxes, travel, offsets, frontArea;
     gpu::BusyTime busy;
 
     Impl(gpu::Context& c, const Directions& d, float r, uint32_t mostSolids)
         : ctx(c),
           dirs(d),
           binRadius(r),
-          pipeline(c, gpu::Words(kSpirv_implicit_composite), 26,
+          pipeline(c, gpu::Words(kSpirv_implicit_composite), 27,
                    std::span<const uint32_t>(&mostSolids, 1), sizeof(CompositePush)),
           tables(c, d),
           opposite(c, size_t(d.Count()) * sizeof(uint32_t)),
@@ -152,7 +152,8 @@ std::string VulkanCompositing::Unfit(const Hierarchy& h, size_t ends) const {
     return {};
 }
 
-bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t>& solid,
+bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<float>& frontArea,
+                                  const std::vector<uint32_t>& solid,
                                   const std::vector<glm::vec4>& boxes, float thin,
                                   std::span<const ImplicitLinker::End> ends, ImplicitLinks& out) {
     Impl& s = *impl_;
@@ -189,6 +190,8 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
     }
     s.Reserve(s.nodes, nodes.size() * sizeof(CompositeNode)).Upload(nodes);
     s.Reserve(s.leaves, leaves.size() * sizeof(CompositeLeaf)).Upload(leaves);
+    PENUMBRA_CHECK_EQ(frontArea.size(), nodeCount * bins);
+    s.Reserve(s.frontArea, frontArea.size() * sizeof(float)).Upload(frontArea);
     s.Reserve(s.boxes, std::max<size_t>(1, boxes.size()) * sizeof(glm::vec4));
     if (!boxes.empty()) s.boxes.buffer->Upload(boxes);
     {
@@ -267,6 +270,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<uint32_t
         b.push_back(s.travel.buffer.get());
         b.push_back(s.offsets.buffer.get());
         b.push_back(s.status.get());
+        b.push_back(s.frontArea.buffer.get());
         return b;
     };
     {
