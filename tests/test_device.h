@@ -1,6 +1,7 @@
 // The Vulkan device the device-against-CPU tests run on: lavapipe (CI, any machine), or a real
-// GPU where PENUMBRA_TEST_VULKAN=gpu is set (the same tests as a check on hardware; the tests
-// compare the device's answer with the CPU back end's, so their bounds hold on either).
+// GPU where PENUMBRA_TEST_VULKAN=gpu is set (the same tests as a check on hardware: they
+// compare the device's answer with the CPU back end's, with looser bounds where a real GPU
+// rounds otherwise than lavapipe and the CPU).
 #pragma once
 
 #include <cstdlib>

@@ -37,7 +37,7 @@ class Timestamps {
 // after what `record` records, submits and waits (Context::RunNow), then adds the time
 // between them. Beside a pass's wall time it says how much of it the device worked and how
 // much went to the host's uploads, submissions, waits and read-backs. Without timestamps
-// the sum stays 0 and `Timed()` is false.
+// the sum stays 0.
 class BusyTime {
   public:
     explicit BusyTime(Context& ctx) : ctx_(ctx), stamps_(ctx, 2) {}
@@ -51,18 +51,14 @@ class BusyTime {
         });
         const std::vector<double> ms = stamps_.Milliseconds();
         if (!ms.empty()) ms_ += ms[0];
-        ++submissions_;
     }
-    void Clear() { ms_ = 0.0, submissions_ = 0; }
-    bool Timed() const { return static_cast<bool>(stamps_); }
+    void Clear() { ms_ = 0.0; }
     double Ms() const { return ms_; }
-    size_t Submissions() const { return submissions_; }
 
   private:
     Context& ctx_;
     Timestamps stamps_;
     double ms_ = 0.0;
-    size_t submissions_ = 0;
 };
 
 }  // namespace penumbra::gpu

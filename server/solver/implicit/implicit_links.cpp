@@ -524,7 +524,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                 corners.emplace_back(box.lo, 0.0f);
                 corners.emplace_back(box.hi, 0.0f);
             }
-            if (composite_->Composite(h, frontArea, solid, corners, thin, all, out)) {
+            if (composite_->Composite(h, device_->FrontArea(), solid, corners, thin, all, out)) {
                 compositedOnDevice_ = true;
                 if (!perFrame) scratch_ = std::make_unique<Scratch>();
                 out.msPush = MsSince(composing);
@@ -768,10 +768,12 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
                     // at a corner, at 0.06 m). A cluster that shows both sides alike (a whole
                     // solid: closed, it shows as much either way) stays as it was: seen from
                     // inside (a floor under a box without a bottom) it is no near face.
-                    const float* row = frontArea.data() + size_t(e.sender) * bins;
                     const bool flat = nodes[e.sender].coneCos >= kFlatCone;
-                    if (of != kNoSolid &&
-                        (flat || row[b] > 2.0f * row[dirs_.Opposite(uint32_t(b))])) {
+                    auto turnedAway = [&] {
+                        const float* row = frontArea.data() + size_t(e.sender) * bins;
+                        return row[b] > 2.0f * row[dirs_.Opposite(uint32_t(b))];
+                    };
+                    if (of != kNoSolid && (flat || turnedAway())) {
                         const HierarchyNode& s = nodes[e.sender];
                         const bool facing = flat && glm::dot(s.normal, centre - s.center) > 0.0f;
                         auto it = std::find_if(solids.begin(), solids.end(),

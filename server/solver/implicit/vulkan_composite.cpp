@@ -95,7 +95,7 @@ struct VulkanCompositing::Impl {
     // The ends and the scattered ends field by field (slot, sender, dist, omega), the shares'
     // fields (bin, sender, weight, mark): 4 bytes an entry, each list in its own buffer.
     Grown ends[4], scattered[4], shares[4];
-    Grown counts, blockSums, nodes, leaves, cover, partial, boxes, travel, offsets, frontArea;
+    Grown counts, blockSums, nodes, leaves, cover, partial, boxes, travel, offsets;
     gpu::BusyTime busy;
 
     Impl(gpu::Context& c, const Directions& d, float r, uint32_t mostSolids)
@@ -152,7 +152,7 @@ std::string VulkanCompositing::Unfit(const Hierarchy& h, size_t ends) const {
     return {};
 }
 
-bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<float>& frontArea,
+bool VulkanCompositing::Composite(const Hierarchy& h, const gpu::Buffer& frontArea,
                                   const std::vector<uint32_t>& solid,
                                   const std::vector<glm::vec4>& boxes, float thin,
                                   std::span<const ImplicitLinker::End> ends, ImplicitLinks& out) {
@@ -190,8 +190,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<float>& 
     }
     s.Reserve(s.nodes, nodes.size() * sizeof(CompositeNode)).Upload(nodes);
     s.Reserve(s.leaves, leaves.size() * sizeof(CompositeLeaf)).Upload(leaves);
-    PENUMBRA_CHECK_EQ(frontArea.size(), nodeCount * bins);
-    s.Reserve(s.frontArea, frontArea.size() * sizeof(float)).Upload(frontArea);
+    PENUMBRA_CHECK_LE(nodeCount * bins * sizeof(float), frontArea.Bytes());
     s.Reserve(s.boxes, std::max<size_t>(1, boxes.size()) * sizeof(glm::vec4));
     if (!boxes.empty()) s.boxes.buffer->Upload(boxes);
     {
@@ -270,7 +269,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const std::vector<float>& 
         b.push_back(s.travel.buffer.get());
         b.push_back(s.offsets.buffer.get());
         b.push_back(s.status.get());
-        b.push_back(s.frontArea.buffer.get());
+        b.push_back(&frontArea);
         return b;
     };
     {

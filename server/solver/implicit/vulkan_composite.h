@@ -39,14 +39,15 @@ class VulkanCompositing {
     std::string Unfit(const Hierarchy& h, size_t ends) const;
     // Composites `ends` (ImplicitLinker::End, in any order) for `h` into `out`'s offsets,
     // bin, sender, weight, travel and empty, as ImplicitLinker::Build does: `frontArea` per
-    // node and bin (Build's), `solid` per node
+    // node and bin on the device (Build's, as VulkanLinkCreation::FrontArea holds them on the
+    // same context), `solid` per node
     // (or empty), `boxes` per closed solid its box's lo and hi, `thin` Build's. Returns false,
     // leaving `out` as it was, when a bin met more closed solids than `mostSolids`, a slot
     // holds more ends than its sort takes (4,096), the shares overflow the storage-buffer
     // range, a closed solid's number does not fit 30 bits, or a bin's two merges (the count,
     // then the write) disagree (a loop cut short: lavapipe ends a shader's loops after
     // 65,535 iterations in all); `Why()` says which. Then the host composites.
-    bool Composite(const Hierarchy& h, const std::vector<float>& frontArea,
+    bool Composite(const Hierarchy& h, const gpu::Buffer& frontArea,
                    const std::vector<uint32_t>& solid, const std::vector<glm::vec4>& boxes,
                    float thin, std::span<const ImplicitLinker::End> ends, ImplicitLinks& out);
     // Why the last Composite returned false (empty after one that ran).

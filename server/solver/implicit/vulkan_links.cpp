@@ -107,6 +107,11 @@ VulkanLinkCreation::VulkanLinkCreation(gpu::Context& ctx, const Directions& dirs
 
 VulkanLinkCreation::~VulkanLinkCreation() = default;
 
+const gpu::Buffer& VulkanLinkCreation::FrontArea() const {
+    PENUMBRA_CHECK(impl_->frontArea != nullptr);
+    return *impl_->frontArea;
+}
+
 void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& frontArea,
                                 const std::vector<float>& slab,
                                 std::vector<ImplicitLinker::End>& ends, size_t& pairs,

@@ -34,6 +34,10 @@ class VulkanLinkCreation {
                 const std::vector<float>& slab, std::vector<ImplicitLinker::End>& ends,
                 size_t& pairs, size_t& linked);
 
+    // The front-facing projected areas the last Create took (per node and bin), on the
+    // device: the compositing on the same context binds them (vulkan_composite.h).
+    const gpu::Buffer& FrontArea() const;
+
     double msDevice = 0.0;  // uploads, rounds and readbacks of the last Create
     double msBusy = 0.0;    // the device's own time in them (0: no timestamps)
     size_t rounds = 0;      // dispatches of the last Create
