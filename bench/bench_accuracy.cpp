@@ -173,6 +173,12 @@ Scene FurnaceScene() {
 }
 
 // The gather stage's table for one scene (against `truth`) into `md` and `js`.
+// The solvers whose default bins are 128, 64 behind the final gather (SolverSettings::
+// behindGather; the light field has no bins).
+bool BinnedSolver(const std::string& solverName) {
+    return solverName == "antiradiance" || solverName == "implicit";
+}
+
 void GatherTable(const Scene& scene, const IrradianceFile& truth, const std::string& solverName,
                  float elementSize, std::ostringstream& md, nlohmann::json& js) {
     char line[512];
@@ -180,7 +186,7 @@ void GatherTable(const Scene& scene, const IrradianceFile& truth, const std::str
                   "The gather stage, part by part (as `bake --solver %s` builds it%s; element "
                   "size %s, until an iteration changes the answer by < 10⁻³):\n\n",
                   solverName.c_str(),
-                  solverName == "antiradiance" ? ": 128 bins, 64 behind the final gather" : "",
+                  BinnedSolver(solverName) ? ": 128 bins, 64 behind the final gather" : "",
                   elementSize > 0 ? (std::to_string(elementSize).substr(0, 4) + " m").c_str()
                                   : "the scene's default");
     md << line;
@@ -225,7 +231,7 @@ void FurnaceTable(const std::string& solverName, std::ostringstream& md, nlohman
     md << "### white furnace with blockers\n\nEvery surface emits 1 nit and reflects 0.5: "
           "E = 2π at every vertex, exactly. 0.1 m elements; solver `"
        << solverName << "`, bins as `bake` picks them"
-       << (solverName == "antiradiance" ? " (128, 64 behind the final gather)" : "")
+       << (BinnedSolver(solverName) ? " (128, 64 behind the final gather)" : "")
        << ".\n\n"
           "| stage | worst vertex | mean | seconds |\n|---|---|---|---|\n";
     for (const Stage& stage : kStages) {

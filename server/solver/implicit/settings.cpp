@@ -10,7 +10,7 @@ namespace {
 std::vector<OptionSpec> Options() {
     using K = OptionKind;
     return {
-        BinsOption("128 (the paper's 6×12×12 cube map is 864)"),
+        BinsOption("64 behind the final gather, 128 without (the paper's 6×12×12 cube map is 864)"),
         {"link-threshold",
          K::kFloat,
          "0.2",
@@ -55,7 +55,9 @@ ImplicitSettings ReadImplicitSettings(const SolverSettings& settings) {
     ImplicitSettings s;
     const int bins = r.Int("bins");
     if (bins != 0) Directions::Check(bins);
-    s.bins = bins > 0 ? bins : kImplicitDefaultBins;
+    s.bins = bins > 0                ? bins
+             : settings.behindGather ? kImplicitBinsBehindGather
+                                     : kImplicitDefaultBins;
     s.linkThreshold = r.Float("link-threshold");
     s.closest = r.Choice("bin-cover") == "closest";
     return s;

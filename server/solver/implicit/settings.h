@@ -22,6 +22,11 @@ struct ImplicitSettings {
 };
 
 inline constexpr int kImplicitDefaultBins = 128;
+// Behind a final gather (SolverSettings::behindGather), as the antiradiance solver's
+// kBinsBehindGather: the gather reads the solver's answer a bounce away, through its own rays,
+// and the links (most of a bake's time) scale with the bins (docs/SOLVER.md "Settings behind
+// the gather").
+inline constexpr int kImplicitBinsBehindGather = 64;
 
 SolverEntry ImplicitEntry();
 ImplicitSettings ReadImplicitSettings(const SolverSettings& settings);
