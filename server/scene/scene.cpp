@@ -382,6 +382,118 @@ struct OrientedMesh {
     std::vector<glm::uvec3> triangles;  // wound so the front is where vertex normals point
 };
 
+// A mesh's triangles split into shells: the surfaces of separate solids, joined across the
+// edges where they pair. An edge of two triangles joins them. Where several solids of one
+// mesh meet at an edge (boxes stacked with their sides flush, a shelf's board against its
+// side), its triangles are paired about the edge: going round it, each triangle is joined to
+// its neighbour across its back (the solid's inside between them), faces that lie in one
+// plane ordered so that the gap between two touching solids is outside both. `count` 0: an
+// edge that does not pair up (a triangle wound against its neighbour, an odd fan), so the
+// mesh bounds no solid.
+struct Shells {
+    std::vector<uint32_t> of;  // per triangle
+    uint32_t count = 0;
+    // The open edges (a, b) as their one triangle runs them, each with that triangle.
+    std::vector<std::array<uint32_t, 3>> open;
+};
+
+Shells SplitShells(const OrientedMesh& m) {
+    const size_t n = m.triangles.size();
+    std::vector<uint32_t> parent(n);
+    for (size_t t = 0; t < n; ++t) parent[t] = uint32_t(t);
+    auto find = [&](uint32_t t) {
+        while (parent[t] != t) t = parent[t] = parent[parent[t]];
+        return t;
+    };
+    // Undirected edge (low << 32 | high) → its triangles, each with its corner off the edge
+    // and whether it runs low → high.
+    struct Wing {
+        uint32_t triangle, corner;
+        bool forward;
+    };
+    std::unordered_map<uint64_t, std::vector<Wing>> edges;
+    for (size_t t = 0; t < n; ++t)
+        for (int e = 0; e < 3; ++e) {
+            const uint32_t a = m.triangles[t][e], b = m.triangles[t][(e + 1) % 3],
+                           c = m.triangles[t][(e + 2) % 3];
+            const uint32_t lo = std::min(a, b), hi = std::max(a, b);
+            edges[uint64_t(lo) << 32 | hi].push_back({uint32_t(t), c, a == lo});
+        }
+    constexpr double kTwoPi = 6.283185307179586, kTie = 1e-4;
+    struct Around {
+        double angle;
+        bool frontAhead;  // its front faces the way the angle grows: the inside lies behind
+        uint32_t wing;
+    };
+    std::vector<Around> around;
+    std::vector<std::array<uint32_t, 3>> open;
+    for (const auto& [key, wings] : edges) {
+        if (wings.size() == 1) {  // an open edge: the shell's boundary
+            const uint32_t lo = uint32_t(key >> 32), hi = uint32_t(key);
+            open.push_back(wings[0].forward ? std::array<uint32_t, 3>{lo, hi, wings[0].triangle}
+                                            : std::array<uint32_t, 3>{hi, lo, wings[0].triangle});
+            continue;
+        }
+        if (wings.size() == 2) {
+            if (wings[0].forward == wings[1].forward) return {};
+            parent[find(wings[0].triangle)] = find(wings[1].triangle);
+            continue;
+        }
+        // The triangles' half-planes about the edge, by angle from the first one's.
+        const glm::dvec3 pa(m.points[key >> 32]), pb(m.points[uint32_t(key)]);
+        const glm::dvec3 axis = glm::normalize(pb - pa);
+        auto across = [&](const Wing& w) {
+            const glm::dvec3 q = glm::dvec3(m.points[w.corner]) - pa;
+            return q - glm::dot(q, axis) * axis;
+        };
+        const glm::dvec3 u = glm::normalize(across(wings[0])), v = glm::cross(axis, u);
+        around.clear();
+        for (uint32_t k = 0; k < wings.size(); ++k) {
+            const glm::dvec3 w = across(wings[k]);
+            if (!(glm::length(w) > 0.0)) return {};
+            double angle = std::atan2(glm::dot(w, v), glm::dot(w, u));
+            if (angle < 0.0) angle += kTwoPi;
+            if (angle > kTwoPi - kTie) angle -= kTwoPi;  // in one plane with the first
+            const glm::uvec3& t = m.triangles[wings[k].triangle];
+            const glm::dvec3 normal =
+                glm::cross(glm::dvec3(m.points[t.y]) - glm::dvec3(m.points[t.x]),
+                           glm::dvec3(m.points[t.z]) - glm::dvec3(m.points[t.x]));
+            around.push_back({angle, glm::dot(normal, glm::cross(axis, w)) > 0.0, k});
+        }
+        std::sort(around.begin(), around.end(),
+                  [](const Around& x, const Around& y) { return x.angle < y.angle; });
+        // Faces in one plane: those whose inside lies behind (the lower angles) first.
+        for (size_t i = 0; i < around.size();) {
+            size_t j = i + 1;
+            while (j < around.size() && around[j].angle - around[j - 1].angle < kTie) ++j;
+            std::stable_sort(
+                around.begin() + long(i), around.begin() + long(j),
+                [](const Around& x, const Around& y) { return x.frontAhead && !y.frontAhead; });
+            i = j;
+        }
+        const size_t count = around.size();
+        for (size_t i = 0; i < count; ++i) {
+            const Around& x = around[i];
+            const Around& y =
+                x.frontAhead ? around[(i + count - 1) % count] : around[(i + 1) % count];
+            // Its neighbour must turn its inside back to it, and run the edge the other way.
+            if (y.frontAhead == x.frontAhead || wings[x.wing].forward == wings[y.wing].forward)
+                return {};
+            parent[find(wings[x.wing].triangle)] = find(wings[y.wing].triangle);
+        }
+    }
+    Shells shells;
+    shells.open = std::move(open);
+    shells.of.assign(n, 0);
+    std::vector<uint32_t> id(n, UINT32_MAX);
+    for (size_t t = 0; t < n; ++t) {
+        uint32_t& r = id[find(uint32_t(t))];
+        if (r == UINT32_MAX) r = shells.count++;
+        shells.of[t] = r;
+    }
+    return shells;
+}
+
 }  // namespace
 
 std::vector<bool> ClosedNodes(const Scene& scene) {
@@ -424,67 +536,73 @@ std::vector<bool> ClosedNodes(const Scene& scene) {
             }
         }
     }
-    // Is `p` on a triangle of a node other than `self`?
-    auto onOtherSurface = [&](size_t self, const glm::vec3& p) {
+    // Per node its shells (SplitShells; empty where an edge does not pair up).
+    std::vector<Shells> shells(meshes.size());
+    for (size_t n = 0; n < meshes.size(); ++n) shells[n] = SplitShells(meshes[n]);
+    // Is `p` on a triangle of another surface than shell `shell` of node `self`: another
+    // node's, or another shell of its own (a box standing on a box of the same node)?
+    auto onOtherSurface = [&](size_t self, uint32_t shell, const glm::vec3& p) {
         for (size_t o = 0; o < meshes.size(); ++o) {
-            if (o == self || glm::any(glm::lessThan(p, lo[o] - touch)) ||
+            if (glm::any(glm::lessThan(p, lo[o] - touch)) ||
                 glm::any(glm::greaterThan(p, hi[o] + touch)))
                 continue;
             const OrientedMesh& m = meshes[o];
-            for (const glm::uvec3& t : m.triangles)
-                if (PointTriangleDistance(p, m.points[t.x], m.points[t.y], m.points[t.z]) <= touch)
+            for (size_t t = 0; t < m.triangles.size(); ++t) {
+                if (o == self && shells[o].of[t] == shell) continue;
+                const glm::uvec3& v = m.triangles[t];
+                if (PointTriangleDistance(p, m.points[v.x], m.points[v.y], m.points[v.z]) <= touch)
                     return true;
+            }
         }
         return false;
     };
-
-    std::vector<bool> closed(scene.nodes.size(), false);
-    for (size_t n = 0; n < meshes.size(); ++n) {
+    // Does shell `shell` of node `n` bound a solid?
+    auto closes = [&](size_t n, uint32_t shell) {
         const OrientedMesh& m = meshes[n];
-        if (m.triangles.empty()) continue;
-        // Directed edge (a, b) → how many times it occurs.
-        std::unordered_map<uint64_t, int> edges;
         double area = 0.0;
-        for (const glm::uvec3& t : m.triangles) {
-            for (int e = 0; e < 3; ++e) ++edges[uint64_t(t[e]) << 32 | t[(e + 1) % 3]];
-            area += 0.5 * glm::length(glm::cross(m.points[t.y] - m.points[t.x],
-                                                 m.points[t.z] - m.points[t.x]));
+        for (size_t t = 0; t < m.triangles.size(); ++t) {
+            if (shells[n].of[t] != shell) continue;
+            const glm::uvec3& v = m.triangles[t];
+            area += 0.5 * glm::length(glm::cross(m.points[v.y] - m.points[v.x],
+                                                 m.points[v.z] - m.points[v.x]));
         }
-        // Boundary edges: met by no opposite edge. An edge used twice the same way is not
-        // manifold: no solid.
+        // Its open edges (every other edge pairs its triangles: SplitShells).
         std::vector<std::pair<uint32_t, uint32_t>> boundary;
-        bool manifold = true;
-        for (const auto& [key, count] : edges) {
-            uint64_t opposite = (key << 32) | (key >> 32);
-            auto it = edges.find(opposite);
-            if (count != 1 || (it != edges.end() && it->second != 1)) manifold = false;
-            if (it == edges.end()) boundary.emplace_back(uint32_t(key >> 32), uint32_t(key));
-        }
-        if (!manifold) continue;
+        for (const auto& [a, b, t] : shells[n].open)
+            if (shells[n].of[t] == shell) boundary.emplace_back(a, b);
         // Signed volume (divergence theorem) about a point on the open boundary's cap, so a
         // planar cap adds nothing: positive when the fronts face out.
         glm::dvec3 origin(0.0);
         for (const auto& [a, b] : boundary) origin += glm::dvec3(m.points[a]);
         if (!boundary.empty()) origin /= double(boundary.size());
         double volume = 0.0;
-        for (const glm::uvec3& t : m.triangles)
-            volume += glm::dot(glm::dvec3(m.points[t.x]) - origin,
-                               glm::cross(glm::dvec3(m.points[t.y]) - origin,
-                                          glm::dvec3(m.points[t.z]) - origin)) /
+        for (size_t t = 0; t < m.triangles.size(); ++t) {
+            if (shells[n].of[t] != shell) continue;
+            const glm::uvec3& v = m.triangles[t];
+            volume += glm::dot(glm::dvec3(m.points[v.x]) - origin,
+                               glm::cross(glm::dvec3(m.points[v.y]) - origin,
+                                          glm::dvec3(m.points[v.z]) - origin)) /
                       6.0;
+        }
         // Far from flat: a planar open sheet has no volume whatever its boundary touches.
-        if (!(volume > 1e-3 * area * std::sqrt(area))) continue;
+        if (!(volume > 1e-3 * area * std::sqrt(area))) return false;
         // An open boundary must be sealed by other surfaces (a box standing on a floor).
-        bool sealed = true;
         for (const auto& [a, b] : boundary) {
             const glm::vec3 &pa = m.points[a], &pb = m.points[b];
-            if (!onOtherSurface(n, pa) || !onOtherSurface(n, pb) ||
-                !onOtherSurface(n, 0.5f * (pa + pb))) {
-                sealed = false;
-                break;
-            }
+            if (!onOtherSurface(n, shell, pa) || !onOtherSurface(n, shell, pb) ||
+                !onOtherSurface(n, shell, 0.5f * (pa + pb)))
+                return false;
         }
-        closed[n] = sealed;
+        return true;
+    };
+
+    // A node closes solids when each of its shells closes one.
+    std::vector<bool> closed(scene.nodes.size(), false);
+    for (size_t n = 0; n < meshes.size(); ++n) {
+        if (meshes[n].triangles.empty() || shells[n].count == 0) continue;
+        bool all = true;
+        for (uint32_t shell = 0; all && shell < shells[n].count; ++shell) all = closes(n, shell);
+        closed[n] = all;
     }
     return closed;
 }

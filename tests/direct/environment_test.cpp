@@ -131,6 +131,38 @@ TEST(Environment, OnlySolidsKeepTheFrontSideRule) {
     EXPECT_FALSE(is("floor"));
     EXPECT_TRUE(is("resting"));  // its open bottom lies on the room's floor
 
+    // Several solids in one node that meet at edges: each closes its own solid.
+    SceneBuilder c;
+    const uint32_t wood = c.AddMaterial("wood", glm::vec3(0.5f));
+    testing::AddUnitRoom(c, wood, wood);
+    for (int k = 0; k < 4; ++k)  // a stack, the boxes' sides flush, the lowest on the floor
+        c.AddBox("stack", wood, {0.3f, 0.05f + 0.1f * k, 0.3f}, {0.2f, 0.1f, 0.2f}, 0.0f, k > 0);
+    // A shelf: two sides standing on the floor, boards between them flush with their edges.
+    c.AddBox("shelf", wood, {0.51f, 0.2f, 0.7f}, {0.02f, 0.4f, 0.2f}, 0.0f, false);
+    c.AddBox("shelf", wood, {0.89f, 0.2f, 0.7f}, {0.02f, 0.4f, 0.2f}, 0.0f, false);
+    c.AddBox("shelf", wood, {0.7f, 0.01f, 0.7f}, {0.36f, 0.02f, 0.2f}, 0.0f, false);
+    c.AddBox("shelf", wood, {0.7f, 0.39f, 0.7f}, {0.36f, 0.02f, 0.2f});
+    // Two boxes touching along one edge only.
+    c.AddBox("edge_to_edge", wood, {0.2f, 0.6f, 0.2f}, {0.1f, 0.1f, 0.1f});
+    c.AddBox("edge_to_edge", wood, {0.3f, 0.7f, 0.2f}, {0.1f, 0.1f, 0.1f});
+    // A stack with an open sheet in it, and one floating without a bottom: no solids.
+    c.AddBox("stack_and_sheet", wood, {0.7f, 0.05f, 0.2f}, {0.1f, 0.1f, 0.1f}, 0.0f, false);
+    c.AddBox("stack_and_sheet", wood, {0.7f, 0.15f, 0.2f}, {0.1f, 0.1f, 0.1f});
+    c.AddQuad("stack_and_sheet", wood, {0.6f, 0.3f, 0.1f}, {0.8f, 0.3f, 0.1f}, {0.8f, 0.3f, 0.3f},
+              {0.6f, 0.3f, 0.3f}, {0, 1, 0});
+    c.AddBox("floating_stack", wood, {0.2f, 0.35f, 0.7f}, {0.1f, 0.1f, 0.1f}, 0.0f, false);
+    c.AddBox("floating_stack", wood, {0.2f, 0.45f, 0.7f}, {0.1f, 0.1f, 0.1f});
+    Scene clutter = c.Build();
+    std::vector<bool> clutterClosed = ClosedNodes(clutter);
+    auto closes = [&](const std::string& name) {
+        return bool(clutterClosed[FindNode(clutter, name)]);
+    };
+    EXPECT_TRUE(closes("stack"));
+    EXPECT_TRUE(closes("shelf"));
+    EXPECT_TRUE(closes("edge_to_edge"));
+    EXPECT_FALSE(closes("stack_and_sheet"));
+    EXPECT_FALSE(closes("floating_stack"));  // the lower box's open bottom floats
+
     // A closed room in one node faces in: its backs face the sky, so it is no solid.
     SceneBuilder r;
     uint32_t white = r.AddMaterial("white", glm::vec3(0.5f));
