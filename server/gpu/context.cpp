@@ -201,6 +201,10 @@ Context::Context(DeviceKind kind, bool validation, Capability need)
         float priority = 1.0f;
         vk::DeviceQueueCreateInfo qi({}, family_, 1, &priority);
         vk::PhysicalDeviceFeatures features;
+        // 64-bit atomicMin in storage buffers where the device has it (the implicit solver's
+        // closest link a (node, bin) slot): Vulkan 1.2's feature on a ray-tracing context
+        // (a 1.2 instance), VK_KHR_shader_atomic_int64's on the others (1.1).
+        const bool shaderInt64 = physical_->getFeatures().shaderInt64;
         if (rayTracing) {
             vk::StructureChain<vk::DeviceCreateInfo, vk::PhysicalDeviceVulkan12Features,
                                vk::PhysicalDeviceAccelerationStructureFeaturesKHR,
@@ -210,7 +214,15 @@ Context::Context(DeviceKind kind, bool validation, Capability need)
                 .setQueueCreateInfos(qi)
                 .setPEnabledExtensionNames(kRayTracingExtensions)
                 .setPEnabledFeatures(&features);
+            int64Atomics_ = shaderInt64 && physical_
+                                               ->getFeatures2<vk::PhysicalDeviceFeatures2,
+                                                              vk::PhysicalDeviceVulkan12Features>()
+                                               .get<vk::PhysicalDeviceVulkan12Features>()
+                                               .shaderBufferInt64Atomics;
+            features.shaderInt64 = int64Atomics_;
             chain.get<vk::PhysicalDeviceVulkan12Features>().bufferDeviceAddress = VK_TRUE;
+            chain.get<vk::PhysicalDeviceVulkan12Features>().shaderBufferInt64Atomics =
+                int64Atomics_;
             chain.get<vk::PhysicalDeviceAccelerationStructureFeaturesKHR>().accelerationStructure =
                 VK_TRUE;
             chain.get<vk::PhysicalDeviceRayTracingPipelineFeaturesKHR>().rayTracingPipeline =
@@ -221,29 +233,45 @@ Context::Context(DeviceKind kind, bool validation, Capability need)
             // Float atomics in storage buffers where the device has them (the light field's
             // walk adds what each line brings to its surfels with them).
             const auto have = physical_->enumerateDeviceExtensionProperties();
-            const bool extension =
-                std::any_of(have.begin(), have.end(), [](const vk::ExtensionProperties& e) {
-                    return std::strcmp(e.extensionName,
-                                       VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME) == 0;
+            auto has = [&](const char* name) {
+                return std::any_of(have.begin(), have.end(), [&](const vk::ExtensionProperties& e) {
+                    return std::strcmp(e.extensionName, name) == 0;
                 });
-            if (extension)
+            };
+            if (has(VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME))
                 floatAtomics_ = physical_
                                     ->getFeatures2<vk::PhysicalDeviceFeatures2,
                                                    vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
                                     .get<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
                                     .shaderBufferFloat32AtomicAdd;
-            vk::StructureChain<vk::DeviceCreateInfo, vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>
+            if (shaderInt64 && has(VK_KHR_SHADER_ATOMIC_INT64_EXTENSION_NAME))
+                int64Atomics_ = physical_
+                                    ->getFeatures2<vk::PhysicalDeviceFeatures2,
+                                                   vk::PhysicalDeviceShaderAtomicInt64Features>()
+                                    .get<vk::PhysicalDeviceShaderAtomicInt64Features>()
+                                    .shaderBufferInt64Atomics;
+            features.shaderInt64 = int64Atomics_;
+            vk::StructureChain<vk::DeviceCreateInfo, vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT,
+                               vk::PhysicalDeviceShaderAtomicInt64Features>
                 chain;
-            const char* atomicFloat = VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME;
+            std::vector<const char*> extensions;
             chain.get<vk::DeviceCreateInfo>().setQueueCreateInfos(qi).setPEnabledFeatures(
                 &features);
             if (floatAtomics_) {
-                chain.get<vk::DeviceCreateInfo>().setPEnabledExtensionNames(atomicFloat);
+                extensions.push_back(VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME);
                 chain.get<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
                     .shaderBufferFloat32AtomicAdd = VK_TRUE;
             } else {
                 chain.unlink<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>();
             }
+            if (int64Atomics_) {
+                extensions.push_back(VK_KHR_SHADER_ATOMIC_INT64_EXTENSION_NAME);
+                chain.get<vk::PhysicalDeviceShaderAtomicInt64Features>().shaderBufferInt64Atomics =
+                    VK_TRUE;
+            } else {
+                chain.unlink<vk::PhysicalDeviceShaderAtomicInt64Features>();
+            }
+            chain.get<vk::DeviceCreateInfo>().setPEnabledExtensionNames(extensions);
             device_ =
                 std::make_unique<vk::raii::Device>(*physical_, chain.get<vk::DeviceCreateInfo>());
         }

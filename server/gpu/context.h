@@ -38,6 +38,9 @@ class Context {
     // atomicAdd on floats in storage buffers (VK_EXT_shader_atomic_float), enabled where the
     // device has it (not on a ray-tracing context).
     bool FloatAtomics() const { return floatAtomics_; }
+    // 64-bit integers and atomicMin on them in storage buffers (shaderInt64,
+    // shaderBufferInt64Atomics: core in Vulkan 1.2, optional), enabled where the device has them.
+    bool Int64Atomics() const { return int64Atomics_; }
 
     const vk::raii::Device& Device() const { return *device_; }
     const vk::raii::PhysicalDevice& Physical() const { return *physical_; }
@@ -82,6 +85,7 @@ class Context {
     float timestampPeriod_ = 1.0f;
     bool lavapipe_ = false;
     bool floatAtomics_ = false;
+    bool int64Atomics_ = false;
     bool graphics_ = false;
     bool validation_ = false;
     mutable std::atomic<bool> lost_{false};

@@ -264,10 +264,7 @@ ImplicitLinker::ImplicitLinker(const Directions& dirs, float linkThreshold, bool
     }
 }
 
-void ImplicitLinker::UseDevice(VulkanLinkCreation* device) {
-    if (device && closest_) throw Error("the closest-link rule creates its links on the CPU");
-    device_ = device;
-}
+void ImplicitLinker::UseDevice(VulkanLinkCreation* device) { device_ = device; }
 
 float ImplicitLinker::OverlapReach(float rho) const {
     const float y = rho / binRadius_;
@@ -284,7 +281,14 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     const auto& nodes = h.nodes;
     PENUMBRA_CHECK(!moving || moving->size() == nodes.size());
     const bool perFrame = moving != nullptr;  // a relink given what moves: keep scratch_
-    if (device_) moving = nullptr;            // the device examines every pair
+    // The closest rule's table on the device where it fits there, else this build's links here.
+    VulkanLinkCreation* device = device_;
+    linkedOnHost_.clear();
+    if (device && closest_) {
+        linkedOnHost_ = device->ClosestUnfit(nodes.size());
+        if (!linkedOnHost_.empty()) device = nullptr;
+    }
+    if (device) moving = nullptr;  // the device examines every pair
     // With the ends kept for this `moving`: only the pairs with a moving end are examined.
     // Else everything, and the ends of the pairs without one are kept for the next build.
     incremental_ = moving && !keptFor_.empty() && keptFor_ == *moving;
@@ -349,9 +353,22 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     const bool keeps = still && !incremental_;
     // The rounds on the device (vulkan_links.h), its ends standing for the threads', or here
     // from the root's self-pair.
-    if (device_) {
+    if (device && closest_) {
+        // The paper's rule there: each slot's closest link kept by 64-bit atomicMin
+        // (VulkanLinkCreation::CreateClosest); the push-down and the shares here.
+        compositedOnDevice_ = false;
+        compositeOnHost_.clear();
+        device->CreateClosest(h, frontArea, slab, scratch_->closest, out.pairs, out.linked);
+        out.msCreate = MsSince(start);
+        start = std::chrono::steady_clock::now();
+        PushClosest(h, out);
+        if (!perFrame) scratch_ = std::make_unique<Scratch>();
+        out.msPush = MsSince(start);
+        return;
+    }
+    if (device) {
         size_t devicePairs = 0, deviceLinked = 0;
-        device_->Create(h, frontArea, slab, recorded.local(), devicePairs, deviceLinked);
+        device->Create(h, frontArea, slab, recorded.local(), devicePairs, deviceLinked);
         pairs = devicePairs;
         linked = deviceLinked;
     } else {
@@ -502,7 +519,7 @@ void ImplicitLinker::Build(const Hierarchy& h, const std::vector<float>& frontAr
     // The device's ends composited there (vulkan_composite.h), where they fit.
     compositedOnDevice_ = false;
     compositeOnHost_.clear();
-    if (device_ && composite_) {
+    if (device && composite_) {
         // The device's ends are in the calling thread's list; joined if ever in several.
         std::vector<const std::vector<End>*> filled;
         for (const auto& v : recorded)
@@ -910,7 +927,6 @@ void ImplicitLinker::BuildClosest(const Hierarchy& h,
     // bits order as it does; the sender breaks ties, so the threads' order never shows).
     const auto& nodes = h.nodes;
     const size_t bins = static_cast<size_t>(dirs_.Count());
-    const float omegaBin = dirs_.BinSolidAngle();
     constexpr uint64_t kNone = ~uint64_t(0);
     auto start = std::chrono::steady_clock::now();
     std::vector<uint64_t>& best = scratch_->closest;
@@ -938,6 +954,16 @@ void ImplicitLinker::BuildClosest(const Hierarchy& h,
                 });
     });
     out.msCreate += MsSince(start);
+    PushClosest(h, out);
+}
+
+void ImplicitLinker::PushClosest(const Hierarchy& h, ImplicitLinks& out) {
+    const auto& nodes = h.nodes;
+    const size_t bins = static_cast<size_t>(dirs_.Count());
+    const float omegaBin = dirs_.BinSolidAngle();
+    constexpr uint64_t kNone = ~uint64_t(0);
+    std::vector<uint64_t>& best = scratch_->closest;
+    PENUMBRA_CHECK_EQ(best.size(), nodes.size() * bins);
     // RefineHierarchicalLinks + PushdownLinks (Sec. 4.2.3–4.2.4): each node's slots take its
     // parent's where those are closer, top down; then each leaf's front bins are its closest
     // links, each covering the bin, or the environment where there is none. The nodes above

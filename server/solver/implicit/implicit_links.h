@@ -88,7 +88,7 @@ class ImplicitLinker {
     };
     // `closest`: each (node, bin) slot keeps its closest link only, which covers the bin
     // (Eq. 5 as the paper writes it; ImplicitSettings::closest): no end is spread, no layer
-    // composited. Links on the CPU only (UseDevice is refused).
+    // composited. On a device (UseDevice, made with `closest`) the slots are kept there.
     ImplicitLinker(const Directions& dirs, float linkThreshold, bool closest = false);
     ~ImplicitLinker();
     // The links of `hierarchy` as it is placed now. `frontArea`: per node and bin, the
@@ -128,8 +128,12 @@ class ImplicitLinker {
     static constexpr float kMinOverlap = 0.2f;
 
     // Creates the links' ends on `device` (vulkan_links.h) from now on, null: on the CPU. The
-    // device examines every pair each build: `moving` is not used, nothing is kept.
+    // device examines every pair each build: `moving` is not used, nothing is kept. With
+    // `closest` the device keeps each slot's closest link (made with `closest` too), where
+    // its table fits (LinkedOnHostBecause says when it did not).
     void UseDevice(VulkanLinkCreation* device);
+    // Why the last build, given a device, made its links on the CPU (empty: it did not).
+    const std::string& LinkedOnHostBecause() const { return linkedOnHost_; }
     // With the ends created on the device (UseDevice), composites the leaves' bins there too
     // (vulkan_composite.h), null: on the CPU. A build the device cannot composite whole
     // (VulkanCompositing::Unfit and Composite say when) composites here.
@@ -160,6 +164,9 @@ class ImplicitLinker {
     // down the tree, each leaf's front bin its closest link's whole.
     void BuildClosest(const Hierarchy& h, const std::vector<std::vector<EndRange>>& sources,
                       ImplicitLinks& out);
+    // The rest of it from the slots' keys in Scratch::closest (made by BuildClosest, or on
+    // the device): the push-down and the leaves' shares.
+    void PushClosest(const Hierarchy& h, ImplicitLinks& out);
     // Scratch::perLeaf's shares into `out`, with each share's travel.
     void WriteShares(const Hierarchy& h, ImplicitLinks& out) const;
     const Directions& dirs_;
@@ -181,6 +188,7 @@ class ImplicitLinker {
     VulkanCompositing* composite_ = nullptr;
     bool compositedOnDevice_ = false;
     std::string compositeOnHost_;
+    std::string linkedOnHost_;
     // The build's working buffers (the rounds' pairs, the threads' ends, the ends by slot, the
     // leaves' shares), kept from a build given `moving` to the next: a relink a frame would
     // otherwise map and fault in their pages (hundreds of megabytes) every frame (also when

@@ -54,14 +54,21 @@ ImplicitSolver::ImplicitSolver(const Scene& scene, const SolverSettings& setting
                                                      ? gpu::DeviceKind::kLavapipe
                                                      : gpu::DeviceKind::kRealGpu,
                                                  settings.validation);
-        // The closest-link rule is the CPU's only (the device's rounds spread wide ends): its
-        // links are made here, the bounces on the device.
+        // The closest-link rule keeps each slot's closest link there by 64-bit atomicMin, where
+        // the device has it (else its links are made here); it composites nothing.
         if (!own.closest) {
             vulkanLinks_ = std::make_unique<VulkanLinkCreation>(*device_, dirs_, own.linkThreshold);
             linker_.UseDevice(vulkanLinks_.get());
             vulkanComposite_ =
                 std::make_unique<VulkanCompositing>(*device_, dirs_, linker_.BinRadius());
             linker_.UseDeviceCompositing(vulkanComposite_.get());
+        } else {
+            closestOnHost_ = VulkanLinkCreation::ClosestUnsupported(*device_);
+            if (closestOnHost_.empty()) {
+                vulkanLinks_ = std::make_unique<VulkanLinkCreation>(*device_, dirs_,
+                                                                    own.linkThreshold, 0, true);
+                linker_.UseDevice(vulkanLinks_.get());
+            }
         }
     }
     ValidateEnvironment(scene.environment);
@@ -475,7 +482,11 @@ SolverStats ImplicitSolver::Stats() const {
     s.SetDetail("relinks_kept", double(incrementalRelinks_));
     s.SetDetail("refinements", double(refinements_));
     // Where the links are created: the device's rounds (uploads, dispatches, readbacks).
-    s.SetDetail("link_device", vulkanLinks_ ? device_->DeviceName() : std::string("cpu"));
+    const std::string& linkedOnHost =
+        !closestOnHost_.empty() ? closestOnHost_ : linker_.LinkedOnHostBecause();
+    s.SetDetail("link_device",
+                vulkanLinks_ && linkedOnHost.empty() ? device_->DeviceName() : std::string("cpu"));
+    if (device_ && !linkedOnHost.empty()) s.SetDetail("link_on_host", linkedOnHost);
     if (vulkanLinks_) {
         s.SetDetail("device_create_ms", vulkanLinks_->msDevice);
         s.SetDetail("device_create_busy_ms", vulkanLinks_->msBusy);
@@ -491,7 +502,9 @@ SolverStats ImplicitSolver::Stats() const {
         s.SetDetail("device_composite_ms", vulkanComposite_->msDevice);
         s.SetDetail("device_composite_busy_ms", vulkanComposite_->msBusy);
     } else if (device_) {
-        s.SetDetail("composite_on_host", std::string("bin-cover closest: links on the CPU"));
+        s.SetDetail("composite_on_host",
+                    std::string("bin-cover closest: no layer to composite, the push-down and the "
+                                "shares on the CPU"));
     }
     // Where the bounces run, and why on the host where a device was asked for.
     s.SetDetail("bounce_device", BouncesOnDevice() ? device_->DeviceName() : std::string("cpu"));

@@ -123,6 +123,8 @@ class ImplicitSolver : public Solver {
     // With --device gpu or lavapipe: the device the links are created on (the rest runs here).
     std::unique_ptr<gpu::Context> device_;
     std::unique_ptr<VulkanLinkCreation> vulkanLinks_;
+    // Why the closest rule's links are made on the CPU on a device (empty: they are not).
+    std::string closestOnHost_;
     // With a device: the leaves' bins composited there too (vulkan_composite.h), where they fit.
     std::unique_ptr<VulkanCompositing> vulkanComposite_;
     // With a device: the bounces there (vulkan_bounce.h), unless bounceUnfit_ says why the

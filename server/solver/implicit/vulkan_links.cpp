@@ -15,6 +15,7 @@
 #include "gpu/pipeline.h"
 #include "gpu/timestamps.h"
 #include "hierarchy/directions_device.h"
+#include "shaders/implicit_closest_spv.h"
 #include "shaders/implicit_pairs_spv.h"
 
 namespace penumbra {
@@ -70,26 +71,36 @@ struct VulkanLinkCreation::Impl {
     const Directions& dirs;
     float threshold;
     size_t bufferBytes;
-    gpu::Pipeline pairs;
+    bool closest;
+    gpu::Pipeline pairs;  // implicit_pairs.comp, or implicit_closest.comp with `closest`
     DeviceDirections tables;
     // The nodes and their projected areas; a chunk of a round's pairs, its next pairs and
-    // ends; the three counters.
-    std::unique_ptr<gpu::Buffer> nodes, frontArea, round, next, ends, counts;
+    // ends; the three counters; the closest rule's table.
+    std::unique_ptr<gpu::Buffer> nodes, frontArea, round, next, ends, counts, best;
     size_t roundCapacity = 0, nextCapacity = 0, endCapacity = 0;
     gpu::BusyTime busy;
 
-    Impl(gpu::Context& c, const Directions& d, float t, size_t bytes)
+    Impl(gpu::Context& c, const Directions& d, float t, size_t bytes, bool closestRule)
         : ctx(c),
           dirs(d),
           threshold(t),
           bufferBytes(bytes > 0 ? std::min<size_t>(bytes, c.Limits().maxStorageBufferRange)
                                 : c.Limits().maxStorageBufferRange),
-          pairs(c, gpu::Words(kSpirv_implicit_pairs), 9, std::span<const uint32_t>{},
-                sizeof(PairPush)),
+          closest(closestRule),
+          pairs(
+              c,
+              closestRule ? gpu::Words(kSpirv_implicit_closest) : gpu::Words(kSpirv_implicit_pairs),
+              closestRule ? 10 : 9, std::span<const uint32_t>{}, sizeof(PairPush)),
           tables(c, d),
           busy(c) {
         counts = MakeBuffer(c, 4 * sizeof(uint32_t));
     }
+
+    // The rounds from the root's self-pair; with `closest` into `best` (filled with all ones
+    // first), else appending the ends to `endsOut`.
+    void Rounds(const Hierarchy& h, const std::vector<float>& frontArea,
+                const std::vector<float>& slab, std::vector<ImplicitLinker::End>* endsOut,
+                size_t& pairs, size_t& linked, size_t& rounds);
 
     // Grows `buffer` (kept in `capacity` elements of `size` bytes) to hold `want`, with room.
     // (at most `limit` bytes: the device's storage-buffer range).
@@ -102,8 +113,25 @@ struct VulkanLinkCreation::Impl {
 };
 
 VulkanLinkCreation::VulkanLinkCreation(gpu::Context& ctx, const Directions& dirs,
-                                       float linkThreshold, size_t bufferBytes)
-    : impl_(std::make_unique<Impl>(ctx, dirs, linkThreshold, bufferBytes)) {}
+                                       float linkThreshold, size_t bufferBytes, bool closest)
+    : impl_(std::make_unique<Impl>(ctx, dirs, linkThreshold, bufferBytes, closest)) {
+    if (closest) PENUMBRA_CHECK(ClosestUnsupported(ctx).empty());
+}
+
+std::string VulkanLinkCreation::ClosestUnsupported(const gpu::Context& ctx) {
+    if (ctx.Int64Atomics()) return "";
+    return ctx.DeviceName() +
+           " has no 64-bit atomics in storage buffers (shaderInt64, "
+           "shaderBufferInt64Atomics)";
+}
+
+std::string VulkanLinkCreation::ClosestUnfit(size_t nodes) const {
+    const size_t bytes = nodes * size_t(impl_->dirs.Count()) * sizeof(uint64_t);
+    if (bytes <= impl_->bufferBytes) return "";
+    return "the closest links' table (" + std::to_string(bytes) +
+           " bytes) is larger than a storage buffer may be on " + impl_->ctx.DeviceName() + " (" +
+           std::to_string(impl_->bufferBytes) + " bytes)";
+}
 
 VulkanLinkCreation::~VulkanLinkCreation() = default;
 
@@ -116,8 +144,41 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
                                 const std::vector<float>& slab,
                                 std::vector<ImplicitLinker::End>& ends, size_t& pairs,
                                 size_t& linked) {
-    Impl& s = *impl_;
+    PENUMBRA_CHECK(!impl_->closest);
     const auto start = std::chrono::steady_clock::now();
+    impl_->busy.Clear();
+    impl_->Rounds(h, frontArea, slab, &ends, pairs, linked, rounds);
+    msDevice = MsSince(start);
+    msBusy = impl_->busy.Ms();
+}
+
+void VulkanLinkCreation::CreateClosest(const Hierarchy& h, const std::vector<float>& frontArea,
+                                       const std::vector<float>& slab, std::vector<uint64_t>& best,
+                                       size_t& pairs, size_t& linked) {
+    Impl& s = *impl_;
+    PENUMBRA_CHECK(s.closest);
+    PENUMBRA_CHECK(ClosestUnfit(h.nodes.size()).empty());
+    const auto start = std::chrono::steady_clock::now();
+    const size_t bytes = h.nodes.size() * size_t(s.dirs.Count()) * sizeof(uint64_t);
+    if (!s.best || s.best->Bytes() < bytes) s.best = MakeBuffer(s.ctx, bytes);
+    s.busy.Clear();
+    s.busy.Run([&](const vk::raii::CommandBuffer& cb) {
+        cb.fillBuffer(s.best->Handle(), 0, VK_WHOLE_SIZE, 0xffffffffu);  // no link yet
+        gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer, vk::AccessFlagBits::eTransferWrite,
+                     vk::PipelineStageFlagBits::eComputeShader);
+    });
+    s.Rounds(h, frontArea, slab, nullptr, pairs, linked, rounds);
+    best.resize(bytes / sizeof(uint64_t));
+    s.best->Download(best.data(), bytes);
+    msDevice = MsSince(start);
+    msBusy = s.busy.Ms();
+}
+
+void VulkanLinkCreation::Impl::Rounds(const Hierarchy& h, const std::vector<float>& frontArea,
+                                      const std::vector<float>& slab,
+                                      std::vector<ImplicitLinker::End>* endsOut, size_t& pairs,
+                                      size_t& linked, size_t& rounds) {
+    Impl& s = *this;
     const size_t bins = size_t(s.dirs.Count());
     PENUMBRA_CHECK_EQ(frontArea.size(), h.nodes.size() * bins);
     PENUMBRA_CHECK_EQ(slab.size(), h.nodes.size());
@@ -156,7 +217,6 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
     pairs = 0;
     linked = 0;
     rounds = 0;
-    s.busy.Clear();
     while (!round.empty()) {
         pairs += round.size();
         next.clear();
@@ -165,17 +225,18 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
             const size_t n = std::min(chunk, round.size() - at);
             s.Reserve(s.round, s.roundCapacity, n, sizeof(glm::uvec2), limit);
             s.Reserve(s.next, s.nextCapacity, 4 * n, sizeof(glm::uvec2), limit);
-            s.Reserve(s.ends, s.endCapacity, std::min(4 * n, endLimit), sizeof(ImplicitLinker::End),
-                      limit);
+            s.Reserve(s.ends, s.endCapacity, s.closest ? 1 : std::min(4 * n, endLimit),
+                      sizeof(ImplicitLinker::End), limit);
             s.round->Upload(round.data() + at, n * sizeof(glm::uvec2));
             push.count = uint32_t(n);
             push.nextCapacity = uint32_t(s.nextCapacity);
             push.endCapacity = uint32_t(s.endCapacity);
-            const gpu::Buffer* buffers[] = {
-                s.nodes.get(),  s.round.get(),  s.next.get(),
-                s.ends.get(),   s.counts.get(), s.frontArea.get(),
-                &s.tables.dirs, &s.tables.cube, s.tables.adjacent.get()};
-            vk::raii::DescriptorSet set = s.pairs.MakeSet(buffers);
+            const gpu::Buffer* buffers[] = {s.nodes.get(),  s.round.get(),  s.next.get(),
+                                            s.ends.get(),   s.counts.get(), s.frontArea.get(),
+                                            &s.tables.dirs, &s.tables.cube, s.tables.adjacent.get(),
+                                            s.best.get()};
+            vk::raii::DescriptorSet set =
+                s.pairs.MakeSet(std::span<const gpu::Buffer* const>(buffers, s.closest ? 10 : 9));
             s.busy.Run([&](const vk::raii::CommandBuffer& cb) {
                 cb.fillBuffer(s.counts->Handle(), 0, VK_WHOLE_SIZE, 0);
                 gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
@@ -207,16 +268,16 @@ void VulkanLinkCreation::Create(const Hierarchy& h, const std::vector<float>& fr
             if (got[0] > 0)
                 s.next->Download(next.data() + next.size() - got[0],
                                  size_t(got[0]) * sizeof(glm::uvec2));
-            ends.resize(ends.size() + got[1]);
-            if (got[1] > 0)
-                s.ends->Download(ends.data() + ends.size() - got[1],
+            PENUMBRA_CHECK(got[1] == 0 || endsOut);  // the closest rule appends no ends
+            if (got[1] > 0) {
+                endsOut->resize(endsOut->size() + got[1]);
+                s.ends->Download(endsOut->data() + endsOut->size() - got[1],
                                  size_t(got[1]) * sizeof(ImplicitLinker::End));
+            }
             at += n;
         }
         std::swap(round, next);
     }
-    msDevice = MsSince(start);
-    msBusy = s.busy.Ms();
 }
 
 }  // namespace penumbra
