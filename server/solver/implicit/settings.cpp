@@ -36,11 +36,10 @@ std::vector<OptionSpec> Options() {
 
 SolverEntry ImplicitEntry() {
     return {"implicit",
-            "implicit visibility (Dong et al. 2007), in progress: links rebuilt every frame, the "
-            "closest surfaces in each direction bin, any move taken in place; on the CPU (on a "
-            "Vulkan device the link creation, the compositing and the bounces), slower than "
-            "its goals "
-            "(docs/SOLVER.md)",
+            "implicit visibility (Dong et al. 2007): links rebuilt every frame, the closest "
+            "surfaces in each direction bin, any move or deformation taken in place; on the CPU "
+            "(on a Vulkan device the link creation, the compositing and the bounces; "
+            "docs/SOLVER.md)",
             Options(),
             [](const Scene& scene, const SolverSettings& settings,
                const ProgressFn& progress) -> std::unique_ptr<Solver> {
