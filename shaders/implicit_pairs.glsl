@@ -184,8 +184,7 @@ void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist
     // centre bin keeps its closest link.
     float depth = Depth(from, at, dirs[centre].xyz, dist);
     atomicMin(best[row + centre], (uint64_t(floatBitsToUint(depth)) << 32) | uint64_t(sender));
-    return;
-#endif
+#else
     float sinRadius = from.radius / dist;
     if (sinRadius > pc.splat) {
         float rho = asin(min(1.0, sinRadius));
@@ -211,6 +210,7 @@ void Record(uint node, uint sender, PairNode from, vec3 at, vec3 dir, float dist
         return;
     }
     Emit(row + centre, sender, Depth(from, at, dirs[centre].xyz, dist), omega);
+#endif
 }
 
 void Split(uint a, uint b) {

@@ -556,52 +556,48 @@ std::vector<bool> ClosedNodes(const Scene& scene) {
         }
         return false;
     };
-    // Does shell `shell` of node `n` bound a solid?
-    auto closes = [&](size_t n, uint32_t shell) {
-        const OrientedMesh& m = meshes[n];
-        double area = 0.0;
-        for (size_t t = 0; t < m.triangles.size(); ++t) {
-            if (shells[n].of[t] != shell) continue;
-            const glm::uvec3& v = m.triangles[t];
-            area += 0.5 * glm::length(glm::cross(m.points[v.y] - m.points[v.x],
-                                                 m.points[v.z] - m.points[v.x]));
-        }
-        // Its open edges (every other edge pairs its triangles: SplitShells).
-        std::vector<std::pair<uint32_t, uint32_t>> boundary;
-        for (const auto& [a, b, t] : shells[n].open)
-            if (shells[n].of[t] == shell) boundary.emplace_back(a, b);
-        // Signed volume (divergence theorem) about a point on the open boundary's cap, so a
-        // planar cap adds nothing: positive when the fronts face out.
-        glm::dvec3 origin(0.0);
-        for (const auto& [a, b] : boundary) origin += glm::dvec3(m.points[a]);
-        if (!boundary.empty()) origin /= double(boundary.size());
-        double volume = 0.0;
-        for (size_t t = 0; t < m.triangles.size(); ++t) {
-            if (shells[n].of[t] != shell) continue;
-            const glm::uvec3& v = m.triangles[t];
-            volume += glm::dot(glm::dvec3(m.points[v.x]) - origin,
-                               glm::cross(glm::dvec3(m.points[v.y]) - origin,
-                                          glm::dvec3(m.points[v.z]) - origin)) /
-                      6.0;
-        }
-        // Far from flat: a planar open sheet has no volume whatever its boundary touches.
-        if (!(volume > 1e-3 * area * std::sqrt(area))) return false;
-        // An open boundary must be sealed by other surfaces (a box standing on a floor).
-        for (const auto& [a, b] : boundary) {
-            const glm::vec3 &pa = m.points[a], &pb = m.points[b];
-            if (!onOtherSurface(n, shell, pa) || !onOtherSurface(n, shell, pb) ||
-                !onOtherSurface(n, shell, 0.5f * (pa + pb)))
-                return false;
-        }
-        return true;
-    };
-
-    // A node closes solids when each of its shells closes one.
+    // A node closes solids when each of its shells closes one: its area, open edges and
+    // volume summed per shell in one pass each (a mesh of many parts has many shells).
     std::vector<bool> closed(scene.nodes.size(), false);
     for (size_t n = 0; n < meshes.size(); ++n) {
-        if (meshes[n].triangles.empty() || shells[n].count == 0) continue;
+        const OrientedMesh& m = meshes[n];
+        const Shells& sh = shells[n];
+        if (m.triangles.empty() || sh.count == 0) continue;
+        std::vector<double> area(sh.count, 0.0), volume(sh.count, 0.0);
+        for (size_t t = 0; t < m.triangles.size(); ++t) {
+            const glm::uvec3& v = m.triangles[t];
+            area[sh.of[t]] += 0.5 * glm::length(glm::cross(m.points[v.y] - m.points[v.x],
+                                                           m.points[v.z] - m.points[v.x]));
+        }
+        // Signed volume (divergence theorem) about a point on the shell's open boundary's cap,
+        // so a planar cap adds nothing: positive when the fronts face out.
+        std::vector<glm::dvec3> origin(sh.count, glm::dvec3(0.0));
+        std::vector<uint32_t> openEdges(sh.count, 0);
+        for (const auto& [a, b, t] : sh.open) {
+            origin[sh.of[t]] += glm::dvec3(m.points[a]);
+            ++openEdges[sh.of[t]];
+        }
+        for (uint32_t k = 0; k < sh.count; ++k)
+            if (openEdges[k] > 0) origin[k] /= double(openEdges[k]);
+        for (size_t t = 0; t < m.triangles.size(); ++t) {
+            const glm::uvec3& v = m.triangles[t];
+            const glm::dvec3& o = origin[sh.of[t]];
+            volume[sh.of[t]] +=
+                glm::dot(glm::dvec3(m.points[v.x]) - o,
+                         glm::cross(glm::dvec3(m.points[v.y]) - o, glm::dvec3(m.points[v.z]) - o)) /
+                6.0;
+        }
+        // Far from flat: a planar open sheet has no volume whatever its boundary touches.
         bool all = true;
-        for (uint32_t shell = 0; all && shell < shells[n].count; ++shell) all = closes(n, shell);
+        for (uint32_t k = 0; all && k < sh.count; ++k)
+            all = volume[k] > 1e-3 * area[k] * std::sqrt(area[k]);
+        // An open boundary must be sealed by other surfaces (a box standing on a floor).
+        for (size_t e = 0; all && e < sh.open.size(); ++e) {
+            const auto& [a, b, t] = sh.open[e];
+            const glm::vec3 &pa = m.points[a], &pb = m.points[b];
+            all = onOtherSurface(n, sh.of[t], pa) && onOtherSurface(n, sh.of[t], pb) &&
+                  onOtherSurface(n, sh.of[t], 0.5f * (pa + pb));
+        }
         closed[n] = all;
     }
     return closed;
