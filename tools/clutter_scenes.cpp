@@ -73,9 +73,10 @@ SceneBuilder BoxStacks(int stacks, int height, float gap) {
     return b;
 }
 
-SceneBuilder Bookshelf(int boards, float gap, uint32_t seed) {
+SceneBuilder Bookshelf(int boards, float gap, uint32_t seed, bool faceNodes) {
     SceneBuilder b;
     AddClutterRoom(b);
+    b.SetBoxFacesAsNodes(faceNodes);
     const uint32_t wood = b.AddMaterial("wood", {0.55f, 0.4f, 0.25f});
     const uint32_t paper[3] = {b.AddMaterial("book_red", {0.6f, 0.2f, 0.15f}),
                                b.AddMaterial("book_cream", {0.75f, 0.7f, 0.6f}),
@@ -188,6 +189,7 @@ std::vector<ClutterScene> ClutterSuite() {
     suite.push_back({"box-stacks-1cm.gltf", BoxStacks(3, 8, 0.01f)});
     suite.push_back({"bookshelf-5mm.gltf", Bookshelf(2, 0.005f, 7)});
     suite.push_back({"bookshelf-0mm.gltf", Bookshelf(2, 0.0f, 11)});
+    suite.push_back({"bookshelf-5mm-faces.gltf", Bookshelf(2, 0.005f, 7, true)});
     suite.push_back({"chairs-under-desks.gltf", ChairsUnderDesks()});
     for (uint32_t seed : {1u, 2u, 3u, 4u})
         suite.push_back({"random-boxes-" + std::to_string(seed) + ".gltf", RandomBoxes(40, seed)});

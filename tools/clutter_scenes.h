@@ -23,8 +23,9 @@ SceneBuilder BoxRow(int count, float gap);
 // `stacks` columns of `height` boxes 0.3 × 0.04 × 0.25 m.
 SceneBuilder BoxStacks(int stacks, int height, float gap);
 // A bookshelf of `boards` boards 0.8 m wide, each carrying a row of books 2–3 cm thick and
-// 18–24 cm tall, `gap` metres apart (books of seed-picked sizes).
-SceneBuilder Bookshelf(int boards, float gap, uint32_t seed);
+// 18–24 cm tall, `gap` metres apart (books of seed-picked sizes). `faceNodes`: every face of
+// every box a node of its own, as many exporters write boxes (SceneBuilder::SetBoxFacesAsNodes).
+SceneBuilder Bookshelf(int boards, float gap, uint32_t seed, bool faceNodes = false);
 // Two desks (a top on four legs) with a chair pushed under each, seat under the top.
 SceneBuilder ChairsUnderDesks();
 // `count` boxes of random sizes (2–40 cm) placed at random on the floor or on each other,

@@ -34,6 +34,30 @@ void WriteResult(const std::string& scenePath, const std::string& outPath, const
         WriteIrradianceGltf(scenePath, outPath, scene, result, color);
 }
 
+// The solver `settings` names behind the gather, run for `iterations`. Where its solution
+// diverged, the fallback solver (FallbackSettings) is built and run instead, with a warning
+// on stderr (even with -q: the answer is another method's), and `fellBack` says why.
+std::unique_ptr<Solver> Solve(const Scene& scene, const SolverSettings& settings,
+                              const std::string& scenePath, const GatherOptions& gather,
+                              const GatherSettings& gatherSettings,
+                              const IterationOptions& iterations, bool quiet, Progress& progress,
+                              std::string& fellBack) {
+    std::unique_ptr<Solver> solver =
+        gather.Create(scene, settings, scenePath, gatherSettings, quiet, progress);
+    iterations.Run(*solver, scenePath, progress, quiet);
+    SolverSettings fallback;
+    const std::string why = solver->Stats().divergence;
+    if (why.empty() || !FallbackSettings(settings, fallback)) return solver;
+    progress.Done();
+    fellBack = "the " + settings.solver + " solution " + why;
+    std::fprintf(stderr, "penumbra: warning: %s: %s; going on with the %s solver\n",
+                 scenePath.c_str(), fellBack.c_str(), fallback.solver.c_str());
+    solver.reset();  // its links and tables go before the next solver's are built
+    solver = gather.Create(scene, fallback, scenePath, gatherSettings, quiet, progress);
+    iterations.Run(*solver, scenePath, progress, quiet);
+    return solver;
+}
+
 }  // namespace
 
 void AddColor0(CLI::App* app, std::string& color0) {
@@ -67,18 +91,20 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     Scene scene = LoadGltf(scenePath);
     environment.Apply(scene);
     Warn(scene, scenePath);
-    std::unique_ptr<Solver> solver =
-        gather.Create(scene, settings, scenePath, gatherSettings, quiet, progress);
-    iterations.Run(*solver, scenePath, progress, quiet);
+    std::string fellBack;
+    std::unique_ptr<Solver> solver = Solve(scene, settings, scenePath, gather, gatherSettings,
+                                           iterations, quiet, progress, fellBack);
     progress.Done();
     // A diverged solution is not written: no file is better than a wrong one.
     if (std::string why = solver->Stats().divergence; !why.empty()) {
-        std::fprintf(stderr, "penumbra: error: %s: the solution %s; nothing written\n",
-                     scenePath.c_str(), why.c_str());
+        std::fprintf(stderr, "penumbra: error: %s: the %s solution %s; nothing written\n",
+                     scenePath.c_str(), solver->Stats().solver.c_str(), why.c_str());
         return kDiverged;
     }
 
     IrradianceResult result = CollectIrradiance(scene, *solver, channel);
+    if (!fellBack.empty())
+        result.stats["fallback"] = {{"from", settings.solver}, {"why", fellBack}};
     WriteResult(scenePath, outPath, scene, result, color);
 
     if (!quiet) {
@@ -256,8 +282,9 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
         perVertex = render::IrradianceForScene(scene, ReadIrradianceJson(o.lighting));
         source = o.lighting;
     } else {
-        solver = o.gather.Create(scene, settings, o.scene, gatherSettings, o.quiet, progress);
-        iterations.Run(*solver, o.scene, progress, o.quiet);
+        std::string fellBack;
+        solver = Solve(scene, settings, o.scene, o.gather, gatherSettings, iterations, o.quiet,
+                       progress, fellBack);
         perSurfel = solver->SurfelIrradiance(channel);
         for (size_t p = 0; p < scene.primitives.size(); ++p)
             perVertex.push_back(PrimitiveIrradiance(solver->GetSurfels(), perSurfel, scene, p));

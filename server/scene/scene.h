@@ -214,17 +214,6 @@ int FindLight(const Scene& scene, const std::string& name);
 // Throws penumbra::Error for a non-finite or singular matrix (the scene is unchanged then).
 void SetNodeTransform(Scene& scene, int node, const glm::mat4& local);
 
-// Per scene node: whether its triangles (all its primitives together) bound solids, so that
-// no light can reach their back sides. Positions are welded and each triangle wound so its
-// front is where its vertex normals point, then split into shells: triangles joined across
-// the edges they share, and where several solids of the node meet at an edge (boxes stacked
-// flush, a shelf's board against its side) paired about it, each with its neighbour across
-// its inside. Every shell must bound a solid: each open edge lies on another surface (another
-// node's, or another shell's: a box without a bottom standing on a floor or on a box), and
-// the enclosed volume is positive (fronts facing out: a closed room facing in is no solid).
-// False for nodes without triangles, and where an edge's triangles do not pair up.
-std::vector<bool> ClosedNodes(const Scene& scene);
-
 // Fills `normals` with area-weighted vertex normals of the triangles.
 void ComputeVertexNormals(Primitive& primitive);
 

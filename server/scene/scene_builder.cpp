@@ -136,6 +136,7 @@ void SceneBuilder::AddBox(const std::string& node, uint32_t material, glm::vec3 
         return centre + glm::vec3(rot * glm::vec4(sx * h.x, sy * h.y, sz * h.z, 0.0f));
     };
     // Each face: 4 corners and a point outside it.
+    const std::string box = node + "." + std::to_string(boxes_++) + ".";
     for (int axis = 0; axis < 3; ++axis)
         for (int sign = -1; sign <= 1; sign += 2) {
             if (axis == 1 && sign < 0 && !bottom) continue;
@@ -149,7 +150,9 @@ void SceneBuilder::AddBox(const std::string& node, uint32_t material, glm::vec3 
                 c[k] = corner(s[0], s[1], s[2]);
             }
             glm::vec3 faceCentre = 0.25f * (c[0] + c[1] + c[2] + c[3]);
-            AddQuad(node, material, c[0], c[1], c[2], c[3], 2.0f * faceCentre - centre);
+            const std::string face = box + (sign > 0 ? "+" : "-") + "xyz"[axis];
+            AddQuad(boxFacesAsNodes_ ? face : node, material, c[0], c[1], c[2], c[3],
+                    2.0f * faceCentre - centre);
         }
 }
 

@@ -30,6 +30,10 @@ class SceneBuilder {
     // `bottom == false` leaves out the face at −y (a box standing on a floor).
     void AddBox(const std::string& node, uint32_t material, glm::vec3 centre, glm::vec3 size,
                 float yawDegrees = 0.0f, bool bottom = true);
+    // From now on, AddBox writes each face of a box as a node of its own, called
+    // `node.N.face` (N counts the boxes, face is +x, -x, +y, -y, +z or -z), as many exporters
+    // write boxes: the six nodes close a solid together, none alone (scene/solids.h).
+    void SetBoxFacesAsNodes(bool on) { boxFacesAsNodes_ = on; }
     // Box with a different material on its −y face (a light fixture).
     void AddBoxWithBottom(const std::string& node, uint32_t material, uint32_t bottomMaterial,
                           glm::vec3 centre, glm::vec3 size);
@@ -79,6 +83,8 @@ class SceneBuilder {
     std::vector<Material> materials_;
     std::vector<std::string> nodeOrder_;
     std::map<std::string, std::map<uint32_t, Part>> nodes_;
+    bool boxFacesAsNodes_ = false;
+    int boxes_ = 0;  // AddBox calls, naming face nodes
 };
 
 }  // namespace penumbra

@@ -5,6 +5,7 @@
 #include <unordered_map>
 
 #include "base/check.h"
+#include "scene/solids.h"
 
 namespace penumbra {
 

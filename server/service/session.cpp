@@ -15,6 +15,7 @@
 #include "base/numeric.h"
 #include "gather/gather_stage.h"
 #include "output/irradiance_writer.h"
+#include "solver/registry.h"
 
 namespace penumbra::service {
 
@@ -174,6 +175,7 @@ nlohmann::json Session::StatsJson() const {
     j["subscribers"] = subscribers_.size();
     j["converged"] = converged_;
     if (!diverged_.empty()) j["diverged"] = diverged_;
+    if (!solverFallback_.empty()) j["solver_fallback"] = solverFallback_;
     j["iterations_per_frame"] = settings_.iterationsPerFrame;
     j["build_seconds"] = buildSeconds_;
     if (!gatherNote_.empty()) j["gather_note"] = gatherNote_;
@@ -192,7 +194,7 @@ nlohmann::json Session::StatsJson() const {
 std::unique_ptr<Solver> Session::BuildSolver(const Scene& scene, bool prepareMoves,
                                              const ProgressFn& progress,
                                              std::vector<std::string>* notes) const {
-    SolverSettings settings = settings_.solver;
+    SolverSettings settings = fellBack_ ? fallback_ : settings_.solver;
     settings.prepareMoves = settings.prepareMoves && prepareMoves;
     if (onCpu_) settings.device = DeviceChoice::kCpu;
     GatherSettings gather;
@@ -334,6 +336,50 @@ bool Session::FallBackToCpu(std::unique_lock<std::mutex>& lock, std::string& not
     return true;
 }
 
+bool Session::FallBackToAnotherSolver(std::unique_lock<std::mutex>& lock, std::string& note) {
+    fallbackTried_ = true;
+    SolverSettings fallback;
+    if (!FallbackSettings(settings_.solver, fallback)) return false;
+    const std::string why = "the " + settings_.solver.solver + " solution " + diverged_;
+    const Scene scene = applied_;
+    const bool prepareMoves = !motionDeclined_;
+    fallback_ = fallback;
+    fellBack_ = true;
+    lock.unlock();
+    const auto start = Clock::now();
+    std::unique_ptr<Solver> next;
+    std::string error;
+    try {
+        next = BuildSolver(scene, prepareMoves);
+    } catch (const std::exception& e) {
+        error = e.what();
+    }
+    const double seconds = MsSince(start) / 1000.0;
+    lock.lock();
+    if (!next) {
+        fellBack_ = false;
+        lastError_ = why + ", and the " + fallback.solver + " solver failed too: " + error;
+        note += (note.empty() ? "" : "; ") + lastError_;
+        return false;
+    }
+    std::swap(solver_, next);  // the diverged solver goes below, outside the lock
+    passTotals_.clear();
+    lastSurfels_.clear();
+    diverged_.clear();
+    solverStatsRaw_ = solver_->Stats();
+    solverFallback_ = why + "; the session went on with the " + fallback.solver + " solver";
+    char built[32];
+    std::snprintf(built, sizeof(built), "%.1f", seconds);
+    note += (note.empty() ? "" : "; ") + why + "; going on with the " + fallback.solver +
+            " solver (built in " + built + " s)";
+    converged_ = false;
+    framesSinceEdit_ = 0;
+    lock.unlock();
+    next.reset();
+    lock.lock();
+    return true;
+}
+
 bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string& note) {
     if (rebuild_ || pending_.empty()) return false;
     Scene next = applied_;
@@ -390,7 +436,8 @@ void Session::Run() {
     while (true) {
         wake_.wait(lock, [&] {
             return stop_ || (rebuild_ && rebuild_->done) || (!rebuild_ && !pending_.empty()) ||
-                   !steps_.empty() || (!converged_ && diverged_.empty());
+                   !steps_.empty() || (!converged_ && diverged_.empty()) ||
+                   (!diverged_.empty() && !rebuild_ && !fallbackTried_);
         });
         if (stop_) return;
         std::string note;
@@ -434,6 +481,9 @@ void Session::Run() {
         // A lost device (an edit's update or a rebuild met it): the CPU back end from here,
         // before any edit reaches the lost solver.
         if (!deviceLost_.empty()) FallBackToCpu(lock, note);
+        // A diverged solution: the fallback solver from here (once; a rebuild under way
+        // brings a new solver of its own first).
+        if (!diverged_.empty() && !rebuild_ && !fallbackTried_) FallBackToAnotherSolver(lock, note);
 
         // Pending edits apply together, atomically, between two iterations (here, or inside
         // ProduceFrame); with a move among them, at this frame boundary, by rebuilding the

@@ -244,6 +244,13 @@ class Session {
     // and reports why, as for any device failure. Worker thread, `lock` held (released while
     // building).
     bool FallBackToCpu(std::unique_lock<std::mutex>& lock, std::string& note);
+    // After a divergence (diverged_ says where) with no rebuild under way: the solver rebuilt
+    // for applied_ as the fallback solver (FallbackSettings: the light-field solver), which
+    // later builds use too; the note and stats (`solver_fallback`) say so. False when there is
+    // none to go on with (the session's solver is the fallback) or its build failed: the
+    // session stops its frames, as before. Worker thread, `lock` held (released while
+    // building).
+    bool FallBackToAnotherSolver(std::unique_lock<std::mutex>& lock, std::string& note);
 
     const std::string name_;
     const uint64_t id_;  // FrameData::session
@@ -290,6 +297,12 @@ class Session {
     // The solver's SolverStats::divergence once it stopped: no more iterations until a rebuild
     // brings a new solver; frames keep the last bounded irradiance.
     std::string diverged_;
+    // FallBackToAnotherSolver tried (once a session); `fallback_` the settings every build
+    // uses from then on when `fellBack_`, `solverFallback_` why (stats). Written by the worker
+    // only while no rebuild thread runs, which reads them in BuildSolver.
+    bool fallbackTried_ = false, fellBack_ = false;
+    SolverSettings fallback_;
+    std::string solverFallback_;
     // Why the device was lost, until FallBackToCpu has taken it (empty: it was not).
     std::string deviceLost_;
     // Set by FallBackToCpu: every build from then on is on the CPU back end.

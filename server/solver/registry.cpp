@@ -48,6 +48,18 @@ void CheckSolverSettings(const SolverSettings& settings) {
     if (e.check) e.check(settings);
 }
 
+bool FallbackSettings(const SolverSettings& settings, SolverSettings& fallback) {
+    const SolverEntry& to = FindSolver("lightfield");
+    if (settings.solver == to.name) return false;
+    fallback = settings;
+    fallback.solver = to.name;
+    fallback.options.clear();
+    for (const auto& [name, value] : settings.options)
+        for (const OptionSpec& spec : to.options)
+            if (spec.name == name) fallback.options[name] = value;
+    return true;
+}
+
 std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& settings,
                                      const ProgressFn& progress) {
     return FindSolver(settings.solver).create(scene, settings, progress);

@@ -40,4 +40,12 @@ bool RegisterSolver(SolverEntry entry);
 // anything (penumbra::Error as CreateSolver would throw it).
 void CheckSolverSettings(const SolverSettings& settings);
 
+// The solver a bake or a session goes on with when `settings.solver`'s solution diverged
+// (Solver::Stats().divergence; docs/SOLVER.md "When a solution diverges"): the light-field
+// solver, whose iteration carries only light that is there (no negative antiradiance to
+// overshoot), with the settings' element size, device and back-side rule and those of
+// their options it declares too. False, `fallback` untouched, for the light-field solver
+// itself: it has no other to go on with.
+bool FallbackSettings(const SolverSettings& settings, SolverSettings& fallback);
+
 }  // namespace penumbra

@@ -14,6 +14,7 @@
 #include "direct/environment_light.h"
 #include "gather/sampling.h"
 #include "reference/path_tracer.h"
+#include "scene/solids.h"
 #include "solver/solver.h"
 #include "test_util.h"
 
@@ -162,6 +163,34 @@ TEST(Environment, OnlySolidsKeepTheFrontSideRule) {
     EXPECT_TRUE(closes("edge_to_edge"));
     EXPECT_FALSE(closes("stack_and_sheet"));
     EXPECT_FALSE(closes("floating_stack"));  // the lower box's open bottom floats
+
+    // Boxes written as a node a face close solids together: the six faces of one box share
+    // one solid (the smallest of their nodes), a box without a bottom standing on a floor is
+    // one, a floating one without a bottom and the floor are none.
+    SceneBuilder f;
+    const uint32_t card = f.AddMaterial("card", glm::vec3(0.5f));
+    f.AddQuad("floor", card, {-1, 0, -1}, {4, 0, -1}, {4, 0, 4}, {-1, 0, 4}, {0, 1, 0});
+    f.SetBoxFacesAsNodes(true);
+    f.AddBox("cube", card, {0, 0.5f, 0}, {1, 1, 1});
+    f.AddBox("standing", card, {2, 0.25f, 0}, {0.5f, 0.5f, 0.5f}, 30.0f, false);
+    f.AddBox("floating", card, {0, 1.5f, 2.5f}, {1, 1, 1}, 0.0f, false);
+    Scene faces = f.Build();
+    const std::vector<int> solid = NodeSolids(faces);
+    auto solidOf = [&](const std::string& box) {
+        std::vector<int> of;
+        for (size_t n = 0; n < faces.nodes.size(); ++n)
+            if (faces.nodes[n].name.rfind(box + ".", 0) == 0) of.push_back(solid[n]);
+        return of;
+    };
+    for (const char* box : {"cube", "standing"}) {
+        const std::vector<int> of = solidOf(box);
+        ASSERT_EQ(of.size(), std::string(box) == "cube" ? 6u : 5u) << box;
+        EXPECT_GE(of[0], 0) << box << " closes a solid with its faces";
+        for (int s : of) EXPECT_EQ(s, of[0]) << box << "'s faces share one solid";
+    }
+    EXPECT_NE(solidOf("cube")[0], solidOf("standing")[0]);
+    for (int s : solidOf("floating")) EXPECT_EQ(s, -1) << "nothing seals its open bottom";
+    EXPECT_EQ(solid[FindNode(faces, "floor")], -1);
 
     // A closed room in one node faces in: its backs face the sky, so it is no solid.
     SceneBuilder r;

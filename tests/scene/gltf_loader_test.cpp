@@ -12,6 +12,7 @@
 
 #include "base/check.h"
 #include "base/image.h"
+#include "scene/solids.h"
 #include "scene/surfels.h"
 #include "test_util.h"
 

@@ -93,7 +93,7 @@ class ImplicitLinker {
     ~ImplicitLinker();
     // The links of `hierarchy` as it is placed now. `frontArea`: per node and bin, the
     // front-facing projected area Σ A cos⁺(n, ω_b) (what a cluster covers of a bin).
-    // `solid`: per node, the closed solid (scene/scene.h ClosedNodes) all its members bound,
+    // `solid`: per node, the closed solid (scene/solids.h NodeSolids) all its members bound,
     // or kNoSolid; empty: none known. In a bin, a solid's turned-away flat senders that lie
     // `thin` or more behind its nearest facing one add only what they cover beyond its
     // facing ones: seen from outside, a solid's far faces lie behind its near ones (at a

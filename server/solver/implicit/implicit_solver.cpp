@@ -11,6 +11,7 @@
 #include "base/check.h"
 #include "base/numeric.h"
 #include "gpu/context.h"
+#include "scene/solids.h"
 #include "solver/implicit/vulkan_bounce.h"
 #include "solver/implicit/vulkan_composite.h"
 #include "solver/implicit/vulkan_links.h"
@@ -116,15 +117,15 @@ void ImplicitSolver::FindSolids(const Scene& scene) {
     // surface just before it (a lamp quad 2 mm before its housing) is the solid's, since
     // whatever of the open surface lies in the solid's shadow shows no more than the solid.
     constexpr uint32_t kOpen = kNoSolid - 1;
-    const std::vector<bool> closed = ClosedNodes(scene);
+    const std::vector<int> solids = NodeSolids(scene);
     std::vector<uint32_t> ofSurfel(surfels_.size(), kOpen);
     bool any = false;
     for (size_t p = 0; p < scene.primitives.size(); ++p) {
         const int node = scene.primitives[p].nodeIndex;
-        if (node < 0 || !closed[size_t(node)]) continue;
+        if (node < 0 || solids[size_t(node)] < 0) continue;
         any = true;
         for (size_t i = surfels_.firstSurfel[p]; i < surfels_.End(p); ++i)
-            ofSurfel[i] = uint32_t(node);
+            ofSurfel[i] = uint32_t(solids[size_t(node)]);
     }
     solid_.clear();
     if (!any) return;

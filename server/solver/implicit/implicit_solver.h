@@ -138,7 +138,7 @@ class ImplicitSolver : public Solver {
     // keeps the links of the pairs of other nodes for it); empty before any move.
     std::vector<uint8_t> moving_;
     size_t incrementalRelinks_ = 0;  // relinks that kept the unmoved pairs' links (stats)
-    // Per node: the closed solid all its members bound (ClosedNodes: the scene node), or
+    // Per node: the closed solid all its members bound (NodeSolids), or
     // kNoSolid; empty when the scene has none. Fixed by the triangles' connectivity, so it
     // is found once (a deformation keeps it).
     std::vector<uint32_t> solid_;
