@@ -196,7 +196,7 @@ bool Meets(vec3 lo, vec3 hi, vec3 from, vec3 dir) {
     return near <= far;
 }
 
-// gather/sampling.h Basis: two unit vectors completing `n` to an orthonormal basis.
+// rays/sampling.h Basis: two unit vectors completing `n` to an orthonormal basis.
 void Basis(vec3 n, out vec3 t, out vec3 s) {
     float sign = (floatBitsToUint(n.z) & 0x80000000u) != 0u ? -1.0 : 1.0;
     float p = -1.0 / (sign + n.z), q = n.x * n.y * p;

@@ -45,6 +45,55 @@ void AddClutterRoom(SceneBuilder& b, float emission, float albedo) {
     b.AddQuad("panel", lamp, {lo, y, lo}, {hi, y, lo}, {hi, y, hi}, {lo, y, hi}, inside, 2);
 }
 
+glm::vec3 SunlitMazeSun() { return glm::normalize(glm::vec3(0.3f, -1.0f, 0.2f)); }
+
+std::vector<std::pair<glm::vec3, glm::vec3>> SunlitMazeWalls() {
+    const float h = kSunlitMazeHeight;
+    return {{{1.47f, 0.0f, 0.0f}, {1.53f, h, 2.5f}},
+            {{2.47f, 0.0f, 1.5f}, {2.53f, h, 4.0f}},
+            {{0.3f, 0.0f, 3.0f}, {1.0f, h, 3.06f}}};
+}
+
+SceneBuilder SunlitMaze() {
+    SceneBuilder b;
+    const uint32_t plaster = b.AddMaterial("plaster", glm::vec3(0.6f));
+    const float W = 4.0f, H = kSunlitMazeHeight, lo = kSunlitMazeHoleLo, hi = kSunlitMazeHoleHi;
+    const glm::vec3 inside(W / 2, H / 2, W / 2);
+    b.AddQuad("floor", plaster, {0, 0, 0}, {W, 0, 0}, {W, 0, W}, {0, 0, W}, inside, 16);
+    b.AddQuad("wall_south", plaster, {0, 0, 0}, {W, 0, 0}, {W, H, 0}, {0, H, 0}, inside, 8);
+    b.AddQuad("wall_north", plaster, {0, 0, W}, {W, 0, W}, {W, H, W}, {0, H, W}, inside, 8);
+    b.AddQuad("wall_west", plaster, {0, 0, 0}, {0, 0, W}, {0, H, W}, {0, H, 0}, inside, 8);
+    b.AddQuad("wall_east", plaster, {W, 0, 0}, {W, 0, W}, {W, H, W}, {W, H, 0}, inside, 8);
+    // The roof in four quads about the hole, facing down into the room.
+    const glm::vec3 below(W / 2, 0.0f, W / 2);
+    b.AddQuad("roof", plaster, {0, H, 0}, {W, H, 0}, {W, H, lo}, {0, H, lo}, below, 4);
+    b.AddQuad("roof", plaster, {0, H, hi}, {W, H, hi}, {W, H, W}, {0, H, W}, below, 8);
+    b.AddQuad("roof", plaster, {0, H, lo}, {lo, H, lo}, {lo, H, hi}, {0, H, hi}, below, 1);
+    b.AddQuad("roof", plaster, {hi, H, lo}, {W, H, lo}, {W, H, hi}, {hi, H, hi}, below, 4);
+    // Hollow inner walls: four sides facing out, open at floor and roof.
+    int k = 0;
+    for (const auto& [a, c] : SunlitMazeWalls()) {
+        const std::string name = "inner_" + std::to_string(k++);
+        const glm::vec3 mid = 0.5f * (a + c);
+        b.AddQuad(name, plaster, {a.x, 0, a.z}, {a.x, 0, c.z}, {a.x, H, c.z}, {a.x, H, a.z},
+                  mid - glm::vec3(1, 0, 0), 8);
+        b.AddQuad(name, plaster, {c.x, 0, a.z}, {c.x, 0, c.z}, {c.x, H, c.z}, {c.x, H, a.z},
+                  mid + glm::vec3(1, 0, 0), 8);
+        b.AddQuad(name, plaster, {a.x, 0, a.z}, {c.x, 0, a.z}, {c.x, H, a.z}, {a.x, H, a.z},
+                  mid - glm::vec3(0, 0, 1), 8);
+        b.AddQuad(name, plaster, {a.x, 0, c.z}, {c.x, 0, c.z}, {c.x, H, c.z}, {a.x, H, c.z},
+                  mid + glm::vec3(0, 0, 1), 8);
+    }
+    PunctualLight sun;
+    sun.name = "sun";
+    sun.type = LightType::kDirectional;
+    sun.intensity = 1000.0f;
+    sun.position = {W / 2, H + 1.0f, W / 2};
+    sun.direction = SunlitMazeSun();
+    b.AddLight(sun);
+    return b;
+}
+
 SceneBuilder BoxRow(int count, float gap) {
     SceneBuilder b;
     AddClutterRoom(b);

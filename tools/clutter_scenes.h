@@ -32,6 +32,18 @@ SceneBuilder ChairsUnderDesks();
 // some touching, some interpenetrating, on seed `seed`.
 SceneBuilder RandomBoxes(int count, uint32_t seed);
 
+// A sunlit maze (issue 61): a closed 4 × 2.5 × 4 m room of one-sided quads facing in, its
+// roof open over x, z ∈ [0.5, 1] (SunlitMazeHole), three hollow inner walls 6 cm thick from
+// floor to roof (four sides each facing out, no top or bottom; SunlitMazeWalls), and a sun
+// (directional light "sun", 1,000 lux) travelling along SunlitMazeSun. Straight lines from
+// the sun reach through the hole only the floor west of the first inner wall and that wall's
+// west side; everything else gets no direct sun.
+SceneBuilder SunlitMaze();
+glm::vec3 SunlitMazeSun();
+// The inner walls' boxes (lo, hi), and the hole's x and z range [lo, hi] at the roof, y = 2.5.
+std::vector<std::pair<glm::vec3, glm::vec3>> SunlitMazeWalls();
+constexpr float kSunlitMazeHoleLo = 0.5f, kSunlitMazeHoleHi = 1.0f, kSunlitMazeHeight = 2.5f;
+
 // The furnace bound of a scene lit only by its emitters: no surface can receive more than
 // π · max(L_e) / (1 − max ρ) lux (radiance never exceeds max(L_e) / (1 − max ρ)).
 float FurnaceBound(const Scene& scene);

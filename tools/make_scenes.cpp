@@ -1,6 +1,6 @@
 // Writes the bundled scenes (tools/bundled_scenes.cpp) as glTF into a folder.
 // Usage: make_scenes OUTDIR [--clutter]; --clutter writes the stability suite
-// (tools/clutter_scenes.h) instead.
+// (tools/clutter_scenes.h) and the sunlit maze instead.
 #include <cstdio>
 #include <cstring>
 
@@ -21,6 +21,9 @@ int main(int argc, char** argv) {
                 s.builder.WriteGltf(path);
                 std::printf("wrote %s\n", path.c_str());
             }
+            const std::string maze = std::string(argv[1]) + "/sunlit-maze.gltf";
+            penumbra::scenes::SunlitMaze().WriteGltf(maze);
+            std::printf("wrote %s\n", maze.c_str());
             return 0;
         }
         for (const auto& s : penumbra::scenes::All()) {

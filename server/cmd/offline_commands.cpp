@@ -119,11 +119,16 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
         for (const auto& p : s.passes)
             std::fprintf(stderr, " | %s %.2f", p.name.c_str(),
                          s.gathers ? p.msTotal / s.gathers : 0.0);
-        if (s.lights)
+        if (s.lights && s.shadowViews)
             std::fprintf(stderr,
                          "\n  %d punctual lights: %d shadow maps of %d² in %.2f ms, direct light "
                          "%.2f ms",
                          s.lights, s.shadowViews, s.shadowMapSize, s.msShadow, s.msDirect);
+        else if (s.lights)
+            std::fprintf(stderr,
+                         "\n  %d punctual lights: shadow rays (their BVH in %.2f ms), direct "
+                         "light %.2f ms",
+                         s.lights, s.msShadow, s.msDirect);
         if (!s.environment.empty())
             std::fprintf(stderr,
                          "\n  environment %s × %.3g, turned %.1f°; %zu of %zu elements occlude "

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <glm/gtc/matrix_transform.hpp>
+#include <unordered_map>
 
 #include "base/check.h"
 #include "base/numeric.h"
@@ -278,12 +279,57 @@ void ViewTriangles(const glm::mat4& viewProj, const std::vector<glm::vec3>& tria
     }
 }
 
+namespace {
+
+// Distance from p to the segment ab.
+float SegmentDistance(const glm::vec3& p, const glm::vec3& a, const glm::vec3& b) {
+    const glm::vec3 ab = b - a;
+    const float len2 = glm::dot(ab, ab);
+    const float t = len2 > 0.0f ? std::clamp(glm::dot(p - a, ab) / len2, 0.0f, 1.0f) : 0.0f;
+    return glm::length(p - (a + t * ab));
+}
+
+// Per surfel, the largest footprint radius that keeps its disc on its own surface: ½√area,
+// or less where a boundary edge of the refined mesh (an edge of one triangle) passes closer
+// to its centroid, for the surfels of every triangle at that edge's ends.
+std::vector<float> FootprintRadii(const Surfels& surfels) {
+    std::vector<float> radius(surfels.size());
+    for (size_t s = 0; s < surfels.size(); ++s) radius[s] = 0.5f * std::sqrt(surfels.areas[s]);
+    const std::vector<uint32_t>& t = surfels.refinedTriangles;
+    std::unordered_map<uint64_t, uint32_t> edges;  // (low << 32 | high) → triangles on it
+    for (size_t i = 0; i + 2 < t.size(); i += 3)
+        for (int k = 0; k < 3; ++k) {
+            const uint32_t a = t[i + k], b = t[i + (k + 1) % 3];
+            ++edges[uint64_t(std::min(a, b)) << 32 | std::max(a, b)];
+        }
+    std::vector<uint32_t> firstAt(surfels.size() + 1, 0), at(t.size());  // triangles a surfel
+    for (uint32_t v : t) ++firstAt[v + 1];
+    for (size_t s = 0; s < surfels.size(); ++s) firstAt[s + 1] += firstAt[s];
+    std::vector<uint32_t> fill(firstAt.begin(), firstAt.end() - 1);
+    for (size_t i = 0; i < t.size(); ++i) at[fill[t[i]]++] = uint32_t(i / 3);
+    for (const auto& [key, count] : edges) {
+        if (count != 1) continue;
+        const uint32_t a = uint32_t(key >> 32), b = uint32_t(key);
+        const glm::vec3 &pa = surfels.positions[a], &pb = surfels.positions[b];
+        for (uint32_t end : {a, b})
+            for (uint32_t k = firstAt[end]; k < firstAt[end + 1]; ++k)
+                for (int c = 0; c < 3; ++c) {
+                    const uint32_t s = t[size_t(at[k]) * 3 + c];
+                    radius[s] = std::min(radius[s], SegmentDistance(surfels.centroids[s], pa, pb));
+                }
+    }
+    return radius;
+}
+
+}  // namespace
+
 std::vector<GpuReceiver> MakeReceivers(const Surfels& surfels, const std::vector<uint32_t>& order) {
     std::vector<GpuReceiver> out;
     out.reserve(order.size());
+    const std::vector<float> radius = FootprintRadii(surfels);
     for (uint32_t s : order) {
         GpuReceiver r{};
-        r.position = glm::vec4(surfels.positions[s], 0.5f * std::sqrt(surfels.areas[s]));
+        r.position = glm::vec4(surfels.positions[s], radius[s]);
         r.normal = glm::vec4(surfels.normals[s], 0.0f);
         r.centroid = glm::vec4(surfels.centroids[s], 0.0f);
         out.push_back(r);
@@ -315,8 +361,13 @@ void RasterShadowMaps(const Plan& plan, const std::vector<glm::vec3>& triangles,
     });
 }
 
-void DirectIrradiance(const Plan& plan, const float* maps,
-                      const std::vector<GpuReceiver>& receivers, float* out, float* perLight) {
+namespace {
+
+// The direct pass over `receivers` (DirectIrradiance's outputs), with each tap's visibility
+// from `visible(light index, tap q, normal n, unit direction to the light, footprint radius)`.
+template <class TapVisible>
+void Irradiance(const Plan& plan, const std::vector<GpuReceiver>& receivers, float* out,
+                float* perLight, const TapVisible& visible) {
     tbb::parallel_for(size_t(0), receivers.size(), [&](size_t i) {
         const GpuReceiver& r = receivers[i];
         const glm::vec3 p(r.position), n(r.normal), c(r.centroid);
@@ -355,9 +406,7 @@ void DirectIrradiance(const Plan& plan, const float* maps,
             }
             float cosine = glm::dot(n, toLight);
             if (cosine <= 0.0f || scale <= 0.0f) continue;
-            float visible = 0.0f;
-            const bool cube = light.cone.w >= 6.0f;
-            const int first = static_cast<int>(light.cone.z);
+            float seen = 0.0f;
             for (int k = 0; k < kTaps; ++k) {
                 float rr = r.position.w * std::sqrt((k + 0.5f) / kTaps);
                 float phi = 2.3999632f * k;  // the golden angle: a Vogel disc
@@ -365,11 +414,9 @@ void DirectIrradiance(const Plan& plan, const float* maps,
                 glm::vec3 qToLight = light.position.w == 2.0f
                                          ? toLight
                                          : glm::normalize(glm::vec3(light.position) - q);
-                visible +=
-                    cube ? CubeTapVisibility(plan, maps, light, q, n, qToLight)
-                         : ViewTapVisibility(plan, maps, first, plan.views[first], q, n, qToLight);
+                seen += visible(li, q, n, qToLight, r.position.w);
             }
-            glm::vec3 ek = glm::vec3(light.radiant) * (scale * cosine * visible / kTaps);
+            glm::vec3 ek = glm::vec3(light.radiant) * (scale * cosine * seen / kTaps);
             e += ek;
             if (mine) mine[0] = ek.x, mine[1] = ek.y, mine[2] = ek.z;
         }
@@ -380,29 +427,70 @@ void DirectIrradiance(const Plan& plan, const float* maps,
     });
 }
 
+}  // namespace
+
+void DirectIrradiance(const Plan& plan, const float* maps,
+                      const std::vector<GpuReceiver>& receivers, float* out, float* perLight) {
+    Irradiance(
+        plan, receivers, out, perLight,
+        [&](size_t li, const glm::vec3& q, const glm::vec3& n, const glm::vec3& toLight, float) {
+            const GpuLight& light = plan.lights[li];
+            const int first = static_cast<int>(light.cone.z);
+            return light.cone.w >= 6.0f
+                       ? CubeTapVisibility(plan, maps, light, q, n, toLight)
+                       : ViewTapVisibility(plan, maps, first, plan.views[first], q, n, toLight);
+        });
+}
+
+void DirectIrradianceByRays(const Plan& plan, const RayScene& rays,
+                            const std::vector<GpuReceiver>& receivers, float* out,
+                            float* perLight) {
+    // A directional light's rays reach 4 scene diameters (LightArrival).
+    const float far = 4.0f * std::max(rays.GetScene().Diameter(), 1e-6f);
+    Irradiance(plan, receivers, out, perLight,
+               [&](size_t li, const glm::vec3& q, const glm::vec3& n, const glm::vec3& toLight,
+                   float radius) {
+                   const GpuLight& light = plan.lights[li];
+                   const glm::vec3 from = q + n * (0.1f * radius + rays.Epsilon());
+                   const glm::vec3 span =
+                       light.position.w == 2.0f ? toLight * far : glm::vec3(light.position) - from;
+                   return rays.Occluded(from, span) ? 0.0f : 1.0f;
+               });
+}
+
 CpuDirect::CpuDirect(const Scene& scene, std::vector<GpuReceiver> receivers, int mapSize)
-    : triangles_(SceneTriangles(scene)), receivers_(std::move(receivers)), mapSize_(mapSize) {
+    : receivers_(std::move(receivers)) {
+    if (mapSize < 16 || mapSize > 8192) throw Error("shadow map size must be 16…8192 texels");
     out_.assign(receivers_.size() * 4, 0.0f);
+    Trace(scene);
     Update(scene);
+}
+
+void CpuDirect::Trace(const Scene& scene) {
+    const auto start = std::chrono::steady_clock::now();
+    rays_.reset();
+    geometry_ = Scene{};
+    geometry_.primitives = scene.primitives;
+    geometry_.materials = scene.materials;
+    geometry_.nodes = scene.nodes;
+    rays_ = std::make_unique<RayScene>(geometry_);
+    msShadow = MsSince(start);
 }
 
 void CpuDirect::Move(const Scene& scene, std::vector<GpuReceiver> receivers) {
     PENUMBRA_CHECK(receivers.size() == receivers_.size());
-    triangles_ = SceneTriangles(scene);
     receivers_ = std::move(receivers);
+    Trace(scene);
     Update(scene);
 }
 
 void CpuDirect::Update(const Scene& scene) {
-    Plan plan = PlanShadows(scene, mapSize_);
-    views = static_cast<int>(plan.views.size());
-    auto t0 = std::chrono::steady_clock::now();
-    RasterShadowMaps(plan, triangles_, maps_);
-    msShadow = MsSince(t0);
-    auto t1 = std::chrono::steady_clock::now();
+    const Plan plan = PlanShadows(scene, 16);  // the lights as the pass reads them
+    views = 0;
+    const auto start = std::chrono::steady_clock::now();
     perLight_.assign(plan.lights.size() * receivers_.size() * 4, 0.0f);
-    DirectIrradiance(plan, maps_.data(), receivers_, out_.data(), perLight_.data());
-    msDirect = MsSince(t1);
+    DirectIrradianceByRays(plan, *rays_, receivers_, out_.data(), perLight_.data());
+    msDirect = MsSince(start);
 }
 
 }  // namespace penumbra::direct

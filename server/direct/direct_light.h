@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "gpu/layout.h"
+#include "rays/ray_scene.h"
 #include "scene/scene.h"
 #include "scene/surfels.h"
 
@@ -102,7 +103,10 @@ std::vector<glm::vec3> SceneTriangles(const Scene& scene);
 void ViewTriangles(const glm::mat4& viewProj, const std::vector<glm::vec3>& triangles,
                    std::vector<uint32_t>& indices);
 
-// Receivers for `order` (surfel indices, e.g. hierarchy leaves), footprints from surfel areas.
+// Receivers for `order` (surfel indices, e.g. hierarchy leaves), footprints from surfel areas:
+// a disc of radius ½√area about the centroid, no wider than the surfel's own surface allows
+// (its distance to the boundary edges of the refined triangles around it), so that no tap
+// lies beyond where the surface ends (a wall's top under a roof, a floor at a wall).
 std::vector<GpuReceiver> MakeReceivers(const Surfels& surfels, const std::vector<uint32_t>& order);
 
 // CPU twin of the shadow pass: `maps` gets plan.MapTexels() depths (1 where nothing is).
@@ -114,5 +118,14 @@ void RasterShadowMaps(const Plan& plan, const std::vector<glm::vec3>& triangles,
 void DirectIrradiance(const Plan& plan, const float* maps,
                       const std::vector<GpuReceiver>& receivers, float* out,
                       float* perLight = nullptr);
+
+// The direct pass with shadow rays instead of maps (the CPU back end's stage): each tap of
+// the footprint, lifted off its surface by a tenth of the footprint's radius (a curved
+// surface leaves its tangent plane by less), sends a ray to the light through `rays` (the
+// scene's triangles): exact visibility, so that no surface lets light through where two
+// meet or where it is thinner than a map's texel. The same outputs as DirectIrradiance.
+void DirectIrradianceByRays(const Plan& plan, const RayScene& rays,
+                            const std::vector<GpuReceiver>& receivers, float* out,
+                            float* perLight = nullptr);
 
 }  // namespace penumbra::direct

@@ -3,15 +3,40 @@
 
 #include "base/check.h"
 #include "direct/environment_light.h"
-#include "direct/vulkan_direct.h"
+#include "gpu/buffer.h"
 
 namespace penumbra::direct {
 
 std::unique_ptr<DirectStage> MakeDirectStage(const Scene& scene, std::vector<GpuReceiver> receivers,
                                              int mapSize, gpu::Context* device, gpu::Buffer* out) {
     if (device && out)
-        return std::make_unique<VulkanDirect>(*device, scene, std::move(receivers), *out, mapSize);
+        return std::make_unique<UploadedDirect>(scene, std::move(receivers), *out, mapSize);
     return std::make_unique<CpuDirect>(scene, std::move(receivers), mapSize);
+}
+
+UploadedDirect::UploadedDirect(const Scene& scene, std::vector<GpuReceiver> receivers,
+                               gpu::Buffer& out, int mapSize)
+    : cpu_(scene, std::move(receivers), mapSize), out_(out) {
+    Upload();
+}
+
+void UploadedDirect::Update(const Scene& scene) {
+    cpu_.Update(scene);
+    Upload();
+}
+
+void UploadedDirect::Move(const Scene& scene, std::vector<GpuReceiver> receivers) {
+    cpu_.Move(scene, std::move(receivers));
+    Upload();
+}
+
+void UploadedDirect::Upload() {
+    const std::vector<float> e = cpu_.Irradiance();
+    PENUMBRA_CHECK_LE(e.size() * sizeof(float), out_.Bytes());
+    out_.Upload(e);
+    msShadow = cpu_.msShadow;
+    msDirect = cpu_.msDirect;
+    views = 0;
 }
 
 bool SkyBins::Update(const Environment& sky, const Directions& dirs, std::vector<glm::vec3>& bins) {

@@ -1,8 +1,11 @@
 // The direct-light stage every solver shares (docs/ARCHITECTURE.md): the punctual lights' shadowed
-// direct irradiance E_d at a solver's receivers, on the CPU (CpuDirect, direct_light.h) or a
-// Vulkan device (VulkanDirect, vulkan_direct.h) behind one interface, and the sky binned on a
-// solver's directions, redone only when the sky changed. A solver names its receivers (its
-// elements' surfels, in its own order) and reads E_d back; it never picks a back end.
+// direct irradiance E_d at a solver's receivers, by shadow rays on the CPU (CpuDirect), for a
+// solver on a Vulkan device uploaded where its passes read it (UploadedDirect), behind one
+// interface, and the sky binned on a solver's directions, redone only when the sky changed. A
+// solver names its receivers (its elements' surfels, in its own order) and reads E_d back; it
+// never picks a back end. VulkanDirect (vulkan_direct.h: shadow maps on the device) is not
+// used by the solvers: its maps let light through surfaces thinner than a texel and where
+// two surfaces meet (docs/SOLVER.md "Direct light").
 #pragma once
 
 #include <memory>
@@ -34,29 +37,48 @@ class DirectStage {
     int views = 0;                          // shadow maps the last update rendered
 };
 
-// Both passes on the CPU (the twins of direct_light.h), with their wall times.
+// The CPU back end: the direct pass with shadow rays (DirectIrradianceByRays), timed.
 class CpuDirect : public DirectStage {
   public:
+    // Shadow rays through an Embree BVH of the scene's triangles (DirectIrradianceByRays);
+    // `mapSize` is kept for the stats only (no maps are drawn). `views` stays 0, msShadow is
+    // the BVH's build.
     CpuDirect(const Scene& scene, std::vector<GpuReceiver> receivers, int mapSize);
     // Re-plans from the scene's lights (geometry as at construction) and recomputes.
     void Update(const Scene& scene) override;
     void Move(const Scene& scene, std::vector<GpuReceiver> receivers) override;
     std::vector<float> Irradiance() const override { return out_; }
     std::vector<float> PerLight() const override { return perLight_; }
-    const std::vector<float>& Maps() const { return maps_; }
 
   private:
-    std::vector<glm::vec3> triangles_;
+    void Trace(const Scene& scene);  // the BVH of the scene's triangles, timed
+    // The scene's geometry as last built (the BVH reads it): its primitives and materials.
+    Scene geometry_;
+    std::unique_ptr<RayScene> rays_;
     std::vector<GpuReceiver> receivers_;
-    int mapSize_;
-    std::vector<float> maps_;
     std::vector<float> out_;
     std::vector<float> perLight_;
 };
 
-// The stage for `scene`'s lights at `receivers`: on `device` when given, rendering E_d into
-// `out` (one vec4 per receiver, outliving the stage) where the solver's passes read it,
-// else on the CPU. Throws penumbra::Error for a bad map size or a device without graphics.
+// CpuDirect for a solver on a Vulkan device: each update's E_d uploaded into `out` (one vec4
+// per receiver, outliving the stage), where the solver's passes read it.
+class UploadedDirect : public DirectStage {
+  public:
+    UploadedDirect(const Scene& scene, std::vector<GpuReceiver> receivers, gpu::Buffer& out,
+                   int mapSize);
+    void Update(const Scene& scene) override;
+    void Move(const Scene& scene, std::vector<GpuReceiver> receivers) override;
+    std::vector<float> Irradiance() const override { return cpu_.Irradiance(); }
+    std::vector<float> PerLight() const override { return cpu_.PerLight(); }
+
+  private:
+    void Upload();
+    CpuDirect cpu_;
+    gpu::Buffer& out_;
+};
+
+// The stage for `scene`'s lights at `receivers`: with `device` and `out`, E_d uploaded into
+// `out` (UploadedDirect), else on the CPU. Throws penumbra::Error for a bad map size.
 std::unique_ptr<DirectStage> MakeDirectStage(const Scene& scene, std::vector<GpuReceiver> receivers,
                                              int mapSize, gpu::Context* device = nullptr,
                                              gpu::Buffer* out = nullptr);

@@ -11,7 +11,7 @@
 #include "base/check.h"
 #include "base/numeric.h"
 #include "base/pcg.h"
-#include "gather/sampling.h"
+#include "rays/sampling.h"
 
 namespace penumbra {
 namespace {

@@ -7,7 +7,7 @@
 #include <glm/glm.hpp>
 #include <vector>
 
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 
 namespace penumbra {
 

@@ -14,7 +14,7 @@
 #include "base/pcg.h"
 #include "gather/gather_detail.h"
 #include "gather/gather_stage.h"
-#include "gather/sampling.h"
+#include "rays/sampling.h"
 
 namespace penumbra {
 

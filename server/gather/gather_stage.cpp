@@ -15,7 +15,7 @@
 #include "base/image.h"
 #include "base/pcg.h"
 #include "gather/gather_detail.h"
-#include "gather/sampling.h"
+#include "rays/sampling.h"
 #include "gpu/context.h"
 #include "gpu/ray_tracer.h"
 

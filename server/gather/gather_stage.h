@@ -25,7 +25,7 @@
 #include <memory>
 
 #include "gather/emitter_direct.h"
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 #include "gather/sun_direct.h"
 #include "solver/solver.h"
 

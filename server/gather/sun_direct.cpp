@@ -7,7 +7,7 @@
 
 #include "base/check.h"
 #include "base/pcg.h"
-#include "gather/sampling.h"
+#include "rays/sampling.h"
 
 namespace penumbra {
 namespace {

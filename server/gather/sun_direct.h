@@ -9,7 +9,7 @@
 #include <glm/glm.hpp>
 #include <vector>
 
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 #include "scene/environment.h"
 
 namespace penumbra {

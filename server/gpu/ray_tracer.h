@@ -2,7 +2,7 @@
 // a bottom-level acceleration structure over the triangles, a top-level one with one
 // instance of it, and a ray-tracing pipeline (shaders/trace.rgen, trace.rmiss, trace.rchit)
 // that writes the nearest hit of each ray. The answer is what RayScene::Intersect gives
-// (gather/ray_scene.h): the triangle, its t and the barycentrics (u, v) of p0 + u·e1 + v·e2.
+// (rays/ray_scene.h): the triangle, its t and the barycentrics (u, v) of p0 + u·e1 + v·e2.
 //
 // It needs VK_KHR_acceleration_structure and VK_KHR_ray_tracing_pipeline (gpu::Capability::
 // kRayTracing). The issue named VK_KHR_ray_query in a compute pass; the GPUs this project

@@ -21,7 +21,7 @@
 #include "base/image.h"
 #include "base/numeric.h"
 #include "base/pcg.h"
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 
 namespace penumbra {
 namespace {

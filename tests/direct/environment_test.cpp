@@ -12,7 +12,7 @@
 #include "base/check.h"
 #include "base/image.h"
 #include "direct/environment_light.h"
-#include "gather/sampling.h"
+#include "rays/sampling.h"
 #include "reference/path_tracer.h"
 #include "scene/solids.h"
 #include "solver/solver.h"

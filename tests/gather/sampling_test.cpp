@@ -1,6 +1,6 @@
-// The gather's sampling patterns (gather/sampling.h): the cheap R2 fraction equals fmod, and
+// The gather's sampling patterns (rays/sampling.h): the cheap R2 fraction equals fmod, and
 // CosineCone lets through every pattern point whose direction lies in its cone.
-#include "gather/sampling.h"
+#include "rays/sampling.h"
 
 #include <gtest/gtest.h>
 

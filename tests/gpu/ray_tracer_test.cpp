@@ -1,5 +1,5 @@
 // Issue 19's hardware ray tracing (gpu/ray_tracer.h) and the final gather traced with it: the
-// hits are Embree's (gather/ray_scene.h) and the gathered answer is the CPU one, on a device
+// hits are Embree's (rays/ray_scene.h) and the gathered answer is the CPU one, on a device
 // that can trace rays; skipped, with what each device lacks, where none can (lavapipe, and
 // the CI machine). What runs everywhere: a device without it is refused with a message that
 // says what it lacks, and the gather traces on Embree and says why.
@@ -13,7 +13,7 @@
 #include "base/check.h"
 #include "base/pcg.h"
 #include "gather/gather_stage.h"
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 #include "gpu/context.h"
 #include "scene/gltf_loader.h"
 #include "solver/antiradiance/settings.h"

@@ -17,7 +17,7 @@
 
 #include "base/check.h"
 #include "base/numeric.h"
-#include "gather/sampling.h"
+#include "rays/sampling.h"
 #include "solver/implicit/vulkan_composite.h"
 #include "solver/implicit/vulkan_links.h"
 

@@ -17,7 +17,7 @@
 #include <memory>
 
 #include "direct/direct_stage.h"
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 #include "solver/lightfield/lines.h"
 #include "solver/lightfield/settings.h"
 #include "solver/lightfield/vulkan_lines.h"

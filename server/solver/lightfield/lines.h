@@ -14,7 +14,7 @@
 #include <utility>
 #include <vector>
 
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 #include "scene/environment.h"
 
 namespace penumbra {

@@ -13,7 +13,7 @@
 #include <memory>
 #include <vector>
 
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 #include "gpu/fwd.h"
 #include "solver/lightfield/lines.h"
 

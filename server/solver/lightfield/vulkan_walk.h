@@ -9,7 +9,7 @@
 #include <memory>
 #include <vector>
 
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 #include "gpu/fwd.h"
 #include "scene/environment.h"
 #include "solver/lightfield/lines.h"

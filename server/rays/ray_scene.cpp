@@ -1,5 +1,5 @@
 // Embree 3 BVH over the scene's triangles (ray_scene.h).
-#include "gather/ray_scene.h"
+#include "rays/ray_scene.h"
 
 #include <embree3/rtcore.h>
 
@@ -155,8 +155,10 @@ void RayScene::Build() {
     if (!device_) throw Error("Embree: cannot create a device");
     rtcSetDeviceErrorFunction(device_, &OnError, &error_);
     rtcScene_ = rtcNewScene(device_);
-    // AllHits' filter runs from its own context only (other queries pass none).
-    rtcSetSceneFlags(rtcScene_, RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
+    // AllHits' filter runs from its own context only (other queries pass none). Robust:
+    // watertight triangle tests, so a ray through an edge two triangles share (a tiled roof,
+    // a grid of quads met along an axis) hits one of them instead of slipping through both.
+    rtcSetSceneFlags(rtcScene_, RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION | RTC_SCENE_FLAG_ROBUST);
     eps_ = 1e-4f * std::max(scene_.Diameter(), 1e-6f);
     Sample();
     BuildBvh();
