@@ -361,7 +361,7 @@ int ServiceCommands::State::Execute(client::Client& c) {
         {move, &State::RunMove},         {deform, &State::RunDeform}, {light, &State::RunLight},
         {material, &State::RunMaterial}, {sky, &State::RunSky},       {get, &State::RunGet},
         {step, &State::RunStep},         {stats, &State::RunStats},   {sleep, &State::RunSleep},
-        {script, &State::RunScript},
+        {script, &State::RunScript},     {wait, &State::RunWait},
     };
     for (const auto& [command, run] : commands)
         if (command && command->parsed()) return (this->*run)(c);

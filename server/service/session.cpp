@@ -173,7 +173,7 @@ nlohmann::json Session::StatsJson() const {
     j["device_fallbacks"] = deviceFallbacks_;
     j["rebuilding"] = rebuild_ != nullptr;
     j["subscribers"] = subscribers_.size();
-    j["converged"] = converged_;
+    j["converged"] = converged_ && pending_.empty() && !rebuild_;
     if (!diverged_.empty()) j["diverged"] = diverged_;
     if (!solverFallback_.empty()) j["solver_fallback"] = solverFallback_;
     j["iterations_per_frame"] = settings_.iterationsPerFrame;
@@ -266,9 +266,12 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
             latencyReported_ = true;
         }
         ++framesSinceEdit_;
-        converged_ =
+        settled_ =
             divergence.empty() && !edited && stats.catchingUp.empty() &&
             (change < settings_.convergedChange || framesSinceEdit_ >= settings_.maxFramesPerEdit);
+        // The frame contract (protocol/SPEC.md): converged only with every edit acknowledged
+        // before it applied, none waiting in the queue or in a rebuild.
+        converged_ = settled_ && pending_.empty() && !rebuild_;
         if (!divergence.empty() && diverged_.empty()) {
             diverged_ = divergence;
             lastError_ = "the solution " + divergence + "; iteration stopped";
@@ -328,7 +331,7 @@ bool Session::FallBackToCpu(std::unique_lock<std::mutex>& lock, std::string& not
     char built[32];
     std::snprintf(built, sizeof(built), "%.1f", seconds);
     note += (note.empty() ? "" : "; ") + lastError_ + " (built in " + built + " s)";
-    converged_ = false;
+    converged_ = settled_ = false;
     framesSinceEdit_ = 0;
     lock.unlock();
     cpu.reset();
@@ -372,7 +375,7 @@ bool Session::FallBackToAnotherSolver(std::unique_lock<std::mutex>& lock, std::s
     std::snprintf(built, sizeof(built), "%.1f", seconds);
     note += (note.empty() ? "" : "; ") + why + "; going on with the " + fallback.solver +
             " solver (built in " + built + " s)";
-    converged_ = false;
+    converged_ = settled_ = false;
     framesSinceEdit_ = 0;
     lock.unlock();
     next.reset();
@@ -426,7 +429,7 @@ bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string&
     appliedEdit_ = last;
     appliedReceived_ = received;
     latencyReported_ = false;
-    converged_ = false;
+    converged_ = settled_ = false;
     framesSinceEdit_ = 0;
     return true;
 }
@@ -436,7 +439,7 @@ void Session::Run() {
     while (true) {
         wake_.wait(lock, [&] {
             return stop_ || (rebuild_ && rebuild_->done) || (!rebuild_ && !pending_.empty()) ||
-                   !steps_.empty() || (!converged_ && diverged_.empty()) ||
+                   !steps_.empty() || (!settled_ && diverged_.empty()) ||
                    (!diverged_.empty() && !rebuild_ && !fallbackTried_);
         });
         if (stop_) return;
@@ -474,7 +477,7 @@ void Session::Run() {
             appliedEdit_ = rebuild_->lastEdit;
             appliedReceived_ = rebuild_->received;
             latencyReported_ = false;
-            converged_ = false;
+            converged_ = settled_ = false;
             framesSinceEdit_ = 0;
             rebuild_.reset();
         }
@@ -555,7 +558,7 @@ void Session::Run() {
                         if (FallBackToCpu(lock, note)) continue;
                     }
                     lastError_ = e.what();
-                    converged_ = true;
+                    converged_ = settled_ = true;
                     return std::current_exception();
                 }
             }
@@ -567,7 +570,7 @@ void Session::Run() {
                 promise.set_exception(failure);
             else
                 promise.set_value(frames_);
-        } else if (!converged_ && diverged_.empty()) {
+        } else if (!settled_ && diverged_.empty()) {
             produce(edited ? 0 : settings_.iterationsPerFrame, true);
         }
     }

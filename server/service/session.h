@@ -275,7 +275,10 @@ class Session {
     std::map<int, FrameSink> subscribers_;
     int nextSubscriber_ = 1;
     FramePtr latest_;
-    bool converged_ = false;
+    // settled_: the solver's answer stopped changing (or the frame cap for an edit was met),
+    // so no frame is iterated until something changes; converged_: settled with every
+    // acknowledged edit applied (what frames and stats say).
+    bool converged_ = false, settled_ = false;
     int framesSinceEdit_ = 0;
     std::vector<glm::vec3> lastSurfels_;
     uint64_t frames_ = 0, rebuilds_ = 0, linkUpdates_ = 0;

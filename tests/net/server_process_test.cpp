@@ -938,6 +938,15 @@ TEST(ServerProcess, CliCommandsAndScriptAgainstTheServer) {
     ASSERT_EQ(load.exitCode, 0) << load.output;
     EXPECT_NE(load.output.find("movable: short_block, tall_block"), std::string::npos)
         << load.output;
+    // Issue 63: `wait` without edits of its own waits until the scene has converged.
+    auto waited = testing::Execute(connect + "wait --timeout 60");
+    ASSERT_EQ(waited.exitCode, 0) << waited.output;
+    auto settled =
+        nlohmann::json::parse(testing::Execute(connect + "stats").output, nullptr, false);
+    ASSERT_FALSE(settled.is_discarded());
+    const nlohmann::json& scene = settled.contains("scenes") ? settled["scenes"].back() : settled;
+    EXPECT_TRUE(scene["converged"].get<bool>()) << scene.dump();
+    EXPECT_GT(scene["frames"].get<int>(), 1) << scene.dump();
     auto dir = server.Dir();
     std::ofstream(dir / "edits.txt") << "# a scripted edit session\n"
                                         "move tall_block --translate 0.05,0,0 --rotate-y 15\n"
@@ -947,6 +956,8 @@ TEST(ServerProcess, CliCommandsAndScriptAgainstTheServer) {
                                             (dir / "after.json").string() + "\n";
     auto script = testing::Execute(connect + "script " + (dir / "edits.txt").string());
     ASSERT_EQ(script.exitCode, 0) << script.output;
+    // The script's `wait` waited for its own two edits: `get` wrote a frame with both.
+    EXPECT_NE(script.output.find(", edit 2, channel"), std::string::npos) << script.output;
     auto file = ReadIrradianceJson((dir / "after.json").string());
     EXPECT_EQ(file.primitives.size(), 8u);  // one per node of the Cornell box
     // Refusals exit 1 with the reason; an unreachable server exits 5.

@@ -94,6 +94,51 @@ TEST(Session, FirstFramesConvergeAndIdle) {
     EXPECT_EQ(session.Latest()->frame, frames) << "a converged session must idle";
 }
 
+// Issue 63, the frame contract: a frame is converged only when it includes every edit
+// acknowledged before it. A move (a link rebuild) and a light edit sent while the first
+// frames iterate: the old solver's frames go on during the rebuild, none of them converged.
+TEST(Session, AConvergedFrameIncludesEveryAcknowledgedEdit) {
+    Scene scene = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/cornell-box.gltf");
+    SessionSettings settings = Settings();
+    settings.solver.elementSize = 0.06f;
+    Session session("cornell", scene, settings);
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<std::pair<uint64_t, uint64_t>> converged;  // (frame, last edit) of each
+    uint64_t acknowledged = 0;
+    bool done = false;
+    int id = session.AddSubscriber([&](const FramePtr& f) {
+        std::lock_guard lock(m);
+        if (f->converged) converged.emplace_back(f->frame, f->lastEdit);
+        done = done || (acknowledged > 0 && f->converged && f->lastEdit >= acknowledged);
+        cv.notify_all();
+    });
+    const int node = FindNode(scene, "tall_block");
+    const glm::mat4 moved =
+        glm::translate(glm::mat4(1.0f), glm::vec3(0.05f, 0.0f, 0.0f)) * scene.nodes[node].local;
+    uint64_t first = 0, edits = 0, before = 0;
+    {
+        std::lock_guard lock(m);  // no frame is taken in before both edits are acknowledged
+        first = session.Submit(TransformEdit{"tall_block", moved});
+        edits = session.Submit(Dim("ceiling_light", 8.0f));
+        acknowledged = edits;
+        // Frames numbered up to here were made before the edits (the replayed one, say).
+        before = session.StatsJson()["frames"].get<uint64_t>();
+    }
+    {
+        std::unique_lock lock(m);
+        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(60), [&] { return done; }))
+            << "no converged frame with edit " << edits;
+    }
+    session.RemoveSubscriber(id);
+    EXPECT_EQ(first + 1, edits);
+    for (const auto& [frame, last] : converged) {
+        if (frame <= before) continue;
+        EXPECT_GE(last, edits) << "frame " << frame << " said converged without edits " << last + 1
+                               << ".." << edits;
+    }
+}
+
 TEST(Session, MoveConvergesToAFreshBakeOfTheMovedScene) {
     Scene scene = LoadGltf(kBlocker);
     Session session("blocker", scene, Settings());
