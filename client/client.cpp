@@ -3,6 +3,7 @@
 #include "client/client.h"
 
 #include <asio.hpp>
+#include <chrono>
 #include <condition_variable>
 #include <map>
 #include <mutex>
@@ -138,6 +139,7 @@ struct Client::Impl {
     uint32_t nextId = 1;
     bool open = true;
     std::string lostReason = "connection closed";
+    uint16_t lostCode = 0;  // the code of the Error the server sent as it closed, else 0
     FrameCallback callback;
     std::map<uint32_t, ProgressCallback> progressCallbacks;  // by request id
     uint16_t version = 0;
@@ -174,6 +176,7 @@ struct Client::Impl {
         protocol::Decoder decoder(protocol::kMaxPayloadCeiling);
         std::vector<uint8_t> buf(256 * 1024);
         std::string reason = "the server closed the connection";
+        uint16_t code = 0;
         while (true) {
             std::error_code ec;
             size_t n = socket.read_some(asio::buffer(buf), ec);
@@ -212,8 +215,9 @@ struct Client::Impl {
                     replied.notify_all();
                 } else if (m.header.type == MessageType::kError) {
                     // An unsolicited error (the server is full, or closing us): keep it as
-                    // the reason the connection ends.
+                    // the reason the connection ends, with its code.
                     reason = Str(m.As<fb::Error>()->message());
+                    code = static_cast<uint16_t>(m.As<fb::Error>()->code());
                 }
             }
             if (r == protocol::Decoder::Result::kError) {
@@ -224,6 +228,7 @@ struct Client::Impl {
         std::lock_guard lock(mutex);
         open = false;
         lostReason = reason;
+        lostCode = code;
         replied.notify_all();
     }
 
@@ -233,7 +238,7 @@ struct Client::Impl {
     protocol::Message Call(MessageType type, flatbuffers::FlatBufferBuilder& b, MessageType expect,
                            const ProgressCallback* progress = nullptr) {
         std::unique_lock lock(mutex);
-        if (!open) throw ClientError(0, lostReason);
+        if (!open) throw ClientError(lostCode, lostReason);
         uint32_t id = nextId++;
         waiting[id];
         if (progress) progressCallbacks[id] = *progress;
@@ -247,13 +252,17 @@ struct Client::Impl {
         asio::write(socket, asio::buffer(bytes), ec);
         if (ec) {
             waiting.erase(id);
+            // The server may have said why it closed (a full server, a missed deadline): the
+            // reader takes that in as the connection ends.
+            replied.wait_for(lock, std::chrono::seconds(2), [&] { return !open; });
+            if (!open && lostCode) throw ClientError(lostCode, lostReason);
             throw ClientError(
                 0, "cannot send " + std::string(protocol::MessageName(type)) + ": " + ec.message());
         }
         replied.wait(lock, [&] { return waiting[id].has_value() || !open; });
         std::optional<protocol::Message> reply = std::move(waiting[id]);
         waiting.erase(id);
-        if (!reply) throw ClientError(0, lostReason);
+        if (!reply) throw ClientError(lostCode, lostReason);
         if (reply->header.type == MessageType::kError) {
             const auto* e = reply->As<fb::Error>();
             throw ClientError(static_cast<uint16_t>(e->code()), Str(e->message()));

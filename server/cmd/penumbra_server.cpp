@@ -37,6 +37,10 @@ int main(int argc, char** argv) {
                    "seconds a frame may take to arrive whole from its first byte (0: no limit)")
         ->capture_default_str()
         ->check(CLI::Range(0.0, 86400.0));
+    app.add_option("--hello-timeout", netLimits.helloTimeoutSeconds,
+                   "seconds a new connection has to complete its Hello (0: no limit)")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 86400.0));
     app.add_option("--max-scenes", serviceLimits.maxScenes, "scenes loaded at once")
         ->capture_default_str()
         ->check(CLI::Range(1, 1000));

@@ -14,13 +14,35 @@ Connection::Connection(Server& server, asio::generic::stream_protocol::socket so
       socket_(std::move(socket)),
       id_(id),
       decoder_(server.Limits().maxFrameBytes),
-      stall_(socket_.get_executor()) {}
+      stall_(socket_.get_executor()),
+      hello_(socket_.get_executor()) {}
+
+void Connection::Start() {
+    const double limit = server_.Limits().helloTimeoutSeconds;
+    if (limit > 0.0) {
+        hello_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+            std::chrono::duration<double>(limit)));
+        auto self = shared_from_this();
+        hello_.async_wait([this, self, limit](std::error_code ec) {
+            if (ec || closed_ || closing_ || helloDone_) return;
+            ++server_.helloTimeouts;
+            char seconds[32];
+            std::snprintf(seconds, sizeof(seconds), "%g", limit);
+            SendError(0, fb::ErrorCode::HelloRequired,
+                      "no Hello within " + std::string(seconds) +
+                          " s of connecting (the server's --hello-timeout)",
+                      true);
+        });
+    }
+    Read();
+}
 
 void Connection::Close() {
     if (closed_) return;
     closed_ = true;
     stallArmed_ = false;
     stall_.cancel();
+    hello_.cancel();
     Unsubscribe("");
     std::error_code ec;
     socket_.shutdown(asio::socket_base::shutdown_both, ec);

@@ -23,7 +23,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
   public:
     Connection(Server& server, asio::generic::stream_protocol::socket socket, uint64_t id);
 
-    void Start() { Read(); }
+    // Starts reading, and the Hello deadline (Limits::helloTimeoutSeconds).
+    void Start();
     // Closes the socket; pending writes are abandoned.
     void Close();
     // Queues a subscribed frame (I/O thread). Keeps at most maxQueuedFrames unsent frames:
@@ -94,6 +95,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     bool closed_ = false;
     bool helloDone_ = false;
     asio::steady_timer stall_;  // WatchStall
+    asio::steady_timer hello_;  // the Hello deadline; cancelled by Hello or Close
     uint64_t stallEpoch_ = 0;   // which arming a firing belongs to
     bool stallArmed_ = false;
     std::string client_;

@@ -122,6 +122,7 @@ void Connection::OnHello(uint32_t id, const fb::Hello& h) {
         return;
     }
     helloDone_ = true;
+    hello_.cancel();
     client_ = Str(h.client());
     flatbuffers::FlatBufferBuilder b;
     b.Finish(fb::CreateWelcomeDirect(b, "penumbra-server", hi, server_.Limits().maxFrameBytes));

@@ -131,6 +131,8 @@ void Server::Adopt(asio::generic::stream_protocol::socket socket) {
         std::error_code ec;
         asio::write(socket, asio::buffer(bytes), ec);
         socket.close(ec);
+        ++refusedFull;
+        Log("refused a connection: LimitReached: " + why);
         return;
     }
     auto c = std::make_shared<Connection>(*this, std::move(socket), nextConnection_++);
@@ -163,6 +165,8 @@ nlohmann::json Server::StatsJson() const {
     j["frames_sent"] = framesSent.load();
     j["frames_dropped"] = framesDropped.load();
     j["protocol_errors"] = protocolErrors.load();
+    j["refused_full"] = refusedFull.load();
+    j["hello_timeouts"] = helloTimeouts.load();
     j["max_clients"] = limits_.maxClients;
     j["max_frame_bytes"] = limits_.maxFrameBytes;
     return j;

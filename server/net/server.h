@@ -25,6 +25,10 @@ struct NetLimits {
     // A frame begun must arrive whole within this many seconds of its first byte, else the
     // connection gets Error Stalled and closes (0: no limit); --frame-timeout.
     double frameTimeoutSeconds = 60.0;
+    // A connection must complete its Hello within this many seconds of being accepted, else
+    // it gets Error HelloRequired and closes (0: no limit); --hello-timeout. A client that
+    // never speaks, or speaks a byte a second, holds a slot no longer than this.
+    double helloTimeoutSeconds = 5.0;
     // Every Hello must carry this token (empty: none asked for); --token-file.
     std::string token;
     // One line on stderr for each load, refusal and protocol error (penumbra-server sets it
@@ -75,6 +79,8 @@ class Server {
     // Connection bookkeeping (I/O thread).
     void Forget(Connection* connection);
     std::atomic<uint64_t> framesSent{0}, framesDropped{0}, protocolErrors{0};
+    // Connections refused at the door (--max-clients) and closed for no Hello in time.
+    std::atomic<uint64_t> refusedFull{0}, helloTimeouts{0};
 
   private:
     void Accept(std::shared_ptr<asio::ip::tcp::acceptor> acceptor);

@@ -469,6 +469,48 @@ TEST(ServerProcess, AStalledHalfFrameTimesOut) {
     EXPECT_EQ(after.ProtocolVersion(), 1);
 }
 
+// Issue 63: connections that never speak hold a client slot no longer than --hello-timeout:
+// with every slot taken by silent sockets a new client is refused (LimitReached, counted),
+// then each silent one gets Error HelloRequired and is closed, and clients get in again.
+TEST(ServerProcess, SilentConnectionsCannotHoldTheSlots) {
+    ServerProcess server("silent", "--max-clients 3 --hello-timeout 1");
+    asio::io_context io;
+    std::vector<asio::local::stream_protocol::socket> silent;
+    for (int i = 0; i < 3; ++i) {
+        silent.emplace_back(io);
+        silent.back().connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
+    }
+    std::string message;
+    const int refused = ErrorCodeOf([&] { client::Client c(server.Unix(), "early"); }, &message);
+    EXPECT_EQ(refused, int(fb::ErrorCode::LimitReached)) << message;
+    const auto start = std::chrono::steady_clock::now();
+    for (auto& raw : silent) {
+        std::vector<uint8_t> reply;
+        std::error_code ec;
+        std::array<uint8_t, 4096> buf;
+        while (!ec) {
+            size_t n = raw.read_some(asio::buffer(buf), ec);
+            reply.insert(reply.end(), buf.begin(), buf.begin() + n);
+        }
+        EXPECT_EQ(ec, asio::error::eof);
+        protocol::Decoder d;
+        d.Feed(reply.data(), reply.size());
+        protocol::Message m;
+        ASSERT_EQ(d.Next(m), protocol::Decoder::Result::kMessage) << reply.size() << " bytes";
+        ASSERT_EQ(m.header.type, protocol::MessageType::kError);
+        EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::HelloRequired);
+        EXPECT_NE(std::string(m.As<fb::Error>()->message()->c_str()).find("--hello-timeout"),
+                  std::string::npos);
+    }
+    EXPECT_GE(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 0.5);
+    client::Client after(server.Unix(), "after");
+    EXPECT_EQ(after.ProtocolVersion(), 1);
+    const nlohmann::json stats = nlohmann::json::parse(after.Stats(""));
+    const nlohmann::json& net = stats.contains("server") ? stats["server"] : stats;
+    EXPECT_EQ(net.value("hello_timeouts", 0), 3) << stats.dump();
+    EXPECT_EQ(net.value("refused_full", 0), 1) << stats.dump();
+}
+
 // Issue 24: an uploaded .glb whose buffer names a file (here one the server could read)
 // is refused: an upload must hold everything it uses, nothing on the server's disk is read.
 TEST(ServerProcess, AnUploadCannotReadTheServersFiles) {
