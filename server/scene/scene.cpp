@@ -203,6 +203,12 @@ int FindLight(const Scene& scene, const std::string& name) {
 void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
     const SceneNode& n = NodeAt(scene, node);
     if (!Finite(local)) throw Error("transform of '" + n.name + "' has NaN or infinity");
+    // glTF node transforms are affine: the bottom row (0, 0, 0, 1).
+    if (std::abs(local[0][3]) > 1e-6f || std::abs(local[1][3]) > 1e-6f ||
+        std::abs(local[2][3]) > 1e-6f || std::abs(local[3][3] - 1.0f) > 1e-6f)
+        throw Error("transform of '" + n.name +
+                    "' is not affine (its bottom row must be 0, 0, 0, 1: a projective matrix "
+                    "cannot place geometry)");
     glm::mat4 parentWorld = n.parent >= 0 ? scene.nodes[n.parent].world : glm::mat4(1.0f);
     // Check every new world matrix before changing anything.
     std::vector<std::pair<int, glm::mat4>> world;

@@ -211,7 +211,8 @@ void PlaceLight(PunctualLight& light, const glm::mat4& world);
 int FindLight(const Scene& scene, const std::string& name);
 
 // Replaces node `node`'s local transform and re-places the geometry and lights of its subtree.
-// Throws penumbra::Error for a non-finite or singular matrix (the scene is unchanged then).
+// Throws penumbra::Error for a non-finite, non-affine or singular matrix (the scene is
+// unchanged then).
 void SetNodeTransform(Scene& scene, int node, const glm::mat4& local);
 
 // Fills `normals` with area-weighted vertex normals of the triangles.

@@ -23,6 +23,26 @@ bool FiniteNonNegative(glm::vec3 v) {
     return true;
 }
 
+// Why the geometry of `node`'s subtree in `scene` lies out of reach: a vertex outside the box
+// [lo, hi] (empty when none does).
+std::string OutOfReach(const Scene& scene, int node, const glm::vec3& lo, const glm::vec3& hi) {
+    std::vector<int> stack{node};
+    while (!stack.empty()) {
+        const SceneNode& n = scene.nodes[size_t(stack.back())];
+        stack.pop_back();
+        for (int c : n.children) stack.push_back(c);
+        for (uint32_t p : n.primitives)
+            for (const glm::vec3& v : scene.primitives[p].positions)
+                if (glm::any(glm::lessThan(v, lo)) || glm::any(glm::greaterThan(v, hi)))
+                    return "would take its geometry out of reach (a vertex at " +
+                           std::to_string(v.x) + ", " + std::to_string(v.y) + ", " +
+                           std::to_string(v.z) + "): a move or scale may reach " +
+                           std::to_string(int(kMoveReach)) +
+                           " scene diameters past the loaded scene's bounds";
+    }
+    return {};
+}
+
 std::string NodeList(const Scene& scene, bool dynamicOnly) {
     std::string out;
     for (const auto& n : scene.nodes) {
@@ -100,10 +120,15 @@ uint64_t Session::Submit(const TransformEdit& edit) {
                                "' is static; mark it extras.penumbra.dynamic in the glTF to move "
                                "it (movable nodes: " +
                                NodeList(validated_, true) + ")");
+    const glm::mat4 before = validated_.nodes[node].local;
     try {
         SetNodeTransform(validated_, node, edit.local);
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kInvalidArgument, e.what());
+    }
+    if (std::string why = OutOfReach(validated_, node, reachLo_, reachHi_); !why.empty()) {
+        SetNodeTransform(validated_, node, before);  // valid: it was the node's
+        throw ServiceError(ErrorKind::kInvalidArgument, "transform of '" + edit.node + "' " + why);
     }
     glm::mat4 local = edit.local;
     std::string what = "moved " + edit.node;

@@ -83,6 +83,9 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     for (const auto& p : scene.primitives) layout->push_back({p.node, p.mesh, p.primitive});
     layout_ = layout;
     punctualLights_ = static_cast<int>(scene.lights.size());
+    const float reach = kMoveReach * std::max(scene.Diameter(), 1e-3f);
+    reachLo_ = scene.BoundsMin() - reach;
+    reachHi_ = scene.BoundsMax() + reach;
     validated_ = scene;
     applied_ = std::move(scene);
     worker_ = std::thread([this] { Run(); });

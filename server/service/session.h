@@ -111,6 +111,9 @@ struct FrameData {
 using FramePtr = std::shared_ptr<const FrameData>;
 
 // Edits, validated on submission and applied by the worker between frames.
+// How far past the loaded scene's bounds a move may take geometry, in scene diameters.
+inline constexpr float kMoveReach = 10.0f;
+
 struct TransformEdit {
     std::string node;
     glm::mat4 local{1.0f};
@@ -254,6 +257,9 @@ class Session {
 
     const std::string name_;
     const uint64_t id_;  // FrameData::session
+    // Where a move may take geometry: the loaded scene's bounds grown by kMoveReach of its
+    // diameter on every side (a 1e38 translation or a 1e6 scale is refused, not rebuilt).
+    glm::vec3 reachLo_{0.0f}, reachHi_{0.0f};
     const SessionSettings settings_;
     double buildSeconds_ = 0.0;
     int punctualLights_ = 0;

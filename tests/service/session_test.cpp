@@ -296,6 +296,16 @@ TEST(Session, EditsAreValidatedOnSubmission) {
     nan[3][1] = std::nanf("");
     EXPECT_EQ(kind(TransformEdit{"blocker", nan}), ErrorKind::kInvalidArgument);
     EXPECT_EQ(kind(TransformEdit{"blocker", glm::mat4(0.0f)}), ErrorKind::kInvalidArgument);
+    // Issue 63: a projective matrix, a translation or scale past reach: refused at once.
+    glm::mat4 projective(1.0f);
+    projective[0][3] = 5.0f;
+    EXPECT_EQ(kind(TransformEdit{"blocker", projective}), ErrorKind::kInvalidArgument);
+    EXPECT_EQ(kind(TransformEdit{"blocker",
+                                 glm::translate(glm::mat4(1.0f), glm::vec3(1e38f, 0.0f, 0.0f))}),
+              ErrorKind::kInvalidArgument);
+    EXPECT_EQ(kind(TransformEdit{"blocker", glm::scale(glm::mat4(1.0f), glm::vec3(1e6f))}),
+              ErrorKind::kInvalidArgument);
+    EXPECT_EQ(session.StatsJson()["edits"], 0) << "a refused edit is no edit";
     EXPECT_EQ(kind(Dim("floor", 2.0f)), ErrorKind::kNotFound);
     EXPECT_EQ(kind(Dim("emitter", -1.0f)), ErrorKind::kInvalidArgument);
     EXPECT_EQ(kind(MaterialEdit{"grey", glm::vec3(1.5f), std::nullopt, {}, {}}),
