@@ -12,6 +12,20 @@ namespace penumbra::service {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// `message` with every `path` in it written as `as`: a client learns names relative to the
+// scene root, never the server's own paths.
+std::string Replace(std::string message, const std::string& path, const std::string& as) {
+    if (path.empty()) return message;
+    for (size_t at = message.find(path); at != std::string::npos;
+         at = message.find(path, at + as.size()))
+        message.replace(at, path.size(), as);
+    return message;
+}
+
+}  // namespace
+
 Service::Service(fs::path sceneRoot, ServiceLimits limits, SolverSettings defaults)
     : root_(fs::weakly_canonical(sceneRoot)), limits_(limits), defaults_(std::move(defaults)) {}
 
@@ -111,11 +125,13 @@ LoadResult Service::Load(const LoadRequest& request) {
     } done{this};
 
     Scene scene;
+    std::string staged;  // an upload's temporary file, named as the upload in messages
     try {
         if (upload) {
             // tinygltf reads files: the upload goes through a private temporary one.
             fs::path tmp = fs::temp_directory_path() /
                            ("penumbra-upload-" + std::to_string(std::random_device{}()) + ".glb");
+            staged = tmp.string();
             {
                 std::ofstream out(tmp, std::ios::binary);
                 out.write(reinterpret_cast<const char*>(request.glb.data()),
@@ -135,7 +151,8 @@ LoadResult Service::Load(const LoadRequest& request) {
             scene.source = name;
         }
     } catch (const Error& e) {
-        throw ServiceError(ErrorKind::kLoadFailed, e.what());
+        throw ServiceError(ErrorKind::kLoadFailed,
+                           Replace(Replace(e.what(), staged, name), root_.string() + "/", ""));
     }
     // The sky: a file under the root (never outside it) or a constant colour.
     if (!request.environmentPath.empty() || request.hasEnvironmentColor)

@@ -511,6 +511,29 @@ TEST(ServerProcess, SilentConnectionsCannotHoldTheSlots) {
     EXPECT_EQ(net.value("refused_full", 0), 1) << stats.dump();
 }
 
+// Issue 63: a load that fails names the file relative to the scene root, never the server's
+// own paths (its root, its temporary files).
+TEST(ServerProcess, LoadErrorsNameFilesRelativeToTheRoot) {
+    const auto root = testing::TempDir("relative-root");
+    std::filesystem::create_directories(root / "rooms");
+    std::ofstream(root / "rooms" / "broken.gltf") << "{\"asset\": {\"version\": \"2.0\"}, ";
+    ServerProcess server("relative", "", "penumbra-server", root.string());
+    client::Client c(server.Unix(), "loader");
+    client::LoadOptions o;
+    o.path = "rooms/broken.gltf";
+    o.device = "cpu";
+    std::string message;
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(o); }, &message), int(fb::ErrorCode::LoadFailed));
+    EXPECT_NE(message.find("rooms/broken.gltf"), std::string::npos) << message;
+    EXPECT_EQ(message.find(root.string()), std::string::npos) << message;
+    client::LoadOptions upload;
+    upload.glb = {'g', 'l', 'T', 'F', 2, 0, 0, 0, 12, 0, 0, 0};
+    upload.name = "mine.glb";
+    upload.device = "cpu";
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(upload); }, &message), int(fb::ErrorCode::LoadFailed));
+    EXPECT_EQ(message.find("penumbra-upload-"), std::string::npos) << message;
+}
+
 // Issue 24: an uploaded .glb whose buffer names a file (here one the server could read)
 // is refused: an upload must hold everything it uses, nothing on the server's disk is read.
 TEST(ServerProcess, AnUploadCannotReadTheServersFiles) {
