@@ -114,6 +114,7 @@ void GatherStage::TraceLobes(const Moved* moved) {
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
     lightsFresh_ = false;
+    pointDirect_.clear();
     msTrace_ += MsSince(start);
 }
 
@@ -201,6 +202,7 @@ void GatherStage::TraceGlints(const Moved* moved) {
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
     lightsFresh_ = false;
+    pointDirect_.clear();
     msTrace_ += MsSince(start);
 }
 
@@ -256,6 +258,7 @@ void GatherStage::SeeLights(const std::vector<uint8_t>& which) {
     });
     fresh_ = false;
     lightsFresh_ = false;
+    pointDirect_.clear();
 }
 
 void GatherStage::Relit(const std::vector<PunctualLight>& before) {

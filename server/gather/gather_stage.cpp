@@ -15,9 +15,9 @@
 #include "base/image.h"
 #include "base/pcg.h"
 #include "gather/gather_detail.h"
-#include "rays/sampling.h"
 #include "gpu/context.h"
 #include "gpu/ray_tracer.h"
+#include "rays/sampling.h"
 
 namespace penumbra {
 
@@ -234,10 +234,29 @@ std::vector<glm::vec3> GatherStage::SurfelIrradiance(Channel channel) {
     if (targets_.empty()) return inner_->SurfelIrradiance(channel);
     if (!fresh_) Evaluate();
     if (channel == Channel::kIndirect) return indirect_;
-    if (channel == Channel::kDirect) return direct_;
-    std::vector<glm::vec3> total(indirect_.size());
-    for (size_t i = 0; i < total.size(); ++i) total[i] = indirect_[i] + direct_[i];
-    return total;
+    if (pointDirect_.size() != targets_.size()) PointDirect();
+    std::vector<glm::vec3> out = direct_;
+    for (size_t t = 0; t < targets_.size(); ++t) out[targets_[t]] = pointDirect_[t];
+    if (channel == Channel::kTotal)
+        for (size_t i = 0; i < out.size(); ++i) out[i] += indirect_[i];
+    return out;
+}
+
+void GatherStage::PointDirect() {
+    const Surfels& s = inner_->GetSurfels();
+    const float diameter = scene_.Diameter();
+    pointDirect_.assign(targets_.size(), glm::vec3(0.0f));
+    if (scene_.lights.empty()) return;
+    tbb::parallel_for(size_t(0), targets_.size(), [&](size_t t) {
+        const uint32_t i = targets_[t];
+        const glm::vec3 from = points_[i] + rays_->Epsilon() * s.normals[i];
+        glm::vec3 e(0.0f);
+        for (const PunctualLight& light : scene_.lights) {
+            const LightArrival a = PunctualArrival(light, points_[i], s.normals[i], diameter);
+            if (a.reaches && !rays_->Occluded(from, a.span)) e += a.irradiance;
+        }
+        pointDirect_[t] = e;
+    });
 }
 
 void GatherStage::UpdateMaterials(const Scene& scene) {
@@ -271,6 +290,7 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
     inner_->UpdateMaterials(scene);
     fresh_ = false;
     lightsFresh_ = false;
+    pointDirect_.clear();
     // A scene that turned glossy takes the first shot back from the solver (its lobes would
     // miss it), one that turned diffuse hands it over.
     const bool handed = HandsOver();
@@ -356,6 +376,7 @@ void GatherStage::UpdateLights(const Scene& scene) {
     if (sky && !targets_.empty()) Sky();
     fresh_ = false;
     lightsFresh_ = false;
+    pointDirect_.clear();
 }
 
 std::string GatherStage::UpdateGeometry(const Scene& scene) {
@@ -414,6 +435,7 @@ std::string GatherStage::UpdateGeometry(const Scene& scene) {
     }
     fresh_ = false;
     lightsFresh_ = false;
+    pointDirect_.clear();
     return done;
 }
 

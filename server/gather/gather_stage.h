@@ -25,8 +25,8 @@
 #include <memory>
 
 #include "gather/emitter_direct.h"
-#include "rays/ray_scene.h"
 #include "gather/sun_direct.h"
+#include "rays/ray_scene.h"
 #include "solver/solver.h"
 
 namespace penumbra {
@@ -285,6 +285,12 @@ class GatherStage : public Solver {
     // The same as a coefficient per target and emitting primitive (RayScene::EmitterSlot),
     // so that an emissive edit re-weights them without tracing (empty: not kept).
     std::vector<glm::vec3> emitterCoef_;
+    // Per target: the punctual lights' direct light at its point (points_), by one shadow ray
+    // a light (PointDirect), for the output's direct channel: a vertex's own value, as the
+    // reference has it, where the solver's E_d is a mean over the surfel's footprint (what it
+    // reflects). Empty: to be traced again (a light, a move).
+    std::vector<glm::vec3> pointDirect_;
+    void PointDirect();
     std::vector<uint32_t> targets_;    // surfels gathered at
     std::vector<glm::vec2> rotation_;  // per target: its rotation of the ray pattern
     std::vector<Hit> hits_;            // targets × gatherRays

@@ -447,7 +447,12 @@ TEST(SceneTransform, BadMatricesAreRefusedAndChangeNothing) {
     glm::mat4 nan(1.0f);
     nan[3][0] = std::numeric_limits<float>::quiet_NaN();
     EXPECT_NE(message(nan).find("NaN"), std::string::npos) << message(nan);
-    EXPECT_NE(message(glm::mat4(0.0f)).find("singular"), std::string::npos);
+    const glm::mat4 flat = glm::scale(glm::mat4(1.0f), glm::vec3(0.0f, 1.0f, 1.0f));
+    EXPECT_NE(message(flat).find("singular"), std::string::npos) << message(flat);
+    EXPECT_NE(message(glm::mat4(0.0f)).find("not affine"), std::string::npos);
+    glm::mat4 projective(1.0f);
+    projective[1][3] = 0.5f;  // a w row of (0, 0.5, 0, 1)
+    EXPECT_NE(message(projective).find("not affine"), std::string::npos) << message(projective);
     glm::mat4 mirror = glm::scale(glm::mat4(1.0f), glm::vec3(-1.0f, 1.0f, 1.0f));
     EXPECT_NE(message(mirror).find("mirror"), std::string::npos) << message(mirror);
     EXPECT_EQ(p.positions, before);
