@@ -301,44 +301,60 @@ std::string Session::WarmStart(Solver& rebuilt, const Scene& next) {
         *solver_, CarrySurfels(applied_, solver_->GetSurfels(), next, rebuilt.GetSurfels()));
 }
 
+bool Session::SwapInRebuilt(std::unique_lock<std::mutex>& lock, std::string& error,
+                            double& seconds) {
+    const Scene scene = applied_;
+    const bool prepareMoves = !motionDeclined_;
+    lock.unlock();
+    const auto start = Clock::now();
+    std::unique_ptr<Solver> next;
+    try {
+        next = BuildSolver(scene, prepareMoves);
+    } catch (const std::exception& e) {
+        error = e.what();
+    }
+    seconds = MsSince(start) / 1000.0;
+    lock.lock();
+    if (!next) return false;
+    std::swap(solver_, next);  // the old solver goes below, outside the lock
+    passTotals_.clear();
+    lastSurfels_.clear();
+    diverged_.clear();
+    solverStatsRaw_ = solver_->Stats();
+    converged_ = settled_ = false;
+    framesSinceEdit_ = 0;
+    lock.unlock();
+    next.reset();
+    lock.lock();
+    return true;
+}
+
+namespace {
+
+// "; why (built in S s)" appended to `note`.
+void AddBuiltNote(std::string& note, const std::string& why, double seconds) {
+    char built[32];
+    std::snprintf(built, sizeof(built), "%.1f", seconds);
+    note += (note.empty() ? "" : "; ") + why + " (built in " + built + " s)";
+}
+
+}  // namespace
+
 bool Session::FallBackToCpu(std::unique_lock<std::mutex>& lock, std::string& note) {
     const std::string why = std::move(deviceLost_);
     deviceLost_.clear();
     if (settings_.solver.device == DeviceChoice::kCpu || onCpu_) return false;
     onCpu_ = true;
-    const Scene scene = applied_;
-    const bool prepareMoves = !motionDeclined_;
-    lock.unlock();
-    const auto start = Clock::now();
-    std::unique_ptr<Solver> cpu;
     std::string error;
-    try {
-        cpu = BuildSolver(scene, prepareMoves);
-    } catch (const std::exception& e) {
-        error = e.what();
-    }
-    const double seconds = MsSince(start) / 1000.0;
-    lock.lock();
-    if (!cpu) {
+    double seconds = 0.0;
+    if (!SwapInRebuilt(lock, error, seconds)) {
         lastError_ = "device lost (" + why + "), and the CPU back end failed too: " + error;
         note += (note.empty() ? "" : "; ") + lastError_;
         return false;
     }
-    std::swap(solver_, cpu);  // the lost device's solver goes below, outside the lock
-    passTotals_.clear();
-    lastSurfels_.clear();
-    diverged_.clear();
-    solverStatsRaw_ = solver_->Stats();
     ++deviceFallbacks_;
     lastError_ = "device lost (" + why + "); the session goes on with the CPU back end";
-    char built[32];
-    std::snprintf(built, sizeof(built), "%.1f", seconds);
-    note += (note.empty() ? "" : "; ") + lastError_ + " (built in " + built + " s)";
-    converged_ = settled_ = false;
-    framesSinceEdit_ = 0;
-    lock.unlock();
-    cpu.reset();
-    lock.lock();
+    AddBuiltNote(note, lastError_, seconds);
     return true;
 }
 
@@ -347,42 +363,18 @@ bool Session::FallBackToAnotherSolver(std::unique_lock<std::mutex>& lock, std::s
     SolverSettings fallback;
     if (!FallbackSettings(settings_.solver, fallback)) return false;
     const std::string why = "the " + settings_.solver.solver + " solution " + diverged_;
-    const Scene scene = applied_;
-    const bool prepareMoves = !motionDeclined_;
     fallback_ = fallback;
     fellBack_ = true;
-    lock.unlock();
-    const auto start = Clock::now();
-    std::unique_ptr<Solver> next;
     std::string error;
-    try {
-        next = BuildSolver(scene, prepareMoves);
-    } catch (const std::exception& e) {
-        error = e.what();
-    }
-    const double seconds = MsSince(start) / 1000.0;
-    lock.lock();
-    if (!next) {
+    double seconds = 0.0;
+    if (!SwapInRebuilt(lock, error, seconds)) {
         fellBack_ = false;
         lastError_ = why + ", and the " + fallback.solver + " solver failed too: " + error;
         note += (note.empty() ? "" : "; ") + lastError_;
         return false;
     }
-    std::swap(solver_, next);  // the diverged solver goes below, outside the lock
-    passTotals_.clear();
-    lastSurfels_.clear();
-    diverged_.clear();
-    solverStatsRaw_ = solver_->Stats();
     solverFallback_ = why + "; the session went on with the " + fallback.solver + " solver";
-    char built[32];
-    std::snprintf(built, sizeof(built), "%.1f", seconds);
-    note += (note.empty() ? "" : "; ") + why + "; going on with the " + fallback.solver +
-            " solver (built in " + built + " s)";
-    converged_ = settled_ = false;
-    framesSinceEdit_ = 0;
-    lock.unlock();
-    next.reset();
-    lock.lock();
+    AddBuiltNote(note, why + "; going on with the " + fallback.solver + " solver", seconds);
     return true;
 }
 

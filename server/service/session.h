@@ -247,6 +247,11 @@ class Session {
     // and reports why, as for any device failure. Worker thread, `lock` held (released while
     // building).
     bool FallBackToCpu(std::unique_lock<std::mutex>& lock, std::string& note);
+    // Builds the solver for applied_ again (BuildSolver, with `lock` released meanwhile) and
+    // swaps it in for the current one, which is destroyed outside the lock; the frame state
+    // starts again. False, the current solver kept, when the build failed (`error` says
+    // why); `seconds` the build's time either way. Worker thread, `lock` held.
+    bool SwapInRebuilt(std::unique_lock<std::mutex>& lock, std::string& error, double& seconds);
     // After a divergence (diverged_ says where) with no rebuild under way: the solver rebuilt
     // for applied_ as the fallback solver (FallbackSettings: the light-field solver), which
     // later builds use too; the note and stats (`solver_fallback`) say so. False when there is

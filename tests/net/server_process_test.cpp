@@ -137,12 +137,9 @@ float FloorNear(const client::Frame& f, glm::vec2 centre, float radius,
 
 // Sends `bytes` on a raw connection to the server's Unix socket, reads until the server
 // closes it, and decodes the first frame of the reply (`closed`: it ended with EOF).
-protocol::Message RawExchange(const ServerProcess& server, const std::vector<uint8_t>& bytes,
-                              bool* closed) {
-    asio::io_context io;
-    asio::local::stream_protocol::socket raw(io);
-    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
-    asio::write(raw, asio::buffer(bytes));
+// Reads `raw` until the server closes it; the first message it sent (`closed`: it ended in an
+// orderly close).
+protocol::Message ReadUntilClosed(asio::local::stream_protocol::socket& raw, bool* closed) {
     std::vector<uint8_t> reply;
     std::error_code ec;
     std::array<uint8_t, 4096> buf;
@@ -156,6 +153,15 @@ protocol::Message RawExchange(const ServerProcess& server, const std::vector<uin
     protocol::Message m;
     EXPECT_EQ(d.Next(m), protocol::Decoder::Result::kMessage) << reply.size() << " bytes";
     return m;
+}
+
+protocol::Message RawExchange(const ServerProcess& server, const std::vector<uint8_t>& bytes,
+                              bool* closed) {
+    asio::io_context io;
+    asio::local::stream_protocol::socket raw(io);
+    raw.connect(asio::local::stream_protocol::endpoint(server.SocketPath()));
+    asio::write(raw, asio::buffer(bytes));
+    return ReadUntilClosed(raw, closed);
 }
 
 TEST(ServerProcess, TwoClientsOneEditsOneWatchesOverTcpAndUnix) {
@@ -485,18 +491,9 @@ TEST(ServerProcess, SilentConnectionsCannotHoldTheSlots) {
     EXPECT_EQ(refused, int(fb::ErrorCode::LimitReached)) << message;
     const auto start = std::chrono::steady_clock::now();
     for (auto& raw : silent) {
-        std::vector<uint8_t> reply;
-        std::error_code ec;
-        std::array<uint8_t, 4096> buf;
-        while (!ec) {
-            size_t n = raw.read_some(asio::buffer(buf), ec);
-            reply.insert(reply.end(), buf.begin(), buf.begin() + n);
-        }
-        EXPECT_EQ(ec, asio::error::eof);
-        protocol::Decoder d;
-        d.Feed(reply.data(), reply.size());
-        protocol::Message m;
-        ASSERT_EQ(d.Next(m), protocol::Decoder::Result::kMessage) << reply.size() << " bytes";
+        bool closed = false;
+        protocol::Message m = ReadUntilClosed(raw, &closed);
+        EXPECT_TRUE(closed);
         ASSERT_EQ(m.header.type, protocol::MessageType::kError);
         EXPECT_EQ(m.As<fb::Error>()->code(), fb::ErrorCode::HelloRequired);
         EXPECT_NE(std::string(m.As<fb::Error>()->message()->c_str()).find("--hello-timeout"),
