@@ -41,6 +41,11 @@ int main(int argc, char** argv) {
                    "seconds a new connection has to complete its Hello (0: no limit)")
         ->capture_default_str()
         ->check(CLI::Range(0.0, 86400.0));
+    app.add_option("--idle-timeout", netLimits.idleTimeoutSeconds,
+                   "seconds a connection may send nothing while it has no subscription and no "
+                   "request in progress (0: no limit)")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 86400.0));
     app.add_option("--max-scenes", serviceLimits.maxScenes, "scenes loaded at once")
         ->capture_default_str()
         ->check(CLI::Range(1, 1000));

@@ -15,7 +15,31 @@ Connection::Connection(Server& server, asio::generic::stream_protocol::socket so
       id_(id),
       decoder_(server.Limits().maxFrameBytes),
       stall_(socket_.get_executor()),
-      hello_(socket_.get_executor()) {}
+      hello_(socket_.get_executor()),
+      idle_(socket_.get_executor()) {}
+
+void Connection::ArmIdle() {
+    const double limit = server_.Limits().idleTimeoutSeconds;
+    if (!(limit > 0.0) || closed_ || closing_) return;
+    const uint64_t epoch = ++idleEpoch_;
+    idle_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(limit)));
+    auto self = shared_from_this();
+    idle_.async_wait([this, self, epoch, limit](std::error_code ec) {
+        if (ec || closed_ || closing_ || epoch != idleEpoch_) return;
+        if (!subscriptions_.empty() || busy_ > 0) {
+            ArmIdle();
+            return;
+        }
+        ++server_.idleTimeouts;
+        char seconds[32];
+        std::snprintf(seconds, sizeof(seconds), "%g", limit);
+        SendError(0, fb::ErrorCode::Stalled,
+                  "nothing sent for " + std::string(seconds) +
+                      " s, and no subscription (the server's --idle-timeout)",
+                  true);
+    });
+}
 
 void Connection::Start() {
     const double limit = server_.Limits().helloTimeoutSeconds;
@@ -43,6 +67,7 @@ void Connection::Close() {
     stallArmed_ = false;
     stall_.cancel();
     hello_.cancel();
+    idle_.cancel();
     Unsubscribe("");
     std::error_code ec;
     socket_.shutdown(asio::socket_base::shutdown_both, ec);
@@ -93,6 +118,7 @@ void Connection::Read() {
             decoded = true;
         }
         if (closed_ || closing_) return;
+        if (decoded && helloDone_) ArmIdle();
         WatchStall(decoded);
         Read();
     });

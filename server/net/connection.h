@@ -60,6 +60,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
     // frame timeout of its first byte (a new frame, `decoded` one before it, starts the
     // clock again); a client that stalls mid-frame gets Error Stalled and is closed.
     void WatchStall(bool decoded);
+    // After Hello and after every request: the connection closes with Error Stalled when
+    // nothing more comes within the idle timeout while it has no subscription and no request
+    // in progress (either one puts the deadline off again).
+    void ArmIdle();
     // Runs `work` on the blocking pool and `reply` with its result back on the I/O thread;
     // a ServiceError becomes an Error reply.
     template <typename Work, typename Reply>
@@ -96,6 +100,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
     bool helloDone_ = false;
     asio::steady_timer stall_;  // WatchStall
     asio::steady_timer hello_;  // the Hello deadline; cancelled by Hello or Close
+    asio::steady_timer idle_;   // ArmIdle
+    uint64_t idleEpoch_ = 0;    // which arming a firing belongs to
+    size_t busy_ = 0;           // requests on the blocking pool, not yet answered
     uint64_t stallEpoch_ = 0;   // which arming a firing belongs to
     bool stallArmed_ = false;
     std::string client_;
@@ -106,6 +113,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
 template <typename Work, typename Reply>
 void Connection::Blocking(uint32_t requestId, Work work, Reply reply) {
     auto self = shared_from_this();
+    ++busy_;
     asio::post(server_.Blocking(), [this, self, requestId, work, reply]() mutable {
         std::function<void()> done;
         try {
@@ -121,7 +129,10 @@ void Connection::Blocking(uint32_t requestId, Work work, Reply reply) {
                 SendError(requestId, protocol::fb::ErrorCode::Internal, what);
             };
         }
-        asio::post(server_.Io(), [self, done] { done(); });
+        asio::post(server_.Io(), [this, self, done] {
+            --busy_;
+            done();
+        });
     });
 }
 

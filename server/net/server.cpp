@@ -167,6 +167,7 @@ nlohmann::json Server::StatsJson() const {
     j["protocol_errors"] = protocolErrors.load();
     j["refused_full"] = refusedFull.load();
     j["hello_timeouts"] = helloTimeouts.load();
+    j["idle_timeouts"] = idleTimeouts.load();
     j["max_clients"] = limits_.maxClients;
     j["max_frame_bytes"] = limits_.maxFrameBytes;
     return j;

@@ -29,6 +29,10 @@ struct NetLimits {
     // it gets Error HelloRequired and closes (0: no limit); --hello-timeout. A client that
     // never speaks, or speaks a byte a second, holds a slot no longer than this.
     double helloTimeoutSeconds = 5.0;
+    // A connection past its Hello that sends nothing for this many seconds, with no
+    // subscription and no request in progress, gets Error Stalled and closes (0: no limit);
+    // --idle-timeout.
+    double idleTimeoutSeconds = 300.0;
     // Every Hello must carry this token (empty: none asked for); --token-file.
     std::string token;
     // One line on stderr for each load, refusal and protocol error (penumbra-server sets it
@@ -80,7 +84,7 @@ class Server {
     void Forget(Connection* connection);
     std::atomic<uint64_t> framesSent{0}, framesDropped{0}, protocolErrors{0};
     // Connections refused at the door (--max-clients) and closed for no Hello in time.
-    std::atomic<uint64_t> refusedFull{0}, helloTimeouts{0};
+    std::atomic<uint64_t> refusedFull{0}, helloTimeouts{0}, idleTimeouts{0};
 
   private:
     void Accept(std::shared_ptr<asio::ip::tcp::acceptor> acceptor);

@@ -508,6 +508,24 @@ TEST(ServerProcess, SilentConnectionsCannotHoldTheSlots) {
     EXPECT_EQ(net.value("refused_full", 0), 1) << stats.dump();
 }
 
+// Issue 63: a connection that sends nothing, subscribes to nothing and waits on nothing is
+// closed after --idle-timeout (Error Stalled, counted); a subscriber stays, however quiet.
+TEST(ServerProcess, IdleConnectionsCloseSubscribersStay) {
+    ServerProcess server("idle", "--idle-timeout 1");
+    client::Client quiet(server.Unix(), "quiet");
+    client::Client viewer(server.Unix(), "viewer");
+    viewer.Load(Cornell());  // a request in progress holds the deadline off, as a subscription
+    viewer.Subscribe([](const client::Frame&) {});
+    std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+    std::string message;
+    EXPECT_EQ(ErrorCodeOf([&] { quiet.Stats(""); }, &message), int(fb::ErrorCode::Stalled))
+        << message;
+    EXPECT_NE(message.find("--idle-timeout"), std::string::npos) << message;
+    const nlohmann::json stats = nlohmann::json::parse(viewer.Stats(""));
+    const nlohmann::json& net = stats.contains("server") ? stats["server"] : stats;
+    EXPECT_EQ(net.value("idle_timeouts", 0), 1) << stats.dump();
+}
+
 // Issue 63: a load that fails names the file relative to the scene root, never the server's
 // own paths (its root, its temporary files).
 TEST(ServerProcess, LoadErrorsNameFilesRelativeToTheRoot) {
