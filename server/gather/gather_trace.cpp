@@ -14,8 +14,8 @@
 #include "base/pcg.h"
 #include "gather/gather_detail.h"
 #include "gather/gather_stage.h"
-#include "rays/sampling.h"
 #include "gpu/ray_tracer.h"
+#include "rays/sampling.h"
 
 namespace penumbra {
 

@@ -13,8 +13,8 @@
 #include <memory>
 #include <vector>
 
-#include "rays/ray_scene.h"
 #include "gpu/fwd.h"
+#include "rays/ray_scene.h"
 #include "solver/lightfield/lines.h"
 
 namespace penumbra {

@@ -9,8 +9,8 @@
 #include <memory>
 #include <vector>
 
-#include "rays/ray_scene.h"
 #include "gpu/fwd.h"
+#include "rays/ray_scene.h"
 #include "scene/environment.h"
 #include "solver/lightfield/lines.h"
 
