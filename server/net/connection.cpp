@@ -9,6 +9,21 @@ namespace penumbra::net {
 namespace fb = protocol::fb;
 using protocol::MessageType;
 
+namespace {
+
+// A limit in seconds as a timer's duration, and as the text an Error quotes.
+std::chrono::steady_clock::duration After(double seconds) {
+    return std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(seconds));
+}
+std::string SecondsText(double seconds) {
+    char text[32];
+    std::snprintf(text, sizeof(text), "%g", seconds);
+    return text;
+}
+
+}  // namespace
+
 Connection::Connection(Server& server, asio::generic::stream_protocol::socket socket, uint64_t id)
     : server_(server),
       socket_(std::move(socket)),
@@ -22,8 +37,7 @@ void Connection::ArmIdle() {
     const double limit = server_.Limits().idleTimeoutSeconds;
     if (!(limit > 0.0) || closed_ || closing_) return;
     const uint64_t epoch = ++idleEpoch_;
-    idle_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-        std::chrono::duration<double>(limit)));
+    idle_.expires_after(After(limit));
     auto self = shared_from_this();
     idle_.async_wait([this, self, epoch, limit](std::error_code ec) {
         if (ec || closed_ || closing_ || epoch != idleEpoch_) return;
@@ -32,10 +46,8 @@ void Connection::ArmIdle() {
             return;
         }
         ++server_.idleTimeouts;
-        char seconds[32];
-        std::snprintf(seconds, sizeof(seconds), "%g", limit);
         SendError(0, fb::ErrorCode::Stalled,
-                  "nothing sent for " + std::string(seconds) +
+                  "nothing sent for " + SecondsText(limit) +
                       " s, and no subscription (the server's --idle-timeout)",
                   true);
     });
@@ -44,16 +56,13 @@ void Connection::ArmIdle() {
 void Connection::Start() {
     const double limit = server_.Limits().helloTimeoutSeconds;
     if (limit > 0.0) {
-        hello_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-            std::chrono::duration<double>(limit)));
+        hello_.expires_after(After(limit));
         auto self = shared_from_this();
         hello_.async_wait([this, self, limit](std::error_code ec) {
             if (ec || closed_ || closing_ || helloDone_) return;
             ++server_.helloTimeouts;
-            char seconds[32];
-            std::snprintf(seconds, sizeof(seconds), "%g", limit);
             SendError(0, fb::ErrorCode::HelloRequired,
-                      "no Hello within " + std::string(seconds) +
+                      "no Hello within " + SecondsText(limit) +
                           " s of connecting (the server's --hello-timeout)",
                       true);
         });
@@ -135,16 +144,13 @@ void Connection::WatchStall(bool decoded) {
     if (stallArmed_ && !decoded) return;  // the same frame, still arriving
     stallArmed_ = true;
     const uint64_t epoch = ++stallEpoch_;
-    stall_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-        std::chrono::duration<double>(limit)));
+    stall_.expires_after(After(limit));
     auto self = shared_from_this();
     stall_.async_wait([this, self, epoch, limit](std::error_code ec) {
         if (ec || closed_ || closing_ || !stallArmed_ || epoch != stallEpoch_) return;
         ++server_.protocolErrors;
-        char seconds[32];
-        std::snprintf(seconds, sizeof(seconds), "%g", limit);
         SendError(0, fb::ErrorCode::Stalled,
-                  "a frame began " + std::string(seconds) + " s ago and has not arrived whole (" +
+                  "a frame began " + SecondsText(limit) + " s ago and has not arrived whole (" +
                       std::to_string(decoder_.buffered()) +
                       " bytes of it so far; the limit is "
                       "the server's --frame-timeout)",
