@@ -109,7 +109,7 @@ images: build
 	     $(BUILD)/penumbra compare --json $(BUILD)/$$a.json $(BUILD)/$${a%%-*}-reference.json; \
 	   done; echo '}}'; } > bench/results/images.json
 	@echo "wrote bench/results/images.json"
-	$(BUILD)/penumbra render scenes/glossy-box.gltf -o docs/images/glossy-box.png --size 512x384 --channel total --bins 256 --element-size 0.08 --iterations 8
+	$(BUILD)/penumbra render scenes/glossy-box.gltf -o docs/images/glossy-box.png --size 512x384 --channel total --solver antiradiance --bins 256 --element-size 0.08 --iterations 8
 	$(BUILD)/penumbra reference scenes/glossy-box.gltf -o $(BUILD)/glossy-reference.json --channel total --samples 4096 -q
 	$(BUILD)/penumbra render scenes/glossy-box.gltf --lighting $(BUILD)/glossy-reference.json -o docs/images/glossy-box-reference.png --size 512x384
 

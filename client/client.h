@@ -99,7 +99,7 @@ struct LoadOptions {
     std::string path;          // under the server's scene root
     std::vector<uint8_t> glb;  // or an uploaded binary glTF
     std::string name;          // session name for an upload
-    std::string solver = "antiradiance";
+    std::string solver;        // empty: the server's default (lightfield)
     // The solver's own options by name, as text ({"bins", "64"}); `penumbra --help` lists
     // each solver's. Absent: the solver's defaults.
     using Options = std::map<std::string, std::string>;

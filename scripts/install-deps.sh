@@ -12,6 +12,7 @@ packages=(
     clang-format
     clang libclang-rt-14-dev
     python3 python3-venv python3-setuptools python3-flatbuffers python3-numpy python3-jsonschema
+    assimp-testmodels assimp-utils
 )
 
 missing=()

@@ -35,6 +35,7 @@ inline size_t NearestSurfel(const Surfels& s, glm::vec3 p, glm::vec3 normal) {
 // Solver settings for tests: the CPU back end, `bins` bins, elements of `elementSize` metres.
 inline SolverSettings CpuSettings(int bins, float elementSize) {
     SolverSettings s;
+    s.solver = "antiradiance";
     s.device = DeviceChoice::kCpu;
     SetOption(s.options, "bins", bins);
     s.elementSize = elementSize;

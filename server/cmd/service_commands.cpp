@@ -372,7 +372,7 @@ int ServiceCommands::State::RunGet(client::Client& c) {
     result.stats["last_edit"] = f.lastEdit;
     for (size_t p = 0; p < f.primitives.size(); ++p) {
         const auto& rgb = f.primitives[p].rgb;
-        if (!json && rgb.size() != scene.primitives[p].positions.size() * 3)
+        if (!json && rgb.size() != scene.primitives[p].InputVertexCount() * 3)
             throw Error(gltf + ": primitive " + std::to_string(p) +
                         " has a different vertex count than the server's scene");
         std::vector<glm::vec3> v(rgb.size() / 3);

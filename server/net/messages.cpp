@@ -93,7 +93,7 @@ service::LoadRequest ReadLoadScene(const fb::LoadScene& load, const service::Ser
     // bad one is refused before anything loads.
     const std::string solver = Str(l->solver());
     try {
-        req.settings.solver = service.DefaultsFor(solver.empty() ? "antiradiance" : solver);
+        req.settings.solver = service.DefaultsFor(solver.empty() ? kDefaultSolver : solver);
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kUnsupported, e.what());
     }
@@ -226,7 +226,8 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
             const Material& m = scene.materials[p.material];
             emissive = emissive || glm::any(glm::greaterThan(m.emission, glm::vec3(0.0f)));
             prims.push_back(fb::CreatePrimitiveInfoDirect(
-                b, p.mesh, p.primitive, static_cast<uint32_t>(p.positions.size()), m.name.c_str()));
+                b, p.mesh, p.primitive, static_cast<uint32_t>(p.InputVertexCount()),
+                m.name.c_str()));
         }
         std::vector<float> matrix(16);
         for (int i = 0; i < 16; ++i) matrix[i] = n.local[i / 4][i % 4];

@@ -310,6 +310,24 @@ ReferenceResult RenderReference(const Scene& scene, const ReferenceSettings& set
                 progressLock.unlock();
             }
         });
+    // A vertex split for flat normals: the area-weighted mean of its copies, as the solvers'.
+    for (uint32_t p = 0; p < scene.primitives.size(); ++p) {
+        const Primitive& prim = scene.primitives[p];
+        if (prim.copyOf.empty()) continue;
+        const std::vector<float> area = VertexAreas(prim);
+        std::vector<glm::dvec3> variance(prim.InputVertexCount(), glm::dvec3(0.0));
+        std::vector<double> weight(prim.InputVertexCount(), 0.0);
+        for (size_t k = 0; k < prim.positions.size(); ++k) {
+            const glm::dvec3 se(result.standardError[p][k]);
+            variance[prim.InputVertex(k)] += double(area[k]) * double(area[k]) * se * se;
+            weight[prim.InputVertex(k)] += area[k];
+        }
+        result.irradiance[p] = ToInputVertices(prim, result.irradiance[p]);
+        result.standardError[p].resize(prim.InputVertexCount());
+        for (size_t i = 0; i < weight.size(); ++i)
+            if (weight[i] > 0.0)
+                result.standardError[p][i] = glm::vec3(glm::sqrt(variance[i]) / weight[i]);
+    }
 
     ReferenceStats& st = result.stats;
     st.samples = settings.samples;

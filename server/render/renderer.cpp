@@ -55,7 +55,7 @@ Mesh ShadedInputMesh(const Scene& scene, const std::vector<std::vector<glm::vec3
     Mesh mesh;
     for (size_t p = 0; p < scene.primitives.size(); ++p) {
         const Primitive& prim = scene.primitives[p];
-        PENUMBRA_CHECK_EQ(irradiance[p].size(), prim.positions.size());
+        PENUMBRA_CHECK_EQ(irradiance[p].size(), prim.InputVertexCount());
         uint32_t base = static_cast<uint32_t>(mesh.positions.size());
         const Material& mat = scene.materials[prim.material];
         for (size_t i = 0; i < prim.positions.size(); ++i) {
@@ -64,7 +64,7 @@ Mesh ShadedInputMesh(const Scene& scene, const std::vector<std::vector<glm::vec3
             const uint32_t v = static_cast<uint32_t>(i);
             mesh.colors.push_back(
                 Shade(mat, TintsAt(scene, static_cast<uint32_t>(p), glm::uvec3(v), 0.0f, 0.0f),
-                      irradiance[p][i]));
+                      irradiance[p][prim.InputVertex(i)]));
         }
         for (uint32_t i : prim.indices) mesh.indices.push_back(base + i);
     }
@@ -98,10 +98,10 @@ std::vector<std::vector<glm::vec3>> IrradianceForScene(const Scene& scene,
         std::string name = "node '" + prim.node + "' mesh " + std::to_string(prim.mesh) +
                            " primitive " + std::to_string(prim.primitive);
         if (it == byKey.end()) throw Error("the lighting file has no " + name);
-        if (it->second->irradiance.size() != prim.positions.size())
+        if (it->second->irradiance.size() != prim.InputVertexCount())
             throw Error("the lighting file has " + std::to_string(it->second->irradiance.size()) +
                         " vertices for " + name + ", the scene " +
-                        std::to_string(prim.positions.size()));
+                        std::to_string(prim.InputVertexCount()));
         out.push_back(it->second->irradiance);
     }
     return out;

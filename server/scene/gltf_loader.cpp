@@ -750,8 +750,6 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
                         if (!std::isfinite(len) || len == 0.0f)
                             ctx.Fail(where, "NORMAL has a zero, NaN or infinite vector");
                     }
-                } else {
-                    ComputeVertexNormals(out);  // in the mesh's own space
                 }
                 // The texture coordinates the material's maps read.
                 const Material& material = scene.materials[out.material];
@@ -784,6 +782,8 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
                                             ": its morph targets are ignored (rest pose)");
                     }
                 }
+                // No normals: flat ones, as glTF draws such a mesh (in the mesh's own space).
+                if (out.normals.empty()) SplitForFlatNormals(out);
                 // Keep the mesh-space vertices (moves re-place them), then go to world space.
                 out.objectPositions = out.positions;
                 out.objectNormals = out.normals;

@@ -249,7 +249,7 @@ void SetNodeTransform(Scene& scene, int node, const glm::mat4& local) {
 size_t NodeVertexCount(const Scene& scene, int node) {
     if (node < 0 || node >= static_cast<int>(scene.nodes.size())) return 0;
     size_t n = 0;
-    for (uint32_t p : scene.nodes[node].primitives) n += scene.primitives[p].positions.size();
+    for (uint32_t p : scene.nodes[node].primitives) n += scene.primitives[p].InputVertexCount();
     return n;
 }
 
@@ -284,7 +284,7 @@ void SetNodeVertices(Scene& scene, int node, const std::vector<glm::vec3>& posit
         size_t at = 0;
         for (uint32_t pi : n.primitives) {
             Primitive& p = scene.primitives[pi];
-            const size_t v = p.positions.size();
+            const size_t v = p.InputVertexCount();
             if (!apply) {
                 for (size_t i = 0; i < v; ++i)
                     if (!finite(glm::vec3(w * glm::vec4(positions[at + i], 1.0f))))
@@ -298,7 +298,10 @@ void SetNodeVertices(Scene& scene, int node, const std::vector<glm::vec3>& posit
                 p.restNormals = p.objectNormals;
             }
             p.objectPositions.assign(positions.begin() + at, positions.begin() + at + v);
-            if (normals.empty()) {
+            for (uint32_t i : p.copyOf) p.objectPositions.push_back(positions[at + i]);
+            // A mesh split for flat normals keeps them flat (given normals are per input
+            // vertex, not per plane).
+            if (normals.empty() || !p.copyOf.empty()) {
                 Primitive own;  // the deformed triangles' normals, in own space
                 own.positions = p.objectPositions;
                 own.indices = p.indices;
@@ -309,7 +312,7 @@ void SetNodeVertices(Scene& scene, int node, const std::vector<glm::vec3>& posit
                 p.objectNormals.assign(normals.begin() + at, normals.begin() + at + v);
                 for (glm::vec3& m : p.objectNormals) m = glm::normalize(m);
             }
-            for (size_t i = 0; i < v; ++i) {
+            for (size_t i = 0; i < p.positions.size(); ++i) {
                 p.positions[i] = glm::vec3(w * glm::vec4(p.objectPositions[i], 1.0f));
                 p.normals[i] = glm::normalize(normalMatrix * p.objectNormals[i]);
             }
@@ -344,7 +347,7 @@ void SetNodeMorphWeights(Scene& scene, int node, const std::vector<float>& weigh
         const Primitive& p = scene.primitives[pi];
         const std::vector<glm::vec3>& rest = p.RestPositions();
         const std::vector<glm::vec3>& restNormals = p.RestNormals();
-        for (size_t i = 0; i < rest.size(); ++i) {
+        for (size_t i = 0; i < p.InputVertexCount(); ++i) {  // copies follow their vertex
             glm::vec3 x = rest[i], m = restNormals[i];
             for (size_t t = 0; t < targets; ++t) {
                 x += weights[t] * p.morphPositions[t][i];
@@ -375,6 +378,86 @@ void ComputeVertexNormals(Primitive& primitive) {
         float len = glm::length(sum[i]);
         primitive.normals[i] = len > 0.0f ? sum[i] / len : glm::vec3(0.0f, 0.0f, 1.0f);
     }
+}
+
+void SplitForFlatNormals(Primitive& p) {
+    PENUMBRA_CHECK(p.copyOf.empty());
+    const size_t n = p.positions.size(), triangles = p.indices.size() / 3;
+    // Each vertex's triangles (CSR).
+    std::vector<uint32_t> start(n + 1, 0), around(triangles * 3);
+    for (size_t c = 0; c < triangles * 3; ++c) ++start[p.indices[c] + 1];
+    for (size_t v = 0; v < n; ++v) start[v + 1] += start[v];
+    std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+    for (size_t c = 0; c < triangles * 3; ++c) around[fill[p.indices[c]]++] = uint32_t(c);
+    std::vector<glm::vec3> facing(triangles, glm::vec3(0.0f));  // unit, or zero when degenerate
+    for (size_t t = 0; t < triangles; ++t) {
+        const glm::vec3& a = p.positions[p.indices[t * 3]];
+        const glm::vec3 c = glm::cross(p.positions[p.indices[t * 3 + 1]] - a,
+                                       p.positions[p.indices[t * 3 + 2]] - a);
+        const float len = glm::length(c);
+        if (len > 0.0f && std::isfinite(len)) facing[t] = c / len;
+    }
+    constexpr float kSamePlane = 0.9999f;  // cos 0.81°
+    auto copy = [&](uint32_t v) {
+        const uint32_t k = static_cast<uint32_t>(p.positions.size());
+        for (auto& set : p.texcoords)  // the per-vertex lists (a set not read is empty)
+            if (set.size() == k) set.push_back(set[v]);
+        for (auto* targets : {&p.morphPositions, &p.morphNormals})
+            for (auto& target : *targets)
+                if (target.size() == k) target.push_back(target[v]);
+        p.positions.push_back(p.positions[v]);
+        p.copyOf.push_back(v);
+        return k;
+    };
+    std::vector<glm::vec3> planes;  // this vertex's, one vertex each
+    std::vector<uint32_t> vertexOf;
+    for (uint32_t v = 0; v < n; ++v) {
+        planes.clear();
+        vertexOf.clear();
+        for (uint32_t i = start[v]; i < start[v + 1]; ++i) {
+            const uint32_t corner = around[i];
+            const glm::vec3& f = facing[corner / 3];
+            if (f == glm::vec3(0.0f)) continue;  // degenerate: keeps v, the first plane's
+            size_t g = 0;
+            while (g < planes.size() && glm::dot(planes[g], f) < kSamePlane) ++g;
+            if (g == planes.size()) {
+                planes.push_back(f);
+                vertexOf.push_back(planes.size() == 1 ? v : copy(v));
+            }
+            p.indices[corner] = vertexOf[g];
+        }
+    }
+    ComputeVertexNormals(p);
+}
+
+std::vector<float> VertexAreas(const Primitive& p) {
+    std::vector<float> area(p.positions.size(), 0.0f);
+    for (size_t t = 0; t + 2 < p.indices.size(); t += 3) {
+        const glm::vec3& a = p.positions[p.indices[t]];
+        const float third = glm::length(glm::cross(p.positions[p.indices[t + 1]] - a,
+                                                   p.positions[p.indices[t + 2]] - a)) /
+                            6.0f;
+        for (int c = 0; c < 3; ++c) area[p.indices[t + c]] += third;
+    }
+    return area;
+}
+
+std::vector<glm::vec3> ToInputVertices(const Primitive& p,
+                                       const std::vector<glm::vec3>& perVertex) {
+    PENUMBRA_CHECK_EQ(perVertex.size(), p.positions.size());
+    const size_t n = p.InputVertexCount();
+    if (p.copyOf.empty()) return perVertex;
+    const std::vector<float> area = VertexAreas(p);
+    std::vector<glm::vec3> sum(n, glm::vec3(0.0f));
+    std::vector<float> weight(n, 0.0f);
+    for (size_t k = 0; k < perVertex.size(); ++k) {
+        const uint32_t i = p.InputVertex(k);
+        sum[i] += area[k] * perVertex[k];
+        weight[i] += area[k];
+    }
+    // A vertex on degenerate triangles only has no area: its own value.
+    for (size_t i = 0; i < n; ++i) sum[i] = weight[i] > 0.0f ? sum[i] / weight[i] : perVertex[i];
+    return sum;
 }
 
 }  // namespace penumbra

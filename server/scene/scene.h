@@ -86,6 +86,20 @@ struct Primitive {
     // POSITION and of NORMAL (a target's NORMAL list is empty when it has none).
     std::vector<std::vector<glm::vec3>> morphPositions, morphNormals;
     uint32_t shape = 0;  // deformations taken so far (SetNodeVertices); 0: as loaded
+    // Flat normals (SplitForFlatNormals: a glTF mesh without NORMAL, which glTF says is drawn
+    // flat): a vertex whose triangles lie in more than one plane became one vertex a plane.
+    // Input vertex i stays vertex i; the copies follow it, copy k of the primitive being
+    // split from input vertex copyOf[k - InputVertexCount()]. Empty: no copies. Outputs stay
+    // per input vertex (ToInputVertices).
+    std::vector<uint32_t> copyOf;
+
+    // The vertices the file has (what outputs, frames and deformations count).
+    size_t InputVertexCount() const { return positions.size() - copyOf.size(); }
+    // The input vertex vertex k stands for.
+    uint32_t InputVertex(size_t k) const {
+        const size_t n = InputVertexCount();
+        return k < n ? static_cast<uint32_t>(k) : copyOf[k - n];
+    }
 
     const std::vector<glm::vec3>& RestPositions() const {
         return restPositions.empty() ? objectPositions : restPositions;
@@ -217,6 +231,22 @@ void SetNodeTransform(Scene& scene, int node, const glm::mat4& local);
 
 // Fills `normals` with area-weighted vertex normals of the triangles.
 void ComputeVertexNormals(Primitive& primitive);
+
+// glTF 2.0 (3.7.2.1): a mesh without normals is drawn with flat normals. Gives `primitive`
+// (its positions, indices, texture coordinates and morph targets as read, in one space) a
+// vertex per plane its triangles meet in at each vertex (Primitive::copyOf) and the normals of
+// those planes. A vertex whose triangles are coplanar within ~0.8° stays one.
+void SplitForFlatNormals(Primitive& primitive);
+
+// Each vertex's share of its triangles' area (a third of each), the weight a split vertex's
+// copies are merged with.
+std::vector<float> VertexAreas(const Primitive& primitive);
+
+// A value per vertex of `primitive` (copies included) as a value per input vertex: a vertex
+// split for flat normals gets the area-weighted mean over its copies, the light over the
+// faces that meet there (a value per face corner is what a vertex-coloured mesh cannot show).
+std::vector<glm::vec3> ToInputVertices(const Primitive& primitive,
+                                       const std::vector<glm::vec3>& perVertex);
 
 // Deformations (a skinned or morphing mesh driven from outside: protocol/SPEC.md,
 // SetVertices). The vertices of node `node`'s own primitives, one primitive after another

@@ -44,6 +44,25 @@ const SolverEntry& FindSolver(const std::string& name) {
 
 void CheckSolverSettings(const SolverSettings& settings) {
     const SolverEntry& e = FindSolver(settings.solver);
+    // An option the solver does not declare but others do: most likely a solver left
+    // unnamed (the default is the light-field solver), so the message says whose it is.
+    for (const auto& [name, value] : settings.options) {
+        bool own = false;
+        std::vector<std::string> takers;
+        for (const OptionSpec& spec : e.options) own = own || spec.name == name;
+        if (own) continue;
+        for (const SolverEntry& other : Solvers())
+            for (const OptionSpec& spec : other.options)
+                if (spec.name == name) takers.push_back(other.name);
+        std::vector<std::string> names;
+        for (const OptionSpec& spec : e.options) names.push_back(spec.name);
+        if (!takers.empty())
+            throw Error("solver '" + e.name + "' has no option '" + name + "' (" +
+                        (names.empty() ? "it takes none" : "it takes " + JoinChoices(names)) +
+                        "; '" + name + "' is an option of " + JoinChoices(takers, " and ") +
+                        ": name that solver, e.g. --solver " + takers.front() + "; " +
+                        kDefaultSolver + " is the default)");
+    }
     OptionReader(e.name, e.options, settings.options);
     if (e.check) e.check(settings);
 }

@@ -64,10 +64,11 @@ std::vector<glm::vec3> PrimitiveIrradiance(const Surfels& surfels,
                                            const std::vector<glm::vec3>& surfelIrradiance,
                                            const Scene& scene, size_t p) {
     PENUMBRA_CHECK_EQ(surfelIrradiance.size(), surfels.size());
-    size_t count = scene.primitives[p].positions.size();
+    const Primitive& prim = scene.primitives[p];
     uint32_t first = surfels.firstSurfel[p];
-    std::vector<glm::vec3> out(surfelIrradiance.begin() + first,
-                               surfelIrradiance.begin() + first + count);
+    std::vector<glm::vec3> out = ToInputVertices(
+        prim, std::vector<glm::vec3>(surfelIrradiance.begin() + first,
+                                     surfelIrradiance.begin() + first + prim.positions.size()));
     // Antiradiance that over-cancels (behind occluders, where the bins blur) can leave
     // a slightly negative sum; irradiance cannot be negative.
     for (auto& e : out) e = glm::max(e, glm::vec3(0.0f));

@@ -26,8 +26,14 @@ enum class Channel { kIndirect, kDirect, kTotal };
 enum class DeviceChoice { kAuto, kGpu, kLavapipe, kCpu };
 // What every solver takes (each solver's own options travel in `options`, declared in its
 // registry entry: solver/registry.h).
+// The solver a bake, a render or a LoadScene gets when it names none: the light-field solver
+// (docs/SOLVER.md "The default solver": chosen by measurement on the clutter suite, the
+// bundled scenes and real models; its iteration carries only light that is there, so it
+// cannot diverge).
+inline constexpr const char* kDefaultSolver = "lightfield";
+
 struct SolverSettings {
-    std::string solver = "antiradiance";  // a name in the registry (Solvers())
+    std::string solver = kDefaultSolver;  // a name in the registry (Solvers())
     float elementSize = 0.0f;  // metres; 0 picks a fraction of the scene's diameter (below)
     DeviceChoice device = DeviceChoice::kAuto;
     int threads = 0;          // CPU threads; 0 = all cores

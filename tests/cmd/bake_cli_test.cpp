@@ -41,7 +41,8 @@ JsonBake BakeJson(const std::string& name, const std::string& options) {
 
 TEST(BakeCli, WritesJsonWithStatsInInputVertexOrder) {
     auto [r, j] =
-        BakeJson("bake-json", "--bins 64 --iterations 4 --element-size 0.08 --device cpu");
+        BakeJson("bake-json",
+                 "--solver antiradiance --bins 64 --iterations 4 --element-size 0.08 --device cpu");
     ASSERT_EQ(r.exitCode, 0) << r.output;
     EXPECT_EQ(j["solver"], "antiradiance");
     EXPECT_EQ(j["channel"], "indirect");
@@ -74,7 +75,7 @@ TEST(BakeCli, WritesGlbWithIrradiancePerPrimitive) {
     for (const std::string color0 : {"tonemapped", "none"}) {
         const std::string out = (dir / ("lit-" + color0 + ".glb")).string();
         ProcessResult r = Execute("bake " + kCornell + " -o " + out + " --color0 " + color0 +
-                                  " --bins 64 --iterations 2 --element-size 0.1 --device cpu -q");
+                                  " --iterations 2 --element-size 0.1 --device cpu -q");
         ASSERT_EQ(r.exitCode, 0) << r.output;
         tinygltf::Model model;
         tinygltf::TinyGLTF io;
@@ -125,7 +126,7 @@ TEST(BakeCli, GltfOutputPassesTheKhronosValidator) {
             const std::string out = (dir / (std::string(name) + ext)).string();
             ProcessResult r = Execute(std::string("bake ") + PENUMBRA_SOURCE_DIR + "/scenes/" +
                                       name + ".gltf -o " + out +
-                                      " --gather off --direct-rays 0 --iterations 1 --bins 32 "
+                                      " --gather off --direct-rays 0 --iterations 1 "
                                       "--element-size 0.5 --device cpu -q");
             ASSERT_EQ(r.exitCode, 0) << r.output;
             FILE* pipe =
@@ -146,8 +147,8 @@ TEST(BakeCli, GltfOutputPassesTheKhronosValidator) {
 
 // `-o -`: the JSON on standard output, nothing else there (-q keeps stderr quiet too).
 TEST(BakeCli, DashWritesJsonToStandardOutput) {
-    ProcessResult r = Execute("bake " + kCornell +
-                              " -o - --bins 32 --iterations 1 --element-size 0.2 --device cpu -q");
+    ProcessResult r =
+        Execute("bake " + kCornell + " -o - --iterations 1 --element-size 0.2 --device cpu -q");
     ASSERT_EQ(r.exitCode, 0) << r.output;
     const auto j = nlohmann::json::parse(r.output, nullptr, false);
     ASSERT_FALSE(j.is_discarded()) << r.output.substr(0, 400);
@@ -157,14 +158,14 @@ TEST(BakeCli, DashWritesJsonToStandardOutput) {
 
 TEST(BakeCli, LavapipeDeviceRuns) {
     auto [r, j] = BakeJson("bake-lvp",
-                           "--bins 32 --iterations 1 --element-size 0.15 --device lavapipe "
+                           "--iterations 1 --element-size 0.15 --device lavapipe "
                            "--validation");
     ASSERT_EQ(r.exitCode, 0) << r.output;
     EXPECT_NE(j["stats"]["device"].get<std::string>().find("vulkan:"), std::string::npos);
 }
 
 TEST(BakeCli, AutoDevicePicksCpuUnlessARealGpuExists) {
-    auto [r, j] = BakeJson("bake-auto", "--bins 32 --iterations 1 --element-size 0.15 -q");
+    auto [r, j] = BakeJson("bake-auto", "--iterations 1 --element-size 0.15 -q");
     ASSERT_EQ(r.exitCode, 0) << r.output;
     std::string device = j["stats"]["device"];
     if (gpu::FindRealGpu(nullptr))
@@ -180,9 +181,18 @@ TEST(BakeCli, BadInputGivesExitCodeOneAndAMessage) {
         << missing.output;
     EXPECT_EQ(missing.output.find("File open error"), std::string::npos) << missing.output;
 
-    ProcessResult bins = Execute("bake " + kCornell + " -o /tmp/x.json --bins 5");
+    ProcessResult bins =
+        Execute("bake " + kCornell + " -o /tmp/x.json --solver antiradiance --bins 5");
     EXPECT_EQ(bins.exitCode, 1) << bins.output;
     EXPECT_NE(bins.output.find("bin count 5"), std::string::npos) << bins.output;
+    // Another solver's option without --solver: the default (lightfield) does not take it,
+    // and the message says whose it is.
+    ProcessResult unnamed = Execute("bake " + kCornell + " -o /tmp/x.json --bins 64");
+    EXPECT_EQ(unnamed.exitCode, 1) << unnamed.output;
+    EXPECT_NE(unnamed.output.find("'bins' is an option of antiradiance and implicit: name that "
+                                  "solver, e.g. --solver antiradiance"),
+              std::string::npos)
+        << unnamed.output;
 
     ProcessResult ext = Execute("bake " + kCornell + " -o /tmp/x.txt");
     EXPECT_EQ(ext.exitCode, 1) << ext.output;
@@ -241,7 +251,8 @@ namespace {
 // `--environment` and `--environment-color`: the Cornell box is open at the front, so a sky
 // adds light; stats name the sky; a bad sky file fails with exit code 1 and its name.
 TEST(BakeCli, EnvironmentLightsTheSceneThroughItsOpening) {
-    const std::string base = "--bins 64 --iterations 4 --element-size 0.1 --device cpu";
+    const std::string base =
+        "--solver antiradiance --bins 64 --iterations 4 --element-size 0.1 --device cpu";
     auto dark = BakeJson("bake-nosky", base);
     ASSERT_EQ(dark.run.exitCode, 0) << dark.run.output;
     EXPECT_FALSE(dark.json["stats"].contains("environment"));
@@ -307,9 +318,10 @@ TEST(BakeCli, DivergedSolutionGoesOnWithTheFallbackSolver) {
     const auto dir = testing::TempDir("bake-diverged");
     const std::string scene = (dir / "row.gltf").string(), out = (dir / "row.json").string();
     scenes::BoxRow(10, 0.02f).WriteGltf(scene);
-    ProcessResult r = Execute("bake " + scene + " -o " + out +
-                              " --scheme symmetric --bins 64 --element-size 0.12 --iterations 40 "
-                              "--gather off --device cpu -q");
+    ProcessResult r = Execute(
+        "bake " + scene + " -o " + out +
+        " --solver antiradiance --scheme symmetric --bins 64 --element-size 0.12 --iterations 40 "
+        "--gather off --device cpu -q");
     EXPECT_EQ(r.exitCode, 0) << r.output;
     EXPECT_NE(r.output.find(scene + ": the antiradiance solution diverged at iteration "),
               std::string::npos)
@@ -322,9 +334,10 @@ TEST(BakeCli, DivergedSolutionGoesOnWithTheFallbackSolver) {
     EXPECT_FALSE(j["stats"].contains("divergence")) << j["stats"].dump();
     std::filesystem::remove(out);
     // The adaptive scheme settles the same scene.
-    ProcessResult ok = Execute("bake " + scene + " -o " + out +
-                               " --scheme adaptive --bins 64 --element-size 0.12 --iterations 60 "
-                               "--device cpu -q");
+    ProcessResult ok = Execute(
+        "bake " + scene + " -o " + out +
+        " --solver antiradiance --scheme adaptive --bins 64 --element-size 0.12 --iterations 60 "
+        "--device cpu -q");
     EXPECT_EQ(ok.exitCode, 0) << ok.output;
     EXPECT_TRUE(std::filesystem::exists(out));
 }

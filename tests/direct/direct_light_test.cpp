@@ -22,6 +22,7 @@ using testing::Mean;
 
 SolverSettings Settings(float elementSize = 0.1f) {
     SolverSettings s;
+    s.solver = "antiradiance";
     s.device = DeviceChoice::kCpu;
     SetOption(s.options, "bins", 64);
     s.elementSize = elementSize;

@@ -40,6 +40,7 @@ GatherSettings ShotOnly() {
 
 SolverSettings Cpu() {
     SolverSettings s;
+    s.solver = "antiradiance";
     s.device = DeviceChoice::kCpu;
     s.elementSize = 0.1f;
     return s;

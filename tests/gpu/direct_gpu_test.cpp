@@ -96,6 +96,7 @@ TEST(VulkanDirect, ShadowAndDirectPassesMatchTheirCpuTwins) {
 TEST(VulkanDirect, LavapipeSolverWithLightsMatchesTheCpuSolver) {
     Scene scene = LitScene();
     SolverSettings s;
+    s.solver = "antiradiance";
     SetOption(s.options, "bins", 64);
     s.elementSize = 0.15f;
     s.validation = true;
@@ -150,6 +151,7 @@ TEST(VulkanDirect, LavapipeSolverWithASkyMatchesTheCpuSolver) {
                 glm::vec3(y < 12 ? 0.3f : 2.0f, 1.0f, 0.5f + x / 64.0f);
     scene.environment = sky;
     SolverSettings s;
+    s.solver = "antiradiance";
     SetOption(s.options, "bins", 64);
     s.elementSize = 0.1f;
     s.validation = true;

@@ -105,6 +105,7 @@ TEST(RayTracing, HitsMatchEmbree) {
 
 SolverSettings On(DeviceChoice device) {
     SolverSettings s;
+    s.solver = "antiradiance";
     s.device = device;
     s.elementSize = 0.1f;
     s.validation = device != DeviceChoice::kCpu;

@@ -31,6 +31,7 @@ using Pass = VulkanAntiradiance::Pass;
 // The solver settings of these tests: 64 bins, validation layers on.
 SolverSettings TestSettings(float elementSize, DeviceChoice device) {
     SolverSettings s;
+    s.solver = "antiradiance";
     SetOption(s.options, "bins", 64);
     s.elementSize = elementSize;
     s.device = device;
@@ -43,6 +44,7 @@ class VulkanTwin : public ::testing::Test {
   protected:
     void SetUp() override {
         SolverSettings s;
+        s.solver = "antiradiance";
         SetOption(s.options, "bins", 64);
         s.elementSize = 0.08f;
         scene_ = scenes::CornellBox().Build();
@@ -186,6 +188,7 @@ TEST(VulkanPasses, WarmStartMatchesTheCpuBackEnd) {
 TEST(VulkanPasses, LinkUpdateOfAMoveMatchesTheHost) {
     Scene scene = scenes::CornellBox().Build();
     SolverSettings s;
+    s.solver = "antiradiance";
     SetOption(s.options, "bins", 64);
     s.elementSize = 0.1f;
     s.prepareMoves = true;

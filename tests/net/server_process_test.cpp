@@ -52,6 +52,7 @@ int ErrorCodeOf(F call, std::string* message = nullptr) {
 client::LoadOptions Cornell() {
     client::LoadOptions o;
     o.path = "cornell-box.gltf";
+    o.solver = "antiradiance";  // compared with local solves at these settings
     o.solverOptions["bins"] = "64";
     o.elementSize = 0.06f;
     o.device = "cpu";
@@ -257,6 +258,7 @@ TEST(ServerProcess, PunctualLightsOverTheWire) {
     o.glb.assign(std::istreambuf_iterator<char>(in), {});
     o.name = "spot.glb";
     o.device = "cpu";
+    o.solver = "antiradiance";
     o.solverOptions["bins"] = "64";
     o.elementSize = 0.1f;
 
@@ -326,6 +328,7 @@ TEST(ServerProcess, EnvironmentAtLoad) {
     scene.environment = ConstantEnvironment(glm::vec3(1.0f));
     scene.environment.intensity = 0.5f;
     SolverSettings s;
+    s.solver = "antiradiance";
     s.prepareMoves = true;  // as the server builds scenes (service::ServiceDefaults)
     SetOption(s.options, "motion-link-budget", 1.0f);
     SetOption(s.options, "bins", 64);
@@ -363,6 +366,7 @@ TEST(ServerProcess, SkyChangedInALoadedSession) {
         scene.environment = ConstantEnvironment(glm::vec3(0.5f, 0.6f, 1.0f));
         scene.environment.intensity = intensity;
         SolverSettings s;
+        s.solver = "antiradiance";
         s.prepareMoves = true;  // as the server builds scenes (service::ServiceDefaults)
         SetOption(s.options, "motion-link-budget", 1.0f);
         SetOption(s.options, "motion-link-budget", 1.0f);
@@ -1014,7 +1018,7 @@ TEST(ServerProcess, ARebuildThatRunsOutOfMemoryKeepsTheSceneServing) {
 TEST(ServerProcess, CliCommandsAndScriptAgainstTheServer) {
     ServerProcess server("cli");
     std::string connect = "--connect " + server.Unix() + " ";
-    auto load = testing::Execute(connect + "load cornell-box.gltf --bins 64 --element-size 0.06");
+    auto load = testing::Execute(connect + "load cornell-box.gltf --element-size 0.06");
     ASSERT_EQ(load.exitCode, 0) << load.output;
     EXPECT_NE(load.output.find("movable: short_block, tall_block"), std::string::npos)
         << load.output;

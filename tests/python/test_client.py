@@ -17,7 +17,7 @@ from penumbra_client import Client, PenumbraError
 
 BUILD = pathlib.Path(os.environ["PENUMBRA_BUILD"])
 SCENES = pathlib.Path(os.environ["PENUMBRA_SCENES"])
-CORNELL = dict(device="cpu", bins=64, element_size=0.06)
+CORNELL = dict(device="cpu", element_size=0.06)  # the default solver (lightfield)
 SCHEMA = json.loads((SCENES.parent / "protocol" / "stats.schema.json").read_text())
 
 
@@ -75,7 +75,7 @@ class ClientAgainstALiveServer(unittest.TestCase):
                           **CORNELL)
             self.assertTrue(reports)  # (stage, fraction, seconds left) as the server builds
             self.assertTrue(all(0.0 <= f <= 1.0 for _, f, _ in reports))
-            self.assertEqual(info.solver, "antiradiance")
+            self.assertEqual(info.solver, "lightfield")  # the default
             self.assertEqual(info.warnings, [])  # nothing in the Cornell box is ignored
             self.assertIn("tall_block", info.nodes)
             self.assertTrue(info.nodes["tall_block"].dynamic)
@@ -203,7 +203,7 @@ class ClientAgainstALiveServer(unittest.TestCase):
                 c.move("tall_block", matrix=[float("nan")] * 16)
             with self.assertRaises(ValueError):
                 c.get(channel="bounce")
-            self.assertEqual(c.info().solver, "antiradiance")  # the connection stays
+            self.assertEqual(c.info().solver, "lightfield")  # the connection stays
         with self.assertRaises(ConnectionError):
             Client("unix:///nonexistent/penumbra.sock")
         with self.assertRaises(ValueError):

@@ -17,6 +17,7 @@ namespace {
 double SceneRmse(const Scene& scene, const std::string& label, float elementSize, int samples,
                  Channel channel = Channel::kIndirect) {
     SolverSettings s;
+    s.solver = "antiradiance";
     SetOption(s.options, "bins", 128);
     s.elementSize = elementSize;
     s.device = DeviceChoice::kCpu;

@@ -22,7 +22,7 @@ TEST(Render, WritesExrAndPngOfTheStatedSize) {
     auto dir = testing::TempDir("render");
     std::string exr = (dir / "cb.exr").string(), png = (dir / "cb.png").string();
     auto r = Execute("render " + kCornell + " -o " + exr + " -o " + png +
-                     " --size 96x64 --bins 64 --iterations 2 --element-size 0.1 --device cpu "
+                     " --size 96x64 --iterations 2 --element-size 0.1 --device cpu "
                      "--render-device lavapipe --validation");
     ASSERT_EQ(r.exitCode, 0) << r.output;
     EXPECT_NE(r.output.find("camera 'camera'"), std::string::npos) << r.output;  // the file's
@@ -57,7 +57,7 @@ TEST(Render, HeatMapOfAFileAgainstItselfShowsNoError) {
     auto dir = testing::TempDir("render-heat");
     std::string json = (dir / "lit.json").string(), png = (dir / "heat.exr").string();
     auto bake = Execute("bake " + kCornell + " -o " + json +
-                        " --bins 64 --iterations 2 --element-size 0.1 --device cpu -q");
+                        " --iterations 2 --element-size 0.1 --device cpu -q");
     ASSERT_EQ(bake.exitCode, 0) << bake.output;
     auto r = Execute("render " + kCornell + " --lighting " + json + " --compare " + json + " -o " +
                      png + " --size 48x48 --render-device lavapipe --validation");
@@ -111,7 +111,7 @@ TEST(Render, BadOptionsFailClearly) {
              {"--camera 1,2,3", "7 numbers"},
              {"--camera-name nope", "no perspective camera called 'nope'"},
              {"--lighting /nonexistent.json", "/nonexistent.json"}}) {
-        auto r = Execute("render " + kCornell + " -o " + out + " --device cpu --bins 32 " +
+        auto r = Execute("render " + kCornell + " -o " + out + " --device cpu " +
                          "--iterations 0 --element-size 0.2 " + options);
         EXPECT_EQ(r.exitCode, 1) << options << "\n" << r.output;
         EXPECT_NE(r.output.find(message), std::string::npos) << options << "\n" << r.output;
@@ -127,7 +127,7 @@ TEST(Render, AFullDiskIsAnError) {
     auto dir = testing::TempDir("full-disk");
     for (const char* name : {"out.png", "out.exr", "out.json", "out.glb"})
         std::filesystem::create_symlink("/dev/full", dir / name);
-    const std::string base = " --device cpu --bins 32 --iterations 1 --element-size 0.2 -q";
+    const std::string base = " --device cpu --iterations 1 --element-size 0.2 -q";
     for (const char* name : {"out.png", "out.exr"}) {
         auto r = Execute("render " + kCornell + " -o " + (dir / name).string() + base);
         EXPECT_EQ(r.exitCode, 1) << name << "\n" << r.output;

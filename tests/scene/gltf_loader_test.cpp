@@ -412,6 +412,90 @@ TEST(GltfLoader, BadMotionBoundsAreRefused) {
     EXPECT_NE(msg.find("bounds.min must be an array of 3 numbers"), std::string::npos) << msg;
 }
 
+// Issue 61: glTF draws a mesh without NORMAL with flat normals. A cube of 8 shared vertices
+// becomes a vertex a face at each corner (24), each with its face's normal; outputs, frames
+// and deformations still count the file's 8, a corner reporting the mean of its three faces.
+TEST(GltfLoader, AMeshWithoutNormalsGetsFlatOnes) {
+    const auto dir = testing::TempDir("flat-cube");
+    std::vector<float> corners;
+    for (int i = 0; i < 8; ++i)
+        for (int axis = 0; axis < 3; ++axis) corners.push_back((i >> axis) & 1 ? 1.0f : -1.0f);
+    // Two triangles a face, wound outwards.
+    const std::vector<uint16_t> indices{0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4,
+                                        2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5};
+    std::ofstream bin(dir / "cube.bin", std::ios::binary);
+    bin.write(reinterpret_cast<const char*>(corners.data()), corners.size() * 4);
+    bin.write(reinterpret_cast<const char*>(indices.data()), indices.size() * 2);
+    bin.close();
+    nlohmann::json doc = {
+        {"asset", {{"version", "2.0"}}},
+        {"scene", 0},
+        {"scenes", {{{"nodes", {0}}}}},
+        {"nodes",
+         {{{"name", "cube"}, {"mesh", 0}, {"extras", {{"penumbra", {{"dynamic", true}}}}}}}},
+        {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}, {"indices", 1}}}}}}},
+        {"buffers", {{{"uri", "cube.bin"}, {"byteLength", 96 + 72}}}},
+        {"bufferViews",
+         {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 96}},
+          {{"buffer", 0}, {"byteOffset", 96}, {"byteLength", 72}}}},
+        {"accessors",
+         {{{"bufferView", 0},
+           {"componentType", 5126},
+           {"count", 8},
+           {"type", "VEC3"},
+           {"min", {-1, -1, -1}},
+           {"max", {1, 1, 1}}},
+          {{"bufferView", 1}, {"componentType", 5123}, {"count", 36}, {"type", "SCALAR"}}}}};
+    std::ofstream(dir / "cube.gltf") << doc.dump();
+    Scene scene = LoadGltf((dir / "cube.gltf").string());
+    ASSERT_EQ(scene.primitives.size(), 1u);
+    const Primitive& p = scene.primitives[0];
+    EXPECT_EQ(p.InputVertexCount(), 8u);
+    ASSERT_EQ(p.positions.size(), 24u);
+    ASSERT_EQ(p.copyOf.size(), 16u);
+    for (size_t k = 0; k < p.positions.size(); ++k) {
+        EXPECT_EQ(p.positions[k], p.positions[p.InputVertex(k)]);
+        const glm::vec3 n = p.normals[k];
+        EXPECT_NEAR(glm::length(glm::abs(n) - glm::vec3(std::round(std::abs(n.x)),
+                                                        std::round(std::abs(n.y)),
+                                                        std::round(std::abs(n.z)))),
+                    0.0f, 1e-6f)
+            << "vertex " << k << ": not a face's normal";
+        EXPECT_GT(glm::dot(n, p.positions[k]), 0.0f) << "vertex " << k << " faces inwards";
+    }
+    for (size_t t = 0; t < p.indices.size(); t += 3) {  // each triangle's corners share one
+        EXPECT_EQ(p.normals[p.indices[t]], p.normals[p.indices[t + 1]]);
+        EXPECT_EQ(p.normals[p.indices[t]], p.normals[p.indices[t + 2]]);
+    }
+    // A value per copy (here its normal) merges to the mean over the corner's three faces,
+    // each weighted by its triangles' area there: two triangles of a face meet at corners 0
+    // and 7, one or two elsewhere.
+    const std::vector<glm::vec3> merged = ToInputVertices(p, p.normals);
+    ASSERT_EQ(merged.size(), 8u);
+    for (size_t i : {0, 7}) {
+        const glm::vec3 want = p.positions[i] / 3.0f;  // corners are (±1, ±1, ±1)
+        EXPECT_NEAR(glm::length(merged[i] - want), 0.0f, 1e-5f) << "corner " << i;
+    }
+    for (size_t i = 0; i < 8; ++i)
+        for (int axis = 0; axis < 3; ++axis) {
+            const float share = merged[i][axis] * p.positions[i][axis];
+            EXPECT_GE(share, 0.25f - 1e-5f) << "corner " << i;
+            EXPECT_LE(share, 0.5f + 1e-5f) << "corner " << i;
+        }
+    // Deformations give the file's 8 vertices; the copies follow and the faces stay flat.
+    ASSERT_EQ(NodeVertexCount(scene, 0), 8u);
+    const std::vector<glm::vec3> flat = p.normals;
+    std::vector<glm::vec3> twice;
+    for (size_t i = 0; i < 8; ++i) twice.push_back(2.0f * p.positions[i]);
+    SetNodeVertices(scene, 0, twice, {});
+    const Primitive& q = scene.primitives[0];
+    ASSERT_EQ(q.positions.size(), 24u);
+    for (size_t k = 0; k < q.positions.size(); ++k) {
+        EXPECT_EQ(q.positions[k], twice[q.InputVertex(k)]);
+        EXPECT_NEAR(glm::length(q.normals[k] - flat[k]), 0.0f, 1e-6f);
+    }
+}
+
 TEST(SceneTransform, MovingANodeMovesItsGeometryExactly) {
     Scene scene = LoadGltf(kCornell);
     int tall = FindNode(scene, "tall_block");

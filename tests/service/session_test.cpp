@@ -21,6 +21,7 @@ const std::string kBlocker = std::string(PENUMBRA_SOURCE_DIR) + "/scenes/blocker
 
 SessionSettings Settings() {
     SessionSettings s;
+    s.solver.solver = "antiradiance";
     s.solver.device = DeviceChoice::kCpu;
     SetOption(s.solver.options, "bins", 64);
     s.solver.elementSize = 0.1f;

@@ -27,6 +27,7 @@ using testing::NearestSurfel;
 
 SolverSettings CpuSettings(int bins = 128, float elementSize = 0.05f) {
     SolverSettings s;
+    s.solver = "antiradiance";
     SetOption(s.options, "bins", bins);
     s.elementSize = elementSize;
     s.device = DeviceChoice::kCpu;

@@ -23,6 +23,7 @@ namespace penumbra::testing {
 // 3.6 ms).
 inline SolverSettings ClutterSettings(DeviceChoice device) {
     SolverSettings s;
+    s.solver = "antiradiance";
     s.device = device;
     SetOption(s.options, "scheme", "adaptive");
     SetOption(s.options, "bins", 64);

@@ -448,7 +448,7 @@ std::string ImplicitSolver::WarmStart(Solver& previous, const SurfelCarry& carry
 SolverStats ImplicitSolver::Stats() const {
     SolverStats s;
     s.solver = "implicit";
-    s.device = device_ ? device_->DeviceName() : "cpu";
+    s.device = device_ ? "vulkan:" + device_->DeviceName() : "cpu";
     s.elements = hierarchy_.leaves.size();
     s.nodes = hierarchy_.size();
     s.links = links_.Count();

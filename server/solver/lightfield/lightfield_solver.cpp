@@ -401,7 +401,7 @@ std::vector<std::string> LightfieldSolver::ValidationMessages() const {
 SolverStats LightfieldSolver::Stats() const {
     SolverStats s;
     s.solver = "lightfield";
-    s.device = device_ ? device_->DeviceName() : "cpu";
+    s.device = device_ ? "vulkan:" + device_->DeviceName() : "cpu";
     s.elements = surfels_.size();
     s.nodes = surfels_.size();
     size_t lines = 0, hits = 0, bytes = 0;

@@ -1,0 +1,127 @@
+# Runs inside Blender (Debian's `blender`, Cycles on the CPU): bakes the irradiance at every face
+# corner of a glTF scene with Cycles, an independent path tracer, for scripts/cycles/check.sh.
+#
+#   blender -b --factory-startup --python scripts/cycles/bake_cycles.py -- IN.glb OUT.json \
+#       [--samples 256] [--environment-color R,G,B]
+#
+# What it bakes: Cycles' diffuse light (bake type DIFFUSE, passes DIRECT and INDIRECT, not
+# COLOR) into a float colour attribute on the face corners, with every material replaced by a
+# Lambert (Diffuse BSDF) of the glTF base colour, so that the light is what penumbra's solvers
+# compute for the same scene. Cycles' diffuse light is the reflected radiance of a white
+# surface, E / π, so each value is multiplied by π: irradiance in penumbra's units (lux for
+# emission and skies given in nits; scripts/cycles/check.sh checks that scale on a plane under
+# a constant sky, where E = π L).
+#
+# OUT.json: {"corners": [[node, material, x, y, z, weight, r, g, b], ...]}: the glTF node and
+# material indices (check.sh names every node n<index> and every material m<index> before the
+# import, so Blender's object and material names carry them), the corner's position in the
+# mesh's own glTF space (Blender's +Z up turned back to glTF's +Y up), a third of its face's
+# area (the weight a vertex's corners are merged with) and the irradiance.
+import json
+import math
+import sys
+
+import bpy
+import numpy
+
+# Debian 12's glTF importer (Blender 3.4) still says numpy.bool, which numpy 1.24 removed.
+if not hasattr(numpy, "bool") or numpy.bool is not bool:
+    numpy.bool = bool
+
+args = sys.argv[sys.argv.index("--") + 1:]
+if len(args) < 2:
+    sys.exit("usage: blender -b --python bake_cycles.py -- IN.glb OUT.json [--samples N] "
+             "[--environment-color r,g,b]")
+source, out = args[0], args[1]
+samples, sky = 256, (0.0, 0.0, 0.0)
+i = 2
+while i < len(args):
+    if args[i] == "--samples":
+        samples = int(args[i + 1])
+    elif args[i] == "--environment-color":
+        sky = tuple(float(x) for x in args[i + 1].split(","))
+    else:
+        sys.exit("unknown option " + args[i])
+    i += 2
+
+bpy.ops.wm.read_factory_settings(use_empty=True)
+# RAW: light strengths as the file has them (punctual lights are not converted).
+bpy.ops.import_scene.gltf(filepath=source, convert_lighting_mode="RAW")
+
+scene = bpy.context.scene
+scene.render.engine = "CYCLES"
+scene.cycles.device = "CPU"
+scene.cycles.samples = samples
+scene.cycles.use_denoising = False
+scene.cycles.max_bounces = 64
+scene.cycles.diffuse_bounces = 64
+scene.cycles.sample_clamp_direct = 0.0
+scene.cycles.sample_clamp_indirect = 0.0
+
+world = bpy.data.worlds.new("sky")
+world.use_nodes = True
+background = world.node_tree.nodes["Background"]
+background.inputs["Color"].default_value = (*sky, 1.0)
+background.inputs["Strength"].default_value = 1.0
+scene.world = world
+
+# Lambert materials of the glTF base colour (its factor; a texture's mean is not taken) and
+# the emission the file gives.
+for material in bpy.data.materials:
+    if not material.use_nodes:
+        continue
+    nodes = material.node_tree.nodes
+    principled = next((n for n in nodes if n.type == "BSDF_PRINCIPLED"), None)
+    if principled is None:
+        continue
+    base = principled.inputs["Base Color"]
+    if base.is_linked:
+        print("bake_cycles: material %s: a base colour texture; its factor is used" % material.name)
+    colour = tuple(base.default_value)
+    emission = tuple(principled.inputs["Emission"].default_value)[:3]
+    strength = principled.inputs["Emission Strength"].default_value
+    output = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    diffuse = nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = colour
+    shader = diffuse.outputs["BSDF"]
+    if max(emission) * strength > 0.0:
+        emit = nodes.new("ShaderNodeEmission")
+        emit.inputs["Color"].default_value = (*emission, 1.0)
+        emit.inputs["Strength"].default_value = strength
+        add = nodes.new("ShaderNodeAddShader")
+        material.node_tree.links.new(diffuse.outputs["BSDF"], add.inputs[0])
+        material.node_tree.links.new(emit.outputs["Emission"], add.inputs[1])
+        shader = add.outputs["Shader"]
+    material.node_tree.links.new(shader, output.inputs["Surface"])
+
+meshes = [o for o in scene.objects if o.type == "MESH"]
+bpy.ops.object.select_all(action="DESELECT")
+for o in meshes:
+    o.select_set(True)
+bpy.context.view_layer.objects.active = meshes[0]
+# A mesh two nodes share gets a copy each: each object bakes its own light.
+bpy.ops.object.make_single_user(object=True, obdata=True)
+for o in meshes:
+    attribute = o.data.color_attributes.new("irradiance", "FLOAT_COLOR", "CORNER")
+    o.data.color_attributes.active_color = attribute
+scene.render.bake.target = "VERTEX_COLORS"
+bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT", "INDIRECT"}, target="VERTEX_COLORS")
+
+corners = []
+for o in meshes:
+    node = int(o.name.split(".")[0][1:])
+    mesh = o.data
+    values = mesh.color_attributes["irradiance"].data
+    for polygon in mesh.polygons:
+        slot = o.material_slots[polygon.material_index] if o.material_slots else None
+        material = int(slot.material.name.split(".")[0][1:]) if slot and slot.material else -1
+        weight = polygon.area / polygon.loop_total
+        for loop in polygon.loop_indices:
+            co = mesh.vertices[mesh.loops[loop].vertex_index].co
+            c = values[loop].color
+            # Blender's importer turns glTF's +Y up to +Z up: (x, y, z) -> (x, -z, y).
+            corners.append([node, material, co.x, co.z, -co.y, weight,
+                            c[0] * math.pi, c[1] * math.pi, c[2] * math.pi])
+with open(out, "w") as f:
+    json.dump({"samples": samples, "corners": corners}, f)
+print("bake_cycles: %d corners of %d objects -> %s" % (len(corners), len(meshes), out))
