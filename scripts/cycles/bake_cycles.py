@@ -2,7 +2,7 @@
 # corner of a glTF scene with Cycles, an independent path tracer, for scripts/cycles/check.sh.
 #
 #   blender -b --factory-startup --python scripts/cycles/bake_cycles.py -- IN.glb OUT.json \
-#       [--samples 256] [--environment-color R,G,B]
+#       [--samples 256] [--environment-color R,G,B] [--back-faces black|diffuse]
 #
 # What it bakes: Cycles' diffuse light (bake type DIFFUSE, passes DIRECT and INDIRECT, not
 # COLOR) into a float colour attribute on the face corners, with every material replaced by a
@@ -21,8 +21,10 @@ import json
 import math
 import sys
 
+import bmesh
 import bpy
 import numpy
+from mathutils import Vector
 
 # Debian 12's glTF importer (Blender 3.4) still says numpy.bool, which numpy 1.24 removed.
 if not hasattr(numpy, "bool") or numpy.bool is not bool:
@@ -33,13 +35,15 @@ if len(args) < 2:
     sys.exit("usage: blender -b --python bake_cycles.py -- IN.glb OUT.json [--samples N] "
              "[--environment-color r,g,b]")
 source, out = args[0], args[1]
-samples, sky = 256, (0.0, 0.0, 0.0)
+samples, sky, back = 256, (0.0, 0.0, 0.0), "diffuse"
 i = 2
 while i < len(args):
     if args[i] == "--samples":
         samples = int(args[i + 1])
     elif args[i] == "--environment-color":
         sky = tuple(float(x) for x in args[i + 1].split(","))
+    elif args[i] == "--back-faces":
+        back = args[i + 1]
     else:
         sys.exit("unknown option " + args[i])
     i += 2
@@ -84,12 +88,21 @@ for material in bpy.data.materials:
     diffuse = nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Color"].default_value = colour
     shader = diffuse.outputs["BSDF"]
+    if back == "black":  # a face's back absorbs, as penumbra's surfaces do
+        backfacing = nodes.new("ShaderNodeNewGeometry")
+        black = nodes.new("ShaderNodeBsdfDiffuse")
+        black.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        mix = nodes.new("ShaderNodeMixShader")
+        material.node_tree.links.new(backfacing.outputs["Backfacing"], mix.inputs["Fac"])
+        material.node_tree.links.new(diffuse.outputs["BSDF"], mix.inputs[1])
+        material.node_tree.links.new(black.outputs["BSDF"], mix.inputs[2])
+        shader = mix.outputs["Shader"]
     if max(emission) * strength > 0.0:
         emit = nodes.new("ShaderNodeEmission")
         emit.inputs["Color"].default_value = (*emission, 1.0)
         emit.inputs["Strength"].default_value = strength
         add = nodes.new("ShaderNodeAddShader")
-        material.node_tree.links.new(diffuse.outputs["BSDF"], add.inputs[0])
+        material.node_tree.links.new(shader, add.inputs[0])
         material.node_tree.links.new(emit.outputs["Emission"], add.inputs[1])
         shader = add.outputs["Shader"]
     material.node_tree.links.new(shader, output.inputs["Surface"])
@@ -101,24 +114,99 @@ for o in meshes:
 bpy.context.view_layer.objects.active = meshes[0]
 # A mesh two nodes share gets a copy each: each object bakes its own light.
 bpy.ops.object.make_single_user(object=True, obdata=True)
+
+# Where a vertex's light is estimated, as penumbra does (rays/ray_scene.h,
+# VertexEstimatePoints): each face corner moved 1e-3 × the scene's diameter into its face,
+# towards the centroids of the vertex's triangles in that plane, at most half way to the
+# nearest of them. Cycles bakes at the exact
+# corners otherwise, and an IFC part's corners mostly lie where it meets another part, inside
+# it or on its back, black. The geometry stays as it is: a probe copy of each mesh, every
+# face's corners its own vertices placed there (and lifted 1e-4 × the diameter off the face,
+# clear of the surface it lies on), is baked, invisible to every ray.
+lo = Vector((math.inf,) * 3)
+hi = -lo
 for o in meshes:
-    attribute = o.data.color_attributes.new("irradiance", "FLOAT_COLOR", "CORNER")
-    o.data.color_attributes.active_color = attribute
+    for v in o.data.vertices:
+        w = o.matrix_world @ v.co
+        lo = Vector(map(min, lo, w))
+        hi = Vector(map(max, hi, w))
+diameter = (hi - lo).length
+inset, lift = 1e-3 * diameter, 1e-4 * diameter
+same_plane = 0.9999  # cos 0.81°, as penumbra's flat normals
+
+probes = []
+for o in meshes:
+    mesh, world = o.data, o.matrix_world
+    turn = world.to_3x3().inverted().transposed()
+    positions = [world @ v.co for v in mesh.vertices]
+    normals = [(turn @ p.normal).normalized() for p in mesh.polygons]
+    towards = {}  # (vertex, plane) -> sum of unit vectors to its triangles' centroids
+    reach = {}    # (vertex, plane) -> how far it may move
+    planes = {}   # vertex -> [(plane normal, key)]
+    corner_key = []
+    for p in mesh.polygons:
+        centre = sum((positions[v] for v in p.vertices), Vector()) / len(p.vertices)
+        keys = []
+        for v in p.vertices:
+            group = next((k for n, k in planes.get(v, []) if n.dot(normals[p.index]) >= same_plane),
+                         None)
+            if group is None:
+                group = (v, len(planes.get(v, [])))
+                planes.setdefault(v, []).append((normals[p.index], group))
+            d = centre - positions[v]
+            if d.length > 0:
+                towards[group] = towards.get(group, Vector()) + d.normalized()
+                reach[group] = min(reach.get(group, inset), 0.5 * d.length)
+            keys.append(group)
+        corner_key.append(keys)
+    probe = o.copy()
+    probe.data = mesh.copy()
+    scene.collection.objects.link(probe)
+    bm = bmesh.new()
+    bm.from_mesh(probe.data)
+    bm.faces.ensure_lookup_table()
+    bmesh.ops.split_edges(bm, edges=bm.edges[:])
+    bm.faces.ensure_lookup_table()
+    inverse = world.inverted()
+    for f in bm.faces:
+        n = normals[f.index]
+        for corner, loop in enumerate(f.loops):
+            group = corner_key[f.index][corner]
+            v = group[0]
+            d = towards.get(group, Vector())
+            d = d - d.dot(n) * n
+            step = min(1.0, d.length) * reach.get(group, inset)
+            point = positions[v] + (step * d.normalized() if d.length > 1e-6 else Vector())
+            loop.vert.co = inverse @ (point + lift * n)
+    bm.to_mesh(probe.data)
+    bm.free()
+    for flag in ("visible_diffuse", "visible_glossy", "visible_transmission",
+                 "visible_volume_scatter", "visible_shadow"):
+        setattr(probe, flag, False)
+    probes.append((o, probe))
+
+bpy.ops.object.select_all(action="DESELECT")
+for _, probe in probes:
+    probe.select_set(True)
+    attribute = probe.data.color_attributes.new("irradiance", "FLOAT_COLOR", "CORNER")
+    probe.data.color_attributes.active_color = attribute
+bpy.context.view_layer.objects.active = probes[0][1]
 scene.render.bake.target = "VERTEX_COLORS"
 bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT", "INDIRECT"}, target="VERTEX_COLORS")
 
 corners = []
-for o in meshes:
+for o, probe in probes:
     node = int(o.name.split(".")[0][1:])
     mesh = o.data
-    values = mesh.color_attributes["irradiance"].data
-    for polygon in mesh.polygons:
+    values = probe.data.color_attributes["irradiance"].data
+    assert len(probe.data.polygons) == len(mesh.polygons)
+    for polygon, baked in zip(mesh.polygons, probe.data.polygons):
         slot = o.material_slots[polygon.material_index] if o.material_slots else None
         material = int(slot.material.name.split(".")[0][1:]) if slot and slot.material else -1
         weight = polygon.area / polygon.loop_total
-        for loop in polygon.loop_indices:
+        for loop, baked_loop in zip(polygon.loop_indices, baked.loop_indices):
             co = mesh.vertices[mesh.loops[loop].vertex_index].co
-            c = values[loop].color
+            c = values[baked_loop].color
             # Blender's importer turns glTF's +Y up to +Z up: (x, y, z) -> (x, -z, y).
             corners.append([node, material, co.x, co.z, -co.y, weight,
                             c[0] * math.pi, c[1] * math.pi, c[2] * math.pi])

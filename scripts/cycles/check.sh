@@ -9,7 +9,8 @@
 #        folder to keep the files in, default a temporary one)
 # env:   SKY (r,g,b radiance in nits, default 1,1,1), SAMPLES (Cycles' samples a corner,
 #        default 256), REFERENCE_SAMPLES (penumbra reference's paths, default 1024), SOLVERS
-#        (default "lightfield"), DEVICE (default cpu)
+#        (default "lightfield"), DEVICE (default cpu), BACK_FACES (Cycles' back faces:
+#        diffuse, its own default, or black, as penumbra's surfaces)
 # Needs Debian's blender (installed when missing).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
@@ -37,6 +38,7 @@ cycles() {  # GLB -> OUT/NAME-cycles.json (a penumbra irradiance file)
     local glb=$1 name=$2
     blender -b --factory-startup --python "$here/bake_cycles.py" -- "$glb" \
         "$out/$name-corners.json" --samples "$samples" --environment-color "$sky" \
+        --back-faces "${BACK_FACES:-diffuse}" \
         >"$out/$name-blender.log" 2>&1 || { tail -20 "$out/$name-blender.log"; exit 1; }
     /usr/bin/python3 "$here/gltf_corners.py" irradiance "$glb" "$out/$name-corners.json" \
         "$out/$name-cycles.json"

@@ -410,6 +410,9 @@ std::vector<std::vector<glm::vec3>> VertexEstimatePoints(const Scene& scene) {
     for (const Primitive& prim : scene.primitives) {
         const size_t n = prim.positions.size();
         std::vector<glm::vec3> towards(n, glm::vec3(0.0f));
+        // At most half way to the nearest of its triangles' centroids: on a small part (a
+        // door handle's facets, a few millimetres) the scene's inset would leave the part.
+        std::vector<float> reach(n, inset);
         for (size_t t = 0; t + 2 < prim.indices.size(); t += 3) {
             glm::vec3 c = (prim.positions[prim.indices[t]] + prim.positions[prim.indices[t + 1]] +
                            prim.positions[prim.indices[t + 2]]) /
@@ -418,14 +421,14 @@ std::vector<std::vector<glm::vec3>> VertexEstimatePoints(const Scene& scene) {
                 uint32_t v = prim.indices[t + k];
                 glm::vec3 d = c - prim.positions[v];
                 float len = glm::length(d);
-                if (len > 0.0f) towards[v] += d / len;
+                if (len > 0.0f) towards[v] += d / len, reach[v] = std::min(reach[v], 0.5f * len);
             }
         }
         std::vector<glm::vec3>& pts = points.emplace_back(prim.positions);
         for (size_t i = 0; i < n; ++i) {
             glm::vec3 d = towards[i] - glm::dot(towards[i], prim.normals[i]) * prim.normals[i];
             float len = glm::length(d);
-            if (len > 1e-6f) pts[i] += std::min(1.0f, len) * inset * (d / len);
+            if (len > 1e-6f) pts[i] += std::min(1.0f, len) * reach[i] * (d / len);
         }
     }
     return points;

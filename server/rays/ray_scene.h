@@ -188,8 +188,9 @@ class RayScene {
 // Where per-vertex irradiance is estimated by everything that traces rays (the reference,
 // the gather stage), per primitive in its input vertex order: each vertex moved
 // kVertexInset × the scene's diameter into its own surface, towards the centroids of its
-// triangles, in its tangent plane. A vertex on an edge where another wall meets it would
-// otherwise see that wall's back side, and one where two objects touch would be inside both.
+// triangles, in its tangent plane, but at most half way to the nearest of those centroids. A vertex
+// on an edge where another wall meets it would otherwise see that wall's back side, and one where
+// two objects touch would be inside both.
 inline constexpr float kVertexInset = 1e-3f;
 std::vector<std::vector<glm::vec3>> VertexEstimatePoints(const Scene& scene);
 
