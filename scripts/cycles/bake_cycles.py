@@ -6,8 +6,9 @@
 #
 # What it bakes: Cycles' diffuse light (bake type DIFFUSE, passes DIRECT and INDIRECT, not
 # COLOR) into a float colour attribute on the face corners, with every material replaced by a
-# Lambert (Diffuse BSDF) of the glTF base colour, so that the light is what penumbra's solvers
-# compute for the same scene. Cycles' diffuse light is the reflected radiance of a white
+# Lambert (Diffuse BSDF) of the glTF base colour factor and its emission, so that the light is
+# what penumbra's solvers compute for the same scene (penumbra's F0 = 0.04 specular layer of
+# a dielectric is left out: a few percent). Cycles' diffuse light is the reflected radiance of a white
 # surface, E / π, so each value is multiplied by π: irradiance in penumbra's units (lux for
 # emission and skies given in nits; scripts/cycles/check.sh checks that scale on a plane under
 # a constant sky, where E = π L).
@@ -19,6 +20,7 @@
 # area (the weight a vertex's corners are merged with) and the irradiance.
 import json
 import math
+import struct
 import sys
 
 import bmesh
@@ -69,24 +71,31 @@ background.inputs["Color"].default_value = (*sky, 1.0)
 background.inputs["Strength"].default_value = 1.0
 scene.world = world
 
-# Lambert materials of the glTF base colour (its factor; a texture's mean is not taken) and
-# the emission the file gives.
+# Lambert materials of the glTF base colour factor (a texture's mean is not taken) and its
+# emission, read from the file itself (material j is m<j>): the importer turns extensions
+# such as KHR_materials_pbrSpecularGlossiness into node trees of their own (a glossy layer),
+# which penumbra does not read.
+with open(source, "rb") as f:
+    data = f.read()
+doc = json.loads(data[20:20 + struct.unpack_from("<I", data, 12)[0]])
 for material in bpy.data.materials:
-    if not material.use_nodes:
+    try:
+        spec = doc["materials"][int(material.name.split(".")[0][1:])]
+    except (ValueError, IndexError, KeyError):
         continue
-    nodes = material.node_tree.nodes
-    principled = next((n for n in nodes if n.type == "BSDF_PRINCIPLED"), None)
-    if principled is None:
-        continue
-    base = principled.inputs["Base Color"]
-    if base.is_linked:
+    pbr = spec.get("pbrMetallicRoughness", {})
+    if "baseColorTexture" in pbr:
         print("bake_cycles: material %s: a base colour texture; its factor is used" % material.name)
-    colour = tuple(base.default_value)
-    emission = tuple(principled.inputs["Emission"].default_value)[:3]
-    strength = principled.inputs["Emission Strength"].default_value
-    output = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    colour = pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0])
+    emission = spec.get("emissiveFactor", [0.0, 0.0, 0.0])
+    strength = spec.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get(
+        "emissiveStrength", 1.0)
+    material.use_nodes = True
+    nodes = material.node_tree.nodes
+    nodes.clear()
+    output = nodes.new("ShaderNodeOutputMaterial")
     diffuse = nodes.new("ShaderNodeBsdfDiffuse")
-    diffuse.inputs["Color"].default_value = colour
+    diffuse.inputs["Color"].default_value = (*colour[:3], 1.0)
     shader = diffuse.outputs["BSDF"]
     if back == "black":  # a face's back absorbs, as penumbra's surfaces do
         backfacing = nodes.new("ShaderNodeNewGeometry")
@@ -106,6 +115,12 @@ for material in bpy.data.materials:
         material.node_tree.links.new(emit.outputs["Emission"], add.inputs[1])
         shader = add.outputs["Shader"]
     material.node_tree.links.new(shader, output.inputs["Surface"])
+
+# glTF's directional lights are exact directions (penumbra's too); Blender gives a new sun
+# the real one's 0.53°, which softens every sun shadow's edge.
+for light in bpy.data.lights:
+    if light.type == "SUN":
+        light.angle = 0.0
 
 meshes = [o for o in scene.objects if o.type == "MESH"]
 bpy.ops.object.select_all(action="DESELECT")
