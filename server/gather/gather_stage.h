@@ -220,9 +220,8 @@ class GatherStage : public Solver {
         uint16_t u, v;      // barycentrics in 1/65535
         uint32_t seen;      // 1: the target sees its front, unoccluded
     };
-    // Four times the gather's rays (glossy box, 256 rays, against a 65,536-path reference:
-    // 64 glints 14.0%, 256 10.3%, 1,024 9.7%; none 15.1%. Session 28, against two such
-    // references averaged: 256 10.31%, 1,024 9.71%, the bake's time the same to its noise).
+    // Four times the gather's rays: on the glossy box more glints stopped paying past that
+    // (bench/results/FINDINGS.md, "Gather: glossy hits").
     int GlintCount() const { return 4 * settings_.gatherRays; }
     // The punctual lights a glossy point y (on refined `triangle`, lifted off it) reflects
     // towards wo through its lobe, without F0: Σ (n + 2)/(2π) cosⁿθ_r · E_l(y) over the lights

@@ -75,7 +75,7 @@ std::string RayTracingGaps(const vk::raii::PhysicalDevice& device) {
 }
 
 // The drivers' lifetime. The Vulkan loader unloads a driver when the last instance that
-// loaded it is destroyed. NVIDIA's driver (580, session 46 on an H200) leaves threads of its
+// loaded it is destroyed. NVIDIA's driver (580, on an H200) leaves threads of its
 // own running ("[vkcf] Analysis"), and a process that destroyed its last context and went on
 // (the service benchmark after its GPU case, before the next) died of a segmentation fault
 // that no handler of ours could report; other projects have met the same on that driver

@@ -1055,7 +1055,7 @@ void ImplicitLinker::Record(uint32_t node, uint32_t sender, const HierarchyNode&
     // within ρ + r_bin of `dir` (Directions::ForEachWithin finds those). A flat sender
     // covers only the bins whose axes meet its plane near its disc (MeetsFlatSender): seen
     // edge-on from a corner, its bounding sphere's cone would also take the bins that look
-    // past it into the room (a room's edges were half as bright as the truth's, session 36).
+    // past it into the room (a room's edges came out half as bright as the truth's).
     const float sinRadius = from.radius / dist;
     if (!closest_ && sinRadius > splat_) {
         const float rho = std::asin(std::min(1.0f, sinRadius));
