@@ -22,8 +22,8 @@
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
 #include "scene/scene_builder.h"
-#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/settings.h"
 
 namespace {
 

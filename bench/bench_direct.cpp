@@ -16,8 +16,8 @@
 #include "bench_util.h"
 #include "direct/environment_light.h"
 #include "scene/gltf_loader.h"
-#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/settings.h"
 
 namespace {
 

@@ -15,8 +15,8 @@
 #include "base/check.h"
 #include "bench_util.h"
 #include "scene/gltf_loader.h"
-#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/settings.h"
 
 using namespace penumbra;
 using bench::RunDevice;

@@ -22,8 +22,8 @@
 #include "bench_util.h"
 #include "clutter_scenes.h"
 #include "scene/scene_builder.h"
-#include "solver/implicit/settings.h"
 #include "solver/solver.h"
+#include "solvers/implicit/settings.h"
 
 namespace {
 

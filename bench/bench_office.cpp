@@ -16,8 +16,8 @@
 #include "bench_util.h"
 #include "output/irradiance_writer.h"
 #include "scene/gltf_loader.h"
-#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/settings.h"
 
 using namespace penumbra;
 using bench::RunDevice;

@@ -16,8 +16,8 @@
 #include "output/compare.h"
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
-#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/settings.h"
 
 namespace {
 

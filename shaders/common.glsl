@@ -18,7 +18,7 @@ struct BinWeight {
     float weight;
 };
 
-// solver/antiradiance/model.h: struct LeafAttributes (64 bytes).
+// solvers/antiradiance/model.h: struct LeafAttributes (64 bytes).
 struct Leaf {
     vec3 normal;
     float area;
@@ -35,12 +35,12 @@ const uint kLeafTwoSided = 1u;
 const uint kLeafGlossy = 2u;
 const uint kGlossyShift = 8u;
 
-// solver/antiradiance/model.h: struct GlossyLeaf (16 bytes).
+// solvers/antiradiance/model.h: struct GlossyLeaf (16 bytes).
 struct GlossyLeaf {
     vec3 specular;  // F0
     uint lobe;
 };
-// solver/antiradiance/model.h: struct GlossyLobe (16 bytes).
+// solvers/antiradiance/model.h: struct GlossyLobe (16 bytes).
 struct Lobe {
     uint start;
     uint width;

@@ -1,6 +1,6 @@
 // One bounce of the implicit solver on a Vulkan device (Dong et al. 2007, Sec. 4.4: each leaf
 // gathers the light of what its bins see, then the new light is pulled up the hierarchy), the
-// device twin of ImplicitSolver::ExitantTables and Bounce (solver/implicit/
+// device twin of ImplicitSolver::ExitantTables and Bounce (solvers/implicit/
 // implicit_solver.cpp): keep the arithmetic in step with them. One table holds every light a
 // share reads: per node and bin the exitant intensity I(ω_b) = Σ A L cos⁺(n, ω_b) of its
 // leaves, then per node Σ A L, then per bin the environment's radiance; a share reads one

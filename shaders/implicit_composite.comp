@@ -2,7 +2,7 @@
 // RefineHierarchicalLinks and PushdownLinks as front-to-back coverage): the links' ends
 // ordered by (node, bin) slot and depth, then each leaf's front bins filled nearest first from
 // the slots of the leaf and its ancestors. The device twin of ImplicitLinker::Build's
-// compositing (solver/implicit/implicit_links.cpp: the ends by slot, the per-leaf loop with
+// compositing (solvers/implicit/implicit_links.cpp: the ends by slot, the per-leaf loop with
 // its SolidCover rules, the partial fill, the far faces' fronts and the shares' travel):
 // keep the arithmetic and the order of the shares in step with it.
 //   mode 0: per end, count it in its slot;
@@ -38,7 +38,7 @@ struct End {
     float dist;
     float omega;
 };
-// solver/implicit/vulkan_composite.cpp: struct CompositeNode (48 bytes).
+// solvers/implicit/vulkan_composite.cpp: struct CompositeNode (48 bytes).
 struct CompositeNode {
     vec3 center;
     float coneCos;

@@ -6,7 +6,7 @@
 // its depth along the bin and the solid angle the sender covers. Both lists are appended with
 // atomic counters; the host reads the counts after the round (and runs it again with larger
 // buffers when one overflowed). The device twin of ImplicitLinker::Build's pair loop,
-// CanReceive, AboveHorizon and Record (solver/implicit/implicit_links.cpp): keep the
+// CanReceive, AboveHorizon and Record (solvers/implicit/implicit_links.cpp): keep the
 // arithmetic in step with them.
 //
 // Included by implicit_pairs.comp (each end appended, the closest layer's) and by
@@ -15,7 +15,7 @@
 
 layout(local_size_x = 64) in;
 
-// solver/implicit/vulkan_links.cpp: struct PairNode (48 bytes).
+// solvers/implicit/vulkan_links.cpp: struct PairNode (48 bytes).
 struct PairNode {
     vec3 center;
     float radius;

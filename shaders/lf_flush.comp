@@ -1,4 +1,4 @@
-// The light field's walk, second pass (solver/lightfield/vulkan_walk.h; TravelSums::Flush in
+// The light field's walk, second pass (solvers/lightfield/vulkan_walk.h; TravelSums::Flush in
 // lines.cpp is the CPU twin): per surfel, per column of the group its lines met it along, the
 // global-lines share A_cell Σ φ L_I with its weight A_cell Σ φ, or where the hat's projected
 // area P_s spans two cells or more P_s Σ φ L_I / Σ φ with P_s, added to `weighted` (RGB, w);

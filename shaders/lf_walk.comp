@@ -1,4 +1,4 @@
-// The light field's radiance-interface walk on a device (solver/lightfield/vulkan_walk.h;
+// The light field's radiance-interface walk on a device (solvers/lightfield/vulkan_walk.h;
 // WalkBatch in lines.cpp is the CPU twin): one invocation a line of a group of directions,
 // front to back along +d then back to front along −d (Mortensen et al. 2008, Sec. 3.2). A
 // surface facing along the travel overwrites the interface with its exitant radiance (its

@@ -10,7 +10,7 @@
 
 layout(local_size_x_id = 0) in;
 
-// solver/antiradiance/vulkan_passes.cpp: struct LinkNode (48 bytes).
+// solvers/antiradiance/vulkan_passes.cpp: struct LinkNode (48 bytes).
 struct LinkNode {
     vec3 center;
     float discRadius;

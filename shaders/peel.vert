@@ -1,4 +1,4 @@
-// Light-field lines by depth peeling (solver/lightfield/vulkan_lines.h), vertex stage: the
+// Light-field lines by depth peeling (solvers/lightfield/vulkan_lines.h), vertex stage: the
 // refined mesh's triangles (three vec4 a triangle, in RayScene order, read by gl_VertexIndex)
 // through one direction's orthographic view, whose pixel centres are the direction's lines.
 // The triangle's number and Embree's barycentrics (u weighs its second corner, v its third)

@@ -8,7 +8,7 @@
 #include "output/compare.h"
 #include "render/renderer.h"
 #include "scene/gltf_loader.h"
-#include "solver/registry.h"
+#include "solvers/registry.h"
 
 namespace penumbra::cli {
 

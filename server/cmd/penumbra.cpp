@@ -9,7 +9,7 @@
 #include "cmd/service_cli.h"
 #include "cmd/solver_options.h"
 #include "output/compare.h"
-#include "solver/registry.h"
+#include "solvers/registry.h"
 
 // The subcommand nearest to `word` by edit distance (empty when none is within 2 edits).
 std::string Nearest(const CLI::App& app, const std::string& word) {

@@ -4,7 +4,7 @@
 #include <map>
 #include <vector>
 
-#include "solver/registry.h"
+#include "solvers/registry.h"
 
 namespace penumbra::cli {
 

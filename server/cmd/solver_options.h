@@ -1,5 +1,5 @@
 // The solver choice on the command line: --solver and every registered solver's own options
-// (solver/registry.h), shared by bake, render and load.
+// (solvers/registry.h), shared by bake, render and load.
 #pragma once
 
 #include <CLI/CLI.hpp>

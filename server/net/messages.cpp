@@ -6,7 +6,7 @@
 #include <limits>
 
 #include "base/check.h"
-#include "solver/registry.h"
+#include "solvers/registry.h"
 
 namespace penumbra::net {
 

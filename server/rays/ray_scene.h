@@ -113,7 +113,7 @@ class RayScene {
                        RayHit* out) const;
     // Every triangle along origin + t·dir, t in (0, tfar), nearest first, in one traversal (a
     // filter that records each hit and lets the ray go on); a triangle Embree meets twice
-    // (its spatial splits) counted once. For the light field's lines (solver/lightfield/).
+    // (its spatial splits) counted once. For the light field's lines (solvers/lightfield/).
     // Clears `hits` first.
     void AllHits(const glm::vec3& origin, const glm::vec3& dir, float tfar,
                  std::vector<RayHit>& hits) const;

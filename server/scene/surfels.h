@@ -29,7 +29,7 @@ struct Surfels {
     std::vector<uint32_t> refinedTriangles;  // triangle list over surfel indices
     // Per surfel (empty: none): the surface occludes light arriving at either side, not only
     // at its front. Set for surfaces that do not close a solid (a wall of one-sided quads),
-    // whose back can be reached by light, e.g. the sky (solver/antiradiance/model.h).
+    // whose back can be reached by light, e.g. the sky (solvers/antiradiance/model.h).
     std::vector<uint8_t> twoSided;
     // Per surfel (empty: all static): its rigid motion group, 0 for static geometry, g > 0
     // for the surfaces of one dynamic node that move together (Sec. 3.3; the antiradiance

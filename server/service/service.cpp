@@ -6,7 +6,7 @@
 
 #include "base/check.h"
 #include "scene/gltf_loader.h"
-#include "solver/registry.h"
+#include "solvers/registry.h"
 
 namespace penumbra::service {
 

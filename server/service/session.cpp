@@ -15,7 +15,7 @@
 #include "base/numeric.h"
 #include "gather/gather_stage.h"
 #include "output/irradiance_writer.h"
-#include "solver/registry.h"
+#include "solvers/registry.h"
 
 namespace penumbra::service {
 

@@ -75,7 +75,7 @@ inline constexpr double kShotPartMs = 30.0;
 // Throws penumbra::Error naming what is wrong with `settings`: iterations per frame
 // (1…kMaxIterationsPerFrame), the converged change (≥ 0), the gather's rays
 // (CheckGatherRays), the element size (≥ 0, finite). The solver's own options are
-// CheckSolverSettings' (solver/registry.h).
+// CheckSolverSettings' (solvers/registry.h).
 void CheckSessionSettings(const SessionSettings& settings);
 
 // Which glTF primitive an irradiance array belongs to.

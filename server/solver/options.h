@@ -1,5 +1,5 @@
 // The options a solver declares for itself and reads back typed: its registry entry
-// (solver/registry.h) lists them, and the CLI, LoadScene and --help take them from there.
+// (solvers/registry.h) lists them, and the CLI, LoadScene and --help take them from there.
 #pragma once
 
 #include <limits>

@@ -25,7 +25,7 @@ namespace penumbra {
 enum class Channel { kIndirect, kDirect, kTotal };
 enum class DeviceChoice { kAuto, kGpu, kLavapipe, kCpu };
 // What every solver takes (each solver's own options travel in `options`, declared in its
-// registry entry: solver/registry.h).
+// registry entry: solvers/registry.h).
 // The solver a bake, a render or a LoadScene gets when it names none: the light-field solver
 // (docs/SOLVER.md "The default solver": chosen by measurement on the clutter suite, the
 // bundled scenes and real models; its iteration carries only light that is there, so it
@@ -226,7 +226,7 @@ class Solver {
 
 using ProgressFn = std::function<void(const std::string& stage, double fraction)>;
 
-// Builds the named solver (its registry entry, solver/registry.h). Throws penumbra::Error
+// Builds the named solver (its registry entry, solvers/registry.h). Throws penumbra::Error
 // for an unknown solver, bad options or an unusable device.
 std::unique_ptr<Solver> CreateSolver(const Scene& scene, const SolverSettings& settings,
                                      const ProgressFn& progress = {});

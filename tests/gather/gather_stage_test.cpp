@@ -13,7 +13,7 @@
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
 #include "scene/scene_builder.h"
-#include "solver/antiradiance/settings.h"
+#include "solvers/antiradiance/settings.h"
 #include "test_util.h"
 
 namespace penumbra {

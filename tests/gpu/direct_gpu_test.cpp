@@ -12,8 +12,8 @@
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 #include "scene/surfels.h"
-#include "solver/antiradiance/antiradiance_solver.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/antiradiance_solver.h"
 #include "test_util.h"
 
 namespace penumbra {

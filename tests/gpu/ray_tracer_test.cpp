@@ -16,7 +16,7 @@
 #include "gpu/context.h"
 #include "rays/ray_scene.h"
 #include "scene/gltf_loader.h"
-#include "solver/antiradiance/settings.h"
+#include "solvers/antiradiance/settings.h"
 #include "test_util.h"
 
 namespace penumbra {

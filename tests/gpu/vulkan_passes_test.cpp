@@ -1,7 +1,7 @@
 // Every Vulkan pass equals its CPU twin on lavapipe, with validation layers on and no
 // validation message allowed. Tolerance: relative 1e-5 of the table's largest value —
 // both sides sum in the same order in fp32, so only fused multiply-adds differ.
-#include "solver/antiradiance/vulkan_passes.h"
+#include "solvers/antiradiance/vulkan_passes.h"
 
 #include <gtest/gtest.h>
 
@@ -16,11 +16,11 @@
 #include "bundled_scenes.h"
 #include "scene/gltf_loader.h"
 #include "scene/scene.h"
-#include "solver/antiradiance/antiradiance_solver.h"
-#include "solver/antiradiance/cpu_passes.h"
-#include "solver/antiradiance/model.h"
-#include "solver/antiradiance/settings.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/antiradiance_solver.h"
+#include "solvers/antiradiance/cpu_passes.h"
+#include "solvers/antiradiance/model.h"
+#include "solvers/antiradiance/settings.h"
 #include "test_util.h"
 
 namespace penumbra {

@@ -11,7 +11,7 @@
 #include "gpu/context.h"
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
-#include "solver/antiradiance/antiradiance_solver.h"
+#include "solvers/antiradiance/antiradiance_solver.h"
 #include "test_util.h"
 
 namespace penumbra::service {

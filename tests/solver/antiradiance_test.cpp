@@ -13,9 +13,9 @@
 #include "bundled_scenes.h"
 #include "scene/gltf_loader.h"
 #include "scene/scene_builder.h"
-#include "solver/antiradiance/cpu_passes.h"
-#include "solver/antiradiance/model.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/cpu_passes.h"
+#include "solvers/antiradiance/model.h"
 #include "test_util.h"
 
 namespace penumbra {

@@ -10,9 +10,9 @@
 #include "base/check.h"
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
-#include "solver/antiradiance/antiradiance_solver.h"
-#include "solver/antiradiance/model.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/antiradiance_solver.h"
+#include "solvers/antiradiance/model.h"
 #include "test_util.h"
 
 namespace penumbra {

@@ -1,4 +1,4 @@
-// The implicit-visibility solver (solver/implicit/) against closed forms: a sky over an open
+// The implicit-visibility solver (solvers/implicit/) against closed forms: a sky over an open
 // plane, a white furnace with occluders, a patch and a disc over a receiver, a thin wall.
 #include <gtest/gtest.h>
 
@@ -12,11 +12,11 @@
 #include "gpu/context.h"
 #include "reference/path_tracer.h"
 #include "scene/scene_builder.h"
-#include "solver/implicit/implicit_solver.h"
-#include "solver/implicit/vulkan_bounce.h"
-#include "solver/implicit/vulkan_composite.h"
-#include "solver/implicit/vulkan_links.h"
-#include "solver/registry.h"
+#include "solvers/implicit/implicit_solver.h"
+#include "solvers/implicit/vulkan_bounce.h"
+#include "solvers/implicit/vulkan_composite.h"
+#include "solvers/implicit/vulkan_links.h"
+#include "solvers/registry.h"
 #include "test_device.h"
 #include "test_util.h"
 

@@ -1,4 +1,4 @@
-// The light-field solver (solver/lightfield/) against closed forms: the direction set's
+// The light-field solver (solvers/lightfield/) against closed forms: the direction set's
 // cosine sum, a form factor, a sky over an open plane, a white furnace with occluders, a
 // thin wall; its lines against Embree's nearest hits.
 #include <gtest/gtest.h>
@@ -14,8 +14,8 @@
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
 #include "scene/scene_builder.h"
-#include "solver/lightfield/lightfield_solver.h"
-#include "solver/registry.h"
+#include "solvers/lightfield/lightfield_solver.h"
+#include "solvers/registry.h"
 #include "test_util.h"
 
 namespace penumbra {

@@ -7,8 +7,8 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "scene/gltf_loader.h"
-#include "solver/antiradiance/antiradiance_solver.h"
-#include "solver/antiradiance/model.h"
+#include "solvers/antiradiance/antiradiance_solver.h"
+#include "solvers/antiradiance/model.h"
 #include "test_util.h"
 
 namespace penumbra {

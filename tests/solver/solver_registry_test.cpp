@@ -6,8 +6,8 @@
 #include "client/client.h"
 #include "net/server_process.h"
 #include "output/irradiance_writer.h"
-#include "solver/antiradiance/settings.h"
-#include "solver/registry.h"
+#include "solvers/antiradiance/settings.h"
+#include "solvers/registry.h"
 #include "test_util.h"
 
 namespace penumbra {

@@ -8,8 +8,8 @@
 #include <cstdio>
 
 #include "clutter_scenes.h"
-#include "solver/antiradiance/antiradiance_solver.h"
 #include "solver/solver.h"
+#include "solvers/antiradiance/antiradiance_solver.h"
 
 namespace penumbra::testing {
 
