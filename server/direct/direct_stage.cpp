@@ -61,8 +61,10 @@ bool UpdateDirectStage(DirectStage* stage, int lights, const Scene& scene) {
     return true;
 }
 
-void DescribeLighting(const DirectStage* stage, int mapSize, const SkyBins& sky, SolverStats& s) {
+LightingFigures DescribeLighting(const DirectStage* stage, int mapSize, const SkyBins& sky) {
+    LightingFigures s;
     if (stage) {
+        s.direct = true;
         s.shadowViews = stage->views;
         s.shadowMapSize = mapSize;
         s.msShadow = stage->msShadow;
@@ -73,6 +75,7 @@ void DescribeLighting(const DirectStage* stage, int mapSize, const SkyBins& sky,
         s.environmentIntensity = env.intensity;
         s.environmentRotation = env.rotation;
     }
+    return s;
 }
 
 }  // namespace penumbra::direct

@@ -9,6 +9,7 @@
 #include "gpu/context.h"
 #include "solvers/antiradiance/cpu_passes.h"
 #include "solvers/antiradiance/vulkan_passes.h"
+#include "solvers/lighting_stats.h"
 
 namespace penumbra {
 
@@ -381,7 +382,7 @@ SolverStats AntiradianceSolver::Stats() const {
     s.SetDetail("antiradiance_cap_hits", double(schedule_.capHits));
     s.irradianceBound = bound_;
     s.divergence = divergence_;
-    direct::DescribeLighting(direct_.get(), mapSize_, sky_, s);
+    AddLightingFigures(direct::DescribeLighting(direct_.get(), mapSize_, sky_), s);
     s.passes = backend_->PassTimings();
     s.tableBytes = backend_->TableBytes();
     s.SetDetail("tables", backend_->Tables());

@@ -15,6 +15,7 @@
 #include "solvers/implicit/vulkan_bounce.h"
 #include "solvers/implicit/vulkan_composite.h"
 #include "solvers/implicit/vulkan_links.h"
+#include "solvers/lighting_stats.h"
 
 namespace penumbra {
 namespace {
@@ -468,7 +469,7 @@ SolverStats ImplicitSolver::Stats() const {
     // Per share: bin, sender, weight and travel, and the bounce's index and factor.
     s.linkBytes = links_.sender.size() * (4 * sizeof(uint32_t) + 2 * sizeof(float));
     s.lights = lights_;
-    direct::DescribeLighting(directStage_.get(), mapSize_, sky_, s);
+    AddLightingFigures(direct::DescribeLighting(directStage_.get(), mapSize_, sky_), s);
     s.geometryUpdates = geometryUpdates_;
     s.msGeometry = msGeometry_;
     s.divergence = divergence_;

@@ -15,6 +15,7 @@
 #include "base/check.h"
 #include "base/numeric.h"
 #include "gpu/context.h"
+#include "solvers/lighting_stats.h"
 
 namespace penumbra {
 namespace {
@@ -427,7 +428,7 @@ SolverStats LightfieldSolver::Stats() const {
     s.tableBytes = surfels_.size() * (6 * sizeof(glm::vec3) + sizeof(float)) + glossyBytes;
     s.linkBytes = bytes;
     s.lights = lights_;
-    direct::DescribeLighting(directStage_.get(), mapSize_, sky_, s);
+    AddLightingFigures(direct::DescribeLighting(directStage_.get(), mapSize_, sky_), s);
     s.geometryUpdates = geometryUpdates_;
     s.msGeometry = msGeometry_;
     s.divergence = divergence_;
