@@ -29,6 +29,11 @@ int main(int argc, char** argv) {
     app.add_option("--max-clients", netLimits.maxClients, "connections at once")
         ->capture_default_str()
         ->check(CLI::Range(1, 100000));
+    app.add_option("--max-clients-per-address", netLimits.maxClientsPerAddress,
+                   "connections at once from one TCP peer address (Unix socket clients are "
+                   "not counted)")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 100000));
     app.add_option("--max-frame-bytes", netLimits.maxFrameBytes,
                    "largest request payload accepted (bytes)")
         ->capture_default_str()

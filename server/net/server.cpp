@@ -105,7 +105,9 @@ void Server::Accept(std::shared_ptr<asio::ip::tcp::acceptor> acceptor) {
         if (stopping_ || !acceptor->is_open()) return;
         if (!ec) {
             socket.set_option(asio::ip::tcp::no_delay(true), ec);
-            Adopt(asio::generic::stream_protocol::socket(std::move(socket)));
+            const auto peer = socket.remote_endpoint(ec);
+            Adopt(asio::generic::stream_protocol::socket(std::move(socket)),
+                  ec ? std::string("?") : peer.address().to_string());
         }
         Accept(acceptor);
     });
@@ -115,32 +117,49 @@ void Server::Accept(std::shared_ptr<asio::local::stream_protocol::acceptor> acce
     acceptor->async_accept(
         [this, acceptor](std::error_code ec, asio::local::stream_protocol::socket socket) {
             if (stopping_ || !acceptor->is_open()) return;
-            if (!ec) Adopt(asio::generic::stream_protocol::socket(std::move(socket)));
+            if (!ec) Adopt(asio::generic::stream_protocol::socket(std::move(socket)), "");
             Accept(acceptor);
         });
 }
 
-void Server::Adopt(asio::generic::stream_protocol::socket socket) {
+void Server::Refuse(asio::generic::stream_protocol::socket& socket, const std::string& why) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateErrorDirect(b, fb::ErrorCode::LimitReached, why.c_str()));
+    auto bytes = protocol::EncodeFrame(MessageType::kError, 0, b);
+    std::error_code ec;
+    asio::write(socket, asio::buffer(bytes), ec);
+    socket.close(ec);
+    Log("refused a connection: LimitReached: " + why);
+}
+
+void Server::Adopt(asio::generic::stream_protocol::socket socket, const std::string& peer) {
+    // Tell the client why before closing (one small frame).
     if (connections_.size() >= limits_.maxClients) {
-        // Tell the client why before closing (best effort, synchronous: one small frame).
-        flatbuffers::FlatBufferBuilder b;
-        std::string why = "the server has its maximum of " + std::to_string(limits_.maxClients) +
-                          " clients (--max-clients)";
-        b.Finish(fb::CreateErrorDirect(b, fb::ErrorCode::LimitReached, why.c_str()));
-        auto bytes = protocol::EncodeFrame(MessageType::kError, 0, b);
-        std::error_code ec;
-        asio::write(socket, asio::buffer(bytes), ec);
-        socket.close(ec);
         ++refusedFull;
-        Log("refused a connection: LimitReached: " + why);
+        Refuse(socket, "the server has its maximum of " + std::to_string(limits_.maxClients) +
+                           " clients (--max-clients)");
+        return;
+    }
+    if (!peer.empty() && perAddress_[peer] >= limits_.maxClientsPerAddress) {
+        ++refusedAddress;
+        Refuse(socket, "the server has its maximum of " +
+                           std::to_string(limits_.maxClientsPerAddress) + " clients from " + peer +
+                           " (--max-clients-per-address)");
         return;
     }
     auto c = std::make_shared<Connection>(*this, std::move(socket), nextConnection_++);
     connections_[c.get()] = c;
+    if (!peer.empty()) ++perAddress_[peer], peers_[c.get()] = peer;
     c->Start();
 }
 
-void Server::Forget(Connection* connection) { connections_.erase(connection); }
+void Server::Forget(Connection* connection) {
+    connections_.erase(connection);
+    if (auto it = peers_.find(connection); it != peers_.end()) {
+        if (--perAddress_[it->second] == 0) perAddress_.erase(it->second);
+        peers_.erase(it);
+    }
+}
 
 void Server::Stop() {
     if (stopping_) return;
@@ -166,6 +185,7 @@ nlohmann::json Server::StatsJson() const {
     j["frames_dropped"] = framesDropped.load();
     j["protocol_errors"] = protocolErrors.load();
     j["refused_full"] = refusedFull.load();
+    j["refused_address"] = refusedAddress.load();
     j["hello_timeouts"] = helloTimeouts.load();
     j["idle_timeouts"] = idleTimeouts.load();
     j["max_clients"] = limits_.maxClients;

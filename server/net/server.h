@@ -20,6 +20,9 @@ namespace penumbra::net {
 
 struct NetLimits {
     size_t maxClients = 64;
+    // Connections at once from one TCP peer address (a Unix socket's clients are local and
+    // not counted), so that one host cannot take every slot; --max-clients-per-address.
+    size_t maxClientsPerAddress = 16;
     uint32_t maxFrameBytes = protocol::kDefaultMaxPayloadBytes;
     size_t maxQueuedFrames = 2;  // per subscriber; older unsent frames are dropped
     // A frame begun must arrive whole within this many seconds of its first byte, else the
@@ -83,13 +86,17 @@ class Server {
     // Connection bookkeeping (I/O thread).
     void Forget(Connection* connection);
     std::atomic<uint64_t> framesSent{0}, framesDropped{0}, protocolErrors{0};
-    // Connections refused at the door (--max-clients) and closed for no Hello in time.
-    std::atomic<uint64_t> refusedFull{0}, helloTimeouts{0}, idleTimeouts{0};
+    // Connections refused at the door (--max-clients, --max-clients-per-address) and closed
+    // for no Hello in time or idleness.
+    std::atomic<uint64_t> refusedFull{0}, refusedAddress{0}, helloTimeouts{0}, idleTimeouts{0};
 
   private:
     void Accept(std::shared_ptr<asio::ip::tcp::acceptor> acceptor);
     void Accept(std::shared_ptr<asio::local::stream_protocol::acceptor> acceptor);
-    void Adopt(asio::generic::stream_protocol::socket socket);
+    // `peer`: the TCP peer's address ("" for a Unix socket's client).
+    void Adopt(asio::generic::stream_protocol::socket socket, const std::string& peer);
+    // Sends Error LimitReached with `why` and closes `socket` (best effort, synchronous).
+    void Refuse(asio::generic::stream_protocol::socket& socket, const std::string& why);
 
     asio::io_context& io_;
     service::Service& service_;
@@ -99,6 +106,8 @@ class Server {
     std::vector<std::shared_ptr<asio::local::stream_protocol::acceptor>> unix_;
     std::vector<std::string> unixPaths_;
     std::map<Connection*, std::weak_ptr<Connection>> connections_;
+    std::map<Connection*, std::string> peers_;  // a TCP connection's peer address
+    std::map<std::string, size_t> perAddress_;  // connections from each peer address
     bool stopping_ = false;
     uint64_t nextConnection_ = 1;
 

@@ -512,6 +512,37 @@ TEST(ServerProcess, SilentConnectionsCannotHoldTheSlots) {
     EXPECT_EQ(net.value("refused_full", 0), 1) << stats.dump();
 }
 
+// Issue 63: one host cannot take every slot: past --max-clients-per-address TCP connections
+// from one address, the next gets LimitReached naming the address (logged, counted); a Unix
+// socket's clients are not counted, and a closed connection frees its address's slot.
+TEST(ServerProcess, OneAddressCannotTakeEverySlot) {
+    ServerProcess server("per-address", "--max-clients-per-address 2");
+    std::vector<std::unique_ptr<client::Client>> held;
+    held.push_back(std::make_unique<client::Client>(server.Tcp(), "first"));
+    held.push_back(std::make_unique<client::Client>(server.Tcp(), "second"));
+    std::string message;
+    EXPECT_EQ(ErrorCodeOf([&] { client::Client c(server.Tcp(), "third"); }, &message),
+              int(fb::ErrorCode::LimitReached))
+        << message;
+    EXPECT_NE(message.find("clients from 127.0.0.1 (--max-clients-per-address)"), std::string::npos)
+        << message;
+    client::Client local(server.Unix(), "local");  // not counted
+    held.pop_back();                               // closes: its slot is free again
+    std::unique_ptr<client::Client> again;
+    for (int i = 0; i < 100 && !again; ++i) {  // the server forgets it once it sees the close
+        try {
+            again = std::make_unique<client::Client>(server.Tcp(), "again");
+        } catch (const std::exception&) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+    }
+    ASSERT_TRUE(again) << server.Log();
+    const nlohmann::json stats = nlohmann::json::parse(local.Stats(""));
+    const nlohmann::json& net = stats.contains("server") ? stats["server"] : stats;
+    EXPECT_GE(net.value("refused_address", 0), 1) << stats.dump();
+    EXPECT_NE(server.Log().find("refused a connection: LimitReached"), std::string::npos);
+}
+
 // Issue 63: a connection that sends nothing, subscribes to nothing and waits on nothing is
 // closed after --idle-timeout (Error Stalled, counted); a subscriber stays, however quiet.
 TEST(ServerProcess, IdleConnectionsCloseSubscribersStay) {
