@@ -81,6 +81,7 @@ void Connection::Close() {
     std::error_code ec;
     socket_.shutdown(asio::socket_base::shutdown_both, ec);
     socket_.close(ec);
+    server_.GetService().Release(id_);
     server_.Forget(this);
 }
 

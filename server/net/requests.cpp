@@ -140,6 +140,10 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
             flatbuffers::FlatBufferBuilder b;
             BuildSceneInfo(b, *r.session, r.reused);
             lastScene_ = r.session->Name();
+            server_.GetService().Hold(lastScene_, id_);
+            for (const std::string& gone : r.evicted)
+                server_.Log(Who() + ": evicted " + gone +
+                            " to make room (no client held it; --max-scenes)");
             const auto* info = flatbuffers::GetRoot<fb::SceneInfo>(b.GetBufferPointer());
             char built[32];
             std::snprintf(built, sizeof(built), "%.2f", info->build_seconds());

@@ -1,6 +1,8 @@
 // Acceptors, the connections' bookkeeping and the shared frame encodings (protocol/SPEC.md).
 #include "net/server.h"
 
+#include <array>
+#include <chrono>
 #include <cstdio>
 #include <deque>
 #include <filesystem>
@@ -122,13 +124,51 @@ void Server::Accept(std::shared_ptr<asio::local::stream_protocol::acceptor> acce
         });
 }
 
+namespace {
+
+// A refused socket after its Error: the sending side shut, what the client sends (its Hello)
+// read and dropped until it closes or 2 s pass, then closed. Closing at once with the Hello
+// unread would reset the connection, and the reset can discard the Error before the client
+// reads it.
+struct Lingering : std::enable_shared_from_this<Lingering> {
+    Lingering(asio::generic::stream_protocol::socket s)
+        : socket(std::move(s)), timer(socket.get_executor()) {}
+    void Start() {
+        std::error_code ec;
+        socket.shutdown(asio::socket_base::shutdown_send, ec);
+        timer.expires_after(std::chrono::seconds(2));
+        timer.async_wait([self = shared_from_this()](std::error_code) {
+            std::error_code ignored;
+            self->socket.close(ignored);
+        });
+        Drain();
+    }
+    void Drain() {
+        socket.async_read_some(asio::buffer(sink),
+                               [self = shared_from_this()](std::error_code ec, size_t) {
+                                   if (ec) {
+                                       self->timer.cancel();
+                                       std::error_code ignored;
+                                       self->socket.close(ignored);
+                                       return;
+                                   }
+                                   self->Drain();
+                               });
+    }
+    asio::generic::stream_protocol::socket socket;
+    asio::steady_timer timer;
+    std::array<char, 4096> sink{};
+};
+
+}  // namespace
+
 void Server::Refuse(asio::generic::stream_protocol::socket& socket, const std::string& why) {
     flatbuffers::FlatBufferBuilder b;
     b.Finish(fb::CreateErrorDirect(b, fb::ErrorCode::LimitReached, why.c_str()));
     auto bytes = protocol::EncodeFrame(MessageType::kError, 0, b);
     std::error_code ec;
-    asio::write(socket, asio::buffer(bytes), ec);
-    socket.close(ec);
+    asio::write(socket, asio::buffer(bytes), ec);  // one small frame: synchronous
+    std::make_shared<Lingering>(std::move(socket))->Start();
     Log("refused a connection: LimitReached: " + why);
 }
 

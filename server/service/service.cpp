@@ -1,6 +1,7 @@
 // Scene sessions by name, loading under the scene root, limits.
 #include "service/service.h"
 
+#include <algorithm>
 #include <fstream>
 #include <random>
 
@@ -103,17 +104,35 @@ LoadResult Service::Load(const LoadRequest& request) {
         file = Resolve(request.path);
         name = fs::relative(file, root_).generic_string();
     }
+    LoadResult result;
+    std::vector<std::shared_ptr<Session>> dropped;  // stopped outside the lock
     {
         std::lock_guard lock(mutex_);
         if (shutdown_) throw ServiceError(ErrorKind::kShuttingDown, "the server is shutting down");
         auto it = sessions_.find(name);
-        if (it != sessions_.end() && !request.reload) return {it->second, true};
+        if (it != sessions_.end() && !request.reload) return {it->second, true, {}};
         size_t others = sessions_.size() - (it != sessions_.end() ? 1 : 0);
-        if (others + loading_ >= limits_.maxScenes)
-            throw ServiceError(ErrorKind::kLimitReached,
-                               "already " + std::to_string(others + loading_) +
-                                   " scenes loaded or loading (--max-scenes " +
-                                   std::to_string(limits_.maxScenes) + ")");
+        while (others + loading_ >= limits_.maxScenes) {
+            // The scene loaded longest ago that no connection holds and nobody watches.
+            auto victim = std::find_if(order_.begin(), order_.end(), [&](const std::string& n) {
+                auto h = holders_.find(n);
+                return n != name && (h == holders_.end() || h->second.empty()) &&
+                       sessions_.at(n)->SubscriberCount() == 0;
+            });
+            if (victim == order_.end())
+                throw ServiceError(ErrorKind::kLimitReached,
+                                   "already " + std::to_string(others + loading_) +
+                                       " scenes loaded or loading, each held by a connected "
+                                       "client or watched (--max-scenes " +
+                                       std::to_string(limits_.maxScenes) + ")");
+            dropped.push_back(sessions_.at(*victim));
+            result.evicted.push_back(*victim);
+            sessions_.erase(*victim);
+            holders_.erase(*victim);
+            order_.erase(victim);
+            ++evictions_;
+            --others;
+        }
         ++loading_;
     }
     struct Done {
@@ -202,7 +221,18 @@ LoadResult Service::Load(const LoadRequest& request) {
         std::erase(order_, name);
         order_.push_back(name);
     }
-    return {session, false};  // `replaced` stops once its last user lets go
+    result.session = session;
+    return result;  // `replaced` stops once its last user lets go
+}
+
+void Service::Hold(const std::string& name, uint64_t holder) {
+    std::lock_guard lock(mutex_);
+    if (sessions_.count(name)) holders_[name].insert(holder);
+}
+
+void Service::Release(uint64_t holder) {
+    std::lock_guard lock(mutex_);
+    for (auto& [name, held] : holders_) held.erase(holder);
 }
 
 std::shared_ptr<Session> Service::Find(const std::string& name) const {
@@ -227,6 +257,10 @@ nlohmann::json Service::StatsJson() const {
         for (const auto& n : order_) sessions.push_back(sessions_.at(n));
     }
     nlohmann::json j;
+    {
+        std::lock_guard lock(mutex_);
+        j["evicted_scenes"] = evictions_;
+    }
     j["scenes"] = nlohmann::json::array();
     for (const auto& s : sessions) j["scenes"].push_back(s->StatsJson());
     return j;
@@ -240,6 +274,7 @@ void Service::Shutdown() {
         shutdown_ = true;
         sessions.swap(sessions_);
         order_.clear();
+        holders_.clear();
     }
     sessions.clear();  // sessions still held by a request finish with it
 }

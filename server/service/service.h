@@ -8,6 +8,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,8 @@ struct LoadRequest {
 struct LoadResult {
     std::shared_ptr<Session> session;
     bool reused = false;
+    // Scenes dropped to make room (no connection held them and nobody watched them).
+    std::vector<std::string> evicted;
 };
 
 // The solver settings a service starts from: the library's defaults, with dynamic nodes
@@ -61,9 +64,15 @@ class Service {
             SolverSettings defaults = ServiceDefaults());
     ~Service();
 
-    // Loads (or joins) the scene's session. Blocks while the solver builds. Throws
+    // Loads (or joins) the scene's session. Blocks while the solver builds. At --max-scenes,
+    // the scenes loaded longest ago that no connection holds (Hold) and nobody subscribes to
+    // are dropped to make room; only when every one is held is the load refused. Throws
     // ServiceError: kOutsideRoot, kLoadFailed, kLimitReached, kInvalidArgument.
     LoadResult Load(const LoadRequest& request);
+    // Connection `holder` loaded or joined scene `name` and is still there; Release when it
+    // goes (every scene it held).
+    void Hold(const std::string& name, uint64_t holder);
+    void Release(uint64_t holder);
     // The named session; "" means the only one loaded, or the newest if several are.
     std::shared_ptr<Session> Find(const std::string& name) const;
     // A path under the scene root, refusing absolute paths, ".." escapes and symlinks that
@@ -90,7 +99,9 @@ class Service {
     const SolverSettings defaults_;
     mutable std::mutex mutex_;
     std::map<std::string, std::shared_ptr<Session>> sessions_;
-    std::vector<std::string> order_;  // load order, newest last
+    std::vector<std::string> order_;                     // load order, newest last
+    std::map<std::string, std::set<uint64_t>> holders_;  // scene -> connections holding it
+    uint64_t evictions_ = 0;
     size_t loading_ = 0;
     bool shutdown_ = false;
     // Set by Shutdown before anything else: a load in flight stops at its next progress

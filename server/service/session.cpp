@@ -131,6 +131,11 @@ void Session::RemoveSubscriber(int id) {
     subscribers_.erase(id);
 }
 
+size_t Session::SubscriberCount() const {
+    std::lock_guard lock(mutex_);
+    return subscribers_.size();
+}
+
 FramePtr Session::Latest() {
     std::unique_lock lock(mutex_);
     frameMade_.wait(lock, [&] { return latest_ || stop_; });

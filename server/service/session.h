@@ -178,6 +178,7 @@ class Session {
     // frame so far, if any, is delivered at once so a watcher starts with a picture.
     int AddSubscriber(FrameSink sink);
     void RemoveSubscriber(int id);
+    size_t SubscriberCount() const;
 
     // The newest frame, waiting for the first one if none exists yet.
     FramePtr Latest();

@@ -543,6 +543,41 @@ TEST(ServerProcess, OneAddressCannotTakeEverySlot) {
     EXPECT_NE(server.Log().find("refused a connection: LimitReached"), std::string::npos);
 }
 
+// Issue 63: a scene nobody holds any more makes room for the next. At --max-scenes, a load
+// drops the scene loaded longest ago that no connected client loaded or joined and nobody
+// watches (logged, counted); while its loader is connected the next load is refused.
+TEST(ServerProcess, ASceneNobodyHoldsMakesRoomForTheNext) {
+    ServerProcess server("evict", "--max-scenes 1");
+    client::LoadOptions blocker;
+    blocker.path = "blocker.gltf";
+    blocker.device = "cpu";
+    blocker.elementSize = 0.2f;
+    {
+        client::Client a(server.Unix(), "first");
+        a.Load(Cornell());
+        client::Client b(server.Unix(), "second");
+        std::string message;
+        EXPECT_EQ(ErrorCodeOf([&] { b.Load(blocker); }, &message), int(fb::ErrorCode::LimitReached))
+            << message;
+        EXPECT_NE(message.find("held by a connected client"), std::string::npos) << message;
+    }  // both leave: nobody holds the Cornell box
+    client::Client c(server.Unix(), "third");
+    client::SceneInfo info;
+    for (int i = 0; i < 100 && info.scene.empty(); ++i) {  // once the server saw them close
+        try {
+            info = c.Load(blocker);
+        } catch (const std::exception&) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+    }
+    EXPECT_EQ(info.scene, "blocker.gltf") << server.Log();
+    EXPECT_NE(server.Log().find("evicted cornell-box.gltf to make room"), std::string::npos)
+        << server.Log();
+    const nlohmann::json stats = nlohmann::json::parse(c.Stats(""));
+    EXPECT_EQ(stats.value("evicted_scenes", 0), 1) << stats.dump();
+    ASSERT_EQ(stats["scenes"].size(), 1u) << stats.dump();
+}
+
 // Issue 63: a connection that sends nothing, subscribes to nothing and waits on nothing is
 // closed after --idle-timeout (Error Stalled, counted); a subscriber stays, however quiet.
 TEST(ServerProcess, IdleConnectionsCloseSubscribersStay) {
