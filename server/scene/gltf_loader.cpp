@@ -29,6 +29,8 @@ namespace {
 struct Context {
     const std::string& path;
     const tinygltf::Model& model;
+    const GltfFiles& files;
+    std::vector<std::string>* notes;  // warnings: input left out or approximated
 
     [[noreturn]] void Fail(const std::string& where, const std::string& why) const {
         throw Error(path + ": " + where + ": " + why);
@@ -220,8 +222,11 @@ std::vector<uint32_t> ToTriangleList(const Context& ctx, const std::string& wher
                         " (points/lines) has no surface to light; only triangles are supported");
 }
 
+std::string Refusal(const GltfFiles& files, const std::string& filepath);
+
 // The colour map of glTF texture `textureIndex` as Scene::maps[returned index], decoded on
-// first use (ReadGltfModel keeps images encoded) and shared by every material that uses it.
+// first use (ReadGltfModel keeps images encoded) and shared by every material that uses it;
+// -1, with a warning, for an image that is missing or cannot be decoded.
 int ReadMap(const Context& ctx, const std::string& where, const char* what, int textureIndex,
             Scene& scene, std::vector<int>& mapOfTexture) {
     if (textureIndex < 0 || textureIndex >= static_cast<int>(ctx.model.textures.size()))
@@ -236,10 +241,22 @@ int ReadMap(const Context& ctx, const std::string& where, const char* what, int 
     int w = 0, h = 0;
     std::vector<glm::vec3> linear;
     const char* why = "";
-    if (!DecodeSrgbImage(img.image, w, h, linear, why))
-        ctx.Fail(where, std::string(what) + " image " + std::to_string(tex.source) +
-                            (img.uri.empty() ? "" : " '" + img.uri + "'") +
-                            " could not be decoded (" + why + ")");
+    if (!DecodeSrgbImage(img.image, w, h, linear, why)) {
+        const std::string image = std::string(what) + " image " + std::to_string(tex.source) +
+                                  (img.uri.empty() ? "" : " '" + img.uri + "'");
+        // A file the loader may not read is an error; one missing or broken is what a
+        // renderer would warn about and draw with the factor alone.
+        if (!img.uri.empty() && img.uri.rfind("data:", 0) != 0) {
+            const std::string file =
+                (std::filesystem::path(ctx.path).parent_path() / img.uri).string();
+            if (const std::string refused = Refusal(ctx.files, file); !refused.empty())
+                ctx.Fail(where, image + ": " + refused);
+        }
+        if (ctx.notes)
+            ctx.notes->push_back(where + ": " + image + " could not be decoded (" + why +
+                                 "): its factor is used alone");
+        return -1;
+    }
     Wrap wrap[2] = {Wrap::kRepeat, Wrap::kRepeat};
     if (tex.sampler >= 0 && tex.sampler < static_cast<int>(ctx.model.samplers.size())) {
         const auto& sampler = ctx.model.samplers[tex.sampler];
@@ -300,7 +317,7 @@ Material ReadMaterial(const Context& ctx, int index, Scene& scene, std::vector<i
     if (pbr.baseColorTexture.index >= 0) {
         baseMap = ReadMap(ctx, where, "baseColorTexture", pbr.baseColorTexture.index, scene,
                           mapOfTexture);
-        base *= scene.maps[baseMap].Mean();
+        if (baseMap >= 0) base *= scene.maps[baseMap].Mean();
     }
     float metallic = static_cast<float>(pbr.metallicFactor);
     float roughness = static_cast<float>(pbr.roughnessFactor);
@@ -315,7 +332,7 @@ Material ReadMaterial(const Context& ctx, int index, Scene& scene, std::vector<i
     if (m.emissiveTexture.index >= 0 && glm::any(glm::greaterThan(emission, glm::vec3(0.0f)))) {
         emissionMap =
             ReadMap(ctx, where, "emissiveTexture", m.emissiveTexture.index, scene, mapOfTexture);
-        emission *= scene.maps[emissionMap].Mean();
+        if (emissionMap >= 0) emission *= scene.maps[emissionMap].Mean();
     }
     for (int c = 0; c < 3; ++c) {
         if (!std::isfinite(base[c]) || base[c] < 0.0f)
@@ -395,28 +412,35 @@ struct Confinement {
     std::filesystem::path self;  // the glTF, canonical
 };
 
+// Why `filepath`, a file a glTF names, may not be read under `files` ("" when it may).
+std::string Refusal(const GltfFiles& files, const std::string& filepath) {
+    if (!files.root) return "";
+    std::error_code ec;
+    const std::filesystem::path file = std::filesystem::weakly_canonical(filepath, ec);
+    bool inside = false;
+    if (!ec && !files.root->empty()) {
+        const std::filesystem::path root = std::filesystem::weakly_canonical(*files.root, ec);
+        const std::filesystem::path rel = file.lexically_relative(root);
+        inside = !ec && !rel.empty() && *rel.begin() != "..";
+    }
+    if (inside) return "";
+    return files.root->empty() ? "external file '" + filepath +
+                                     "' refused: an uploaded .glb must hold its buffers and images"
+                               : "external file '" + filepath + "' lies outside the scene root " +
+                                     files.root->string();
+}
+
 // tinygltf's file reading (the glTF itself goes through it too), refused outside
 // GltfFiles::root.
 bool ReadConfinedFile(std::vector<unsigned char>* out, std::string* err,
                       const std::string& filepath, void* user) {
     const Confinement& c = *static_cast<const Confinement*>(user);
-    const GltfFiles& files = *c.files;
     std::error_code ec;
     const std::filesystem::path file = std::filesystem::weakly_canonical(filepath, ec);
-    if (files.root && (ec || file != c.self)) {
-        bool inside = false;
-        if (!ec && !files.root->empty()) {
-            const std::filesystem::path root = std::filesystem::weakly_canonical(*files.root, ec);
-            const std::filesystem::path rel = file.lexically_relative(root);
-            inside = !ec && !rel.empty() && *rel.begin() != "..";
-        }
-        if (!inside) {
-            if (err)
-                *err += files.root->empty()
-                            ? "external file '" + filepath +
-                                  "' refused: an uploaded .glb must hold its buffers and images"
-                            : "external file '" + filepath + "' lies outside the scene root " +
-                                  files.root->string();
+    if (ec || file != c.self) {
+        const std::string why = Refusal(*c.files, filepath);
+        if (!why.empty()) {
+            if (err) *err += why;
             return false;
         }
     }
@@ -599,7 +623,8 @@ std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene&
 Scene LoadGltf(const std::string& path, const GltfFiles& files) {
     tinygltf::Model model;
     ReadGltfModel(path, &model, files);
-    Context ctx{path, model};
+    std::vector<std::string> readNotes;  // warnings: coordinates, targets or images left out
+    Context ctx{path, model, files, &readNotes};
 
     for (const auto& ext : model.extensionsRequired) {
         if (ext != "KHR_materials_emissive_strength" && ext != "KHR_lights_punctual")
@@ -633,7 +658,6 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
             if (!isChild[i]) roots.push_back(static_cast<int>(i));
     }
 
-    std::vector<std::string> readNotes;  // warnings: coordinates or targets left out
     std::vector<int> visits(model.nodes.size(), 0);
     scene.nodes.resize(model.nodes.size());
     for (size_t i = 0; i < model.nodes.size(); ++i)

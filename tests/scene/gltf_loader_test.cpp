@@ -235,15 +235,25 @@ TEST(GltfLoader, IgnoredInputIsWarnedAbout) {
     // Morph targets are read (and posed at weight 0), not ignored.
     EXPECT_EQ(NodeMorphTargets(scene, 0), 1u);
     EXPECT_EQ(all.find("morph"), std::string::npos) << all;
-    // One the answer reads, broken, fails it with the image named.
+    // One the answer reads, broken (issue 62: as a renderer would): a warning naming the
+    // image, and the material's factor alone.
     doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 1}};
     std::ofstream(dir / "broken-base.gltf") << doc.dump();
+    const Scene broken = LoadGltf((dir / "broken-base.gltf").string());
+    std::string brokenWarnings;
+    for (const auto& w : SceneWarnings(broken)) brokenWarnings += w + "\n";
+    EXPECT_NE(brokenWarnings.find("image 1 'broken.png' could not be decoded"), std::string::npos)
+        << brokenWarnings;
+    EXPECT_NE(brokenWarnings.find("its factor is used alone"), std::string::npos) << brokenWarnings;
+    EXPECT_EQ(broken.materials[0].baseColorMap, -1);
+    // One outside the scene root stays an error, and says so.
+    doc["images"][1]["uri"] = "../../elsewhere.png";
+    std::ofstream(dir / "outside-base.gltf") << doc.dump();
     try {
-        LoadGltf((dir / "broken-base.gltf").string());
-        ADD_FAILURE() << "a broken base colour texture loaded";
+        LoadGltf((dir / "outside-base.gltf").string(), GltfFiles{dir});
+        ADD_FAILURE() << "an image outside the scene root loaded";
     } catch (const Error& e) {
-        EXPECT_NE(std::string(e.what()).find("image 1 'broken.png' could not be decoded"),
-                  std::string::npos)
+        EXPECT_NE(std::string(e.what()).find("lies outside the scene root"), std::string::npos)
             << e.what();
     }
 
