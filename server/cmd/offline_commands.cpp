@@ -15,9 +15,10 @@ namespace penumbra::cli {
 namespace {
 
 // What the scene's answer leaves out (SceneWarnings), on stderr even with -q: a warning is
-// not progress. The JSON output carries the same list.
-void Warn(const Scene& scene, const std::string& path) {
-    for (const std::string& w : SceneWarnings(scene))
+// not progress. The JSON output carries the same list. `lightFromScene` false: the light is
+// read from a file (render --lighting), so a scene without lights is no concern.
+void Warn(const Scene& scene, const std::string& path, bool lightFromScene = true) {
+    for (const std::string& w : SceneWarnings(scene, lightFromScene))
         std::fprintf(stderr, "penumbra: warning: %s: %s\n", path.c_str(), w.c_str());
 }
 
@@ -257,7 +258,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
     progress.Update("loading " + o.scene, 0.0);
     Scene scene = LoadGltf(o.scene);
     environment.Apply(scene);
-    Warn(scene, o.scene);
+    Warn(scene, o.scene, !fromFile);
     render::RenderSettings rs;
     rs.width = w;
     rs.height = h;

@@ -109,8 +109,9 @@ Tints TintsAt(const Scene& scene, uint32_t p, const glm::uvec3& abc, float u, fl
     return out;
 }
 
-std::vector<std::string> SceneWarnings(const Scene& scene) {
+std::vector<std::string> SceneWarnings(const Scene& scene, bool lightFromScene) {
     std::vector<std::string> out = scene.warnings;
+    if (!lightFromScene) return out;
     const bool emits = std::any_of(
         scene.materials.begin(), scene.materials.end(),
         [](const auto& m) { return glm::any(glm::greaterThan(m.emission, glm::vec3(0.0f))); });

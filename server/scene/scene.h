@@ -211,8 +211,9 @@ Tints TintsAt(const Scene& scene, uint32_t p, const glm::uvec3& abc, float u, fl
 // Everything a user should be told about `scene` before trusting its answer: the loader's
 // warnings, and a scene with no light at all (no emission, punctual light or sky: its
 // irradiance is zero everywhere). Shown by bake and reference (stderr and the JSON's
-// `warnings`) and by the service (SceneInfo `warnings`, the server's log).
-std::vector<std::string> SceneWarnings(const Scene& scene);
+// `warnings`) and by the service (SceneInfo `warnings`, the server's log). Without
+// `lightFromScene` (render --lighting: the light comes from a file) the second is left out.
+std::vector<std::string> SceneWarnings(const Scene& scene, bool lightFromScene = true);
 
 // Index of the node called `name`, or -1.
 int FindNode(const Scene& scene, const std::string& name);

@@ -6,6 +6,8 @@
 #include <stb/stb_image.h>
 
 #include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "base/image.h"
 #include "render/renderer.h"
@@ -51,6 +53,26 @@ TEST(Render, WritesExrAndPngOfTheStatedSize) {
     EXPECT_EQ(w, 96);
     EXPECT_EQ(h, 64);
     EXPECT_EQ(n, 3);
+}
+
+// Issue 62: with --lighting the light comes from the file: a scene without lights of its own
+// is no concern, and render does not warn "no light".
+TEST(Render, LightingFromAFileNeedsNoLightsInTheScene) {
+    auto dir = testing::TempDir("render-unlit");
+    const std::string json = (dir / "lit.json").string(), dark = (dir / "dark.gltf").string();
+    auto bake = Execute("bake " + kCornell + " -o " + json +
+                        " --iterations 2 --element-size 0.2 --device cpu -q");
+    ASSERT_EQ(bake.exitCode, 0) << bake.output;
+    nlohmann::json doc = nlohmann::json::parse(std::ifstream(kCornell));
+    for (auto& m : doc["materials"]) m.erase("emissiveFactor");
+    std::ofstream(dark) << doc.dump();
+    auto unlit = Execute("bake " + dark + " -o " + (dir / "zero.json").string() +
+                         " --iterations 1 --element-size 0.2 --device cpu -q");
+    EXPECT_NE(unlit.output.find("no light"), std::string::npos) << unlit.output;
+    auto r = Execute("render " + dark + " --lighting " + json + " -o " +
+                     (dir / "lit.png").string() + " --size 32x32 --device cpu");
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_EQ(r.output.find("no light"), std::string::npos) << r.output;
 }
 
 TEST(Render, HeatMapOfAFileAgainstItselfShowsNoError) {
