@@ -29,13 +29,12 @@ struct GltfFiles {
 // Reads a .gltf/.glb file into a tinygltf model; throws penumbra::Error naming the file.
 void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFiles& files = {});
 
-// Writes `model` to `path`: .gltf (JSON, its one buffer and its images embedded as data URIs)
-// or .glb (every buffer and image in the one BIN chunk), in a form the Khronos validator
-// accepts. tinygltf alone writes a .glb's second buffer and its images as data URIs and an
-// infinite perspective camera as "zfar": 0; here the buffers are merged into one, images
-// given by URI (relative to `inputDir`, or data URIs) are moved into buffer views, and a
-// zfar of 0 is left out. Throws penumbra::Error when an image cannot be read or the file
-// cannot be written.
+// Writes `model` to `path`: .gltf (JSON, its one buffer embedded as a data URI, every image
+// in that buffer) or .glb (every buffer and image in the one BIN chunk), in a form the Khronos
+// validator accepts. tinygltf alone writes a .glb's second buffer and its images as data URIs and
+// an infinite perspective camera as "zfar": 0; here the buffers are merged into one, images given
+// by URI (relative to `inputDir`, or data URIs) are moved into buffer views, and a zfar of 0 is
+// left out. Throws penumbra::Error when an image cannot be read or the file cannot be written.
 void WriteGltfModel(tinygltf::Model model, const std::string& path,
                     const std::string& inputDir = ".");
 

@@ -1,5 +1,5 @@
 // Scene files written back (gltf_loader.h, WriteGltfModel): a tinygltf model as .glb or
-// .gltf, its external buffers and images embedded or copied beside it.
+// .gltf, its external buffers and images embedded.
 #include <tiny_gltf.h>
 
 #include <cstring>
@@ -69,8 +69,10 @@ void WriteGltfModel(tinygltf::Model model, const std::string& path, const std::s
         model.buffers[0].data = std::move(data);
         model.buffers[0].uri.clear();
     }
-    // A .glb's images in buffer views, as they were encoded (the decoded pixels are dropped).
-    if (binary) {
+    // Images in buffer views, as they were encoded (the decoded pixels are dropped): a .glb
+    // holds them in its BIN chunk, a .gltf in its one embedded buffer, so that a file written
+    // to another folder than its input's has every image it names.
+    {
         for (tinygltf::Image& image : model.images) {
             if (image.bufferView >= 0 || image.uri.empty()) continue;
             std::vector<unsigned char> bytes;
