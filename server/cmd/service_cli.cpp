@@ -174,7 +174,9 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.move->add_option("node", s.node, "node name")->required();
     s.move->add_option("--translate", s.translate, "x,y,z metres, in the parent's space")
         ->delimiter(',');
-    s.move->add_option("--rotate-y", s.rotateY, "degrees about the node's own y axis");
+    s.move->add_option("--rotate-y", s.rotateY,
+                       "degrees about the node's own y axis (its local frame's: the world's up "
+                       "only when neither it nor a parent is turned)");
     s.move->add_option("--matrix", s.matrix, "16 numbers, column-major: the new local transform")
         ->delimiter(',');
 
