@@ -319,8 +319,9 @@ class Client:
              emitter_rays: int = 256, gather_rays: int = 256, progress=None,
              **solver_options) -> SceneInfo:
         """Loads a scene (a path under the server's --scene-root, or `glb` bytes), or joins
-        the session that has it. Other keywords are the solver's own options
-        (`penumbra --help`), `_` for `-`: `load("office.gltf", bins=64, link_oracle="paper")`.
+        the session that has it. `solver` "" is the server's default (lightfield). Other
+        keywords are the solver's own options (`penumbra --help`), `_` for `-`:
+        `load("office.gltf", solver="antiradiance", bins=64, link_oracle="paper")`.
         `progress(stage, fraction, seconds_left)` is called (on the reader thread) as the
         server builds; `seconds_left` < 0 while not known.
         """
