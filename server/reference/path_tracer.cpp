@@ -322,7 +322,7 @@ ReferenceResult RenderReference(const Scene& scene, const ReferenceSettings& set
             variance[prim.InputVertex(k)] += double(area[k]) * double(area[k]) * se * se;
             weight[prim.InputVertex(k)] += area[k];
         }
-        result.irradiance[p] = ToInputVertices(prim, result.irradiance[p]);
+        result.irradiance[p] = ToInputVertices(prim, std::move(result.irradiance[p]));
         result.standardError[p].resize(prim.InputVertexCount());
         for (size_t i = 0; i < weight.size(); ++i)
             if (weight[i] > 0.0)

@@ -443,11 +443,10 @@ std::vector<float> VertexAreas(const Primitive& p) {
     return area;
 }
 
-std::vector<glm::vec3> ToInputVertices(const Primitive& p,
-                                       const std::vector<glm::vec3>& perVertex) {
+std::vector<glm::vec3> ToInputVertices(const Primitive& p, std::vector<glm::vec3> perVertex) {
     PENUMBRA_CHECK_EQ(perVertex.size(), p.positions.size());
     const size_t n = p.InputVertexCount();
-    if (p.copyOf.empty()) return perVertex;
+    if (p.copyOf.empty()) return perVertex;  // moved out: no copy on a frame's path
     const std::vector<float> area = VertexAreas(p);
     std::vector<glm::vec3> sum(n, glm::vec3(0.0f));
     std::vector<float> weight(n, 0.0f);

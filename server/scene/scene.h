@@ -247,7 +247,7 @@ std::vector<float> VertexAreas(const Primitive& primitive);
 // split for flat normals gets the area-weighted mean over its copies, the light over the
 // faces that meet there (a value per face corner is what a vertex-coloured mesh cannot show).
 std::vector<glm::vec3> ToInputVertices(const Primitive& primitive,
-                                       const std::vector<glm::vec3>& perVertex);
+                                       std::vector<glm::vec3> perVertex);
 
 // Deformations (a skinned or morphing mesh driven from outside: protocol/SPEC.md,
 // SetVertices). The vertices of node `node`'s own primitives, one primitive after another

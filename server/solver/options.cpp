@@ -37,6 +37,12 @@ void SetOption(SolverOptions& options, const std::string& name, const std::strin
     options[name] = value;
 }
 
+std::string TakesText(const std::vector<OptionSpec>& specs) {
+    std::vector<std::string> names;
+    for (const OptionSpec& s : specs) names.push_back(s.name);
+    return names.empty() ? "it takes none" : "it takes " + JoinChoices(names);
+}
+
 OptionReader::OptionReader(std::string solver, const std::vector<OptionSpec>& specs,
                            const SolverOptions& given)
     : solver_(std::move(solver)), specs_(specs), given_(given) {
@@ -44,12 +50,9 @@ OptionReader::OptionReader(std::string solver, const std::vector<OptionSpec>& sp
         const OptionSpec* spec = nullptr;
         for (const OptionSpec& s : specs_)
             if (s.name == name) spec = &s;
-        if (!spec) {
-            std::vector<std::string> names;
-            for (const OptionSpec& s : specs_) names.push_back(s.name);
+        if (!spec)
             throw Error("solver '" + solver_ + "' has no option '" + name + "' (" +
-                        (names.empty() ? "it takes none" : "it takes " + JoinChoices(names)) + ")");
-        }
+                        TakesText(specs_) + ")");
         if (spec->kind == OptionKind::kChoice) {
             bool known = false;
             for (const std::string& c : spec->choices) known = known || c == text;

@@ -63,5 +63,7 @@ inline void SetOption(SolverOptions& options, const std::string& name, const cha
 
 // "a, b or c".
 std::string JoinChoices(const std::vector<std::string>& words, const char* last = " or ");
+// "it takes a, b or c" (or "it takes none"): a solver's options, for messages.
+std::string TakesText(const std::vector<OptionSpec>& specs);
 
 }  // namespace penumbra

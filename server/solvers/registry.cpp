@@ -54,14 +54,11 @@ void CheckSolverSettings(const SolverSettings& settings) {
         for (const SolverEntry& other : Solvers())
             for (const OptionSpec& spec : other.options)
                 if (spec.name == name) takers.push_back(other.name);
-        std::vector<std::string> names;
-        for (const OptionSpec& spec : e.options) names.push_back(spec.name);
         if (!takers.empty())
             throw Error("solver '" + e.name + "' has no option '" + name + "' (" +
-                        (names.empty() ? "it takes none" : "it takes " + JoinChoices(names)) +
-                        "; '" + name + "' is an option of " + JoinChoices(takers, " and ") +
-                        ": name that solver, e.g. --solver " + takers.front() + "; " +
-                        kDefaultSolver + " is the default)");
+                        TakesText(e.options) + "; '" + name + "' is an option of " +
+                        JoinChoices(takers, " and ") + ": name that solver, e.g. --solver " +
+                        takers.front() + "; " + kDefaultSolver + " is the default)");
     }
     OptionReader(e.name, e.options, settings.options);
     if (e.check) e.check(settings);
