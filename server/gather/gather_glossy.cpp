@@ -228,13 +228,26 @@ size_t GatherStage::See(const glm::vec3& y, const glm::vec3& n, uint32_t* bits, 
 }
 
 void GatherStage::SeeLights(const std::vector<uint8_t>& which) {
-    if (!glossy_ || targets_.empty()) return;
+    if (targets_.empty()) return;
     const int n = settings_.gatherRays, words = LightWords();
     const auto& tris = rays_->Triangles();
     // Every light when `which` is empty (their count changed: the words are laid out anew).
     const std::vector<uint8_t>* marked = which.empty() ? nullptr : &which;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
         for (size_t t = range.begin(); t != range.end(); ++t) {
+            // The short hits' view of the lights (SeeShort).
+            std::vector<uint32_t>& shortSeen = shortSeen_[t];
+            if (!marked) shortSeen.assign((secondStart_[t + 1] - secondStart_[t]) * words, 0u);
+            size_t k = 0;
+            for (int r = 0; r < n && words > 0; ++r) {
+                const Hit& h = hits_[t * n + r];
+                if (!Front(h) || !(h.triangle & kShort)) continue;
+                const glm::vec3& ny = tris[h.triangle & kIndex].normal;
+                uint32_t* bits = shortSeen.data() + k++ * words;
+                See(HitPoint(h) + rays_->Epsilon() * ny, ny, bits, marked ? bits : nullptr, nullptr,
+                    marked);
+            }
+            if (!glossy_) continue;
             std::vector<uint32_t>& seen = seen_[t];
             if (!marked) seen.assign(lobes_[t].size() * words, 0u);
             for (size_t k = 0; k < lobes_[t].size(); ++k) {

@@ -192,9 +192,9 @@ void GatherStage::Evaluate() {
                     sum += at(radiance, h);
                     continue;
                 }
-                // A short hit: its irradiance gathered again, E = first shot + punctual lights
-                // (interpolated) + π/M Σ L over its secondary rays.
-                glm::vec3 e = at(direct_, h) + secondSky_[secondStart_[t] + k];
+                // A short hit: its irradiance gathered again, E = first shot (interpolated) +
+                // the punctual lights it sees + π/M Σ L over its secondary rays.
+                glm::vec3 e = ShortDirect(t, k, h) + secondSky_[secondStart_[t] + k];
                 if (!shot_.empty()) e += at(shot_, h);
                 glm::vec3 second(0.0f);
                 for (int j = 0; j < m; ++j) {
@@ -249,13 +249,8 @@ void GatherStage::PointDirect() {
     if (scene_.lights.empty()) return;
     tbb::parallel_for(size_t(0), targets_.size(), [&](size_t t) {
         const uint32_t i = targets_[t];
-        const glm::vec3 from = points_[i] + rays_->Epsilon() * s.normals[i];
-        glm::vec3 e(0.0f);
-        for (const PunctualLight& light : scene_.lights) {
-            const LightArrival a = PunctualArrival(light, points_[i], s.normals[i], diameter);
-            if (a.reaches && !rays_->Occluded(from, a.span)) e += a.irradiance;
-        }
-        pointDirect_[t] = e;
+        pointDirect_[t] =
+            VertexLightDirect(*rays_, scene_.lights, points_[i], s.normals[i], diameter);
     });
 }
 
@@ -464,6 +459,9 @@ SolverStats GatherStage::Stats() const {
     // (TraceGlints).
     if (!glossyTriangles_.empty())
         s.SetDetail("gather_glints", static_cast<double>(targets_.size() * GlintCount()));
+    // Each short hit traces a shadow ray a punctual light (SeeShort).
+    if (!secondStart_.empty())
+        s.SetDetail("gather_short_hits", static_cast<double>(secondStart_.back()));
     if (ShotPending()) {
         char line[160];
         std::snprintf(line, sizeof line,

@@ -284,10 +284,10 @@ class GatherStage : public Solver {
     // The same as a coefficient per target and emitting primitive (RayScene::EmitterSlot),
     // so that an emissive edit re-weights them without tracing (empty: not kept).
     std::vector<glm::vec3> emitterCoef_;
-    // Per target: the punctual lights' direct light at its point (points_), by one shadow ray
-    // a light (PointDirect), for the output's direct channel: a vertex's own value, as the
-    // reference has it, where the solver's E_d is a mean over the surfel's footprint (what it
-    // reflects). Empty: to be traced again (a light, a move).
+    // Per target: the punctual lights' direct light at its point (points_, VertexLightDirect),
+    // for the output's direct channel: a vertex's own value, as the reference has it, where
+    // the solver's E_d is a mean over the surfel's footprint (what it reflects). Empty: to be
+    // traced again (a light, a move).
     std::vector<glm::vec3> pointDirect_;
     void PointDirect();
     std::vector<uint32_t> targets_;    // surfels gathered at
@@ -317,6 +317,17 @@ class GatherStage : public Solver {
     std::vector<std::vector<Hit>> second_;
     std::vector<uint32_t> secondStart_;
     std::vector<glm::vec3> secondSky_;
+    // Per target, LightWords() words a short hit (in ray order): bit l where punctual light l
+    // reaches the hit's point y unoccluded. A short hit's direct light is then y's own, as
+    // the reference has it, where the solver's, interpolated over a refined triangle, reaches
+    // across a wall that stands on the triangle (the lit side's light read behind the wall).
+    std::vector<std::vector<uint32_t>> shortSeen_;
+    // shortSeen_ after Trace: every short hit of a target whose rays were traced again
+    // (`touched`; all of them without `moved`), and the others' lights whose segments the
+    // move can have cut. Returns the shadow rays traced.
+    size_t SeeShort(const Moved* moved, const std::vector<uint8_t>& touched);
+    // The punctual lights' irradiance at target t's k-th short hit h (shortSeen_).
+    glm::vec3 ShortDirect(size_t t, size_t k, const Hit& h) const;
     bool fresh_ = false;                        // indirect_, direct_ hold the current answer
     std::vector<glm::vec3> indirect_, direct_;  // per surfel, after Evaluate
     // The GPU that traces full gathers (null: Embree), or why there is none (empty: not asked).

@@ -8,6 +8,7 @@
 #include <limits>
 
 #include "base/check.h"
+#include "rays/sampling.h"
 
 namespace penumbra {
 namespace {
@@ -432,6 +433,49 @@ std::vector<std::vector<glm::vec3>> VertexEstimatePoints(const Scene& scene) {
         }
     }
     return points;
+}
+
+glm::vec3 VertexLightDirect(const RayScene& rays, const std::vector<PunctualLight>& lights,
+                            const glm::vec3& x, const glm::vec3& n, float diameter,
+                            uint64_t* count) {
+    constexpr int kRim = 4, kSpread = 16;
+    constexpr float kGoldenAngle = 2.39996323f;
+    glm::vec3 t, s;
+    Basis(n, t, s);
+    const float radius = 0.1f * rays.Epsilon();
+    const glm::vec3 lift = rays.Epsilon() * n;
+    uint64_t traced = 0;
+    glm::vec3 e(0.0f);
+    for (const PunctualLight& light : lights) {
+        const LightArrival a = PunctualArrival(light, x, n, diameter);
+        if (!a.reaches) continue;
+        // Whether the light reaches the disc's point x + offset: a directional light along
+        // the same span, a point or spot light at its place.
+        auto lit = [&](const glm::vec3& offset) {
+            ++traced;
+            const glm::vec3 span = light.type == LightType::kDirectional ? a.span : a.span - offset;
+            return !rays.Occluded(x + offset + lift, span);
+        };
+        const bool centre = lit(glm::vec3(0.0f));
+        bool agree = true;
+        for (int k = 0; k < kRim && agree; ++k) {
+            const float phi = k * (2.0f * kPi / kRim);
+            agree = lit(radius * (std::cos(phi) * t + std::sin(phi) * s)) == centre;
+        }
+        float seen = centre ? 1.0f : 0.0f;
+        if (!agree) {
+            // Vogel's spiral: even over the disc, no two points at one radius.
+            int hits = 0;
+            for (int k = 0; k < kSpread; ++k) {
+                const float r = radius * std::sqrt((k + 0.5f) / kSpread), phi = k * kGoldenAngle;
+                hits += lit(r * (std::cos(phi) * t + std::sin(phi) * s));
+            }
+            seen = static_cast<float>(hits) / kSpread;
+        }
+        e += seen * a.irradiance;
+    }
+    if (count) *count += traced;
+    return e;
 }
 
 }  // namespace penumbra

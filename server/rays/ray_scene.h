@@ -194,4 +194,17 @@ class RayScene {
 inline constexpr float kVertexInset = 1e-3f;
 std::vector<std::vector<glm::vec3>> VertexEstimatePoints(const Scene& scene);
 
+// The punctual lights' irradiance at a vertex's estimate point x (normal n, a directional
+// light's shadow ray `diameter` × 4 long, as PunctualArrival), each light's visibility the
+// mean over a disc of radius rays.Epsilon() about x in its tangent plane. A vertex on the
+// edge of a shadow (a mesh edge the shadow follows, as a sun through a window lines up with
+// its frame) reads the mean of the two sides, the limit of the light about it from every
+// side; one shadow ray from x would read whichever side rounding puts it on. Elsewhere the
+// disc is all lit or all dark: its centre and four points on its rim agree, and only where
+// they do not are 16 more traced, spread over it. `count` (when given) adds the shadow rays.
+// The reference and the gather stage's vertices both read their direct light so.
+glm::vec3 VertexLightDirect(const RayScene& rays, const std::vector<PunctualLight>& lights,
+                            const glm::vec3& x, const glm::vec3& n, float diameter,
+                            uint64_t* count = nullptr);
+
 }  // namespace penumbra

@@ -127,6 +127,12 @@ class Tracer {
         return e;
     }
 
+    // The punctual lights' irradiance at a vertex's estimate point (VertexLightDirect: a
+    // vertex on a shadow's edge reads the mean of its two sides).
+    glm::vec3 VertexDirect(const glm::vec3& x, const glm::vec3& n, uint64_t& rays) const {
+        return VertexLightDirect(rays_, scene_.lights, x, n, diameter_, &rays);
+    }
+
   private:
     static float PowerHeuristic(float a, float b) { return a * a / (a * a + b * b); }
 
@@ -289,7 +295,7 @@ ReferenceResult RenderReference(const Scene& scene, const ReferenceSettings& set
                 glm::dvec3 sum(0.0), sum2(0.0);
                 glm::vec3 direct(0.0f);
                 if (settings.channel != Channel::kIndirect)
-                    direct = tracer.PunctualDirect(points[p][i], prim.normals[i], r);
+                    direct = tracer.VertexDirect(points[p][i], prim.normals[i], r);
                 for (int s = 0; s < settings.samples && settings.channel != Channel::kDirect; ++s) {
                     glm::dvec3 e(tracer.Sample(points[p][i], prim.normals[i], rng, r));
                     sum += e;
