@@ -22,205 +22,14 @@
 
 #include "base/check.h"
 #include "base/numeric.h"
+#include "scene/gltf_read.h"
 
 namespace penumbra {
 namespace {
 
-struct Context {
-    const std::string& path;
-    const tinygltf::Model& model;
-    const GltfFiles& files;
-    std::vector<std::string>* notes;  // warnings: input left out or approximated
-
-    [[noreturn]] void Fail(const std::string& where, const std::string& why) const {
-        throw Error(path + ": " + where + ": " + why);
-    }
-};
-
-std::string NodeLabel(const tinygltf::Model& model, int node) {
-    const auto& n = model.nodes[node];
-    std::ostringstream s;
-    s << "node " << node;
-    if (!n.name.empty()) s << " '" << n.name << "'";
-    return s.str();
-}
-
-glm::mat4 LocalTransform(const tinygltf::Node& node) {
-    if (node.matrix.size() == 16) {
-        glm::mat4 m;
-        for (int i = 0; i < 16; ++i) glm::value_ptr(m)[i] = static_cast<float>(node.matrix[i]);
-        return m;  // glTF matrices are column-major, as GLM's
-    }
-    glm::mat4 m(1.0f);
-    if (node.translation.size() == 3)
-        m = glm::translate(
-            m, glm::vec3(node.translation[0], node.translation[1], node.translation[2]));
-    if (node.rotation.size() == 4) {
-        glm::quat q(static_cast<float>(node.rotation[3]), static_cast<float>(node.rotation[0]),
-                    static_cast<float>(node.rotation[1]), static_cast<float>(node.rotation[2]));
-        m = m * glm::mat4_cast(q);
-    }
-    if (node.scale.size() == 3)
-        m = glm::scale(m, glm::vec3(node.scale[0], node.scale[1], node.scale[2]));
-    return m;
-}
-
-// The first byte an accessor reads, for `acc.count` elements of `size` bytes each, `stride`
-// (set here: the view's byteStride, or `size`) apart: fails unless its view and buffer exist
-// and every element lies inside both. Overflow-safe: counts and offsets come from the file.
-const unsigned char* AccessorBytes(const Context& ctx, const std::string& where,
-                                   const tinygltf::Accessor& acc, size_t size, size_t& stride,
-                                   const std::string& what) {
-    const auto& model = ctx.model;
-    if (acc.bufferView < 0 || acc.bufferView >= static_cast<int>(model.bufferViews.size()))
-        ctx.Fail(where, what + " accessor has no buffer view");
-    const auto& view = model.bufferViews[acc.bufferView];
-    if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size()))
-        ctx.Fail(where, what + " accessor's buffer view names buffer " +
-                            std::to_string(view.buffer) + ", which does not exist");
-    const auto& buffer = model.buffers[view.buffer];
-    stride = view.byteStride ? view.byteStride : size;
-    // The bytes the view may give: its length, cut to what its buffer holds.
-    const size_t held = buffer.data.size();
-    if (view.byteOffset > held) ctx.Fail(where, what + " buffer view starts past its buffer");
-    const size_t limit = std::min<size_t>(view.byteLength, held - view.byteOffset);
-    if (acc.count > 0 && (acc.byteOffset > limit || size > limit - acc.byteOffset ||
-                          (acc.count - 1) > (limit - acc.byteOffset - size) / stride))
-        ctx.Fail(where, what + " accessor reads past the end of its buffer");
-    return buffer.data.data() + view.byteOffset + acc.byteOffset;
-}
-
-// Reads a float VEC3 accessor (POSITION, NORMAL), honouring byteStride.
-std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, int accessorIndex,
-                                const char* attribute) {
-    const auto& model = ctx.model;
-    if (accessorIndex < 0 || accessorIndex >= static_cast<int>(model.accessors.size()))
-        ctx.Fail(where, std::string(attribute) + " names accessor " +
-                            std::to_string(accessorIndex) + ", which does not exist");
-    const auto& acc = model.accessors[accessorIndex];
-    if (acc.sparse.isSparse)
-        ctx.Fail(where, std::string(attribute) + " uses a sparse accessor (not supported)");
-    if (acc.type != TINYGLTF_TYPE_VEC3 || acc.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT ||
-        acc.normalized)
-        ctx.Fail(where, std::string(attribute) +
-                            " must be float VEC3 (quantized attributes are not supported)");
-    size_t stride = 0;
-    const unsigned char* bytes =
-        AccessorBytes(ctx, where, acc, sizeof(float) * 3, stride, attribute);
-    std::vector<glm::vec3> out(acc.count);
-    for (size_t i = 0; i < acc.count; ++i) {
-        float v[3];
-        std::memcpy(v, bytes + stride * i, sizeof(v));
-        out[i] = glm::vec3(v[0], v[1], v[2]);
-    }
-    return out;
-}
-
-// Reads a TEXCOORD_n accessor: float, or normalised unsigned byte or short VEC2.
-std::vector<glm::vec2> ReadTexcoords(const Context& ctx, const std::string& where,
-                                     int accessorIndex, const std::string& attribute) {
-    const auto& model = ctx.model;
-    if (accessorIndex < 0 || accessorIndex >= static_cast<int>(model.accessors.size()))
-        ctx.Fail(where, attribute + " names accessor " + std::to_string(accessorIndex) +
-                            ", which does not exist");
-    const auto& acc = model.accessors[accessorIndex];
-    if (acc.sparse.isSparse) ctx.Fail(where, attribute + " uses a sparse accessor (not supported)");
-    const int type = acc.componentType;
-    const size_t size = type == TINYGLTF_COMPONENT_TYPE_FLOAT            ? 4
-                        : type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ? 2
-                        : type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE  ? 1
-                                                                         : 0;
-    if (acc.type != TINYGLTF_TYPE_VEC2 || size == 0 || (size < 4 && !acc.normalized))
-        ctx.Fail(where,
-                 attribute + " must be VEC2 of floats or normalised unsigned bytes or shorts");
-    size_t stride = 0;
-    const unsigned char* bytes = AccessorBytes(ctx, where, acc, size * 2, stride, attribute);
-    std::vector<glm::vec2> out(acc.count);
-    for (size_t i = 0; i < acc.count; ++i) {
-        const unsigned char* p = bytes + stride * i;
-        for (int c = 0; c < 2; ++c) {
-            if (size == 4) {
-                std::memcpy(&out[i][c], p + 4 * c, 4);
-            } else if (size == 2) {
-                uint16_t v;
-                std::memcpy(&v, p + 2 * c, 2);
-                out[i][c] = static_cast<float>(v) / 65535.0f;
-            } else {
-                out[i][c] = static_cast<float>(p[c]) / 255.0f;
-            }
-        }
-        if (!std::isfinite(out[i].x) || !std::isfinite(out[i].y))
-            ctx.Fail(where, attribute + " has NaN or infinity");
-    }
-    return out;
-}
-
-std::vector<uint32_t> ReadIndices(const Context& ctx, const std::string& where, int accessorIndex) {
-    const auto& model = ctx.model;
-    if (accessorIndex < 0 || accessorIndex >= static_cast<int>(model.accessors.size()))
-        ctx.Fail(where, "indices name accessor " + std::to_string(accessorIndex) +
-                            ", which does not exist");
-    const auto& acc = model.accessors[accessorIndex];
-    if (acc.sparse.isSparse) ctx.Fail(where, "indices use a sparse accessor (not supported)");
-    if (acc.type != TINYGLTF_TYPE_SCALAR) ctx.Fail(where, "indices accessor must be SCALAR");
-    size_t size = 0;
-    switch (acc.componentType) {
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
-            size = 1;
-            break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
-            size = 2;
-            break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
-            size = 4;
-            break;
-        default:
-            ctx.Fail(where, "indices must be unsigned byte, short or int");
-    }
-    size_t stride = 0;
-    const unsigned char* bytes = AccessorBytes(ctx, where, acc, size, stride, "indices");
-    std::vector<uint32_t> out(acc.count);
-    for (size_t i = 0; i < acc.count; ++i) {
-        const unsigned char* p = bytes + stride * i;
-        if (size == 1) {
-            out[i] = p[0];
-        } else if (size == 2) {
-            uint16_t v;
-            std::memcpy(&v, p, 2);
-            out[i] = v;
-        } else {
-            std::memcpy(&out[i], p, 4);
-        }
-    }
-    return out;
-}
-
-// Triangle list from a TRIANGLES / TRIANGLE_STRIP / TRIANGLE_FAN index sequence.
-std::vector<uint32_t> ToTriangleList(const Context& ctx, const std::string& where, int mode,
-                                     const std::vector<uint32_t>& seq) {
-    if (mode == TINYGLTF_MODE_TRIANGLES) {
-        if (seq.size() % 3 != 0)
-            ctx.Fail(where, "triangle list has " + std::to_string(seq.size()) +
-                                " indices, not a multiple of 3");
-        return seq;
-    }
-    std::vector<uint32_t> out;
-    if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
-        for (size_t i = 2; i < seq.size(); ++i) {
-            if (i % 2 == 0)
-                out.insert(out.end(), {seq[i - 2], seq[i - 1], seq[i]});
-            else
-                out.insert(out.end(), {seq[i - 1], seq[i - 2], seq[i]});
-        }
-        return out;
-    }
-    if (mode == TINYGLTF_MODE_TRIANGLE_FAN) {
-        for (size_t i = 2; i < seq.size(); ++i) out.insert(out.end(), {seq[0], seq[i - 1], seq[i]});
-        return out;
-    }
-    ctx.Fail(where, "primitive mode " + std::to_string(mode) +
-                        " (points/lines) has no surface to light; only triangles are supported");
-}
+using gltf::Context;
+using gltf::LocalTransform;
+using gltf::NodeLabel;
 
 std::string Refusal(const GltfFiles& files, const std::string& filepath);
 
@@ -503,71 +312,6 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
     }
 }
 
-// A primitive's morph targets (POSITION and NORMAL displacements, float VEC3 like the
-// attributes; TANGENT is not used). Throws penumbra::Error (through ctx.Fail) for what it
-// cannot read; the caller then ignores the targets.
-void ReadMorphTargets(const Context& ctx, const std::string& where, const tinygltf::Primitive& prim,
-                      Primitive& out) {
-    for (size_t t = 0; t < prim.targets.size(); ++t) {
-        const std::string label = where + " morph target " + std::to_string(t);
-        const auto& target = prim.targets[t];
-        std::vector<glm::vec3> dp(out.positions.size(), glm::vec3(0.0f)), dn;
-        if (auto it = target.find("POSITION"); it != target.end())
-            dp = ReadVec3(ctx, label, it->second, "POSITION");
-        if (auto it = target.find("NORMAL"); it != target.end())
-            dn = ReadVec3(ctx, label, it->second, "NORMAL");
-        if (dp.size() != out.positions.size() || (!dn.empty() && dn.size() != dp.size()))
-            ctx.Fail(label, "has another vertex count than its primitive");
-        for (const auto* list : {&dp, &dn})
-            for (const glm::vec3& v : *list)
-                if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
-                    ctx.Fail(label, "has NaN or infinity");
-        out.morphPositions.push_back(std::move(dp));
-        out.morphNormals.push_back(std::move(dn));
-    }
-}
-
-// Poses node `ni`'s mesh at its morph weights (the node's `weights`, else the mesh's, else
-// zeros), once its primitives are read. glTF asks every primitive of a mesh for the same
-// number of targets; a mesh that breaks that keeps its rest pose, with a warning.
-void PoseMorphTargets(const Context& ctx, const std::string& where, const tinygltf::Node& node,
-                      Scene& scene, int ni, std::vector<std::string>& warnings) {
-    const size_t targets = NodeMorphTargets(scene, ni);
-    SceneNode& sn = scene.nodes[ni];
-    bool even = true;
-    for (uint32_t p : sn.primitives)
-        even = even && scene.primitives[p].morphPositions.size() == targets;
-    if (targets == 0 || !even) {
-        for (uint32_t p : sn.primitives) {
-            scene.primitives[p].morphPositions.clear();
-            scene.primitives[p].morphNormals.clear();
-        }
-        if (!even)
-            warnings.push_back(where +
-                               ": its primitives have different numbers of morph "
-                               "targets: they are ignored (rest pose)");
-        return;
-    }
-    const auto& given = !node.weights.empty() ? node.weights : ctx.model.meshes[node.mesh].weights;
-    std::vector<float> weights(targets, 0.0f);
-    if (!given.empty()) {
-        if (given.size() != targets)
-            ctx.Fail(where, "has " + std::to_string(given.size()) + " morph weights for " +
-                                std::to_string(targets) + " targets");
-        for (size_t t = 0; t < targets; ++t) weights[t] = static_cast<float>(given[t]);
-    }
-    sn.morphWeights = weights;
-    bool posed = false;
-    for (float w : weights) posed = posed || w != 0.0f;
-    if (!posed) return;
-    try {
-        SetNodeMorphWeights(scene, ni, weights);
-    } catch (const Error& e) {
-        ctx.Fail(where, e.what());
-    }
-    for (uint32_t p : sn.primitives) scene.primitives[p].shape = 0;  // as loaded
-}
-
 // What LoadGltf read but ignored or approximated, one sentence each (Scene::warnings).
 std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene& scene) {
     std::vector<std::string> out;
@@ -620,6 +364,78 @@ std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene&
     return out;
 }
 
+namespace {
+
+// The nodes the scene starts from: the default scene's (the first's), or without scenes every
+// node that is no node's child.
+std::vector<int> SceneRoots(const Context& ctx) {
+    const tinygltf::Model& model = ctx.model;
+    std::vector<int> roots;
+    if (!model.scenes.empty()) {
+        int s = model.defaultScene >= 0 ? model.defaultScene : 0;
+        if (s >= static_cast<int>(model.scenes.size()))
+            ctx.Fail("scene", "default scene " + std::to_string(s) + " does not exist");
+        roots = model.scenes[s].nodes;
+    } else {
+        std::vector<bool> isChild(model.nodes.size(), false);
+        for (const auto& n : model.nodes)
+            for (int c : n.children)
+                if (c >= 0 && c < static_cast<int>(isChild.size())) isChild[c] = true;
+        for (size_t i = 0; i < model.nodes.size(); ++i)
+            if (!isChild[i]) roots.push_back(static_cast<int>(i));
+    }
+    return roots;
+}
+
+// Node `ni`'s KHR_lights_punctual light (if any), placed by its world transform.
+void ReadNodeLight(const Context& ctx, int ni, Scene& scene) {
+    const tinygltf::Model& model = ctx.model;
+    const tinygltf::Node& node = model.nodes[ni];
+    const SceneNode& sn = scene.nodes[ni];
+    if (auto ext = node.extensions.find("KHR_lights_punctual"); ext != node.extensions.end()) {
+        const tinygltf::Value& index = ext->second.Get("light");
+        if (!index.IsInt())
+            ctx.Fail(NodeLabel(model, ni), "KHR_lights_punctual needs an integer 'light'");
+        PunctualLight light = ReadLight(ctx, index.Get<int>());
+        light.node = ni;
+        if (light.name.empty()) light.name = sn.name;
+        try {
+            PlaceLight(light, sn.world);
+        } catch (const Error& e) {
+            ctx.Fail(NodeLabel(model, ni), "transform is singular (the light has no direction)");
+        }
+        scene.lights.push_back(light);
+    }
+}
+
+// Node `ni`'s camera (model.nodes[ni].camera, ≥ 0): a perspective one is kept (`penumbra
+// render`), others are skipped.
+void ReadNodeCamera(const Context& ctx, int ni, Scene& scene) {
+    const tinygltf::Model& model = ctx.model;
+    const tinygltf::Node& node = model.nodes[ni];
+    const SceneNode& sn = scene.nodes[ni];
+    const glm::mat4& world = sn.world;
+    if (node.camera >= static_cast<int>(model.cameras.size()))
+        ctx.Fail(NodeLabel(model, ni), "camera " + std::to_string(node.camera) + " does not exist");
+    const tinygltf::Camera& cam = model.cameras[node.camera];
+    if (cam.type == "perspective") {
+        Camera c;
+        c.name = cam.name.empty() ? sn.name : cam.name;
+        c.yfov = static_cast<float>(cam.perspective.yfov);
+        if (!(c.yfov > 0.0f && c.yfov < 3.14f))
+            ctx.Fail(NodeLabel(model, ni), "camera yfov must be in (0, π)");
+        c.eye = glm::vec3(world[3]);
+        glm::vec3 f = -glm::vec3(world[2]), u = glm::vec3(world[1]);
+        if (glm::length(f) < 1e-12f || glm::length(u) < 1e-12f)
+            ctx.Fail(NodeLabel(model, ni), "camera transform is singular");
+        c.forward = glm::normalize(f);
+        c.up = glm::normalize(u - glm::dot(u, c.forward) * c.forward);
+        scene.cameras.push_back(c);
+    }
+}
+
+}  // namespace
+
 Scene LoadGltf(const std::string& path, const GltfFiles& files) {
     tinygltf::Model model;
     ReadGltfModel(path, &model, files);
@@ -643,20 +459,7 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
     // geometry without a material does not light the scene up.
     scene.materials.push_back(DiffuseMaterial("(default)", glm::vec3(0.0f)));
 
-    std::vector<int> roots;
-    if (!model.scenes.empty()) {
-        int s = model.defaultScene >= 0 ? model.defaultScene : 0;
-        if (s >= static_cast<int>(model.scenes.size()))
-            ctx.Fail("scene", "default scene " + std::to_string(s) + " does not exist");
-        roots = model.scenes[s].nodes;
-    } else {
-        std::vector<bool> isChild(model.nodes.size(), false);
-        for (const auto& n : model.nodes)
-            for (int c : n.children)
-                if (c >= 0 && c < static_cast<int>(isChild.size())) isChild[c] = true;
-        for (size_t i = 0; i < model.nodes.size(); ++i)
-            if (!isChild[i]) roots.push_back(static_cast<int>(i));
-    }
+    const std::vector<int> roots = SceneRoots(ctx);
 
     std::vector<int> visits(model.nodes.size(), 0);
     scene.nodes.resize(model.nodes.size());
@@ -683,145 +486,13 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
         if (!Finite(world)) ctx.Fail(NodeLabel(model, ni), "transform has NaN or infinity");
         sn.world = world;
         ReadPenumbraExtras(ctx, NodeLabel(model, ni), node.extras, sn);
-        if (auto ext = node.extensions.find("KHR_lights_punctual"); ext != node.extensions.end()) {
-            const tinygltf::Value& index = ext->second.Get("light");
-            if (!index.IsInt())
-                ctx.Fail(NodeLabel(model, ni), "KHR_lights_punctual needs an integer 'light'");
-            PunctualLight light = ReadLight(ctx, index.Get<int>());
-            light.node = ni;
-            if (light.name.empty()) light.name = sn.name;
-            try {
-                PlaceLight(light, world);
-            } catch (const Error& e) {
-                ctx.Fail(NodeLabel(model, ni),
-                         "transform is singular (the light has no direction)");
-            }
-            scene.lights.push_back(light);
-        }
-        if (node.camera >= 0) {
-            // Only perspective cameras matter (`penumbra render`); others are skipped.
-            if (node.camera >= static_cast<int>(model.cameras.size()))
-                ctx.Fail(NodeLabel(model, ni),
-                         "camera " + std::to_string(node.camera) + " does not exist");
-            const tinygltf::Camera& cam = model.cameras[node.camera];
-            if (cam.type == "perspective") {
-                Camera c;
-                c.name = cam.name.empty() ? sn.name : cam.name;
-                c.yfov = static_cast<float>(cam.perspective.yfov);
-                if (!(c.yfov > 0.0f && c.yfov < 3.14f))
-                    ctx.Fail(NodeLabel(model, ni), "camera yfov must be in (0, π)");
-                c.eye = glm::vec3(world[3]);
-                glm::vec3 f = -glm::vec3(world[2]), u = glm::vec3(world[1]);
-                if (glm::length(f) < 1e-12f || glm::length(u) < 1e-12f)
-                    ctx.Fail(NodeLabel(model, ni), "camera transform is singular");
-                c.forward = glm::normalize(f);
-                c.up = glm::normalize(u - glm::dot(u, c.forward) * c.forward);
-                scene.cameras.push_back(c);
-            }
-        }
+        ReadNodeLight(ctx, ni, scene);
+        if (node.camera >= 0) ReadNodeCamera(ctx, ni, scene);
         if (parentIndex >= 0) {
             scene.nodes[parentIndex].children.push_back(ni);
             sn.dynamic = sn.dynamic || scene.nodes[parentIndex].dynamic;
         }
-        if (node.mesh >= 0) {
-            if (node.mesh >= static_cast<int>(model.meshes.size()))
-                ctx.Fail(NodeLabel(model, ni),
-                         "mesh " + std::to_string(node.mesh) + " does not exist");
-            if (std::abs(glm::determinant(glm::mat3(world))) < 1e-20f)
-                ctx.Fail(NodeLabel(model, ni), "transform is singular (zero scale)");
-            glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(world)));
-            bool flips = glm::determinant(glm::mat3(world)) < 0.0f;
-            const auto& mesh = model.meshes[node.mesh];
-            for (size_t pi = 0; pi < mesh.primitives.size(); ++pi) {
-                const auto& prim = mesh.primitives[pi];
-                std::string where = NodeLabel(model, ni) + " mesh " + std::to_string(node.mesh) +
-                                    " primitive " + std::to_string(pi);
-                auto pos = prim.attributes.find("POSITION");
-                if (pos == prim.attributes.end()) ctx.Fail(where, "has no POSITION attribute");
-                Primitive out;
-                out.node = sn.name;
-                out.nodeIndex = ni;
-                out.mesh = node.mesh;
-                out.primitive = static_cast<int>(pi);
-                if (prim.material >= static_cast<int>(model.materials.size()))
-                    ctx.Fail(where,
-                             "material " + std::to_string(prim.material) + " does not exist");
-                out.material =
-                    prim.material >= 0 ? static_cast<uint32_t>(prim.material) : defaultMaterial;
-                out.positions = ReadVec3(ctx, where, pos->second, "POSITION");
-                std::vector<uint32_t> seq;
-                if (prim.indices >= 0) {
-                    seq = ReadIndices(ctx, where, prim.indices);
-                } else {
-                    seq.resize(out.positions.size());
-                    for (size_t i = 0; i < seq.size(); ++i) seq[i] = static_cast<uint32_t>(i);
-                }
-                out.indices = ToTriangleList(ctx, where, prim.mode, seq);
-                for (uint32_t idx : out.indices)
-                    if (idx >= out.positions.size())
-                        ctx.Fail(where, "index " + std::to_string(idx) + " is past the " +
-                                            std::to_string(out.positions.size()) + " vertices");
-                for (const auto& p : out.positions)
-                    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-                        ctx.Fail(where, "POSITION has NaN or infinity");
-                auto nrm = prim.attributes.find("NORMAL");
-                if (nrm != prim.attributes.end()) {
-                    out.normals = ReadVec3(ctx, where, nrm->second, "NORMAL");
-                    if (out.normals.size() != out.positions.size())
-                        ctx.Fail(where, "NORMAL and POSITION counts differ");
-                    for (const auto& n : out.normals) {
-                        float len = glm::length(normalMatrix * n);
-                        if (!std::isfinite(len) || len == 0.0f)
-                            ctx.Fail(where, "NORMAL has a zero, NaN or infinite vector");
-                    }
-                }
-                // The texture coordinates the material's maps read.
-                const Material& material = scene.materials[out.material];
-                for (auto [map, set] : {std::pair{material.baseColorMap, material.baseColorSet},
-                                        {material.emissionMap, material.emissionSet}}) {
-                    if (map < 0) continue;
-                    const std::string name = "TEXCOORD_" + std::to_string(set);
-                    auto uv = prim.attributes.find(name);
-                    if (uv == prim.attributes.end()) {
-                        readNotes.push_back(where + ": no " + name +
-                                            " for its material's texture: the texture's mean "
-                                            "colour is used over it");
-                        continue;
-                    }
-                    if (static_cast<int>(out.texcoords.size()) <= set)
-                        out.texcoords.resize(set + 1);
-                    if (!out.texcoords[set].empty()) continue;
-                    out.texcoords[set] = ReadTexcoords(ctx, where, uv->second, name);
-                    if (out.texcoords[set].size() != out.positions.size())
-                        ctx.Fail(where, name + " and POSITION counts differ");
-                }
-                // Morph targets: displacements in the mesh's own space (posed below).
-                if (!prim.targets.empty()) {
-                    try {
-                        ReadMorphTargets(ctx, where, prim, out);
-                    } catch (const Error& e) {
-                        out.morphPositions.clear();
-                        out.morphNormals.clear();
-                        readNotes.push_back(std::string(e.what()) +
-                                            ": its morph targets are ignored (rest pose)");
-                    }
-                }
-                // No normals: flat ones, as glTF draws such a mesh (in the mesh's own space).
-                if (out.normals.empty()) SplitForFlatNormals(out);
-                // Keep the mesh-space vertices (moves re-place them), then go to world space.
-                out.objectPositions = out.positions;
-                out.objectNormals = out.normals;
-                for (auto& p : out.positions) p = glm::vec3(world * glm::vec4(p, 1.0f));
-                for (auto& n : out.normals) n = glm::normalize(normalMatrix * n);
-                if (flips)
-                    for (size_t t = 0; t + 2 < out.indices.size(); t += 3)
-                        std::swap(out.indices[t + 1], out.indices[t + 2]);
-                scene.nodes[ni].primitives.push_back(
-                    static_cast<uint32_t>(scene.primitives.size()));
-                scene.primitives.push_back(std::move(out));
-            }
-        }
-        if (node.mesh >= 0) PoseMorphTargets(ctx, NodeLabel(model, ni), node, scene, ni, readNotes);
+        if (node.mesh >= 0) gltf::ReadNodeMeshes(ctx, ni, world, defaultMaterial, scene);
         for (int c : node.children) visit(c, ni, depth + 1);
     };
     for (int r : roots) visit(r, -1, 0);
