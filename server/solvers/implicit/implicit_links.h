@@ -18,6 +18,7 @@
 // environment (Sec. 4.4).
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -169,6 +170,24 @@ class ImplicitLinker {
     void PushClosest(const Hierarchy& h, ImplicitLinks& out);
     // Scratch::perLeaf's shares into `out`, with each share's travel.
     void WriteShares(const Hierarchy& h, ImplicitLinks& out) const;
+    // The recorded ends of `sources` (and the kept ones) by (node, bin), each slot's nearest
+    // first, into Scratch (ends, occupied, runFirst, runs; implicit_pushdown.cpp). The
+    // sources are counted and scattered by node side by side, then each node's ends by bin
+    // and each slot by depth, node by node; the order they are read in never shows: no two
+    // ends of a slot tie on depth and sender.
+    void SortEnds(const Hierarchy& h, const std::vector<std::vector<EndRange>>& sources);
+    // Each leaf's bins covered front to back by the sorted ends of the leaf and its
+    // ancestors, into Scratch::perLeaf (Build's arguments; implicit_pushdown.cpp).
+    void Composite(const Hierarchy& h, const std::vector<float>& frontArea,
+                   const std::vector<uint32_t>& solid, float thin);
+    struct LeafWalk;  // one thread's walk over the leaves (Composite)
+    struct Rounds;    // one build's rounds of pairs on the CPU (implicit_links.cpp)
+    using TimePoint = std::chrono::steady_clock::time_point;
+    // The device's ends composited there (vulkan_composite.h) where they fit: true when it
+    // did (`out` is done); else CompositedOnHostBecause says why. `start`: when the build
+    // began; `perFrame`: the build was given `moving` (its scratch is kept).
+    bool CompositeOnDevice(const Hierarchy& h, const std::vector<uint32_t>& solid, float thin,
+                           ImplicitLinks& out, TimePoint start, bool perFrame);
     const Directions& dirs_;
     float threshold_;
     bool closest_;
