@@ -191,6 +191,10 @@ class GatherStage : public Solver {
     // The gather rays' hits at the targets: all of them, or after a move those that it can
     // have changed; then emitterHits_ (Shoot reads them).
     void Trace(const Moved* moved = nullptr);
+    struct TargetTracer;  // one thread's tracing of its targets (Trace)
+    // emitterHits_ and emitterCoef_ from the gather rays' emitting hits: at every target, or
+    // `afterMove` at those `touched` (a ray traced again).
+    void WeighEmitterHits(bool afterMove, const std::vector<uint8_t>& touched);
     void Sky();  // the environment light of the escaped rays
     // The lobe rays of the targets' glossy hits: all of them, or after a move those that it
     // can have changed (every cached one is checked against the moved boxes).

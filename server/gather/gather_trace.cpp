@@ -224,57 +224,236 @@ bool GatherStage::TraceOnGpu(std::vector<float>& distances) {
     return true;
 }
 
+// One thread's tracing of its targets' gather rays and secondaries (Trace): the cones and
+// patterns a move's tests need, and the packets the CPU traces.
+struct GatherStage::TargetTracer {
+    GatherStage& stage;
+    const Moved* moved;  // null: every ray is traced
+    const bool onGpu;    // the gather rays were traced on the GPU (`distances` along them)
+    const std::vector<float>& distances;
+    const float shortHit;  // a hit nearer than this is gathered again
+    const int n, m;        // gather rays a target, secondaries a short hit
+    size_t count = 0;      // rays traced
+    std::vector<BallCone> cones, wide, secondCones;
+    std::vector<CosineCone> pattern, secondPattern;
+    // Per normal met at this target's short hits, its secondaries' pattern.
+    std::vector<std::pair<glm::vec3, std::vector<CosineCone>>> patterns;
+    std::vector<uint8_t> kept, was;
+    std::vector<Hit> relaid;
+    // The rays a target traces on the CPU go out in packets of 8 from its point, and a short
+    // hit's from the hit (`packed` holds the answers of either).
+    std::vector<RayHit> packed;
+    std::vector<glm::vec3> dirs, secondDirs;
+    std::vector<int> batch, secondBatch;
+    size_t t = 0;    // the target being traced
+    glm::vec3 o{0};  // its ray origin
+
+    TargetTracer(GatherStage& stage, const Moved* moved, bool onGpu,
+                 const std::vector<float>& distances, float shortHit)
+        : stage(stage),
+          moved(moved),
+          onGpu(onGpu),
+          distances(distances),
+          shortHit(shortHit),
+          n(stage.settings_.gatherRays),
+          m(stage.SecondRays()),
+          kept(n),
+          was(n),
+          packed(std::max(n, m)),
+          dirs(n),
+          secondDirs(m) {}
+
+    // After a move: whether a cached hit still holds (its ray starts on a surface that did
+    // not move, ends on one that did not, and passes by where the moved ones were and are).
+    // The segment is the one to the hit point (no direction needed, which costs more to make
+    // again than the test), or the ray to infinity when it escaped; `cones` (one per box,
+    // from the ray's origin) turn most segments away before the slab test.
+    template <typename Direction>
+    bool Holds(const glm::vec3& from, const std::vector<BallCone>& at, const Direction& direction,
+               const Hit& h) const {
+        const std::vector<Bounds>& boxes = moved->boxes;
+        if (h.triangle == kEscaped) {
+            const glm::vec3 d = direction();
+            for (size_t k = 0; k < boxes.size(); ++k)
+                if (at[k].MayMeet(d, true) &&
+                    boxes[k].Meets(from, d, std::numeric_limits<float>::infinity()))
+                    return false;
+            return true;
+        }
+        if (moved->Touches(*stage.rays_, h.triangle & kIndex)) return false;
+        const glm::vec3 span = stage.HitPoint(h) - from;
+        for (size_t k = 0; k < boxes.size(); ++k)
+            if (at[k].MayMeet(span) && boxes[k].Meets(from, span, 1.0f)) return false;
+        return true;
+    }
+    // The cones from `from` towards the boxes (`grow`: each box's ball grown by that much),
+    // and which points of a cosine pattern about `normal` can fall in one (CosineCone); false
+    // when none can: no ray from `from` meets a box.
+    bool ConesAt(const glm::vec3& from, const glm::vec3& normal, float grow,
+                 std::vector<BallCone>& into, std::vector<CosineCone>& intoPattern) const {
+        into.clear(), intoPattern.clear();
+        bool any = false;
+        for (const Bounds& b : moved->boxes) {
+            Ball ball(b);
+            ball.radius += grow;
+            into.emplace_back(from, ball);
+            const BallCone& c = into.back();
+            intoPattern.push_back(c.Inside() ? CosineCone()
+                                             : CosineCone(normal, c.Axis(), c.SinHalf()));
+            any = any || !intoPattern.back().Empty();
+        }
+        return any;
+    }
+    static bool MayMeet(const std::vector<CosineCone>& in, const glm::vec2& u) {
+        for (const CosineCone& c : in)
+            if (c.MayContain(u)) return true;
+        return false;
+    }
+    Hit& HitOf(int r) { return stage.hits_[t * n + r]; }
+    bool IsShort(int r) {
+        const Hit& h = HitOf(r);
+        return Front(h) && (h.triangle & kShort);
+    }
+
+    // Target t's gather rays (those a move can have changed, or all) and then its
+    // secondaries. Returns whether any gather ray was traced again.
+    bool Trace(size_t target) {
+        t = target;
+        const Surfels& surfels = stage.inner_->GetSurfels();
+        const uint32_t i = stage.targets_[t];
+        o = stage.points_[i] + stage.rays_->Epsilon() * surfels.normals[i];
+        const bool all = !moved || moved->surfels[i];
+        // Nothing moved in front of it: every hit holds, its secondaries are checked.
+        const bool clear = !all && !ConesAt(o, surfels.normals[i], 0.0f, cones, pattern);
+        bool same = !all;  // its short hits are the rays they were
+        bool touched = !moved;
+        batch.clear();
+        for (int r = 0; r < n; ++r) {
+            const Hit before = all ? Hit{kEscaped, 0, 0} : HitOf(r);
+            was[r] = Front(before) && (before.triangle & kShort);
+            kept[r] = !all && (clear || !MayMeet(pattern, R2Point(stage.rotation_[t], r)) ||
+                               Holds(
+                                   o, cones, [&] { return stage.Direction(t, r); }, before));
+            if (!kept[r] && !onGpu) {
+                dirs[batch.size()] = stage.Direction(t, r);
+                batch.push_back(r);
+            }
+        }
+        stage.rays_->IntersectFrom(o, dirs.data(), batch.size(),
+                                   std::numeric_limits<float>::infinity(), packed.data());
+        size_t next = 0;  // the next of `batch`
+        for (int r = 0; r < n; ++r) {
+            if (kept[r]) continue;
+            Hit& hit = HitOf(r);
+            float dist = std::numeric_limits<float>::infinity();
+            if (onGpu) {
+                dist = distances[t * n + r];
+            } else {
+                dist = packed[next].hit ? packed[next].t : dist;
+                hit = stage.Cached(packed[next], dirs[next]);
+                ++next;
+            }
+            ++count;
+            touched = true;
+            const bool isShort = Front(hit) && dist < shortHit;
+            if (isShort) hit.triangle |= kShort;
+            same = same && isShort == static_cast<bool>(was[r]);
+        }
+        Secondaries(same);
+        return touched;
+    }
+
+    // A secondary ray from a short hit y (within shortHit of o) that meets a ball runs in a
+    // direction inside o's cone towards that ball grown by shortHit (the parallel ray from o
+    // passes within shortHit of where it does): the pattern about y's normal is made once per
+    // normal the target's short hits have, from o.
+    const std::vector<CosineCone>& PatternFor(const glm::vec3& normal) {
+        // Bit for bit: a −0 in the normal turns the pattern's basis (CosineDirection).
+        for (const auto& [nm, p] : patterns)
+            if (std::memcmp(&nm, &normal, sizeof(glm::vec3)) == 0) return p;
+        if (wide.empty()) ConesAt(o, normal, shortHit + stage.rays_->Epsilon(), wide, pattern);
+        patterns.emplace_back(normal, std::vector<CosineCone>());
+        for (const BallCone& c : wide)
+            patterns.back().second.push_back(
+                c.Inside() ? CosineCone() : CosineCone(normal, c.Axis(), c.SinHalf()));
+        return patterns.back().second;
+    }
+
+    // Ray r's secondary gather into `out`: the cached one (`old`, null where the hit did not
+    // hold) where each ray holds, traced again where not (out may be old).
+    void GatherAgain(int r, const Hit* old, Hit* out) {
+        const Hit& hit = HitOf(r);
+        const uint32_t tri = hit.triangle & kIndex;
+        const glm::vec3& normal = stage.rays_->Triangles()[tri].normal;
+        const std::vector<CosineCone>* filter = old ? &PatternFor(normal) : nullptr;
+        if (filter && std::all_of(filter->begin(), filter->end(),
+                                  [](const CosineCone& c) { return c.Empty(); })) {
+            if (out != old) std::copy(old, old + m, out);  // none can meet a box
+            return;
+        }
+        const glm::vec3 y = stage.HitPoint(hit) + stage.rays_->Epsilon() * normal;
+        const glm::vec2 rot = stage.SecondRotation(t, r);
+        // Which rays hold (none without `old`); the others are traced again, in packets of 8
+        // from y (the same hits as one at a time).
+        bool near = false;  // secondCones made at y
+        secondBatch.clear();
+        for (int j = 0; j < m; ++j) {
+            const glm::vec2 u = R2Point(rot, j);
+            auto d2 = [&] { return CosineDirection(normal, u); };
+            bool holding = old && !MayMeet(*filter, u);
+            if (old && !holding) {
+                if (!near) ConesAt(y, normal, 0.0f, secondCones, secondPattern);
+                near = true;
+                holding = Holds(y, secondCones, d2, old[j]);
+            }
+            if (holding) {
+                out[j] = old[j];
+            } else {
+                secondDirs[secondBatch.size()] = d2();
+                secondBatch.push_back(j);
+            }
+        }
+        stage.rays_->IntersectFrom(y, secondDirs.data(), secondBatch.size(),
+                                   std::numeric_limits<float>::infinity(), packed.data());
+        for (size_t k = 0; k < secondBatch.size(); ++k)
+            out[secondBatch[k]] = stage.Cached(packed[k], secondDirs[k]);
+        count += secondBatch.size();
+    }
+
+    // Target t's secondaries: in place where its short hits are the same rays as before
+    // (`same`), laid out anew where not.
+    void Secondaries(bool same) {
+        patterns.clear();
+        wide.clear();
+        std::vector<Hit>& block = stage.second_[t];
+        if (same) {
+            Hit* at = block.data();
+            for (int r = 0; r < n; ++r)
+                if (IsShort(r)) {
+                    GatherAgain(r, kept[r] ? at : nullptr, at);
+                    at += m;
+                }
+            return;
+        }
+        relaid.clear();
+        size_t old = 0;  // its old secondaries (none when all are traced)
+        for (int r = 0; r < n; ++r) {
+            if (IsShort(r)) {
+                relaid.resize(relaid.size() + m);
+                GatherAgain(r, kept[r] ? block.data() + old : nullptr,
+                            relaid.data() + relaid.size() - m);
+            }
+            if (was[r]) old += m;
+        }
+        block.assign(relaid.begin(), relaid.end());
+    }
+};
+
 void GatherStage::Trace(const Moved* moved) {
     auto start = std::chrono::steady_clock::now();
     ++traces_;
     const int n = settings_.gatherRays, m = SecondRays();
     const float shortHit = kShortHit * inner_->Stats().elementSize;
-    const auto& tris = rays_->Triangles();
-    const Surfels& surfels = inner_->GetSurfels();
-    const float inf = std::numeric_limits<float>::infinity();
-    // After a move: whether a cached hit still holds (its ray starts on a surface that did not
-    // move, ends on one that did not, and passes by where the moved ones were and are). The
-    // segment is the one to the hit point (no direction needed, which costs more to make
-    // again than the test), or the ray to infinity when it escaped; `cones` (one per box,
-    // from the ray's origin) turn most segments away before the slab test.
-    auto holds = [&](const glm::vec3& o, const std::vector<BallCone>& cones, const auto& direction,
-                     const Hit& h) {
-        const std::vector<Bounds>& boxes = moved->boxes;
-        if (h.triangle == kEscaped) {
-            const glm::vec3 d = direction();
-            for (size_t k = 0; k < boxes.size(); ++k)
-                if (cones[k].MayMeet(d, true) && boxes[k].Meets(o, d, inf)) return false;
-            return true;
-        }
-        if (moved->Touches(*rays_, h.triangle & kIndex)) return false;
-        const glm::vec3 span = HitPoint(h) - o;
-        for (size_t k = 0; k < boxes.size(); ++k)
-            if (cones[k].MayMeet(span) && boxes[k].Meets(o, span, 1.0f)) return false;
-        return true;
-    };
-    // The cones from o towards the boxes (`grow`: each box's ball grown by that much), and
-    // which points of a cosine pattern about `normal` can fall in one (CosineCone); false
-    // when none can: no ray from o meets a box.
-    auto conesAt = [&](const glm::vec3& o, const glm::vec3& normal, float grow,
-                       std::vector<BallCone>& cones, std::vector<CosineCone>& pattern) {
-        cones.clear(), pattern.clear();
-        bool any = false;
-        for (const Bounds& b : moved->boxes) {
-            Ball ball(b);
-            ball.radius += grow;
-            cones.emplace_back(o, ball);
-            const BallCone& c = cones.back();
-            pattern.push_back(c.Inside() ? CosineCone()
-                                         : CosineCone(normal, c.Axis(), c.SinHalf()));
-            any = any || !pattern.back().Empty();
-        }
-        return any;
-    };
-    auto mayMeet = [](const std::vector<CosineCone>& pattern, const glm::vec2& u) {
-        for (const CosineCone& c : pattern)
-            if (c.MayContain(u)) return true;
-        return false;
-    };
     hits_.resize(targets_.size() * n);  // in place: a target's hits are read, then written
     // All of them at once on the GPU where there is one (then only the secondaries below).
     std::vector<float> gpuDistances;
@@ -284,189 +463,61 @@ void GatherStage::Trace(const Moved* moved) {
     std::vector<uint8_t> touched(targets_.size(), moved ? 0 : 1);
     std::atomic<size_t> traced{0};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
-        size_t count = 0;
-        std::vector<BallCone> cones, wide, secondCones;
-        std::vector<CosineCone> pattern, secondPattern;
-        // Per normal met at this target's short hits, its secondaries' pattern.
-        std::vector<std::pair<glm::vec3, std::vector<CosineCone>>> patterns;
-        std::vector<uint8_t> kept(n), was(n);
-        std::vector<Hit> relaid;
-        // The rays a target traces on the CPU go out in packets of 8 from its point, and a
-        // short hit's from the hit (`packed` holds the answers of either).
-        std::vector<RayHit> packed(std::max(n, m));
-        std::vector<glm::vec3> dirs(n);
-        std::vector<int> batch, secondBatch;
-        std::vector<glm::vec3> secondDirs(m);
-        for (size_t t = range.begin(); t != range.end(); ++t) {
-            const uint32_t i = targets_[t];
-            const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
-            const bool all = !moved || moved->surfels[i];
-            // Nothing moved in front of it: every hit holds, its secondaries are checked.
-            const bool clear = !all && !conesAt(o, surfels.normals[i], 0.0f, cones, pattern);
-            bool same = !all;  // its short hits are the rays they were
-            batch.clear();
-            for (int r = 0; r < n; ++r) {
-                const Hit before = all ? Hit{kEscaped, 0, 0} : hits_[t * n + r];
-                was[r] = Front(before) && (before.triangle & kShort);
-                kept[r] = !all && (clear || !mayMeet(pattern, R2Point(rotation_[t], r)) ||
-                                   holds(
-                                       o, cones, [&] { return Direction(t, r); }, before));
-                if (!kept[r] && !onGpu) {
-                    dirs[batch.size()] = Direction(t, r);
-                    batch.push_back(r);
-                }
-            }
-            rays_->IntersectFrom(o, dirs.data(), batch.size(), inf, packed.data());
-            size_t next = 0;  // the next of `batch`
-            for (int r = 0; r < n; ++r) {
-                if (kept[r]) continue;
-                Hit& hit = hits_[t * n + r];
-                float dist = inf;
-                if (onGpu) {
-                    dist = gpuDistances[t * n + r];
-                } else {
-                    dist = packed[next].hit ? packed[next].t : inf;
-                    hit = Cached(packed[next], dirs[next]);
-                    ++next;
-                }
-                ++count;
-                touched[t] = 1;
-                const bool isShort = Front(hit) && dist < shortHit;
-                if (isShort) hit.triangle |= kShort;
-                same = same && isShort == static_cast<bool>(was[r]);
-            }
-            // A secondary ray from a short hit y (within shortHit of o) that meets a ball runs
-            // in a direction inside o's cone towards that ball grown by shortHit (the parallel
-            // ray from o passes within shortHit of where it does): the pattern about y's normal
-            // is made once per normal the target's short hits have, from o.
-            patterns.clear();
-            auto patternFor = [&](const glm::vec3& normal) -> const std::vector<CosineCone>& {
-                // Bit for bit: a −0 in the normal turns the pattern's basis (CosineDirection).
-                for (const auto& [nm, p] : patterns)
-                    if (std::memcmp(&nm, &normal, sizeof(glm::vec3)) == 0) return p;
-                if (wide.empty()) conesAt(o, normal, shortHit + rays_->Epsilon(), wide, pattern);
-                patterns.emplace_back(normal, std::vector<CosineCone>());
-                for (const BallCone& c : wide)
-                    patterns.back().second.push_back(
-                        c.Inside() ? CosineCone() : CosineCone(normal, c.Axis(), c.SinHalf()));
-                return patterns.back().second;
-            };
-            wide.clear();
-            // Ray r's secondary gather into `out`: the cached one (`old`, null where the hit
-            // did not hold) where each ray holds, traced again where not (out may be old).
-            auto gatherAgain = [&](int r, const Hit* old, Hit* out) {
-                const Hit& hit = hits_[t * n + r];
-                const uint32_t tri = hit.triangle & kIndex;
-                const glm::vec3& normal = tris[tri].normal;
-                const std::vector<CosineCone>* filter = old ? &patternFor(normal) : nullptr;
-                if (filter && std::all_of(filter->begin(), filter->end(),
-                                          [](const CosineCone& c) { return c.Empty(); })) {
-                    if (out != old) std::copy(old, old + m, out);  // none can meet a box
-                    return;
-                }
-                const glm::vec3 y = HitPoint(hit) + rays_->Epsilon() * normal;
-                const glm::vec2 rot = SecondRotation(t, r);
-                // Which rays hold (none without `old`); the others are traced again, in
-                // packets of 8 from y (the same hits as one at a time).
-                bool near = false;  // secondCones made at y
-                secondBatch.clear();
-                for (int j = 0; j < m; ++j) {
-                    const glm::vec2 u = R2Point(rot, j);
-                    auto d2 = [&] { return CosineDirection(normal, u); };
-                    bool holding = old && !mayMeet(*filter, u);
-                    if (old && !holding) {
-                        if (!near) conesAt(y, normal, 0.0f, secondCones, secondPattern);
-                        near = true;
-                        holding = holds(y, secondCones, d2, old[j]);
-                    }
-                    if (holding) {
-                        out[j] = old[j];
-                    } else {
-                        secondDirs[secondBatch.size()] = d2();
-                        secondBatch.push_back(j);
-                    }
-                }
-                rays_->IntersectFrom(y, secondDirs.data(), secondBatch.size(), inf, packed.data());
-                for (size_t k = 0; k < secondBatch.size(); ++k)
-                    out[secondBatch[k]] = Cached(packed[k], secondDirs[k]);
-                count += secondBatch.size();
-            };
-            auto isShort = [&](int r) {
-                return Front(hits_[t * n + r]) && (hits_[t * n + r].triangle & kShort);
-            };
-            // Its secondaries: in place where its short hits are the same rays as before.
-            std::vector<Hit>& block = second_[t];
-            if (same) {
-                Hit* at = block.data();
-                for (int r = 0; r < n; ++r)
-                    if (isShort(r)) {
-                        gatherAgain(r, kept[r] ? at : nullptr, at);
-                        at += m;
-                    }
-                continue;
-            }
-            relaid.clear();
-            size_t old = 0;  // its old secondaries (none when all are traced)
-            for (int r = 0; r < n; ++r) {
-                if (isShort(r)) {
-                    relaid.resize(relaid.size() + m);
-                    gatherAgain(r, kept[r] ? block.data() + old : nullptr,
-                                relaid.data() + relaid.size() - m);
-                }
-                if (was[r]) old += m;
-            }
-            block.assign(relaid.begin(), relaid.end());
-        }
-        traced += count;
+        TargetTracer tracer(*this, moved, onGpu, gpuDistances, shortHit);
+        for (size_t t = range.begin(); t != range.end(); ++t) touched[t] = tracer.Trace(t) ? 1 : 0;
+        traced += tracer.count;
     });
     secondStart_.assign(targets_.size() + 1, 0);
     for (size_t t = 0; t < targets_.size(); ++t)
         secondStart_[t + 1] = secondStart_[t] + static_cast<uint32_t>(second_[t].size() / m);
     traced += SeeShort(moved, touched);
-
-    // The emitters the gather rays meet, weighted against the first shot's rays, as a
-    // coefficient per emitting primitive: again at the targets with a ray traced again.
-    const size_t slots = rays_->EmitterPrimitives().size();
-    if (!moved) {
-        emitterHits_.assign(targets_.size(), glm::vec3(0.0f));
-        emitterCoef_.assign(slots <= EmitterDirect::kMaxSlots ? targets_.size() * slots : 0,
-                            glm::vec3(0.0f));
-    }
-    if (settings_.emitterRays > 0 && slots > 0) {
-        PENUMBRA_CHECK_EQ(shotSplit_.size(), points_.size());
-        tbb::parallel_for(
-            tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
-                for (size_t t = range.begin(); t != range.end(); ++t) {
-                    if (!touched[t]) continue;
-                    const uint32_t i = targets_[t];
-                    const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
-                    emitterHits_[t] = glm::vec3(0.0f);
-                    glm::vec3* coef = emitterCoef_.empty() ? nullptr : &emitterCoef_[t * slots];
-                    if (coef) std::fill(coef, coef + slots, glm::vec3(0.0f));
-                    for (int r = 0; r < n; ++r) {
-                        const Hit& h = hits_[t * n + r];
-                        if (!Front(h) || !(rays_->AreaPdf(h.triangle & kIndex) > 0.0f)) continue;
-                        const uint32_t tri = h.triangle & kIndex;
-                        // Weighted against the shot's rays at this surfel, its split.
-                        const int cosine = shotSplit_[i];
-                        const float c = EmitterHitWeight(*rays_, settings_.emitterRays - cosine,
-                                                         cosine + n, surfels.normals[i],
-                                                         Direction(t, r), tri, Distance(o, h));
-                        // The emission map's tint at the hit is in the coefficient.
-                        const glm::vec3 tinted =
-                            c *
-                            rays_->TintsAt(tri, h.u * (1.0f / 65535.0f), h.v * (1.0f / 65535.0f))
-                                .emission;
-                        emitterHits_[t] += rays_->MaterialOf(tri).emission * tinted;
-                        if (coef) coef[rays_->EmitterSlot(tris[tri].primitive)] += tinted;
-                    }
-                }
-            });
-    }
+    WeighEmitterHits(moved != nullptr, touched);
     raysRetraced_ += moved ? traced.load() : 0;
     fresh_ = false;
     lightsFresh_ = false;
     msTrace_ = MsSince(start);
+}
+
+void GatherStage::WeighEmitterHits(bool afterMove, const std::vector<uint8_t>& touched) {
+    // The emitters the gather rays meet, weighted against the first shot's rays, as a
+    // coefficient per emitting primitive: again at the targets with a ray traced again.
+    const int n = settings_.gatherRays;
+    const auto& tris = rays_->Triangles();
+    const Surfels& surfels = inner_->GetSurfels();
+    const size_t slots = rays_->EmitterPrimitives().size();
+    if (!afterMove) {
+        emitterHits_.assign(targets_.size(), glm::vec3(0.0f));
+        emitterCoef_.assign(slots <= EmitterDirect::kMaxSlots ? targets_.size() * slots : 0,
+                            glm::vec3(0.0f));
+    }
+    if (settings_.emitterRays <= 0 || slots == 0) return;
+    PENUMBRA_CHECK_EQ(shotSplit_.size(), points_.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 64), [&](const auto& range) {
+        for (size_t t = range.begin(); t != range.end(); ++t) {
+            if (!touched[t]) continue;
+            const uint32_t i = targets_[t];
+            const glm::vec3 o = points_[i] + rays_->Epsilon() * surfels.normals[i];
+            emitterHits_[t] = glm::vec3(0.0f);
+            glm::vec3* coef = emitterCoef_.empty() ? nullptr : &emitterCoef_[t * slots];
+            if (coef) std::fill(coef, coef + slots, glm::vec3(0.0f));
+            for (int r = 0; r < n; ++r) {
+                const Hit& h = hits_[t * n + r];
+                if (!Front(h) || !(rays_->AreaPdf(h.triangle & kIndex) > 0.0f)) continue;
+                const uint32_t tri = h.triangle & kIndex;
+                // Weighted against the shot's rays at this surfel, its split.
+                const int cosine = shotSplit_[i];
+                const float c =
+                    EmitterHitWeight(*rays_, settings_.emitterRays - cosine, cosine + n,
+                                     surfels.normals[i], Direction(t, r), tri, Distance(o, h));
+                // The emission map's tint at the hit is in the coefficient.
+                const glm::vec3 tinted =
+                    c *
+                    rays_->TintsAt(tri, h.u * (1.0f / 65535.0f), h.v * (1.0f / 65535.0f)).emission;
+                emitterHits_[t] += rays_->MaterialOf(tri).emission * tinted;
+                if (coef) coef[rays_->EmitterSlot(tris[tri].primitive)] += tinted;
+            }
+        }
+    });
 }
 
 size_t GatherStage::SeeShort(const Moved* moved, const std::vector<uint8_t>& touched) {
