@@ -77,14 +77,18 @@ GatherStage::GatherStage(std::unique_ptr<Solver> inner, const Scene& scene,
             rotation_[t].x = rng.Uniform();
             rotation_[t].y = rng.Uniform();
         }
-        Trace();
-        TraceLobes();
-        PlaceGlints();
-        TraceGlints();
-        Sky();
+        TraceAll();
     }
     Shoot();
     HandSky(false);
+}
+
+void GatherStage::TraceAll(const Moved* moved) {
+    Trace(moved);
+    TraceLobes(moved);
+    PlaceGlints();
+    TraceGlints(moved);
+    Sky();
 }
 
 GatherStage::~GatherStage() = default;
@@ -328,13 +332,7 @@ void GatherStage::UpdateMaterials(const Scene& scene) {
     }
     rays_ = std::make_unique<RayScene>(scene_, inner_->GetSurfels());
     SplitShot();  // a new emitter: split for the emitters there are now
-    if (!targets_.empty()) {
-        Trace();
-        TraceLobes();
-        PlaceGlints();
-        TraceGlints();
-        Sky();
-    }
+    if (!targets_.empty()) TraceAll();
     Shoot();
 }
 
@@ -409,12 +407,8 @@ std::string GatherStage::UpdateGeometry(const Scene& scene) {
     // moved emitter moves the points the first shot's shadow rays aim at: the shot is traced
     // again whole.
     if (!targets_.empty()) {
-        Trace(&moved);
-        TraceLobes(&moved);
-        PlaceGlints();
-        TraceGlints(&moved);
+        TraceAll(&moved);
         Relit(lightsBefore);  // lights placed by a moved node
-        Sky();
     }
     // A moved emitter's shot in parts (any move while one is under way starts it again: its
     // surfels traced so far saw the scene before this move); the sun's part as after any

@@ -192,6 +192,9 @@ class GatherStage : public Solver {
     // have changed; then emitterHits_ (Shoot reads them).
     void Trace(const Moved* moved = nullptr);
     struct TargetTracer;  // one thread's tracing of its targets (Trace)
+    // Every ray the gather keeps (all of them, or after a move those it can have changed):
+    // Trace, the glossy hits' lobes, the glints, then the sky the escaped rays read.
+    void TraceAll(const Moved* moved = nullptr);
     // emitterHits_ and emitterCoef_ from the gather rays' emitting hits: at every target, or
     // `afterMove` at those `touched` (a ray traced again).
     void WeighEmitterHits(bool afterMove, const std::vector<uint8_t>& touched);
