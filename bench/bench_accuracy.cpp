@@ -81,6 +81,7 @@ Sweep SweepFor(const std::string& name) {
 Run Solve(const Scene& scene, const IrradianceFile& truth, int bins, int iterations,
           float elementSize, const Sweep& sweep) {
     SolverSettings s;
+    s.solver = "antiradiance";  // the sweep is over its oracles
     SetOption(s.options, "bins", bins);
     s.elementSize = elementSize;
     s.device = DeviceChoice::kCpu;

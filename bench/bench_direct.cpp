@@ -57,6 +57,7 @@ int main(int argc, char** argv) {
     std::vector<int> mapSizes{0, 1024};  // 0: the solver's default, from the element size
     int updates = 10, iterations = 4;
     SolverSettings settings;
+    settings.solver = "antiradiance";  // its bins and oracle below
     SetOption(settings.options, "bins", 128);
     settings.elementSize = 0.5f;
     SetOption(settings.options, "link-oracle", "paper");

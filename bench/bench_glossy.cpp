@@ -23,29 +23,19 @@ using bench::RunDevice;
 
 int main(int argc, char** argv) {
     CLI::App app{"penumbra glossy benchmark (local pass with lobes, issue 5)"};
-    std::string scenePath = "scenes/glossy-box.gltf", out = "bench/results";
-    std::vector<std::string> devices{"cpu", "lavapipe"};
-    int frames = 10, iterations = 3, samples = 1024;
-    SolverSettings settings;
-    int bins = 128;
-    settings.elementSize = 0.25f;
-    app.add_option("--scene", scenePath, "glTF with glossy materials")->capture_default_str();
-    app.add_option("--out", out, "folder for the results JSON (empty: print only)")
-        ->capture_default_str();
-    app.add_option("--devices", devices, "devices to run: cpu, lavapipe, gpu")
-        ->capture_default_str();
-    app.add_option("--frames", frames, "frames measured per case")->capture_default_str();
-    app.add_option("--iterations", iterations, "iterations (bounces) per frame")
-        ->capture_default_str();
-    app.add_option("--samples", samples, "reference paths per vertex for the RMSE (0: none)")
-        ->capture_default_str();
-    app.add_option("--bins", bins)->capture_default_str();
-    app.add_option("--element-size", settings.elementSize)->capture_default_str();
+    bench::DeviceBenchOptions o;
+    o.scene = "scenes/glossy-box.gltf";
+    o.iterations = 3;
+    o.elementSize = 0.25f;
+    o.AddTo(app, "glTF with glossy materials", "frames measured per case");
     CLI11_PARSE(app, argc, argv);
 
     try {
-        SetOption(settings.options, "bins", bins);
-        Scene glossy = LoadGltf(scenePath);
+        SolverSettings settings;
+        settings.solver = "antiradiance";  // its lobes are what this measures
+        settings.elementSize = o.elementSize;
+        SetOption(settings.options, "bins", o.bins);
+        Scene glossy = LoadGltf(o.scene);
         Scene diffuse = glossy, allGlossy = glossy;
         for (Material& m : diffuse.materials)
             if (m.Glossy()) m = DiffuseMaterial(m.name, glm::min(m.albedo + m.specular, 1.0f));
@@ -53,38 +43,33 @@ int main(int argc, char** argv) {
             if (!m.Glossy()) m = PbrMaterial(m.name, m.baseColor, 0.0f, 0.4f, m.emission);
         const std::pair<const char*, const Scene*> variants[] = {
             {"glossy", &glossy}, {"diffuse", &diffuse}, {"all-glossy", &allGlossy}};
-        nlohmann::json report;
-        report["benchmark"] = "glossy";
-        report["scene"] = scenePath;
-        report["triangles"] = glossy.TriangleCount();
-        report["machine"] = {{"cpu", bench::CpuModel()},
-                             {"threads", std::thread::hardware_concurrency()}};
-        report["settings"] = {{"bins", bins},
+        nlohmann::json report = bench::ReportHeader("glossy", o.scene, glossy.TriangleCount());
+        report["settings"] = {{"bins", o.bins},
                               {"element_size", settings.elementSize},
                               {"link_oracle", "conservative"},
                               {"scheme", SchemeName(ReadAntiradianceSettings(settings).scheme)},
-                              {"iterations_per_frame", iterations},
-                              {"reference_samples", samples}};
+                              {"iterations_per_frame", o.iterations},
+                              {"reference_samples", o.samples}};
         std::map<std::string, IrradianceFile> truth;
-        if (samples > 0)
+        if (o.samples > 0)
             for (const auto& [name, scene] : variants)
-                truth[name] = bench::Reference(*scene, samples);
+                truth[name] = bench::Reference(*scene, o.samples);
         std::printf(
             "%s: %zu triangles, %d bins, element %.2f m, %d iterations/frame, median of "
             "%d frames\n",
-            scenePath.c_str(), glossy.TriangleCount(), bins, settings.elementSize, iterations,
-            frames);
+            o.scene.c_str(), glossy.TriangleCount(), o.bins, settings.elementSize, o.iterations,
+            o.frames);
         std::printf("%-30s %-10s %8s %7s %9s %9s %9s %9s %7s %9s\n", "device", "surfaces",
                     "elements", "glossy", "links", "local ms", "ms/iter", "frame ms", "fps",
                     "rel.RMSE");
-        for (const auto& d : devices) {
+        for (const auto& d : o.devices) {
             for (const auto& [name, scene] : variants) {
                 SolverSettings s = settings;
                 s.device = ParseDevice(d);
                 nlohmann::json r;
                 try {
-                    r = RunDevice(*scene, s, frames, iterations,
-                                  samples > 0 ? &truth.at(name) : nullptr);
+                    r = RunDevice(*scene, s, o.frames, o.iterations,
+                                  o.samples > 0 ? &truth.at(name) : nullptr);
                 } catch (const Error& e) {
                     std::printf("%-30s unavailable: %s\n", d.c_str(), e.what());
                     break;
@@ -103,7 +88,7 @@ int main(int argc, char** argv) {
                 report["results"].push_back(r);
             }
         }
-        bench::WriteReport(report, out, "glossy.json");
+        bench::WriteReport(report, o.out, "glossy.json");
     } catch (const std::exception& e) {
         std::fprintf(stderr, "bench: %s\n", e.what());
         return 1;

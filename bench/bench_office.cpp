@@ -24,25 +24,10 @@ using bench::RunDevice;
 
 int main(int argc, char** argv) {
     CLI::App app{"penumbra office benchmark (antiradiance, issue 2)"};
-    std::string scenePath = "scenes/office.gltf", out = "bench/results";
-    std::vector<std::string> devices{"cpu", "lavapipe"};
-    int frames = 10, iterations = 1, samples = 1024;
-    SolverSettings settings;
-    int bins = 128;
-    settings.elementSize = 0.5f;
+    bench::DeviceBenchOptions o;
+    o.scene = "scenes/office.gltf";
+    o.AddTo(app, "office-scale glTF", "frames measured per device");
     float oracle = 2.15f;  // 626K links: the paper office has 632K
-    app.add_option("--scene", scenePath, "office-scale glTF")->capture_default_str();
-    app.add_option("--out", out, "folder for the results JSON (empty: print only)")
-        ->capture_default_str();
-    app.add_option("--devices", devices, "devices to run: cpu, lavapipe, gpu")
-        ->capture_default_str();
-    app.add_option("--frames", frames, "frames measured per device")->capture_default_str();
-    app.add_option("--iterations", iterations, "iterations (bounces) per frame")
-        ->capture_default_str();
-    app.add_option("--samples", samples, "reference paths per vertex for the RMSE (0: none)")
-        ->capture_default_str();
-    app.add_option("--bins", bins)->capture_default_str();
-    app.add_option("--element-size", settings.elementSize)->capture_default_str();
     app.add_option("--oracle", oracle, "paper oracle threshold")->capture_default_str();
     std::string tables = "auto";
     app.add_option("--tables", tables, "CPU back end tables: auto|fp32|fp16")
@@ -50,39 +35,37 @@ int main(int argc, char** argv) {
     CLI11_PARSE(app, argc, argv);
 
     try {
-        SetOption(settings.options, "bins", bins);
+        SolverSettings settings;
+        settings.solver = "antiradiance";  // the paper office: its passes and oracle
+        settings.elementSize = o.elementSize;
+        SetOption(settings.options, "bins", o.bins);
         SetOption(settings.options, "link-oracle", "paper");
         SetOption(settings.options, "oracle", oracle);
         SetOption(settings.options, "tables", tables);
-        Scene scene = LoadGltf(scenePath);
-        nlohmann::json report;
-        report["benchmark"] = "office";
-        report["scene"] = scenePath;
-        report["triangles"] = scene.TriangleCount();
-        report["machine"] = {{"cpu", bench::CpuModel()},
-                             {"threads", std::thread::hardware_concurrency()}};
-        report["settings"] = {{"bins", bins},
+        Scene scene = LoadGltf(o.scene);
+        nlohmann::json report = bench::ReportHeader("office", o.scene, scene.TriangleCount());
+        report["settings"] = {{"bins", o.bins},
                               {"element_size", settings.elementSize},
                               {"link_oracle", "paper"},
                               {"oracle", oracle},
                               {"scheme", SchemeName(ReadAntiradianceSettings(settings).scheme)},
-                              {"reference_samples", samples}};
+                              {"reference_samples", o.samples}};
         IrradianceFile truth;
-        if (samples > 0) truth = bench::Reference(scene, samples);
+        if (o.samples > 0) truth = bench::Reference(scene, o.samples);
         std::printf(
             "office: %zu triangles, %d bins, element %.2f m, paper oracle %.2f, "
             "%d iterations/frame, median of %d frames\n",
-            scene.TriangleCount(), bins, settings.elementSize, oracle, iterations, frames);
+            scene.TriangleCount(), o.bins, settings.elementSize, oracle, o.iterations, o.frames);
         std::printf("%-34s %6s %8s %9s %8s %8s %8s %8s %8s %9s %7s %7s %8s %9s\n", "device",
                     "tables", "elements", "links", "build s", "global", "push", "local", "pull",
                     "ms/iter", "passes", "fps", "tbl MiB", "rel.RMSE");
-        for (const auto& d : devices) {
+        for (const auto& d : o.devices) {
             SolverSettings s = settings;
             s.device = ParseDevice(d);
             if (s.device != DeviceChoice::kCpu) SetOption(s.options, "tables", "auto");
             nlohmann::json r;
             try {
-                r = RunDevice(scene, s, frames, iterations, samples > 0 ? &truth : nullptr);
+                r = RunDevice(scene, s, o.frames, o.iterations, o.samples > 0 ? &truth : nullptr);
             } catch (const Error& e) {
                 std::printf("%-34s unavailable: %s\n", d.c_str(), e.what());
                 continue;
@@ -111,7 +94,7 @@ int main(int argc, char** argv) {
                         r["table_mib"].get<double>(), rmse);
             report["results"].push_back(r);
         }
-        bench::WriteReport(report, out, "office.json");
+        bench::WriteReport(report, o.out, "office.json");
     } catch (const std::exception& e) {
         std::fprintf(stderr, "bench: %s\n", e.what());
         return 1;

@@ -1,6 +1,7 @@
 // Shared by the benchmarks: what machine a result was measured on.
 #pragma once
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -10,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -26,6 +28,43 @@ inline std::string CpuModel() {
     while (std::getline(in, line))
         if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
     return "unknown";
+}
+
+// The options of a benchmark that runs one solver on devices (bench_office, bench_glossy):
+// the scene, the results' folder, the devices, frames measured, iterations a frame, the
+// reference's paths a vertex (0: no RMSE), bins and element size.
+struct DeviceBenchOptions {
+    std::string scene;
+    std::string out = "bench/results";
+    std::vector<std::string> devices{"cpu", "lavapipe"};
+    int frames = 10, iterations = 1, samples = 1024, bins = 128;
+    float elementSize = 0.5f;
+
+    void AddTo(CLI::App& app, const std::string& sceneHelp, const std::string& framesHelp) {
+        app.add_option("--scene", scene, sceneHelp)->capture_default_str();
+        app.add_option("--out", out, "folder for the results JSON (empty: print only)")
+            ->capture_default_str();
+        app.add_option("--devices", devices, "devices to run: cpu, lavapipe, gpu")
+            ->capture_default_str();
+        app.add_option("--frames", frames, framesHelp)->capture_default_str();
+        app.add_option("--iterations", iterations, "iterations (bounces) per frame")
+            ->capture_default_str();
+        app.add_option("--samples", samples, "reference paths per vertex for the RMSE (0: none)")
+            ->capture_default_str();
+        app.add_option("--bins", bins)->capture_default_str();
+        app.add_option("--element-size", elementSize)->capture_default_str();
+    }
+};
+
+// A report's opening: the benchmark's name, its scene and triangles, the machine.
+inline nlohmann::json ReportHeader(const std::string& benchmark, const std::string& scenePath,
+                                   size_t triangles) {
+    nlohmann::json report;
+    report["benchmark"] = benchmark;
+    report["scene"] = scenePath;
+    report["triangles"] = triangles;
+    report["machine"] = {{"cpu", CpuModel()}, {"threads", std::thread::hardware_concurrency()}};
+    return report;
 }
 
 inline double Median(std::vector<double> v) {
