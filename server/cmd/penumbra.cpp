@@ -34,9 +34,195 @@ std::string Nearest(const CLI::App& app, const std::string& word) {
     return best;
 }
 
+namespace {
+
+using namespace penumbra;
+using namespace penumbra::cli;
+
+// `penumbra bake`: its options, and the run they ask for.
+struct BakeCommand {
+    CLI::App* cmd = nullptr;
+    std::string scenePath, outPath, device = "auto", channel = "indirect";
+    std::string bakeColor0 = "tonemapped", backOcclusion = "auto";
+    SolverSettings settings;
+    IterationOptions iterations;
+    EnvironmentOptions bakeEnv;
+    GatherOptions bakeGather;
+    bool quiet = false;
+
+    void Add(CLI::App& app) {
+        cmd = app.add_subcommand("bake",
+                                 "Light a glTF scene in-process and write per-vertex "
+                                 "irradiance (.json, or .glb/.gltf with _IRRADIANCE)");
+        cmd->add_option("scene", scenePath, "glTF 2.0 scene (.gltf or .glb)")->required();
+        cmd->add_option("-o,--output", outPath,
+                        "output file: .json, .glb or .gltf; - for JSON on standard output")
+            ->required();
+        AddColor0(cmd, bakeColor0);
+        cli::AddSolverOptions(cmd, settings.solver, settings.options);
+        iterations.Add(cmd);
+        cmd->add_option(
+            "--element-size", settings.elementSize,
+            "longest element edge after refinement, metres (default: scene diameter/24 behind the "
+            "final gather, /40 without)");
+        cmd->add_option("--device", device,
+                        "auto, gpu, lavapipe or cpu (auto: a real GPU if present, else cpu)")
+            ->capture_default_str();
+        cmd->add_option("--threads", settings.threads, "CPU threads (0: all cores)")
+            ->capture_default_str();
+        cmd->add_option(
+               "--channel", channel,
+               "indirect (all but punctual lights' direct light), direct (punctual lights, "
+               "shadowed) or total")
+            ->capture_default_str();
+        cmd->add_option("--shadow-map-size", settings.shadowMapSize,
+                        "texels per side of each shadow map (cube face), 16..8192; 0: from the "
+                        "element size (256..2048)")
+            ->capture_default_str();
+        bakeEnv.Add(cmd);
+        cmd->add_option("--back-occlusion", backOcclusion,
+                        "auto|on|off: surfaces that do not bound a solid also block light arriving "
+                        "at their backs (auto: on with an environment)")
+            ->capture_default_str();
+        cmd->add_flag("--motion-links", settings.prepareMoves,
+                      "prepare dynamic nodes to move in place, as the service does (antiradiance: "
+                      "links built for their motion bounds, Sec. 3.3)");
+        bakeGather.Add(cmd);
+        cmd->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
+        cmd->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
+    }
+    int Run() {
+        settings.backOcclusion = ParseBackOcclusion(backOcclusion);
+        return Bake(scenePath, outPath, settings, iterations, device, channel, bakeEnv, bakeGather,
+                    ParseDisplayColor(bakeColor0), quiet);
+    }
+};
+
+// `penumbra reference`.
+struct ReferenceCommand {
+    CLI::App* cmd = nullptr;
+    std::string refScene, refOut, refChannel = "indirect", refColor0 = "tonemapped";
+    ReferenceSettings refSettings;
+    EnvironmentOptions refEnv;
+    bool refQuiet = false;
+
+    void Add(CLI::App& app) {
+        cmd = app.add_subcommand(
+            "reference",
+            "Path-trace per-vertex irradiance with Embree (ground truth for the solvers), with a "
+            "standard error per vertex");
+        cmd->add_option("scene", refScene, "glTF 2.0 scene (.gltf or .glb)")->required();
+        cmd->add_option("-o,--output", refOut,
+                        "output file: .json, .glb or .gltf; - for JSON on standard output")
+            ->required();
+        AddColor0(cmd, refColor0);
+        cmd->add_option("--samples", refSettings.samples, "light paths per vertex (>= 2)")
+            ->capture_default_str();
+        cmd->add_option("--max-depth", refSettings.maxDepth,
+                        "bounces after the vertex (Russian roulette ends most paths sooner)")
+            ->capture_default_str();
+        cmd->add_option("--seed", refSettings.seed, "random seed")->capture_default_str();
+        cmd->add_option("--threads", refSettings.threads, "threads (0: all cores)")
+            ->capture_default_str();
+        cmd->add_option("--channel", refChannel,
+                        "indirect (all but punctual lights' direct light), direct or total")
+            ->capture_default_str();
+        refEnv.Add(cmd);
+        cmd->add_flag("-q,--quiet", refQuiet, "no progress or summary on stderr");
+    }
+    int Run() {
+        refSettings.channel = ParseChannel(refChannel);
+        return Reference(refScene, refOut, refSettings, refEnv, ParseDisplayColor(refColor0),
+                         refQuiet);
+    }
+};
+
+// `penumbra render`.
+struct RenderCommand {
+    CLI::App* cmd = nullptr;
+    RenderOptions ro;
+    SolverSettings renderSettings;
+    IterationOptions renderIterations;
+    std::string renderSolverDevice = "auto", renderChannel = "total";
+    EnvironmentOptions renderEnv;
+
+    void Add(CLI::App& app) {
+        cmd = app.add_subcommand(
+            "render",
+            "Render the lit scene to an image (headless Vulkan raster): OpenEXR (linear, half) "
+            "and/or PNG (tone-mapped)");
+        cmd->add_option("scene", ro.scene, "glTF 2.0 scene (.gltf or .glb)")->required();
+        cmd->add_option("-o,--output", ro.outputs, "image file(s): .exr and/or .png")->required();
+        cmd->add_option("--size", ro.size, "WIDTHxHEIGHT")->capture_default_str();
+        cmd->add_option("--camera", ro.camera,
+                        "ex,ey,ez,tx,ty,tz,fov: eye, target (metres), vertical fov (degrees); "
+                        "default: the file's first perspective camera, else one framing the "
+                        "scene from -Z");
+        cmd->add_option("--camera-name", ro.cameraName, "a perspective camera of the file");
+        cmd->add_option("--lighting", ro.lighting,
+                        "per-vertex irradiance JSON (bake, reference, get) instead of solving");
+        cmd->add_option("--compare", ro.compare,
+                        "reference irradiance JSON: render the relative error as a heat map");
+        cmd->add_option("--error-scale", ro.errorScale, "relative error shown as red")
+            ->capture_default_str();
+        cmd->add_option("--exposure", ro.exposure, "EV added to the automatic exposure (PNG)")
+            ->capture_default_str();
+        cmd->add_option("--mesh", ro.mesh,
+                        "auto|refined|input: shade the solver's refined mesh or the input "
+                        "vertices (auto: refined when solving here)")
+            ->capture_default_str();
+        cmd->add_option("--render-device", ro.renderDevice,
+                        "auto (a real GPU if any, else lavapipe) or lavapipe")
+            ->capture_default_str();
+        cmd->add_option("--channel", renderChannel, "indirect, direct or total")
+            ->capture_default_str();
+        cli::AddSolverOptions(cmd, renderSettings.solver, renderSettings.options);
+        renderIterations.Add(cmd);
+        ro.gather.Add(cmd);
+        cmd->add_option("--element-size", renderSettings.elementSize,
+                        "metres; 0 = scene diameter / 24 behind the final gather, / 40 without");
+        cmd->add_option("--device", renderSolverDevice, "solver device: auto, gpu, lavapipe, cpu")
+            ->capture_default_str();
+        cmd->add_option("--shadow-map-size", renderSettings.shadowMapSize,
+                        "texels per shadow map side; 0 = from the element size");
+        renderEnv.Add(cmd);
+        cmd->add_flag("--validation", renderSettings.validation, "enable Vulkan validation layers");
+        cmd->add_flag("-q,--quiet", ro.quiet, "no progress or summary on stderr");
+    }
+    int Run() {
+        return Render(ro, renderSettings, renderIterations, renderSolverDevice, renderChannel,
+                      renderEnv);
+    }
+};
+
+// `penumbra compare`.
+struct CompareCommand {
+    CLI::App* cmd = nullptr;
+    std::string cmpA, cmpB;
+    bool cmpJson = false;
+    double maxRmse = -1.0, floor = kDefaultFloor;
+
+    void Add(CLI::App& app) {
+        cmd = app.add_subcommand(
+            "compare",
+            "Per-vertex error of irradiance file A against reference B: relative RMSE, mean and "
+            "max relative error, per node and overall (exit status 4 when --max-rmse is exceeded)");
+        cmd->add_option("a", cmpA, "irradiance JSON to judge")->required();
+        cmd->add_option("b", cmpB, "reference irradiance JSON")->required();
+        cmd->add_flag("--json", cmpJson, "print the result as JSON");
+        cmd->add_option("--max-rmse", maxRmse,
+                        "fail (exit 4) when the overall relative RMSE exceeds this (e.g. 0.1)");
+
+        cmd->add_option("--floor", floor,
+                        "relative errors are taken against max(|b|, floor × mean |b|)")
+            ->capture_default_str();
+    }
+    int Run() { return CompareFiles(cmpA, cmpB, cmpJson, maxRmse, floor); }
+};
+
+}  // namespace
+
 int main(int argc, char** argv) {
-    using namespace penumbra;
-    using namespace penumbra::cli;
     CLI::App app{
         "Penumbra: a headless lighting service (global illumination, per-vertex "
         "irradiance streamed to clients)"};
@@ -47,150 +233,14 @@ int main(int argc, char** argv) {
     app.fallthrough();
     cli::ServiceCommands service(app);
 
-    auto* bake = app.add_subcommand("bake",
-                                    "Light a glTF scene in-process and write per-vertex "
-                                    "irradiance (.json, or .glb/.gltf with _IRRADIANCE)");
-    std::string scenePath, outPath, device = "auto", channel = "indirect";
-    SolverSettings settings;
-    IterationOptions iterations;
-    bool quiet = false;
-    bake->add_option("scene", scenePath, "glTF 2.0 scene (.gltf or .glb)")->required();
-    bake->add_option("-o,--output", outPath,
-                     "output file: .json, .glb or .gltf; - for JSON on standard output")
-        ->required();
-    std::string bakeColor0 = "tonemapped";
-    AddColor0(bake, bakeColor0);
-    cli::AddSolverOptions(bake, settings.solver, settings.options);
-    iterations.Add(bake);
-    bake->add_option(
-        "--element-size", settings.elementSize,
-        "longest element edge after refinement, metres (default: scene diameter/24 behind the "
-        "final gather, /40 without)");
-    bake->add_option("--device", device,
-                     "auto, gpu, lavapipe or cpu (auto: a real GPU if present, else cpu)")
-        ->capture_default_str();
-    bake->add_option("--threads", settings.threads, "CPU threads (0: all cores)")
-        ->capture_default_str();
-    bake->add_option("--channel", channel,
-                     "indirect (all but punctual lights' direct light), direct (punctual lights, "
-                     "shadowed) or total")
-        ->capture_default_str();
-    bake->add_option("--shadow-map-size", settings.shadowMapSize,
-                     "texels per side of each shadow map (cube face), 16..8192; 0: from the "
-                     "element size (256..2048)")
-        ->capture_default_str();
-    EnvironmentOptions bakeEnv;
-    bakeEnv.Add(bake);
-    std::string backOcclusion = "auto";
-    bake->add_option("--back-occlusion", backOcclusion,
-                     "auto|on|off: surfaces that do not bound a solid also block light arriving "
-                     "at their backs (auto: on with an environment)")
-        ->capture_default_str();
-    bake->add_flag("--motion-links", settings.prepareMoves,
-                   "prepare dynamic nodes to move in place, as the service does (antiradiance: "
-                   "links built for their motion bounds, Sec. 3.3)");
-    GatherOptions bakeGather;
-    bakeGather.Add(bake);
-    bake->add_flag("--validation", settings.validation, "enable Vulkan validation layers");
-    bake->add_flag("-q,--quiet", quiet, "no progress or summary on stderr");
-
-    auto* reference = app.add_subcommand(
-        "reference",
-        "Path-trace per-vertex irradiance with Embree (ground truth for the solvers), with a "
-        "standard error per vertex");
-    std::string refScene, refOut, refChannel = "indirect";
-    ReferenceSettings refSettings;
-    bool refQuiet = false;
-    reference->add_option("scene", refScene, "glTF 2.0 scene (.gltf or .glb)")->required();
-    reference
-        ->add_option("-o,--output", refOut,
-                     "output file: .json, .glb or .gltf; - for JSON on standard output")
-        ->required();
-    std::string refColor0 = "tonemapped";
-    AddColor0(reference, refColor0);
-    reference->add_option("--samples", refSettings.samples, "light paths per vertex (>= 2)")
-        ->capture_default_str();
-    reference
-        ->add_option("--max-depth", refSettings.maxDepth,
-                     "bounces after the vertex (Russian roulette ends most paths sooner)")
-        ->capture_default_str();
-    reference->add_option("--seed", refSettings.seed, "random seed")->capture_default_str();
-    reference->add_option("--threads", refSettings.threads, "threads (0: all cores)")
-        ->capture_default_str();
-    reference
-        ->add_option("--channel", refChannel,
-                     "indirect (all but punctual lights' direct light), direct or total")
-        ->capture_default_str();
-    EnvironmentOptions refEnv;
-    refEnv.Add(reference);
-    reference->add_flag("-q,--quiet", refQuiet, "no progress or summary on stderr");
-
-    auto* render = app.add_subcommand(
-        "render",
-        "Render the lit scene to an image (headless Vulkan raster): OpenEXR (linear, half) "
-        "and/or PNG (tone-mapped)");
-    RenderOptions ro;
-    SolverSettings renderSettings;
-    IterationOptions renderIterations;
-    std::string renderSolverDevice = "auto", renderChannel = "total";
-    render->add_option("scene", ro.scene, "glTF 2.0 scene (.gltf or .glb)")->required();
-    render->add_option("-o,--output", ro.outputs, "image file(s): .exr and/or .png")->required();
-    render->add_option("--size", ro.size, "WIDTHxHEIGHT")->capture_default_str();
-    render->add_option("--camera", ro.camera,
-                       "ex,ey,ez,tx,ty,tz,fov: eye, target (metres), vertical fov (degrees); "
-                       "default: the file's first perspective camera, else one framing the "
-                       "scene from -Z");
-    render->add_option("--camera-name", ro.cameraName, "a perspective camera of the file");
-    render->add_option("--lighting", ro.lighting,
-                       "per-vertex irradiance JSON (bake, reference, get) instead of solving");
-    render->add_option("--compare", ro.compare,
-                       "reference irradiance JSON: render the relative error as a heat map");
-    render->add_option("--error-scale", ro.errorScale, "relative error shown as red")
-        ->capture_default_str();
-    render->add_option("--exposure", ro.exposure, "EV added to the automatic exposure (PNG)")
-        ->capture_default_str();
-    render
-        ->add_option("--mesh", ro.mesh,
-                     "auto|refined|input: shade the solver's refined mesh or the input "
-                     "vertices (auto: refined when solving here)")
-        ->capture_default_str();
-    render
-        ->add_option("--render-device", ro.renderDevice,
-                     "auto (a real GPU if any, else lavapipe) or lavapipe")
-        ->capture_default_str();
-    render->add_option("--channel", renderChannel, "indirect, direct or total")
-        ->capture_default_str();
-    cli::AddSolverOptions(render, renderSettings.solver, renderSettings.options);
-    renderIterations.Add(render);
-    ro.gather.Add(render);
-    render->add_option("--element-size", renderSettings.elementSize,
-                       "metres; 0 = scene diameter / 24 behind the final gather, / 40 without");
-    render->add_option("--device", renderSolverDevice, "solver device: auto, gpu, lavapipe, cpu")
-        ->capture_default_str();
-    render->add_option("--shadow-map-size", renderSettings.shadowMapSize,
-                       "texels per shadow map side; 0 = from the element size");
-    EnvironmentOptions renderEnv;
-    renderEnv.Add(render);
-    render->add_flag("--validation", renderSettings.validation, "enable Vulkan validation layers");
-    render->add_flag("-q,--quiet", ro.quiet, "no progress or summary on stderr");
-
-    auto* compare = app.add_subcommand(
-        "compare",
-        "Per-vertex error of irradiance file A against reference B: relative RMSE, mean and "
-        "max relative error, per node and overall (exit status 4 when --max-rmse is exceeded)");
-    std::string cmpA, cmpB;
-    bool cmpJson = false;
-    double maxRmse = -1.0, floor = kDefaultFloor;
-    compare->add_option("a", cmpA, "irradiance JSON to judge")->required();
-    compare->add_option("b", cmpB, "reference irradiance JSON")->required();
-    compare->add_flag("--json", cmpJson, "print the result as JSON");
-    compare->add_option("--max-rmse", maxRmse,
-                        "fail (exit 4) when the overall relative RMSE exceeds this (e.g. 0.1)");
-
-    compare
-        ->add_option("--floor", floor,
-                     "relative errors are taken against max(|b|, floor × mean |b|)")
-        ->capture_default_str();
+    BakeCommand bake;
+    ReferenceCommand reference;
+    RenderCommand render;
+    CompareCommand compare;
+    bake.Add(app);
+    reference.Add(app);
+    render.Add(app);
+    compare.Add(app);
 
     try {
         app.parse(argc, argv);
@@ -214,20 +264,10 @@ int main(int argc, char** argv) {
     }
     if (service.Parsed()) return service.Run();
     try {
-        if (bake->parsed()) {
-            settings.backOcclusion = ParseBackOcclusion(backOcclusion);
-            return Bake(scenePath, outPath, settings, iterations, device, channel, bakeEnv,
-                        bakeGather, ParseDisplayColor(bakeColor0), quiet);
-        }
-        if (reference->parsed()) {
-            refSettings.channel = ParseChannel(refChannel);
-            return Reference(refScene, refOut, refSettings, refEnv, ParseDisplayColor(refColor0),
-                             refQuiet);
-        }
-        if (render->parsed())
-            return Render(ro, renderSettings, renderIterations, renderSolverDevice, renderChannel,
-                          renderEnv);
-        if (compare->parsed()) return CompareFiles(cmpA, cmpB, cmpJson, maxRmse, floor);
+        if (bake.cmd->parsed()) return bake.Run();
+        if (reference.cmd->parsed()) return reference.Run();
+        if (render.cmd->parsed()) return render.Run();
+        if (compare.cmd->parsed()) return compare.Run();
     } catch (const penumbra::Error& e) {
         std::fprintf(stderr, "penumbra: error: %s\n", e.what());
         return 1;
