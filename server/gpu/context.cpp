@@ -116,6 +116,26 @@ Context::Context(DeviceKind kind, bool validation, Capability need)
     } catch (const std::exception& e) {
         throw Error(std::string("Vulkan is not available (loader missing?): ") + e.what());
     }
+    try {
+        CreateInstance(validation, rayTracing);
+        PickDevice(kind, rayTracing);
+        PickQueueFamily();
+        float priority = 1.0f;
+        vk::DeviceQueueCreateInfo qi({}, family_, 1, &priority);
+        if (rayTracing)
+            CreateRayTracingDevice(qi);
+        else
+            CreateComputeDevice(qi);
+        queue_ = std::make_unique<vk::raii::Queue>(*device_, family_, 0);
+        pool_ = std::make_unique<vk::raii::CommandPool>(
+            *device_,
+            vk::CommandPoolCreateInfo(vk::CommandPoolCreateFlagBits::eResetCommandBuffer, family_));
+    } catch (const vk::SystemError& e) {
+        throw Error(std::string("Vulkan set-up failed: ") + e.what());
+    }
+}
+
+void Context::CreateInstance(bool validation, bool rayTracing) {
     std::vector<const char*> layers, extensions;
     if (validation) {
         bool found = false;
@@ -132,156 +152,147 @@ Context::Context(DeviceKind kind, bool validation, Capability need)
     vk::ApplicationInfo app("penumbra", 1, "penumbra", 1,
                             rayTracing ? VK_API_VERSION_1_2 : VK_API_VERSION_1_1);
     vk::InstanceCreateInfo info({}, &app, layers, extensions);
-    try {
-        instance_ = std::make_unique<vk::raii::Instance>(*context_, info);
-        if (validation_) {
-            vk::DebugUtilsMessengerCreateInfoEXT mi(
-                {},
-                vk::DebugUtilsMessageSeverityFlagBitsEXT::eWarning |
-                    vk::DebugUtilsMessageSeverityFlagBitsEXT::eError,
-                vk::DebugUtilsMessageTypeFlagBitsEXT::eGeneral |
-                    vk::DebugUtilsMessageTypeFlagBitsEXT::eValidation |
-                    vk::DebugUtilsMessageTypeFlagBitsEXT::ePerformance,
-                &OnMessage, messages_.get());
-            messenger_ = std::make_unique<vk::raii::DebugUtilsMessengerEXT>(*instance_, mi);
-        }
-
-        // Device choice: discrete > integrated > virtual > CPU, or lavapipe when asked.
-        vk::raii::PhysicalDevices all(*instance_);
-        int best = -1, bestRank = -1;
-        std::string gaps;  // with `need`: the devices of `kind` that lack it, and what
-        for (size_t i = 0; i < all.size(); ++i) {
-            auto props = all[i].getProperties();
-            bool isCpu = props.deviceType == vk::PhysicalDeviceType::eCpu;
-            if (kind == DeviceKind::kLavapipe && !isCpu) continue;
-            if (kind == DeviceKind::kRealGpu && isCpu) continue;
-            if (rayTracing) {
-                const std::string gap = RayTracingGaps(all[i]);
-                if (!gap.empty()) {
-                    gaps += (gaps.empty() ? "" : "; ") + std::string(props.deviceName.data()) +
-                            " lacks " + gap;
-                    continue;
-                }
-            }
-            if (Rank(props) > bestRank) bestRank = Rank(props), best = static_cast<int>(i);
-        }
-        if (best < 0 && !gaps.empty())
-            throw Error(
-                "no Vulkan device can trace rays (VK_KHR_acceleration_structure and "
-                "VK_KHR_ray_tracing_pipeline): " +
-                gaps);
-        if (best < 0) {
-            throw Error(kind == DeviceKind::kLavapipe
-                            ? "no CPU Vulkan device (lavapipe) found; install mesa-vulkan-drivers"
-                        : kind == DeviceKind::kRealGpu
-                            ? "no GPU Vulkan device found (only CPU implementations); use "
-                              "--device cpu or --device lavapipe"
-                            : "no Vulkan device found");
-        }
-        physical_ = std::make_unique<vk::raii::PhysicalDevice>(std::move(all[best]));
-        auto props = physical_->getProperties();
-        name_ = props.deviceName.data();
-        lavapipe_ = props.deviceType == vk::PhysicalDeviceType::eCpu;
-        limits_ = props.limits;
-        timestampPeriod_ = props.limits.timestampPeriod;
-
-        auto families = physical_->getQueueFamilyProperties();
-        // A queue that computes and, for the shadow pass, rasterises; else compute only.
-        family_ = UINT32_MAX;
-        const auto both = vk::QueueFlagBits::eCompute | vk::QueueFlagBits::eGraphics;
-        for (uint32_t i = 0; i < families.size() && family_ == UINT32_MAX; ++i)
-            if ((families[i].queueFlags & both) == both) family_ = i;
-        for (uint32_t i = 0; i < families.size() && family_ == UINT32_MAX; ++i)
-            if (families[i].queueFlags & vk::QueueFlagBits::eCompute) family_ = i;
-        graphics_ = static_cast<bool>(families[family_ == UINT32_MAX ? 0 : family_].queueFlags &
-                                      vk::QueueFlagBits::eGraphics);
-        if (family_ == UINT32_MAX) throw Error("Vulkan device " + name_ + " has no compute queue");
-        if (families[family_].timestampValidBits == 0) timestampPeriod_ = 0.0f;
-
-        float priority = 1.0f;
-        vk::DeviceQueueCreateInfo qi({}, family_, 1, &priority);
-        vk::PhysicalDeviceFeatures features;
-        // 64-bit atomicMin in storage buffers where the device has it (the implicit solver's
-        // closest link a (node, bin) slot): Vulkan 1.2's feature on a ray-tracing context
-        // (a 1.2 instance), VK_KHR_shader_atomic_int64's on the others (1.1).
-        const bool shaderInt64 = physical_->getFeatures().shaderInt64;
-        if (rayTracing) {
-            vk::StructureChain<vk::DeviceCreateInfo, vk::PhysicalDeviceVulkan12Features,
-                               vk::PhysicalDeviceAccelerationStructureFeaturesKHR,
-                               vk::PhysicalDeviceRayTracingPipelineFeaturesKHR>
-                chain;
-            chain.get<vk::DeviceCreateInfo>()
-                .setQueueCreateInfos(qi)
-                .setPEnabledExtensionNames(kRayTracingExtensions)
-                .setPEnabledFeatures(&features);
-            int64Atomics_ = shaderInt64 && physical_
-                                               ->getFeatures2<vk::PhysicalDeviceFeatures2,
-                                                              vk::PhysicalDeviceVulkan12Features>()
-                                               .get<vk::PhysicalDeviceVulkan12Features>()
-                                               .shaderBufferInt64Atomics;
-            features.shaderInt64 = int64Atomics_;
-            chain.get<vk::PhysicalDeviceVulkan12Features>().bufferDeviceAddress = VK_TRUE;
-            chain.get<vk::PhysicalDeviceVulkan12Features>().shaderBufferInt64Atomics =
-                int64Atomics_;
-            chain.get<vk::PhysicalDeviceAccelerationStructureFeaturesKHR>().accelerationStructure =
-                VK_TRUE;
-            chain.get<vk::PhysicalDeviceRayTracingPipelineFeaturesKHR>().rayTracingPipeline =
-                VK_TRUE;
-            device_ =
-                std::make_unique<vk::raii::Device>(*physical_, chain.get<vk::DeviceCreateInfo>());
-        } else {
-            // Float atomics in storage buffers where the device has them (the light field's
-            // walk adds what each line brings to its surfels with them).
-            const auto have = physical_->enumerateDeviceExtensionProperties();
-            auto has = [&](const char* name) {
-                return std::any_of(have.begin(), have.end(), [&](const vk::ExtensionProperties& e) {
-                    return std::strcmp(e.extensionName, name) == 0;
-                });
-            };
-            if (has(VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME))
-                floatAtomics_ = physical_
-                                    ->getFeatures2<vk::PhysicalDeviceFeatures2,
-                                                   vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
-                                    .get<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
-                                    .shaderBufferFloat32AtomicAdd;
-            if (shaderInt64 && has(VK_KHR_SHADER_ATOMIC_INT64_EXTENSION_NAME))
-                int64Atomics_ = physical_
-                                    ->getFeatures2<vk::PhysicalDeviceFeatures2,
-                                                   vk::PhysicalDeviceShaderAtomicInt64Features>()
-                                    .get<vk::PhysicalDeviceShaderAtomicInt64Features>()
-                                    .shaderBufferInt64Atomics;
-            features.shaderInt64 = int64Atomics_;
-            vk::StructureChain<vk::DeviceCreateInfo, vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT,
-                               vk::PhysicalDeviceShaderAtomicInt64Features>
-                chain;
-            std::vector<const char*> extensions;
-            chain.get<vk::DeviceCreateInfo>().setQueueCreateInfos(qi).setPEnabledFeatures(
-                &features);
-            if (floatAtomics_) {
-                extensions.push_back(VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME);
-                chain.get<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
-                    .shaderBufferFloat32AtomicAdd = VK_TRUE;
-            } else {
-                chain.unlink<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>();
-            }
-            if (int64Atomics_) {
-                extensions.push_back(VK_KHR_SHADER_ATOMIC_INT64_EXTENSION_NAME);
-                chain.get<vk::PhysicalDeviceShaderAtomicInt64Features>().shaderBufferInt64Atomics =
-                    VK_TRUE;
-            } else {
-                chain.unlink<vk::PhysicalDeviceShaderAtomicInt64Features>();
-            }
-            chain.get<vk::DeviceCreateInfo>().setPEnabledExtensionNames(extensions);
-            device_ =
-                std::make_unique<vk::raii::Device>(*physical_, chain.get<vk::DeviceCreateInfo>());
-        }
-        queue_ = std::make_unique<vk::raii::Queue>(*device_, family_, 0);
-        pool_ = std::make_unique<vk::raii::CommandPool>(
-            *device_,
-            vk::CommandPoolCreateInfo(vk::CommandPoolCreateFlagBits::eResetCommandBuffer, family_));
-    } catch (const vk::SystemError& e) {
-        throw Error(std::string("Vulkan set-up failed: ") + e.what());
+    instance_ = std::make_unique<vk::raii::Instance>(*context_, info);
+    if (validation_) {
+        vk::DebugUtilsMessengerCreateInfoEXT mi(
+            {},
+            vk::DebugUtilsMessageSeverityFlagBitsEXT::eWarning |
+                vk::DebugUtilsMessageSeverityFlagBitsEXT::eError,
+            vk::DebugUtilsMessageTypeFlagBitsEXT::eGeneral |
+                vk::DebugUtilsMessageTypeFlagBitsEXT::eValidation |
+                vk::DebugUtilsMessageTypeFlagBitsEXT::ePerformance,
+            &OnMessage, messages_.get());
+        messenger_ = std::make_unique<vk::raii::DebugUtilsMessengerEXT>(*instance_, mi);
     }
+}
+
+void Context::PickDevice(DeviceKind kind, bool rayTracing) {
+    // Device choice: discrete > integrated > virtual > CPU, or lavapipe when asked.
+    vk::raii::PhysicalDevices all(*instance_);
+    int best = -1, bestRank = -1;
+    std::string gaps;  // with `need`: the devices of `kind` that lack it, and what
+    for (size_t i = 0; i < all.size(); ++i) {
+        auto props = all[i].getProperties();
+        bool isCpu = props.deviceType == vk::PhysicalDeviceType::eCpu;
+        if (kind == DeviceKind::kLavapipe && !isCpu) continue;
+        if (kind == DeviceKind::kRealGpu && isCpu) continue;
+        if (rayTracing) {
+            const std::string gap = RayTracingGaps(all[i]);
+            if (!gap.empty()) {
+                gaps += (gaps.empty() ? "" : "; ") + std::string(props.deviceName.data()) +
+                        " lacks " + gap;
+                continue;
+            }
+        }
+        if (Rank(props) > bestRank) bestRank = Rank(props), best = static_cast<int>(i);
+    }
+    if (best < 0 && !gaps.empty())
+        throw Error(
+            "no Vulkan device can trace rays (VK_KHR_acceleration_structure and "
+            "VK_KHR_ray_tracing_pipeline): " +
+            gaps);
+    if (best < 0) {
+        throw Error(kind == DeviceKind::kLavapipe
+                        ? "no CPU Vulkan device (lavapipe) found; install mesa-vulkan-drivers"
+                    : kind == DeviceKind::kRealGpu
+                        ? "no GPU Vulkan device found (only CPU implementations); use "
+                          "--device cpu or --device lavapipe"
+                        : "no Vulkan device found");
+    }
+    physical_ = std::make_unique<vk::raii::PhysicalDevice>(std::move(all[best]));
+    auto props = physical_->getProperties();
+    name_ = props.deviceName.data();
+    lavapipe_ = props.deviceType == vk::PhysicalDeviceType::eCpu;
+    limits_ = props.limits;
+    timestampPeriod_ = props.limits.timestampPeriod;
+}
+
+void Context::PickQueueFamily() {
+    auto families = physical_->getQueueFamilyProperties();
+    // A queue that computes and, for the shadow pass, rasterises; else compute only.
+    family_ = UINT32_MAX;
+    const auto both = vk::QueueFlagBits::eCompute | vk::QueueFlagBits::eGraphics;
+    for (uint32_t i = 0; i < families.size() && family_ == UINT32_MAX; ++i)
+        if ((families[i].queueFlags & both) == both) family_ = i;
+    for (uint32_t i = 0; i < families.size() && family_ == UINT32_MAX; ++i)
+        if (families[i].queueFlags & vk::QueueFlagBits::eCompute) family_ = i;
+    graphics_ = static_cast<bool>(families[family_ == UINT32_MAX ? 0 : family_].queueFlags &
+                                  vk::QueueFlagBits::eGraphics);
+    if (family_ == UINT32_MAX) throw Error("Vulkan device " + name_ + " has no compute queue");
+    if (families[family_].timestampValidBits == 0) timestampPeriod_ = 0.0f;
+}
+
+// 64-bit atomicMin in storage buffers where the device has it (the implicit solver's closest
+// link a (node, bin) slot): Vulkan 1.2's feature on a ray-tracing context (a 1.2 instance).
+void Context::CreateRayTracingDevice(const vk::DeviceQueueCreateInfo& qi) {
+    vk::PhysicalDeviceFeatures features;
+    const bool shaderInt64 = physical_->getFeatures().shaderInt64;
+    vk::StructureChain<vk::DeviceCreateInfo, vk::PhysicalDeviceVulkan12Features,
+                       vk::PhysicalDeviceAccelerationStructureFeaturesKHR,
+                       vk::PhysicalDeviceRayTracingPipelineFeaturesKHR>
+        chain;
+    chain.get<vk::DeviceCreateInfo>()
+        .setQueueCreateInfos(qi)
+        .setPEnabledExtensionNames(kRayTracingExtensions)
+        .setPEnabledFeatures(&features);
+    int64Atomics_ =
+        shaderInt64 &&
+        physical_->getFeatures2<vk::PhysicalDeviceFeatures2, vk::PhysicalDeviceVulkan12Features>()
+            .get<vk::PhysicalDeviceVulkan12Features>()
+            .shaderBufferInt64Atomics;
+    features.shaderInt64 = int64Atomics_;
+    chain.get<vk::PhysicalDeviceVulkan12Features>().bufferDeviceAddress = VK_TRUE;
+    chain.get<vk::PhysicalDeviceVulkan12Features>().shaderBufferInt64Atomics = int64Atomics_;
+    chain.get<vk::PhysicalDeviceAccelerationStructureFeaturesKHR>().accelerationStructure = VK_TRUE;
+    chain.get<vk::PhysicalDeviceRayTracingPipelineFeaturesKHR>().rayTracingPipeline = VK_TRUE;
+    device_ = std::make_unique<vk::raii::Device>(*physical_, chain.get<vk::DeviceCreateInfo>());
+}
+
+// VK_KHR_shader_atomic_int64's 64-bit atomics on a compute context (a 1.1 instance), and float
+// atomics in storage buffers where the device has them (the light field's walk adds what each
+// line brings to its surfels with them).
+void Context::CreateComputeDevice(const vk::DeviceQueueCreateInfo& qi) {
+    vk::PhysicalDeviceFeatures features;
+    const bool shaderInt64 = physical_->getFeatures().shaderInt64;
+    const auto have = physical_->enumerateDeviceExtensionProperties();
+    auto has = [&](const char* name) {
+        return std::any_of(have.begin(), have.end(), [&](const vk::ExtensionProperties& e) {
+            return std::strcmp(e.extensionName, name) == 0;
+        });
+    };
+    if (has(VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME))
+        floatAtomics_ = physical_
+                            ->getFeatures2<vk::PhysicalDeviceFeatures2,
+                                           vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
+                            .get<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>()
+                            .shaderBufferFloat32AtomicAdd;
+    if (shaderInt64 && has(VK_KHR_SHADER_ATOMIC_INT64_EXTENSION_NAME))
+        int64Atomics_ = physical_
+                            ->getFeatures2<vk::PhysicalDeviceFeatures2,
+                                           vk::PhysicalDeviceShaderAtomicInt64Features>()
+                            .get<vk::PhysicalDeviceShaderAtomicInt64Features>()
+                            .shaderBufferInt64Atomics;
+    features.shaderInt64 = int64Atomics_;
+    vk::StructureChain<vk::DeviceCreateInfo, vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT,
+                       vk::PhysicalDeviceShaderAtomicInt64Features>
+        chain;
+    std::vector<const char*> extensions;
+    chain.get<vk::DeviceCreateInfo>().setQueueCreateInfos(qi).setPEnabledFeatures(&features);
+    if (floatAtomics_) {
+        extensions.push_back(VK_EXT_SHADER_ATOMIC_FLOAT_EXTENSION_NAME);
+        chain.get<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>().shaderBufferFloat32AtomicAdd =
+            VK_TRUE;
+    } else {
+        chain.unlink<vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT>();
+    }
+    if (int64Atomics_) {
+        extensions.push_back(VK_KHR_SHADER_ATOMIC_INT64_EXTENSION_NAME);
+        chain.get<vk::PhysicalDeviceShaderAtomicInt64Features>().shaderBufferInt64Atomics = VK_TRUE;
+    } else {
+        chain.unlink<vk::PhysicalDeviceShaderAtomicInt64Features>();
+    }
+    chain.get<vk::DeviceCreateInfo>().setPEnabledExtensionNames(extensions);
+    device_ = std::make_unique<vk::raii::Device>(*physical_, chain.get<vk::DeviceCreateInfo>());
 }
 
 Context::~Context() {

@@ -72,6 +72,15 @@ class Context {
     };
 
   private:
+    // The set-up's steps, in order: the instance (and the validation messenger), the device
+    // of `kind` (with ray tracing where asked), its queue family, then the logical device
+    // with the atomics the device has.
+    void CreateInstance(bool validation, bool rayTracing);
+    void PickDevice(DeviceKind kind, bool rayTracing);
+    void PickQueueFamily();
+    void CreateRayTracingDevice(const vk::DeviceQueueCreateInfo& qi);
+    void CreateComputeDevice(const vk::DeviceQueueCreateInfo& qi);
+
     std::unique_ptr<vk::raii::Context> context_;
     std::unique_ptr<vk::raii::Instance> instance_;
     std::unique_ptr<vk::raii::DebugUtilsMessengerEXT> messenger_;
