@@ -113,6 +113,34 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
                        "scene session on the server (default: the newest loaded)");
     }
 
+    AddLoad(app);
+    AddWatch(app);
+    AddObjectEdits(app);
+    AddLightEdits(app);
+    AddReads(app);
+    if (forScript) {
+        s.sleep = app.add_subcommand("sleep", "Pause the script");
+        s.sleep->add_option("seconds", s.sleepSeconds)->required();
+    } else {
+        s.script = app.add_subcommand(
+            "script",
+            "Run service commands from a file, one per line (docs/CLI.md); without --connect, "
+            "on an embedded server that loads --scene");
+        s.script->add_option("file", s.scriptFile, "script file ('-' for stdin)")->required();
+        s.script->add_option("--scene", s.embeddedScene,
+                             "glTF to load in an embedded in-process server (no --connect)");
+        s.script->add_option("--device", s.device, "embedded server's device")
+            ->capture_default_str();
+        s.script->add_flag("-q,--quiet", s.quiet, "do not echo the script's lines");
+    }
+    for (CLI::App* c : {s.load, s.info, s.watch, s.move, s.deform, s.light, s.material, s.sky,
+                        s.get, s.step, s.stats, s.wait})
+        c->add_flag("-q,--quiet", s.quiet, "print less");
+}
+
+// `load`: the scene, its solver and what the server does with it.
+void ServiceCommands::AddLoad(CLI::App& app) {
+    State& s = *s_;
     s.load = app.add_subcommand("load", "Load a scene on the server (or join its session)");
     s.load->add_option("path", s.loadPath, "glTF path under the server's --scene-root")->required();
     s.load->add_flag("--upload", s.upload, "send the local file as a .glb instead of a path");
@@ -152,7 +180,11 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
         ->add_option("--environment-rotation", s.skyRotationDegrees,
                      "turns the sky about +Y, degrees")
         ->capture_default_str();
+}
 
+// `info` and `watch`.
+void ServiceCommands::AddWatch(CLI::App& app) {
+    State& s = *s_;
     s.info = app.add_subcommand("info", "Print the scene's nodes, lights and materials");
 
     s.watch = app.add_subcommand(
@@ -168,7 +200,11 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.watch->add_flag("--json", s.watchJson,
                       "one JSON object per frame and line (scene, frame, edit, iterations, ms, "
                       "device_ms, fps, converged, note, latency_ms, passes)");
+}
 
+// `move` and `deform`.
+void ServiceCommands::AddObjectEdits(CLI::App& app) {
+    State& s = *s_;
     s.move = app.add_subcommand(
         "move", "Move a dynamic node: new local = translate × current × rotate-y (or --matrix)");
     s.move->add_option("node", s.node, "node name")->required();
@@ -194,7 +230,11 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
                      "JSON file {\"positions\": [x,y,z,...], \"normals\": [...] (optional)}: "
                      "the node's vertices in its own space, its primitives' one after another")
         ->excludes(weights);
+}
 
+// `light`, `material` and `sky`.
+void ServiceCommands::AddLightEdits(CLI::App& app) {
+    State& s = *s_;
     s.light = app.add_subcommand(
         "light",
         "Change a light: a punctual light's colour, intensity, placement, cone and range, or an "
@@ -231,7 +271,11 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.sky->add_option("--environment-intensity", s.skyIntensity, "scales the sky (≥ 0)");
     s.sky->add_option("--environment-rotation", s.skyTurnDegrees,
                       "turns the sky about +Y, degrees");
+}
 
+// `get`, `step`, `stats` and `wait`.
+void ServiceCommands::AddReads(CLI::App& app) {
+    State& s = *s_;
     s.get = app.add_subcommand("get", "Write the current irradiance (.json, or .glb/.gltf)");
     s.get
         ->add_option("-o,--output", s.output,
@@ -254,25 +298,6 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
     s.wait = app.add_subcommand(
         "wait", "Wait until a frame includes every edit sent so far and has converged");
     s.wait->add_option("--timeout", s.timeout, "seconds (default 60)");
-
-    if (forScript) {
-        s.sleep = app.add_subcommand("sleep", "Pause the script");
-        s.sleep->add_option("seconds", s.sleepSeconds)->required();
-    } else {
-        s.script = app.add_subcommand(
-            "script",
-            "Run service commands from a file, one per line (docs/CLI.md); without --connect, "
-            "on an embedded server that loads --scene");
-        s.script->add_option("file", s.scriptFile, "script file ('-' for stdin)")->required();
-        s.script->add_option("--scene", s.embeddedScene,
-                             "glTF to load in an embedded in-process server (no --connect)");
-        s.script->add_option("--device", s.device, "embedded server's device")
-            ->capture_default_str();
-        s.script->add_flag("-q,--quiet", s.quiet, "do not echo the script's lines");
-    }
-    for (CLI::App* c : {s.load, s.info, s.watch, s.move, s.deform, s.light, s.material, s.sky,
-                        s.get, s.step, s.stats, s.wait})
-        c->add_flag("-q,--quiet", s.quiet, "print less");
 }
 
 ServiceCommands::~ServiceCommands() = default;

@@ -28,6 +28,12 @@ class ServiceCommands {
     int Run();
 
   private:
+    // The constructor's parts: each adds its subcommands and their options to `app`.
+    void AddLoad(CLI::App& app);
+    void AddWatch(CLI::App& app);
+    void AddObjectEdits(CLI::App& app);
+    void AddLightEdits(CLI::App& app);
+    void AddReads(CLI::App& app);
     struct State;
     std::unique_ptr<State> s_;
 };
