@@ -72,7 +72,17 @@ Directions::Directions(int count) : count_(count) {
     }
 
     for (const auto& d : dirs_) x_.push_back(d.x), y_.push_back(d.y), z_.push_back(d.z);
+    BuildAdjacency();
+    BuildCubeTable();
+    BuildLookupTable();
+    opposite_.resize(count);
+    for (int b = 0; b < count; ++b) opposite_[b] = Lookup(-dirs_[b]);
+    BuildGroups();
+    BuildSpreading();
+}
 
+void Directions::BuildAdjacency() {
+    const int count = count_;
     // Adjacency: bins within 2 spacings (enough for the greedy walk to reach the nearest).
     adjacent_.resize(count);
     for (int i = 0; i < count; ++i)
@@ -85,7 +95,10 @@ Directions::Directions(int count) : count_(count) {
         std::stable_sort(byAngle_[i].begin(), byAngle_[i].end(),
                          [](const Near& a, const Near& b) { return a.cos > b.cos; });
     }
+}
 
+void Directions::BuildCubeTable() {
+    const int count = count_;
     // Cube-map table, brute force at build time (≤ 6·64²·1024 dot products).
     cubeRes_ = std::max(8, static_cast<int>(std::ceil(std::sqrt(count / 6.0f) * 2.0f)));
     cube_.resize(6 * cubeRes_ * cubeRes_);
@@ -101,6 +114,9 @@ Directions::Directions(int count) : count_(count) {
                 }
                 cube_[(f * cubeRes_ + v) * cubeRes_ + u] = best;
             }
+}
+
+void Directions::BuildLookupTable() {
     // Lookup's own table: a cube map twice as fine (finer tables miss the cache more), each texel
     // listing every bin that is the nearest somewhere in it. For p in a texel, |p − c| ≤ ρ (c its
     // centre, ρ the chord to its farthest corner), so |p·x − c·x| ≤ ρ |x| for any x: a bin b
@@ -131,50 +147,53 @@ Directions::Directions(int count) : count_(count) {
                 }
                 candidateFirst_[size_t(f * res + v) * res + u + 1] = uint32_t(candidates_.size());
             }
-    opposite_.resize(count);
-    for (int b = 0; b < count; ++b) opposite_[b] = Lookup(-dirs_[b]);
+}
 
+void Directions::BuildGroups() {
+    const int count = count_;
     // ForEachWithin's groups: the cells of a cube map of 4² cells a face (about nine bins a
     // group at 864 bins), each bin in the cell its direction falls in.
-    {
-        constexpr int kCells = 4;
-        std::vector<std::vector<uint32_t>> members(6 * kCells * kCells);
-        for (int b = 0; b < count; ++b) {
-            int face, u, v;
-            CubeCoords(dirs_[b], kCells, face, u, v);
-            members[(face * kCells + v) * kCells + u].push_back(uint32_t(b));
-        }
-        groupFirst_.push_back(0);
-        for (const auto& m : members) {
-            if (m.empty()) continue;
-            glm::vec3 sum(0.0f);
-            for (uint32_t b : m) sum += dirs_[b];
-            const glm::vec3 centre = glm::normalize(sum);
-            float radius = 0.0f;
-            for (uint32_t b : m) radius = std::max(radius, AngleBetween(centre, dirs_[b]));
-            radius += 2e-3f;  // the rounding of the caller's cosines
-            groups_.push_back({centre, radius, std::cos(radius), std::sin(radius)});
-            groupBins_.insert(groupBins_.end(), m.begin(), m.end());
-            groupFirst_.push_back(uint32_t(groupBins_.size()));
-        }
-        const size_t groups = groups_.size();
-        PENUMBRA_CHECK(groups <= 256);  // groupOrder_ holds them as bytes
-        groupOrder_.resize(size_t(count) * groups);
-        groupLower_.resize(size_t(count) * groups);
-        std::vector<std::pair<float, uint8_t>> byLower(groups);
-        for (int b = 0; b < count; ++b) {
-            for (size_t g = 0; g < groups; ++g)
-                byLower[g] = {
-                    std::max(0.0f, AngleBetween(dirs_[b], groups_[g].centre) - groups_[g].radius),
-                    uint8_t(g)};
-            std::sort(byLower.begin(), byLower.end());
-            for (size_t g = 0; g < groups; ++g) {
-                groupLower_[size_t(b) * groups + g] = byLower[g].first;
-                groupOrder_[size_t(b) * groups + g] = byLower[g].second;
-            }
+    constexpr int kCells = 4;
+    std::vector<std::vector<uint32_t>> members(6 * kCells * kCells);
+    for (int b = 0; b < count; ++b) {
+        int face, u, v;
+        CubeCoords(dirs_[b], kCells, face, u, v);
+        members[(face * kCells + v) * kCells + u].push_back(uint32_t(b));
+    }
+    groupFirst_.push_back(0);
+    for (const auto& m : members) {
+        if (m.empty()) continue;
+        glm::vec3 sum(0.0f);
+        for (uint32_t b : m) sum += dirs_[b];
+        const glm::vec3 centre = glm::normalize(sum);
+        float radius = 0.0f;
+        for (uint32_t b : m) radius = std::max(radius, AngleBetween(centre, dirs_[b]));
+        radius += 2e-3f;  // the rounding of the caller's cosines
+        groups_.push_back({centre, radius, std::cos(radius), std::sin(radius)});
+        groupBins_.insert(groupBins_.end(), m.begin(), m.end());
+        groupFirst_.push_back(uint32_t(groupBins_.size()));
+    }
+    const size_t groups = groups_.size();
+    PENUMBRA_CHECK(groups <= 256);  // groupOrder_ holds them as bytes
+    groupOrder_.resize(size_t(count) * groups);
+    groupLower_.resize(size_t(count) * groups);
+    std::vector<std::pair<float, uint8_t>> byLower(groups);
+    for (int b = 0; b < count; ++b) {
+        for (size_t g = 0; g < groups; ++g)
+            byLower[g] = {
+                std::max(0.0f, AngleBetween(dirs_[b], groups_[g].centre) - groups_[g].radius),
+                uint8_t(g)};
+        std::sort(byLower.begin(), byLower.end());
+        for (size_t g = 0; g < groups; ++g) {
+            groupLower_[size_t(b) * groups + g] = byLower[g].first;
+            groupOrder_[size_t(b) * groups + g] = byLower[g].second;
         }
     }
+}
 
+void Directions::BuildSpreading() {
+    const int count = count_;
+    const float pi = std::numbers::pi_v<float>;
     // Spreading tables: for each level, bins within 2.5σ with Gaussian weights, Σ = 1.
     offsets_.assign(kLevels * (count + 1), 0);
     for (int k = 0; k < kLevels; ++k) {

@@ -171,6 +171,14 @@ class Directions {
     std::vector<uint32_t> PaddedAdjacency(uint32_t& width) const;
 
   private:
+    // The constructor's tables, in order: each bin's neighbours (adjacent_, byAngle_), the
+    // nearest-bin cube map Walk starts from (cube_), Lookup's finer map of candidates, the
+    // groups ForEachWithin prunes by, and the spreading levels' Gaussian weights.
+    void BuildAdjacency();
+    void BuildCubeTable();
+    void BuildLookupTable();
+    void BuildGroups();
+    void BuildSpreading();
     int count_;
     float solidAngle_;
     float spacing_;

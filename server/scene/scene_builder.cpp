@@ -267,12 +267,13 @@ Scene SceneBuilder::Build() const {
     return scene;
 }
 
-void SceneBuilder::WriteGltf(const std::string& path) const {
-    tinygltf::Model model;
-    model.asset.version = "2.0";
-    model.asset.generator = "penumbra make_scenes";
+namespace {
+
+// The model's materials: base colour, metallic and roughness factors, and emission as
+// emissiveFactor times KHR_materials_emissive_strength past 1.
+void WriteMaterials(const std::vector<Material>& materials, tinygltf::Model& model) {
     bool usesStrength = false;
-    for (const auto& m : materials_) {
+    for (const auto& m : materials) {
         tinygltf::Material mat;
         mat.name = m.name;
         mat.pbrMetallicRoughness.baseColorFactor = {m.baseColor.x, m.baseColor.y, m.baseColor.z,
@@ -294,9 +295,13 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
         model.materials.push_back(mat);
     }
     if (usesStrength) model.extensionsUsed.push_back("KHR_materials_emissive_strength");
+}
 
+// The model's one buffer, each view 4-byte aligned.
+struct BufferWriter {
+    tinygltf::Model& model;
     tinygltf::Buffer buffer;
-    auto addView = [&](const void* data, size_t bytes, int target) {
+    int AddView(const void* data, size_t bytes, int target) {
         tinygltf::BufferView view;
         view.buffer = 0;
         view.byteOffset = buffer.data.size();
@@ -306,87 +311,34 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
         std::memcpy(buffer.data.data() + view.byteOffset, data, bytes);
         model.bufferViews.push_back(view);
         return static_cast<int>(model.bufferViews.size() - 1);
-    };
-    tinygltf::Scene scene;
-    for (const auto& name : nodeOrder_) {
-        tinygltf::Mesh mesh;
-        mesh.name = name;
-        auto motion = dynamic_.find(name);
-        glm::vec3 origin = motion != dynamic_.end() ? motion->second.origin : glm::vec3(0.0f);
-        for (const auto& [material, shared] : nodes_.at(name)) {
-            Part part = shared;
-            for (auto& v : part.positions) v -= origin;
-            tinygltf::Primitive prim;
-            prim.material = static_cast<int>(material);
-            prim.mode = TINYGLTF_MODE_TRIANGLES;
-            glm::vec3 lo(1e30f), hi(-1e30f);
-            for (const auto& p : part.positions) lo = glm::min(lo, p), hi = glm::max(hi, p);
-            tinygltf::Accessor pos;
-            pos.bufferView = addView(part.positions.data(), part.positions.size() * 12,
-                                     TINYGLTF_TARGET_ARRAY_BUFFER);
-            pos.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
-            pos.type = TINYGLTF_TYPE_VEC3;
-            pos.count = part.positions.size();
-            pos.minValues = {lo.x, lo.y, lo.z};
-            pos.maxValues = {hi.x, hi.y, hi.z};
-            model.accessors.push_back(pos);
-            prim.attributes["POSITION"] = static_cast<int>(model.accessors.size() - 1);
-            tinygltf::Accessor nrm = pos;
-            nrm.bufferView = addView(part.normals.data(), part.normals.size() * 12,
-                                     TINYGLTF_TARGET_ARRAY_BUFFER);
-            nrm.minValues.clear();
-            nrm.maxValues.clear();
-            model.accessors.push_back(nrm);
-            prim.attributes["NORMAL"] = static_cast<int>(model.accessors.size() - 1);
-            tinygltf::Accessor idx;
-            idx.bufferView = addView(part.indices.data(), part.indices.size() * 4,
-                                     TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
-            idx.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
-            idx.type = TINYGLTF_TYPE_SCALAR;
-            idx.count = part.indices.size();
-            model.accessors.push_back(idx);
-            prim.indices = static_cast<int>(model.accessors.size() - 1);
-            for (const auto& target : part.targets) {
-                glm::vec3 dlo(1e30f), dhi(-1e30f);
-                for (const auto& d : target) dlo = glm::min(dlo, d), dhi = glm::max(dhi, d);
-                tinygltf::Accessor t = pos;
-                t.bufferView =
-                    addView(target.data(), target.size() * 12, TINYGLTF_TARGET_ARRAY_BUFFER);
-                t.minValues = {dlo.x, dlo.y, dlo.z};
-                t.maxValues = {dhi.x, dhi.y, dhi.z};
-                model.accessors.push_back(t);
-                prim.targets.push_back({{"POSITION", int(model.accessors.size() - 1)}});
-                mesh.weights.push_back(0.0);
-            }
-            mesh.primitives.push_back(prim);
-        }
-        model.meshes.push_back(mesh);
-        tinygltf::Node node;
-        node.name = name;
-        node.mesh = static_cast<int>(model.meshes.size() - 1);
-        if (motion != dynamic_.end()) {
-            node.translation = {origin.x, origin.y, origin.z};
-            tinygltf::Value::Object pen;
-            pen["dynamic"] = tinygltf::Value(true);
-            if (motion->second.hasBounds) {
-                auto array = [](glm::vec3 v) {
-                    return tinygltf::Value(tinygltf::Value::Array{tinygltf::Value(double(v.x)),
-                                                                  tinygltf::Value(double(v.y)),
-                                                                  tinygltf::Value(double(v.z))});
-                };
-                tinygltf::Value::Object bounds;
-                bounds["min"] = array(motion->second.boundsMin);
-                bounds["max"] = array(motion->second.boundsMax);
-                pen["bounds"] = tinygltf::Value(bounds);
-            }
-            tinygltf::Value::Object extras;
-            extras["penumbra"] = tinygltf::Value(pen);
-            node.extras = tinygltf::Value(extras);
-        }
-        model.nodes.push_back(node);
-        scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
     }
-    for (const PunctualLight& light : lights_) {
+};
+
+// The extras of a dynamic node: {"penumbra": {"dynamic": true, "bounds": ...}}.
+tinygltf::Value DynamicExtras(bool hasBounds, const glm::vec3& boundsMin,
+                              const glm::vec3& boundsMax) {
+    tinygltf::Value::Object pen;
+    pen["dynamic"] = tinygltf::Value(true);
+    if (hasBounds) {
+        auto array = [](glm::vec3 v) {
+            return tinygltf::Value(tinygltf::Value::Array{tinygltf::Value(double(v.x)),
+                                                          tinygltf::Value(double(v.y)),
+                                                          tinygltf::Value(double(v.z))});
+        };
+        tinygltf::Value::Object bounds;
+        bounds["min"] = array(boundsMin);
+        bounds["max"] = array(boundsMax);
+        pen["bounds"] = tinygltf::Value(bounds);
+    }
+    tinygltf::Value::Object extras;
+    extras["penumbra"] = tinygltf::Value(pen);
+    return tinygltf::Value(extras);
+}
+
+// The punctual lights, each a node with KHR_lights_punctual.
+void WriteLights(const std::vector<PunctualLight>& lights, tinygltf::Model& model,
+                 tinygltf::Scene& scene) {
+    for (const PunctualLight& light : lights) {
         tinygltf::Light out;
         out.name = light.name;
         out.type = light.type == LightType::kPoint  ? "point"
@@ -409,7 +361,12 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
         model.nodes.push_back(node);
         scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
     }
-    for (const Camera& c : cameras_) {
+}
+
+// The perspective cameras, each a node.
+void WriteCameras(const std::vector<Camera>& cameras, tinygltf::Model& model,
+                  tinygltf::Scene& scene) {
+    for (const Camera& c : cameras) {
         tinygltf::Camera out;
         out.name = c.name;
         out.type = "perspective";
@@ -426,7 +383,94 @@ void SceneBuilder::WriteGltf(const std::string& path) const {
         model.nodes.push_back(node);
         scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
     }
-    model.buffers.push_back(buffer);
+}
+
+// One part's primitive: its positions (less `origin`), normals, indices and morph targets.
+// `positions` are moved by `origin` first. A morph target adds a weight to `mesh`.
+tinygltf::Primitive WritePart(std::vector<glm::vec3> positions,
+                              const std::vector<glm::vec3>& normals,
+                              const std::vector<uint32_t>& indices,
+                              const std::vector<std::vector<glm::vec3>>& targets, uint32_t material,
+                              const glm::vec3& origin, BufferWriter& writer, tinygltf::Mesh& mesh) {
+    tinygltf::Model& model = writer.model;
+    for (auto& v : positions) v -= origin;
+    tinygltf::Primitive prim;
+    prim.material = static_cast<int>(material);
+    prim.mode = TINYGLTF_MODE_TRIANGLES;
+    glm::vec3 lo(1e30f), hi(-1e30f);
+    for (const auto& p : positions) lo = glm::min(lo, p), hi = glm::max(hi, p);
+    tinygltf::Accessor pos;
+    pos.bufferView =
+        writer.AddView(positions.data(), positions.size() * 12, TINYGLTF_TARGET_ARRAY_BUFFER);
+    pos.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+    pos.type = TINYGLTF_TYPE_VEC3;
+    pos.count = positions.size();
+    pos.minValues = {lo.x, lo.y, lo.z};
+    pos.maxValues = {hi.x, hi.y, hi.z};
+    model.accessors.push_back(pos);
+    prim.attributes["POSITION"] = static_cast<int>(model.accessors.size() - 1);
+    tinygltf::Accessor nrm = pos;
+    nrm.bufferView =
+        writer.AddView(normals.data(), normals.size() * 12, TINYGLTF_TARGET_ARRAY_BUFFER);
+    nrm.minValues.clear();
+    nrm.maxValues.clear();
+    model.accessors.push_back(nrm);
+    prim.attributes["NORMAL"] = static_cast<int>(model.accessors.size() - 1);
+    tinygltf::Accessor idx;
+    idx.bufferView =
+        writer.AddView(indices.data(), indices.size() * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+    idx.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+    idx.type = TINYGLTF_TYPE_SCALAR;
+    idx.count = indices.size();
+    model.accessors.push_back(idx);
+    prim.indices = static_cast<int>(model.accessors.size() - 1);
+    for (const auto& target : targets) {
+        glm::vec3 dlo(1e30f), dhi(-1e30f);
+        for (const auto& d : target) dlo = glm::min(dlo, d), dhi = glm::max(dhi, d);
+        tinygltf::Accessor t = pos;
+        t.bufferView =
+            writer.AddView(target.data(), target.size() * 12, TINYGLTF_TARGET_ARRAY_BUFFER);
+        t.minValues = {dlo.x, dlo.y, dlo.z};
+        t.maxValues = {dhi.x, dhi.y, dhi.z};
+        model.accessors.push_back(t);
+        prim.targets.push_back({{"POSITION", int(model.accessors.size() - 1)}});
+        mesh.weights.push_back(0.0);
+    }
+    return prim;
+}
+
+}  // namespace
+
+void SceneBuilder::WriteGltf(const std::string& path) const {
+    tinygltf::Model model;
+    model.asset.version = "2.0";
+    model.asset.generator = "penumbra make_scenes";
+    WriteMaterials(materials_, model);
+    BufferWriter writer{model, {}};
+    tinygltf::Scene scene;
+    for (const auto& name : nodeOrder_) {
+        tinygltf::Mesh mesh;
+        mesh.name = name;
+        auto motion = dynamic_.find(name);
+        glm::vec3 origin = motion != dynamic_.end() ? motion->second.origin : glm::vec3(0.0f);
+        for (const auto& [material, shared] : nodes_.at(name))
+            mesh.primitives.push_back(WritePart(shared.positions, shared.normals, shared.indices,
+                                                shared.targets, material, origin, writer, mesh));
+        model.meshes.push_back(mesh);
+        tinygltf::Node node;
+        node.name = name;
+        node.mesh = static_cast<int>(model.meshes.size() - 1);
+        if (motion != dynamic_.end()) {
+            node.translation = {origin.x, origin.y, origin.z};
+            node.extras = DynamicExtras(motion->second.hasBounds, motion->second.boundsMin,
+                                        motion->second.boundsMax);
+        }
+        model.nodes.push_back(node);
+        scene.nodes.push_back(static_cast<int>(model.nodes.size() - 1));
+    }
+    WriteLights(lights_, model, scene);
+    WriteCameras(cameras_, model, scene);
+    model.buffers.push_back(writer.buffer);
     model.scenes.push_back(scene);
     model.defaultScene = 0;
     WriteGltfModel(std::move(model), path);
