@@ -113,6 +113,117 @@ struct VulkanCompositing::Impl {
         status = MakeBuffer(c, 4 * sizeof(uint32_t));
     }
 
+    // The hierarchy's nodes and leaves, the solids' boxes and the ends (field by field) on the
+    // device, and room for what the passes write: the slots' and cells' counts (the
+    // environment's cells' last, at environmentAt), the scan's block sums, the cells'
+    // cover and partial marks, the leaves' first shares.
+    void Upload(const Hierarchy& h, const std::vector<uint32_t>& solid,
+                const std::vector<glm::vec4>& boxes, std::span<const ImplicitLinker::End> ends,
+                size_t environmentAt) {
+        const size_t bins = size_t(dirs.Count()), nodeCount = h.size(), leafCount = h.leaves.size();
+        const size_t slots = nodeCount * bins, cells = leafCount * bins;
+        std::vector<CompositeNode> nodes(nodeCount);
+        for (size_t i = 0; i < nodeCount; ++i) {
+            const HierarchyNode& n = h.nodes[i];
+            nodes[i] = {n.center,
+                        n.coneCos,
+                        n.normal,
+                        n.IsLeaf() ? 0u : h.nodes[i + 1].end,
+                        solid.empty() ? kNoSolid : solid[i],
+                        {0, 0, 0}};
+        }
+        std::vector<CompositeLeaf> leaves(leafCount);
+        for (size_t i = 0; i < leafCount; ++i) {
+            const HierarchyNode& n = h.nodes[h.leaves[i]];
+            leaves[i] = {n.center, dirs.CosineNorm(n.normal), n.normal, h.leaves[i]};
+        }
+        Reserve(this->nodes, nodes.size() * sizeof(CompositeNode)).Upload(nodes);
+        Reserve(this->leaves, leaves.size() * sizeof(CompositeLeaf)).Upload(leaves);
+        Reserve(this->boxes, std::max<size_t>(1, boxes.size()) * sizeof(glm::vec4));
+        if (!boxes.empty()) this->boxes.buffer->Upload(boxes);
+        {
+            std::vector<uint32_t> field(ends.size());
+            for (int f = 0; f < 4; ++f) {
+                for (size_t k = 0; k < ends.size(); ++k) {
+                    const ImplicitLinker::End& e = ends[k];
+                    field[k] = f == 0   ? e.slot
+                               : f == 1 ? e.sender
+                               : f == 2 ? std::bit_cast<uint32_t>(e.dist)
+                                        : std::bit_cast<uint32_t>(e.omega);
+                }
+                Reserve(this->ends[f], ends.size() * sizeof(uint32_t))
+                    .Upload(field.data(), field.size() * sizeof(uint32_t));
+                Reserve(scattered[f], ends.size() * sizeof(uint32_t));
+            }
+        }
+        Reserve(counts, (environmentAt + cells + 1) * sizeof(uint32_t));
+        const size_t mostBlocks = (std::max(slots, cells) + kBlock - 1) / kBlock;
+        Reserve(blockSums, (mostBlocks + 1) * sizeof(uint32_t));
+        Reserve(cover, cells * sizeof(float));
+        Reserve(partial, cells * sizeof(uint32_t));
+        Reserve(offsets, (leafCount + 1) * sizeof(uint32_t));
+        for (auto& field : shares) Reserve(field, sizeof(uint32_t));
+        Reserve(travel, sizeof(uint32_t));
+    }
+
+    // The passes' constants (each pass sets its mode, a scan its range).
+    CompositePush Push(const Hierarchy& h, const std::vector<uint32_t>& solid, float thin,
+                       size_t endCount, size_t mergedAt, size_t environmentAt) const {
+        const size_t bins = size_t(dirs.Count());
+        CompositePush push{};
+        push.bins = uint32_t(bins);
+        push.leafCount = uint32_t(h.leaves.size());
+        push.endCount = uint32_t(endCount);
+        push.slots = uint32_t(h.size() * bins);
+        push.mergedAt = uint32_t(mergedAt);
+        push.environmentAt = uint32_t(environmentAt);
+        push.cubeRes = uint32_t(dirs.CubeRes());
+        push.adjacentWidth = tables.adjacentWidth;
+        push.hasSolids = solid.empty() ? 0u : 1u;
+        push.binSolidAngle = dirs.BinSolidAngle();
+        push.thin = thin;
+        // As SolidBox::Holds and Build's compositing compute them.
+        push.cosBinRadius = std::cos(binRadius);
+        push.sinBinRadius = std::sin(binRadius);
+        push.aboveHorizon = std::sin(dirs.Spacing());
+        return push;
+    }
+
+    // Every buffer the pipeline binds, in its bindings' order.
+    std::vector<const gpu::Buffer*> Bound(const gpu::Buffer& frontArea) const {
+        std::vector<const gpu::Buffer*> b;
+        for (auto& f : ends) b.push_back(f.buffer.get());
+        for (auto& f : scattered) b.push_back(f.buffer.get());
+        for (const auto* g : {&counts, &blockSums, &nodes, &leaves, &cover, &partial, &boxes})
+            b.push_back(g->buffer.get());
+        for (const gpu::Buffer* t : {&tables.dirs, &tables.cube}) b.push_back(t);
+        b.push_back(tables.adjacent.get());
+        b.push_back(&opposite);
+        for (auto& f : shares) b.push_back(f.buffer.get());
+        b.push_back(travel.buffer.get());
+        b.push_back(offsets.buffer.get());
+        b.push_back(status.get());
+        b.push_back(&frontArea);
+        return b;
+    }
+
+    // The shares (`total`) and each leaf's first into `out`.
+    void ReadShares(size_t total, size_t leafCount, ImplicitLinks& out) {
+        out.offsets.resize(leafCount + 1);
+        offsets.buffer->Download(out.offsets.data(), (leafCount + 1) * sizeof(uint32_t));
+        PENUMBRA_CHECK_EQ(out.offsets[leafCount], total);
+        out.bin.resize(total);
+        out.sender.resize(total);
+        out.weight.resize(total);
+        out.travel.resize(total);
+        if (total > 0) travel.buffer->Download(out.travel.data(), total * sizeof(uint32_t));
+        if (total > 0) {
+            shares[0].buffer->Download(out.bin.data(), total * sizeof(uint32_t));
+            shares[1].buffer->Download(out.sender.data(), total * sizeof(uint32_t));
+            shares[2].buffer->Download(out.weight.data(), total * sizeof(float));
+        }
+    }
+
     // Grows `g` to hold `bytes` with room, the room kept inside the device's storage-buffer
     // range (each buffer is bound whole).
     gpu::Buffer& Reserve(Grown& g, size_t bytes) {
@@ -173,67 +284,11 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const gpu::Buffer& frontAr
             return fail("a closed solid's number exceeds what the device's shares mark");
     const size_t bins = size_t(s.dirs.Count()), nodeCount = h.size(), leafCount = h.leaves.size();
     const size_t slots = nodeCount * bins, cells = leafCount * bins;
-    std::vector<CompositeNode> nodes(nodeCount);
-    for (size_t i = 0; i < nodeCount; ++i) {
-        const HierarchyNode& n = h.nodes[i];
-        nodes[i] = {n.center,
-                    n.coneCos,
-                    n.normal,
-                    n.IsLeaf() ? 0u : h.nodes[i + 1].end,
-                    solid.empty() ? kNoSolid : solid[i],
-                    {0, 0, 0}};
-    }
-    std::vector<CompositeLeaf> leaves(leafCount);
-    for (size_t i = 0; i < leafCount; ++i) {
-        const HierarchyNode& n = h.nodes[h.leaves[i]];
-        leaves[i] = {n.center, s.dirs.CosineNorm(n.normal), n.normal, h.leaves[i]};
-    }
-    s.Reserve(s.nodes, nodes.size() * sizeof(CompositeNode)).Upload(nodes);
-    s.Reserve(s.leaves, leaves.size() * sizeof(CompositeLeaf)).Upload(leaves);
-    PENUMBRA_CHECK_LE(nodeCount * bins * sizeof(float), frontArea.Bytes());
-    s.Reserve(s.boxes, std::max<size_t>(1, boxes.size()) * sizeof(glm::vec4));
-    if (!boxes.empty()) s.boxes.buffer->Upload(boxes);
-    {
-        std::vector<uint32_t> field(ends.size());
-        for (int f = 0; f < 4; ++f) {
-            for (size_t k = 0; k < ends.size(); ++k) {
-                const ImplicitLinker::End& e = ends[k];
-                field[k] = f == 0   ? e.slot
-                           : f == 1 ? e.sender
-                           : f == 2 ? std::bit_cast<uint32_t>(e.dist)
-                                    : std::bit_cast<uint32_t>(e.omega);
-            }
-            s.Reserve(s.ends[f], ends.size() * sizeof(uint32_t))
-                .Upload(field.data(), field.size() * sizeof(uint32_t));
-            s.Reserve(s.scattered[f], ends.size() * sizeof(uint32_t));
-        }
-    }
-    const size_t mergedAt = slots + 1, environmentAt = mergedAt + cells + 1;
-    s.Reserve(s.counts, (environmentAt + cells + 1) * sizeof(uint32_t));
-    const size_t mostBlocks = (std::max(slots, cells) + kBlock - 1) / kBlock;
-    s.Reserve(s.blockSums, (mostBlocks + 1) * sizeof(uint32_t));
-    s.Reserve(s.cover, cells * sizeof(float));
-    s.Reserve(s.partial, cells * sizeof(uint32_t));
-    s.Reserve(s.offsets, (leafCount + 1) * sizeof(uint32_t));
-    for (auto& field : s.shares) s.Reserve(field, sizeof(uint32_t));
-    s.Reserve(s.travel, sizeof(uint32_t));
 
-    CompositePush push{};
-    push.bins = uint32_t(bins);
-    push.leafCount = uint32_t(leafCount);
-    push.endCount = uint32_t(ends.size());
-    push.slots = uint32_t(slots);
-    push.mergedAt = uint32_t(mergedAt);
-    push.environmentAt = uint32_t(environmentAt);
-    push.cubeRes = uint32_t(s.dirs.CubeRes());
-    push.adjacentWidth = s.tables.adjacentWidth;
-    push.hasSolids = solid.empty() ? 0u : 1u;
-    push.binSolidAngle = s.dirs.BinSolidAngle();
-    push.thin = thin;
-    // As SolidBox::Holds and Build's compositing compute them.
-    push.cosBinRadius = std::cos(s.binRadius);
-    push.sinBinRadius = std::sin(s.binRadius);
-    push.aboveHorizon = std::sin(s.dirs.Spacing());
+    const size_t mergedAt = slots + 1, environmentAt = mergedAt + cells + 1;
+    PENUMBRA_CHECK_LE(nodeCount * bins * sizeof(float), frontArea.Bytes());
+    s.Upload(h, solid, boxes, ends, environmentAt);
+    CompositePush push = s.Push(h, solid, thin, ends.size(), mergedAt, environmentAt);
 
     auto record = [&](const vk::raii::CommandBuffer& cb, const vk::raii::DescriptorSet& set) {
         cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.pipeline.Handle());
@@ -255,25 +310,8 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const gpu::Buffer& frontAr
         run(cb, 2, 1);
         run(cb, 3, gpu::StridedGroups(blocks));
     };
-    auto buffers = [&]() {
-        std::vector<const gpu::Buffer*> b;
-        for (auto& f : s.ends) b.push_back(f.buffer.get());
-        for (auto& f : s.scattered) b.push_back(f.buffer.get());
-        for (const auto* g :
-             {&s.counts, &s.blockSums, &s.nodes, &s.leaves, &s.cover, &s.partial, &s.boxes})
-            b.push_back(g->buffer.get());
-        for (const gpu::Buffer* t : {&s.tables.dirs, &s.tables.cube}) b.push_back(t);
-        b.push_back(s.tables.adjacent.get());
-        b.push_back(&s.opposite);
-        for (auto& f : s.shares) b.push_back(f.buffer.get());
-        b.push_back(s.travel.buffer.get());
-        b.push_back(s.offsets.buffer.get());
-        b.push_back(s.status.get());
-        b.push_back(&frontArea);
-        return b;
-    };
     {
-        const std::vector<const gpu::Buffer*> bound = buffers();
+        const std::vector<const gpu::Buffer*> bound = s.Bound(frontArea);
         vk::raii::DescriptorSet set = s.pipeline.MakeSet(bound);
         s.busy.Run([&](const vk::raii::CommandBuffer& cb) {
             cb.fillBuffer(s.counts.buffer->Handle(), 0, VK_WHOLE_SIZE, 0);
@@ -307,7 +345,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const gpu::Buffer& frontAr
     for (auto& field : s.shares) s.Reserve(field, total * sizeof(uint32_t));
     s.Reserve(s.travel, total * sizeof(uint32_t));
     {
-        const std::vector<const gpu::Buffer*> bound = buffers();
+        const std::vector<const gpu::Buffer*> bound = s.Bound(frontArea);
         vk::raii::DescriptorSet set = s.pipeline.MakeSet(bound);
         s.busy.Run([&](const vk::raii::CommandBuffer& cb) {
             record(cb, set);
@@ -319,19 +357,7 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const gpu::Buffer& frontAr
     }
     s.status->Download(state, sizeof(state));
     if (state[3] != 0) return fail("the device's merges wrote other counts than they counted");
-    out.offsets.resize(leafCount + 1);
-    s.offsets.buffer->Download(out.offsets.data(), (leafCount + 1) * sizeof(uint32_t));
-    PENUMBRA_CHECK_EQ(out.offsets[leafCount], total);
-    out.bin.resize(total);
-    out.sender.resize(total);
-    out.weight.resize(total);
-    out.travel.resize(total);
-    if (total > 0) s.travel.buffer->Download(out.travel.data(), total * sizeof(uint32_t));
-    if (total > 0) {
-        s.shares[0].buffer->Download(out.bin.data(), total * sizeof(uint32_t));
-        s.shares[1].buffer->Download(out.sender.data(), total * sizeof(uint32_t));
-        s.shares[2].buffer->Download(out.weight.data(), total * sizeof(float));
-    }
+    s.ReadShares(total, leafCount, out);
     size_t empty = 0;
     for (uint32_t sender : out.sender) empty += sender == kNoSender;
     out.empty = empty;
