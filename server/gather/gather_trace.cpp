@@ -520,49 +520,6 @@ void GatherStage::WeighEmitterHits(bool afterMove, const std::vector<uint8_t>& t
     });
 }
 
-size_t GatherStage::SeeShort(const Moved* moved, const std::vector<uint8_t>& touched) {
-    const int n = settings_.gatherRays, words = LightWords();
-    const auto& tris = rays_->Triangles();
-    shortSeen_.resize(targets_.size());
-    std::atomic<size_t> traced{0};
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
-        size_t rays = 0;
-        for (size_t t = range.begin(); t != range.end(); ++t) {
-            std::vector<uint32_t>& seen = shortSeen_[t];
-            const size_t count = secondStart_[t + 1] - secondStart_[t];
-            const bool all = !moved || touched[t] || seen.size() != count * words;
-            if (all) seen.assign(count * words, 0u);
-            size_t k = 0;
-            for (int r = 0; r < n && words > 0; ++r) {
-                const Hit& h = hits_[t * n + r];
-                if (!Front(h) || !(h.triangle & kShort)) continue;
-                const glm::vec3& ny = tris[h.triangle & kIndex].normal;
-                uint32_t* bits = seen.data() + k++ * words;
-                rays +=
-                    See(HitPoint(h) + rays_->Epsilon() * ny, ny, bits, all ? nullptr : bits, moved);
-            }
-        }
-        traced += rays;
-    });
-    pointDirect_.clear();
-    return traced.load();
-}
-
-glm::vec3 GatherStage::ShortDirect(size_t t, size_t k, const Hit& h) const {
-    const int words = LightWords();
-    glm::vec3 e(0.0f);
-    if (words == 0) return e;
-    const uint32_t* bits = shortSeen_[t].data() + k * words;
-    const glm::vec3& ny = rays_->Triangles()[h.triangle & kIndex].normal;
-    const glm::vec3 y = HitPoint(h);
-    for (size_t l = 0; l < scene_.lights.size(); ++l) {
-        if (!(bits[l / 32] & (1u << (l % 32)))) continue;
-        const LightArrival a = PunctualArrival(scene_.lights[l], y, ny, diameter_);
-        if (a.reaches) e += a.irradiance;
-    }
-    return e;
-}
-
 void GatherStage::Sky() {
     const int n = settings_.gatherRays, m = SecondRays();
     sky_.assign(targets_.size(), glm::vec3(0.0f));
