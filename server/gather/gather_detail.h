@@ -14,10 +14,9 @@ inline constexpr uint64_t kSecondStream = 0x5851f42d4c957f2dull;
 inline constexpr uint64_t kLobeStream = 0x2545f4914f6cdd1dull;
 inline constexpr uint64_t kGlintStream = 0x6a09e667f3bcc909ull;
 
-// A hit closer than this × the solver's element size is gathered again (GatherStage::kShort).
-// Measured (bake at 0.1 m elements against the reference at 4,096 samples; 0, 0.25, 0.5, 1):
-// the Cornell box 2.78, 2.15, 2.14, 2.13%; the office (0.37 m elements) 4.01, 3.90, 3.88,
-// 3.88%, its tracing 0.44, 1.1, 1.2, 2.1 s; the white furnace's worst vertex 2.3% without.
+// A hit closer than this × the solver's element size is gathered again (GatherStage::kShort):
+// past half an element the answers stopped improving while the tracing time went on growing
+// (bench/results/FINDINGS.md, "Constants in the code").
 inline constexpr float kShortHit = 0.5f;
 
 }  // namespace penumbra::gather_detail

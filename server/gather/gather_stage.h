@@ -251,10 +251,9 @@ class GatherStage : public Solver {
     // the R2 sequence rotated by SecondRotation(t, r), cosine-distributed.
     glm::vec2 SecondRotation(size_t target, int ray) const;
     glm::vec3 SecondDirection(size_t target, int ray, uint32_t tri, int j) const;
-    // Rays a secondary gather: 4 at 256. A vertex has many short hits (59 of 256 on the
-    // office, ~23%), whose secondaries' noise averages out over them: 16, 8 and 4 gave the
-    // same answers (8 → 4: office 4.354 → 4.355%, maze 4.434 → 4.442%, the gather's tracing
-    // 0.8 → 0.5 s); 2 began to lose (maze 4.454%, Cornell 1.737 → 1.762%).
+    // Rays a secondary gather: 4 at 256. A vertex has many short hits (about a quarter of its
+    // rays on the office), whose secondaries' noise averages out over them: 16, 8 and 4 gave
+    // the same answers, 2 began to lose (bench/results/FINDINGS.md, "Constants in the code").
     int SecondRays() const { return std::max(4, settings_.gatherRays / 64); }
     // A cached hit's point (front or back side; not for kEscaped), and how far along its ray
     // it lies (∞ when it escaped).

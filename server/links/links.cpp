@@ -442,8 +442,8 @@ Links BuildLinks(const Hierarchy& h, const Directions& dirs, const LeafNorms& no
     // (links of one level and bin are adjacent and spread once), then by sender for
     // locality of I_ex reads. The bins come in a scrambled order, (37·bin) mod 1024 first:
     // neighbouring bins spread into mostly the same accumulator entries, and spreads of
-    // neighbouring bins back to back wait on each other's stores (office, CPU back end:
-    // gather 7.3 → 6.9 ms in same-run pairs).
+    // neighbouring bins back to back wait on each other's stores (bench/results/FINDINGS.md,
+    // "Constants in the code").
     links.offsets.assign(h.size() + 1, 0);
     auto count = [&](const std::vector<PendingLink>& v) {
         for (const auto& p : v) links.offsets[p.receiver + 1]++;

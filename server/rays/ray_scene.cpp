@@ -118,8 +118,8 @@ void RayScene::Update(const Surfels& surfels) {
     RTCGeometry geom = rtcGetGeometry(rtcScene_, 0);
     WriteVertices(static_cast<float*>(rtcGetGeometryBufferData(geom, RTC_BUFFER_TYPE_VERTEX, 0)));
     rtcUpdateGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0);
-    // A move's rebuild at medium quality: 4 ms against 16 ms on the office's refined mesh
-    // (34K triangles), for the few rays a move traces again.
+    // A move's rebuild at medium quality: a quarter of the high-quality build's time, for the
+    // few rays a move traces again (bench/results/FINDINGS.md, "Constants in the code").
     rtcSetSceneBuildQuality(rtcScene_, RTC_BUILD_QUALITY_MEDIUM);
     rtcCommitGeometry(geom);
     rtcCommitScene(rtcScene_);

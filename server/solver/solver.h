@@ -53,7 +53,7 @@ struct SolverSettings {
 inline constexpr float kDefaultElementFraction = 1.0f / 40.0f;
 // Behind a final gather (behindGather) the solver's answer is read a bounce away through the
 // gather's hits, so coarser elements cost little there (docs/SOLVER.md, "Settings behind the
-// gather"; measured in bench/results/FINDINGS.md): the office's load-to-answer 7.5 → 4.0 s.
+// gather"; measured in bench/results/FINDINGS.md, "Settings behind the gather").
 inline constexpr float kGatherElementFraction = 1.0f / 24.0f;
 
 // The element size a solver refines `scene` at: settings.elementSize, or when 0 the scene's

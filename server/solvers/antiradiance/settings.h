@@ -22,7 +22,7 @@ enum class TablePrecision { kAuto, kFp32, kFp16 };
 // Where a move inside the bounds recomputes its links on a Vulkan back end: on the device
 // (shaders/links.comp), or on the host with the links uploaded after. kAuto: the device,
 // except lavapipe, whose "device" is the host's own cores and runs the pass slower than the
-// host code does (office chair: 17 against 22 ms a move).
+// host code does (bench/results/FINDINGS.md, "Constants in the code").
 enum class LinkUpdate { kAuto, kDevice, kHost };
 
 inline constexpr int kDefaultBins = 128;

@@ -48,9 +48,9 @@ PENUMBRA_GPU_FIELD(RangePush, count, 4);
 // Receivers are dispatched window by window in node order (depth first, so a window is a
 // patch of nearby surfaces), and by link count within a window, so the lanes of a workgroup
 // finish together. Nearby receivers read much the same senders' I_ex rows, which stay in
-// the cache while a window is gathered: on lavapipe (office bench) windows of 2,048 nodes
-// took an iteration from 80 to 58–64 ms against a sort by link count alone (512–8,192 were
-// all within the machine's noise of it).
+// the cache while a window is gathered: on lavapipe windows of 2,048 nodes took a quarter
+// off an iteration against a sort by link count alone, and other widths were within noise
+// of it (bench/results/FINDINGS.md, "Constants in the code").
 constexpr uint32_t kLocalityWindow = 2048;
 
 // Whether receiver node a goes before node b (see kLocalityWindow).
