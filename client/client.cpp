@@ -141,6 +141,7 @@ struct Client::Impl {
     std::string lostReason = "connection closed";
     uint16_t lostCode = 0;  // the code of the Error the server sent as it closed, else 0
     FrameCallback callback;
+    EndCallback ended;                                       // the subscription's end (Subscribe)
     std::map<uint32_t, ProgressCallback> progressCallbacks;  // by request id
     uint16_t version = 0;
 
@@ -206,6 +207,17 @@ struct Client::Impl {
                     }
                     const auto* pr = m.As<fb::Progress>();
                     if (cb) cb(Str(pr->stage()), pr->fraction(), pr->seconds_left());
+                    continue;
+                }
+                if (m.header.type == MessageType::kError && m.header.requestId == 0 &&
+                    m.As<fb::Error>()->code() == fb::ErrorCode::NoScene) {
+                    // The subscription's scene went (UnloadScene): the connection stays.
+                    EndCallback cb;
+                    {
+                        std::lock_guard lock(mutex);
+                        cb = ended;
+                    }
+                    if (cb) cb(Str(m.As<fb::Error>()->message()));
                     continue;
                 }
                 std::lock_guard lock(mutex);
@@ -448,10 +460,11 @@ uint64_t Client::SetMaterial(const std::string& material, const MaterialChange& 
 }
 
 void Client::Subscribe(FrameCallback callback, Channel channel, Format format,
-                       const std::string& scene) {
+                       const std::string& scene, EndCallback ended) {
     {
         std::lock_guard lock(impl_->mutex);
         impl_->callback = std::move(callback);
+        impl_->ended = std::move(ended);
     }
     flatbuffers::FlatBufferBuilder b;
     b.Finish(fb::CreateSubscribeDirect(b, scene.c_str(), static_cast<fb::Channel>(channel),
@@ -463,6 +476,12 @@ void Client::Unsubscribe(const std::string& scene) {
     flatbuffers::FlatBufferBuilder b;
     b.Finish(fb::CreateUnsubscribeDirect(b, scene.c_str()));
     impl_->Call(MessageType::kUnsubscribe, b, MessageType::kOk);
+}
+
+void Client::UnloadScene(const std::string& scene) {
+    flatbuffers::FlatBufferBuilder b;
+    b.Finish(fb::CreateUnloadSceneDirect(b, scene.c_str()));
+    impl_->Call(MessageType::kUnloadScene, b, MessageType::kOk);
 }
 
 Frame Client::Get(Channel channel, Format format, const std::string& scene) {

@@ -181,9 +181,17 @@ class Client {
     // stays registered until Close (which joins that thread) or the client's destruction:
     // whatever it uses must outlive that, or be owned by the callback (a shared_ptr).
     using FrameCallback = std::function<void(const Frame&)>;
+    // `ended` (optional, on the reader thread too): the server ended the subscription
+    // because its scene went (UnloadScene), with the server's reason; no frames follow.
+    using EndCallback = std::function<void(const std::string& why)>;
     void Subscribe(FrameCallback callback, Channel channel = Channel::kIndirect,
-                   Format format = Format::kFloat32, const std::string& scene = "");
+                   Format format = Format::kFloat32, const std::string& scene = "",
+                   EndCallback ended = {});
     void Unsubscribe(const std::string& scene = "");
+    // Drops the scene from the server (its owner, the client that loaded it, while that one
+    // is connected; else anyone): Error Forbidden for another client's scene. Its
+    // subscribers get an Error NoScene and no more frames.
+    void UnloadScene(const std::string& scene = "");
     Frame Get(Channel channel = Channel::kIndirect, Format format = Format::kFloat32,
               const std::string& scene = "");
     uint64_t Step(int iterations, const std::string& scene = "");  // returns the frame number

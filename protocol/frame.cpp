@@ -46,6 +46,8 @@ const char* MessageName(MessageType type) {
             return "GetSceneInfo";
         case MessageType::kSceneInfo:
             return "SceneInfo";
+        case MessageType::kUnloadScene:
+            return "UnloadScene";
         case MessageType::kSetTransform:
             return "SetTransform";
         case MessageType::kSetLight:
@@ -102,6 +104,8 @@ bool VerifyPayload(MessageType type, const uint8_t* data, size_t size) {
             return Verify<fb::GetSceneInfo>(data, size);
         case MessageType::kSceneInfo:
             return Verify<fb::SceneInfo>(data, size);
+        case MessageType::kUnloadScene:
+            return Verify<fb::UnloadScene>(data, size);
         case MessageType::kSetTransform:
             return Verify<fb::SetTransform>(data, size);
         case MessageType::kSetLight:

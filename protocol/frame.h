@@ -37,6 +37,7 @@ enum class MessageType : uint16_t {
     kLoadScene = 10,
     kGetSceneInfo = 11,
     kSceneInfo = 12,
+    kUnloadScene = 13,
     kSetTransform = 20,
     kSetLight = 21,
     kSetMaterial = 22,

@@ -134,7 +134,7 @@ ServiceCommands::ServiceCommands(CLI::App& app, bool forScript) : s_(std::make_u
         s.script->add_flag("-q,--quiet", s.quiet, "do not echo the script's lines");
     }
     for (CLI::App* c : {s.load, s.info, s.watch, s.move, s.deform, s.light, s.material, s.sky,
-                        s.get, s.step, s.stats, s.wait})
+                        s.get, s.step, s.stats, s.wait, s.unload})
         c->add_flag("-q,--quiet", s.quiet, "print less");
 }
 
@@ -298,6 +298,11 @@ void ServiceCommands::AddReads(CLI::App& app) {
     s.wait = app.add_subcommand(
         "wait", "Wait until a frame includes every edit sent so far and has converged");
     s.wait->add_option("--timeout", s.timeout, "seconds (default 60)");
+
+    s.unload = app.add_subcommand(
+        "unload",
+        "Drop the scene (--session, else this client's or the newest) from the server: its "
+        "owner's while that client is connected, anyone's once it has gone");
 }
 
 ServiceCommands::~ServiceCommands() = default;
@@ -305,7 +310,7 @@ ServiceCommands::~ServiceCommands() = default;
 bool ServiceCommands::Parsed() const {
     for (CLI::App* c :
          {s_->load, s_->info, s_->watch, s_->move, s_->deform, s_->light, s_->material, s_->sky,
-          s_->get, s_->step, s_->stats, s_->script, s_->wait, s_->sleep})
+          s_->get, s_->step, s_->stats, s_->script, s_->wait, s_->sleep, s_->unload})
         if (c && c->parsed()) return true;
     return false;
 }
@@ -388,7 +393,7 @@ int ServiceCommands::State::Execute(client::Client& c) {
         {move, &State::RunMove},         {deform, &State::RunDeform}, {light, &State::RunLight},
         {material, &State::RunMaterial}, {sky, &State::RunSky},       {get, &State::RunGet},
         {step, &State::RunStep},         {stats, &State::RunStats},   {sleep, &State::RunSleep},
-        {script, &State::RunScript},     {wait, &State::RunWait},
+        {script, &State::RunScript},     {wait, &State::RunWait},     {unload, &State::RunUnload},
     };
     for (const auto& [command, run] : commands)
         if (command && command->parsed()) return (this->*run)(c);

@@ -165,6 +165,7 @@ int ServiceCommands::State::RunWatch(client::Client& c) {
         std::condition_variable cv;
         int seen = 0;
         bool done = false;
+        std::string ended;  // the server ended the subscription: why
         std::deque<Clock::time_point> arrivals;
     };
     const auto shared = std::make_shared<Shared>();
@@ -187,7 +188,15 @@ int ServiceCommands::State::RunWatch(client::Client& c) {
                 s.done = true;
             s.cv.notify_all();
         },
-        ParseClientChannel(channel), ParseFormat(format), session);
+        ParseClientChannel(channel), ParseFormat(format), session,
+        [shared](const std::string& why) {
+            Shared& s = *shared;
+            std::lock_guard lock(s.m);
+            if (s.done) return;
+            s.ended = why;
+            s.done = true;
+            s.cv.notify_all();
+        });
     Shared& s = *shared;
     std::unique_lock lock(s.m);
     auto stop = [&] { return s.done || !c.Connected(); };
@@ -203,6 +212,10 @@ int ServiceCommands::State::RunWatch(client::Client& c) {
         while (!stop()) s.cv.wait_for(lock, std::chrono::milliseconds(200));
     }
     s.done = true;
+    if (!s.ended.empty()) {
+        std::fprintf(stderr, "penumbra: watch: %s\n", s.ended.c_str());
+        return kExitRefused;
+    }
     if (!c.Connected()) {
         std::fprintf(stderr, "penumbra: watch: the server closed the connection\n");
         return kExitConnection;
@@ -400,6 +413,12 @@ int ServiceCommands::State::RunStep(client::Client& c) {
 
 int ServiceCommands::State::RunStats(client::Client& c) {
     std::printf("%s\n", nlohmann::json::parse(c.Stats(session)).dump(2).c_str());
+    return kExitOk;
+}
+
+int ServiceCommands::State::RunUnload(client::Client& c) {
+    c.UnloadScene(session);
+    if (!quiet) std::printf("unloaded %s\n", session.empty() ? "the scene" : session.c_str());
     return kExitOk;
 }
 

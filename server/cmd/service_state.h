@@ -24,7 +24,8 @@ struct ServiceCommands::State {
 
     CLI::App *load = nullptr, *info = nullptr, *watch = nullptr, *move = nullptr, *light = nullptr,
              *material = nullptr, *sky = nullptr, *get = nullptr, *step = nullptr, *stats = nullptr,
-             *script = nullptr, *wait = nullptr, *sleep = nullptr, *deform = nullptr;
+             *unload = nullptr, *script = nullptr, *wait = nullptr, *sleep = nullptr,
+             *deform = nullptr;
 
     client::LoadOptions loadOptions;
     std::string loadPath;
@@ -71,6 +72,7 @@ struct ServiceCommands::State {
     int RunGet(client::Client& c);
     int RunStep(client::Client& c);
     int RunStats(client::Client& c);
+    int RunUnload(client::Client& c);
     int RunSleep(client::Client& c);
     int RunWait(client::Client& c);
     int RunScript(client::Client& c);

@@ -31,6 +31,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
     // a slow client sees fewer frames, never stale ones, and never holds up the others.
     void PushFrame(std::shared_ptr<const std::vector<uint8_t>> bytes);
 
+    // Scene `name` was unloaded: a subscription to it ends with a pushed Error NoScene
+    // carrying `why` (nothing for a connection not subscribed to it).
+    void SceneGone(const std::string& name, const std::string& why);
+
   private:
     struct Outgoing {
         std::shared_ptr<const std::vector<uint8_t>> bytes;
@@ -75,6 +79,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     void Handle(const protocol::Message& m);
     void OnHello(uint32_t id, const protocol::fb::Hello& h);
     void OnLoadScene(uint32_t id, const protocol::fb::LoadScene& l);
+    void OnUnloadScene(uint32_t id, const protocol::fb::UnloadScene& u);
     void OnSetEnvironment(uint32_t id, const protocol::fb::SetEnvironment& s);
     void OnSubscribe(uint32_t id, const protocol::fb::Subscribe& s);
     void OnGetIrradiance(uint32_t id, const protocol::fb::GetIrradiance& g);

@@ -34,6 +34,8 @@ fb::ErrorCode CodeOf(ErrorKind kind) {
             return fb::ErrorCode::LimitReached;
         case ErrorKind::kShuttingDown:
             return fb::ErrorCode::ShuttingDown;
+        case ErrorKind::kForbidden:
+            return fb::ErrorCode::Forbidden;
     }
     return fb::ErrorCode::Internal;
 }

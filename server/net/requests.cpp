@@ -50,6 +50,8 @@ void Connection::Handle(const protocol::Message& m) {
         }
         case MessageType::kLoadScene:
             return OnLoadScene(id, *m.As<fb::LoadScene>());
+        case MessageType::kUnloadScene:
+            return OnUnloadScene(id, *m.As<fb::UnloadScene>());
         case MessageType::kGetSceneInfo: {
             auto session = SessionOf(m.As<fb::GetSceneInfo>()->scene());
             flatbuffers::FlatBufferBuilder b;
@@ -133,6 +135,7 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
     service::Service& service = server_.GetService();
     // Checked whole here, so a bad request is refused before anything loads.
     service::LoadRequest req = ReadLoadScene(l, service);
+    req.by = id_;
     if (l.progress()) req.progress = ProgressSender(id);
     Blocking(
         id, [&service, req] { return service.Load(req); },
@@ -141,6 +144,7 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
             BuildSceneInfo(b, *r.session, r.reused);
             lastScene_ = r.session->Name();
             server_.GetService().Hold(lastScene_, id_);
+            if (!r.reused) server_.GetService().Own(lastScene_, id_);
             for (const std::string& gone : r.evicted)
                 server_.Log(Who() + ": evicted " + gone +
                             " to make room (no client held it; --max-scenes)");
@@ -155,6 +159,32 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
                     server_.Log("warning: " + r.session->Name() + ": " + w->str());
             Send(MessageType::kSceneInfo, id, b);  // after the log: a client sees both
         });
+}
+
+void Connection::OnUnloadScene(uint32_t id, const fb::UnloadScene& u) {
+    const std::string name = Str(u.scene()).empty() ? lastScene_ : Str(u.scene());
+    std::shared_ptr<service::Session> session = server_.GetService().Unload(name, id_);
+    const std::string scene = session->Name();
+    server_.Log(Who() + ": unloaded " + scene);
+    if (lastScene_ == scene) lastScene_.clear();
+    Unsubscribe(scene);
+    server_.SceneGone(scene, "scene '" + scene + "' was unloaded by " + Who());
+    // The session's worker stops as the last reference goes, which can wait out an
+    // iteration: on the blocking pool, not the I/O thread.
+    Blocking(
+        id,
+        [session = std::move(session)]() mutable {
+            session.reset();
+            return 0;
+        },
+        [this, id](int) { SendOk(id); });
+}
+
+void Connection::SceneGone(const std::string& name, const std::string& why) {
+    if (!subscriptions_.count(name)) return;
+    Unsubscribe(name);
+    if (lastScene_ == name) lastScene_.clear();
+    SendError(0, fb::ErrorCode::NoScene, why);
 }
 
 ProgressFn Connection::ProgressSender(uint32_t id) {

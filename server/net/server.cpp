@@ -201,6 +201,13 @@ void Server::Forget(Connection* connection) {
     }
 }
 
+void Server::SceneGone(const std::string& name, const std::string& why) {
+    std::vector<std::shared_ptr<Connection>> open;
+    for (auto& [p, weak] : connections_)
+        if (auto c = weak.lock()) open.push_back(c);
+    for (auto& c : open) c->SceneGone(name, why);
+}
+
 void Server::Stop() {
     if (stopping_) return;
     stopping_ = true;

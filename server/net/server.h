@@ -85,6 +85,9 @@ class Server {
 
     // Connection bookkeeping (I/O thread).
     void Forget(Connection* connection);
+    // Scene `name` is gone (unloaded): every connection subscribed to it gets `why` as a
+    // pushed Error NoScene and its subscription ends (I/O thread).
+    void SceneGone(const std::string& name, const std::string& why);
     std::atomic<uint64_t> framesSent{0}, framesDropped{0}, protocolErrors{0};
     // Connections refused at the door (--max-clients, --max-clients-per-address) and closed
     // for no Hello in time or idleness.

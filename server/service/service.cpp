@@ -111,6 +111,12 @@ LoadResult Service::Load(const LoadRequest& request) {
         if (shutdown_) throw ServiceError(ErrorKind::kShuttingDown, "the server is shutting down");
         auto it = sessions_.find(name);
         if (it != sessions_.end() && !request.reload) return {it->second, true, {}};
+        if (auto owner = owners_.find(name);
+            it != sessions_.end() && owner != owners_.end() && owner->second != request.by)
+            throw ServiceError(ErrorKind::kForbidden,
+                               "scene '" + name +
+                                   "' was loaded by another client, which is still connected: "
+                                   "only it may reload the scene");
         size_t others = sessions_.size() - (it != sessions_.end() ? 1 : 0);
         while (others + loading_ >= limits_.maxScenes) {
             // The scene loaded longest ago that no connection holds and nobody watches.
@@ -129,6 +135,7 @@ LoadResult Service::Load(const LoadRequest& request) {
             result.evicted.push_back(*victim);
             sessions_.erase(*victim);
             holders_.erase(*victim);
+            owners_.erase(*victim);
             order_.erase(victim);
             ++evictions_;
             --others;
@@ -230,9 +237,37 @@ void Service::Hold(const std::string& name, uint64_t holder) {
     if (sessions_.count(name)) holders_[name].insert(holder);
 }
 
+void Service::Own(const std::string& name, uint64_t owner) {
+    std::lock_guard lock(mutex_);
+    if (sessions_.count(name)) owners_[name] = owner;
+}
+
 void Service::Release(uint64_t holder) {
     std::lock_guard lock(mutex_);
     for (auto& [name, held] : holders_) held.erase(holder);
+    std::erase_if(owners_, [&](const auto& entry) { return entry.second == holder; });
+}
+
+std::shared_ptr<Session> Service::Unload(const std::string& name, uint64_t by) {
+    std::lock_guard lock(mutex_);
+    if (sessions_.empty())
+        throw ServiceError(ErrorKind::kNoScene, "no scene is loaded, so none can be unloaded");
+    const std::string scene = name.empty() ? order_.back() : name;
+    auto it = sessions_.find(scene);
+    if (it == sessions_.end())
+        throw ServiceError(ErrorKind::kNoScene, "no scene '" + scene + "' is loaded");
+    if (auto owner = owners_.find(scene); owner != owners_.end() && owner->second != by)
+        throw ServiceError(ErrorKind::kForbidden,
+                           "scene '" + scene +
+                               "' was loaded by another client, which is still connected: only "
+                               "it may unload the scene");
+    std::shared_ptr<Session> session = it->second;
+    sessions_.erase(it);
+    holders_.erase(scene);
+    owners_.erase(scene);
+    std::erase(order_, scene);
+    ++unloads_;
+    return session;
 }
 
 std::shared_ptr<Session> Service::Find(const std::string& name) const {
@@ -260,6 +295,7 @@ nlohmann::json Service::StatsJson() const {
     {
         std::lock_guard lock(mutex_);
         j["evicted_scenes"] = evictions_;
+        j["unloaded_scenes"] = unloads_;
     }
     j["scenes"] = nlohmann::json::array();
     for (const auto& s : sessions) j["scenes"].push_back(s->StatsJson());

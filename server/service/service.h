@@ -36,6 +36,9 @@ struct LoadRequest {
     float environmentRotation = 0.0f;  // radians
     // Told how the build goes (stage, fraction of it), from the loading thread; may be empty.
     ProgressFn progress;
+    // The connection asking (Service::Own), 0 in-process: a reload of a scene another
+    // connected client owns is refused.
+    uint64_t by = 0;
 };
 
 struct LoadResult {
@@ -72,7 +75,16 @@ class Service {
     // Connection `holder` loaded or joined scene `name` and is still there; Release when it
     // goes (every scene it held).
     void Hold(const std::string& name, uint64_t holder);
+    // Connection `owner` built scene `name` (its load was no join): it owns the scene until
+    // it goes (Release) or the scene does.
+    void Own(const std::string& name, uint64_t owner);
     void Release(uint64_t holder);
+    // Drops scene `name` ("": the newest) for connection `by`: while its owner (Own) is
+    // connected only the owner may; a scene whose owner has gone, or that no connection
+    // built, any connection may. Returns the session, for the caller to tell its subscribers
+    // and to let go of (its worker stops when the last reference goes). Throws ServiceError
+    // kNoScene, kForbidden.
+    std::shared_ptr<Session> Unload(const std::string& name, uint64_t by);
     // The named session; "" means the only one loaded, or the newest if several are.
     std::shared_ptr<Session> Find(const std::string& name) const;
     // A path under the scene root, refusing absolute paths, ".." escapes and symlinks that
@@ -101,7 +113,8 @@ class Service {
     std::map<std::string, std::shared_ptr<Session>> sessions_;
     std::vector<std::string> order_;                     // load order, newest last
     std::map<std::string, std::set<uint64_t>> holders_;  // scene -> connections holding it
-    uint64_t evictions_ = 0;
+    std::map<std::string, uint64_t> owners_;             // scene -> the connection that built it
+    uint64_t evictions_ = 0, unloads_ = 0;
     size_t loading_ = 0;
     bool shutdown_ = false;
     // Set by Shutdown before anything else: a load in flight stops at its next progress

@@ -35,7 +35,8 @@ enum class ErrorKind {
     kStaticNode,
     kUnsupported,
     kLimitReached,
-    kShuttingDown
+    kShuttingDown,
+    kForbidden
 };
 
 class ServiceError : public std::runtime_error {

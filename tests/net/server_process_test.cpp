@@ -578,6 +578,81 @@ TEST(ServerProcess, ASceneNobodyHoldsMakesRoomForTheNext) {
     ASSERT_EQ(stats["scenes"].size(), 1u) << stats.dump();
 }
 
+// Issue 63: a scene's owner (the client that loaded it) unloads it; another client may not
+// while the owner is connected, nor reload it; a subscriber is told (Error NoScene, no more
+// frames) and keeps its connection; once the owner has gone anyone may unload.
+TEST(ServerProcess, OnlyTheOwnerUnloadsItsSceneAndSubscribersAreTold) {
+    ServerProcess server("unload");
+    client::Client owner(server.Unix(), "owner");
+    owner.Load(Cornell());
+    client::Client viewer(server.Unix(), "viewer");
+    client::Client other(server.Unix(), "other");
+    std::mutex m;
+    std::condition_variable cv;
+    std::string why;
+    int frames = 0;
+    viewer.Subscribe(
+        [&](const client::Frame&) {
+            std::lock_guard lock(m);
+            ++frames;
+        },
+        client::Channel::kIndirect, client::Format::kFloat32, "cornell-box.gltf",
+        [&](const std::string& reason) {
+            std::lock_guard lock(m);
+            why = reason;
+            cv.notify_all();
+        });
+    std::string message;
+    EXPECT_EQ(ErrorCodeOf([&] { other.UnloadScene("cornell-box.gltf"); }, &message),
+              int(fb::ErrorCode::Forbidden))
+        << message;
+    EXPECT_NE(message.find("loaded by another client"), std::string::npos) << message;
+    client::LoadOptions reload = Cornell();
+    reload.reload = true;
+    EXPECT_EQ(ErrorCodeOf([&] { other.Load(reload); }, &message), int(fb::ErrorCode::Forbidden))
+        << message;
+
+    owner.UnloadScene("cornell-box.gltf");
+    {
+        std::unique_lock lock(m);
+        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] { return !why.empty(); }))
+            << server.Log();
+    }
+    EXPECT_NE(why.find("cornell-box.gltf' was unloaded"), std::string::npos) << why;
+    int seen;
+    {
+        std::lock_guard lock(m);
+        seen = frames;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    {
+        std::lock_guard lock(m);
+        EXPECT_EQ(frames, seen) << "frames after the scene went";
+    }
+    EXPECT_TRUE(viewer.Connected());
+    EXPECT_EQ(ErrorCodeOf([&] { viewer.Step(1, "cornell-box.gltf"); }, &message),
+              int(fb::ErrorCode::NoScene))
+        << message;
+    const nlohmann::json stats = nlohmann::json::parse(viewer.Stats(""));
+    EXPECT_EQ(stats.value("unloaded_scenes", 0), 1) << stats.dump();
+    EXPECT_EQ(stats["scenes"].size(), 0u) << stats.dump();
+
+    // Loaded again by the owner, who then leaves: now anyone may unload it.
+    owner.Load(Cornell());
+    owner.Close();
+    bool unloaded = false;
+    for (int i = 0; i < 100 && !unloaded; ++i) {  // once the server saw the owner go
+        try {
+            other.UnloadScene("cornell-box.gltf");
+            unloaded = true;
+        } catch (const std::exception&) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+    }
+    EXPECT_TRUE(unloaded) << server.Log();
+    EXPECT_NE(server.Log().find("unloaded cornell-box.gltf"), std::string::npos) << server.Log();
+}
+
 // Issue 63: a connection that sends nothing, subscribes to nothing and waits on nothing is
 // closed after --idle-timeout (Error Stalled, counted); a subscriber stays, however quiet.
 TEST(ServerProcess, IdleConnectionsCloseSubscribersStay) {
@@ -963,14 +1038,16 @@ TEST(ServerProcess, AReloadedSceneStreamsItsOwnFrames) {
                 for (size_t i = 0; i + 2 < p.rgb.size(); i += 3) r += p.rgb[i], b += p.rgb[i + 2];
         return r > 0 ? b / r : 0.0;
     };
-    // The same file again, under a blue sky: a new session of the same name. `a` stays
-    // connected and subscribed.
+    // The same file again, under a blue sky: a new session of the same name, reloaded by its
+    // owner (`a`, which stays connected and subscribed; another client may not reload it),
+    // joined by `b`.
     client::Client b(server.Tcp(), "second");
     client::LoadOptions blue = Cornell();
     blue.reload = true;
     blue.environmentColor = std::array<float, 3>{0.0f, 0.0f, 1.0f};
     blue.environmentIntensity = 4.0f;
-    EXPECT_FALSE(b.Load(blue).reused);
+    EXPECT_FALSE(a.Load(blue).reused);
+    EXPECT_TRUE(b.Load(Cornell()).reused);
     Watcher fresh;
     b.Subscribe(std::ref(fresh));
     auto after = fresh.Until(0);

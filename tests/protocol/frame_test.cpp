@@ -39,6 +39,9 @@ std::vector<uint8_t> Payload(MessageType type) {
         case MessageType::kSceneInfo:
             b.Finish(fb::CreateSceneInfoDirect(b, "s"));
             break;
+        case MessageType::kUnloadScene:
+            b.Finish(fb::CreateUnloadSceneDirect(b, "s"));
+            break;
         case MessageType::kSetTransform: {
             std::vector<float> m(16, 0.0f);
             b.Finish(fb::CreateSetTransformDirect(b, "s", "block", &m));
@@ -108,7 +111,7 @@ const MessageType kAllTypes[] = {
     MessageType::kSubscribe,    MessageType::kUnsubscribe, MessageType::kGetIrradiance,
     MessageType::kFrame,        MessageType::kStep,        MessageType::kProgress,
     MessageType::kGetStats,     MessageType::kStats,       MessageType::kSetEnvironment,
-    MessageType::kSetVertices,
+    MessageType::kUnloadScene,  MessageType::kSetVertices,
 };
 
 TEST(Frame, EveryMessageRoundTripsByteByByte) {

@@ -209,6 +209,25 @@ class ClientAgainstALiveServer(unittest.TestCase):
         with self.assertRaises(ValueError):
             Client("http://localhost:7450")
 
+    def test_unload(self):
+        # Issue 63: the client that loaded a scene unloads it; a subscriber's frames() ends
+        # with NoScene and its connection stays; another client may not while the owner is on.
+        with Client(self.server.unix) as owner, Client(self.server.unix) as viewer, \
+                Client(self.server.unix) as other:
+            owner.load("blocker.gltf", device="cpu", element_size=0.2)
+            frames = viewer.frames(scene="blocker.gltf", timeout=30)
+            next(frames)
+            with self.assertRaises(PenumbraError) as e:
+                other.unload("blocker.gltf")
+            self.assertEqual(e.exception.name, "Forbidden")
+            owner.unload("blocker.gltf")
+            with self.assertRaises(PenumbraError) as e:
+                while True:
+                    next(frames)
+            self.assertEqual(e.exception.name, "NoScene")
+            self.assertIn("was unloaded", str(e.exception))
+            self.assertNotIn("blocker.gltf", [s["scene"] for s in viewer.stats()["scenes"]])
+
 
 if __name__ == "__main__":
     unittest.main(verbosity=2)

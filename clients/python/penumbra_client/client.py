@@ -22,8 +22,8 @@ from penumbra_client._fb import (Bye, Channel, EditAck, Error, ErrorCode, Format
                                  GetIrradiance, GetSceneInfo, GetStats, Hello, LoadScene, Ok,
                                  Progress,
                                  SceneInfo as FbSceneInfo, SetEnvironment, SetLight, SetMaterial,
-                                 SetTransform, SetVertices, SolverOption, Stats, Step, Subscribe, Unsubscribe,
-                                 Vec3, Welcome)
+                                 SetTransform, SetVertices, SolverOption, Stats, Step, Subscribe, UnloadScene,
+                                 Unsubscribe, Vec3, Welcome)
 
 MAGIC = b"PNBR"
 FRAMING_VERSION = 1
@@ -32,7 +32,7 @@ PROTOCOL_VERSION = 1
 
 # Message types (protocol/frame.h, SPEC.md "Messages").
 HELLO, WELCOME, ERROR, BYE, OK = 1, 2, 3, 4, 5
-LOAD_SCENE, GET_SCENE_INFO, SCENE_INFO = 10, 11, 12
+LOAD_SCENE, GET_SCENE_INFO, SCENE_INFO, UNLOAD_SCENE = 10, 11, 12, 13
 SET_TRANSFORM, SET_LIGHT, SET_MATERIAL, EDIT_ACK, SET_ENVIRONMENT, SET_VERTICES = (20, 21, 22, 23,
                                                                             24, 25)
 SUBSCRIBE, UNSUBSCRIBE, GET_IRRADIANCE, FRAME, STEP, PROGRESS = 30, 31, 32, 33, 34, 35
@@ -191,6 +191,8 @@ class Client:
         self.frames_dropped = 0
         self._subscribed: Dict[str, int] = {}
         self._closed: Optional[str] = None
+        # The server ended the subscription (its scene was unloaded): raised by frames().
+        self._ended: Optional[PenumbraError] = None
         self._last_edit = 0
         self._reader = threading.Thread(target=self._read, name="penumbra-client", daemon=True)
         self._reader.start()
@@ -242,9 +244,15 @@ class Client:
                         if report is not None:
                             p = Progress.Progress.GetRootAs(payload)
                             report(_text(p.Stage()), p.Fraction(), p.SecondsLeft())
-                    elif rid == 0 and kind == ERROR:  # the server is closing this connection
+                    elif rid == 0 and kind == ERROR:
                         e = Error.Error.GetRootAs(payload)
-                        reason = str(PenumbraError(e.Code(), _text(e.Message())))
+                        error = PenumbraError(e.Code(), _text(e.Message()))
+                        if e.Code() == ErrorCode.ErrorCode.NoScene:
+                            # The subscription's scene was unloaded: frames() ends with it,
+                            # the connection stays.
+                            self._ended = error
+                        else:  # the server is closing this connection
+                            reason = str(error)
                     else:
                         self._replies[rid] = [kind, payload]
                     self._reply_ready.notify_all()
@@ -568,7 +576,8 @@ class Client:
         the subscription when the loop stops. A reader that falls more than 16 frames behind
         loses the oldest (`frames_dropped`); the server drops frames for a slow connection
         too: a gap in `frame` numbers is how many were skipped. `timeout`: seconds to wait
-        for a frame before TimeoutError (None: wait as long as it takes)."""
+        for a frame before TimeoutError (None: wait as long as it takes). When the scene is
+        unloaded the loop ends with PenumbraError NoScene (the connection stays)."""
         self._subscribe(scene, channel, format)
         try:
             while True:
@@ -601,6 +610,12 @@ class Client:
         b.Finish(Step.End(b))
         _, payload = self._request(STEP, b, OK)
         return Ok.Ok.GetRootAs(payload).Frame()
+
+    def unload(self, scene: str = "") -> None:
+        """Drops the scene from the server ("": this client's last, else the newest). Only the
+        client that loaded it may while it is connected (PenumbraError Forbidden otherwise);
+        once it has gone, anyone may. Its subscribers' frames() raise PenumbraError NoScene."""
+        self._request(UNLOAD_SCENE, self._scene_only(UnloadScene, scene), OK)
 
     def stats(self, scene: str = "") -> dict:
         _, payload = self._request(GET_STATS, self._scene_only(GetStats, scene), STATS)
@@ -674,6 +689,9 @@ class Client:
         deadline = None if timeout is None else time.monotonic() + timeout
         with self._lock:
             while not self._frames:
+                if self._ended is not None:
+                    ended, self._ended = self._ended, None
+                    raise ended
                 if self._closed:
                     raise ConnectionError(self._closed)
                 left = None if deadline is None else deadline - time.monotonic()
