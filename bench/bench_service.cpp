@@ -334,6 +334,9 @@ nlohmann::json RunCase(InProcessServer& srv, const Case& c, double seconds, int 
                          {"goal_p50", frame + 5.0}};
     if (!deformSplit.empty()) out["last_deformation"] = deformSplit;
     watcher.Close();
+    // The case's scene goes with it: the next case reloads it from a new client, which may
+    // not while this one, its owner, might still be connected.
+    editor.UnloadScene(c.path);
     editor.Close();
     return out;
 }
@@ -422,13 +425,12 @@ int main(int argc, char** argv) {
                 o.path = c.path;
                 o.device = "cpu";
                 o.elementSize = 2.0f;
-                o.solverOptions["link-oracle"] = "paper";
-                o.solverOptions["oracle"] = "4";
                 for (const auto& n : probe.Load(o).nodes)
                     if (n.emissive) {
                         c.light = n.name;
                         break;
                     }
+                probe.UnloadScene(c.path);  // the case loads it again, its own way
             }
             std::unique_ptr<IrradianceFile> truth;
             if (samples > 0)
