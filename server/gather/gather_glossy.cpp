@@ -229,31 +229,37 @@ size_t GatherStage::See(const glm::vec3& y, const glm::vec3& n, uint32_t* bits, 
 }
 
 size_t GatherStage::SeeShort(const Moved* moved, const std::vector<uint8_t>& touched) {
-    const int n = settings_.gatherRays, words = LightWords();
-    const auto& tris = rays_->Triangles();
+    const int words = LightWords();
     shortSeen_.resize(targets_.size());
     std::atomic<size_t> traced{0};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
         size_t rays = 0;
         for (size_t t = range.begin(); t != range.end(); ++t) {
-            std::vector<uint32_t>& seen = shortSeen_[t];
             const size_t count = secondStart_[t + 1] - secondStart_[t];
-            const bool all = !moved || touched[t] || seen.size() != count * words;
-            if (all) seen.assign(count * words, 0u);
-            size_t k = 0;
-            for (int r = 0; r < n && words > 0; ++r) {
-                const Hit& h = hits_[t * n + r];
-                if (!Front(h) || !(h.triangle & kShort)) continue;
-                const glm::vec3& ny = tris[h.triangle & kIndex].normal;
-                uint32_t* bits = seen.data() + k++ * words;
-                rays +=
-                    See(HitPoint(h) + rays_->Epsilon() * ny, ny, bits, all ? nullptr : bits, moved);
-            }
+            const bool all = !moved || touched[t] || shortSeen_[t].size() != count * words;
+            rays += SeeShortOf(t, all, moved, nullptr);
         }
         traced += rays;
     });
     pointDirect_.clear();
     return traced.load();
+}
+
+size_t GatherStage::SeeShortOf(size_t t, bool fresh, const Moved* moved,
+                               const std::vector<uint8_t>* which) {
+    const int n = settings_.gatherRays, words = LightWords();
+    std::vector<uint32_t>& seen = shortSeen_[t];
+    if (fresh) seen.assign((secondStart_[t + 1] - secondStart_[t]) * words, 0u);
+    size_t rays = 0, k = 0;
+    for (int r = 0; r < n && words > 0; ++r) {
+        const Hit& h = hits_[t * n + r];
+        if (!Front(h) || !(h.triangle & kShort)) continue;
+        const glm::vec3& ny = rays_->Triangles()[h.triangle & kIndex].normal;
+        uint32_t* bits = seen.data() + k++ * words;
+        rays += See(HitPoint(h) + rays_->Epsilon() * ny, ny, bits, fresh ? nullptr : bits, moved,
+                    which);
+    }
+    return rays;
 }
 
 glm::vec3 GatherStage::ShortDirect(size_t t, size_t k, const Hit& h) const {
@@ -279,18 +285,7 @@ void GatherStage::SeeLights(const std::vector<uint8_t>& which) {
     const std::vector<uint8_t>* marked = which.empty() ? nullptr : &which;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, targets_.size(), 16), [&](const auto& range) {
         for (size_t t = range.begin(); t != range.end(); ++t) {
-            // The short hits' view of the lights (SeeShort).
-            std::vector<uint32_t>& shortSeen = shortSeen_[t];
-            if (!marked) shortSeen.assign((secondStart_[t + 1] - secondStart_[t]) * words, 0u);
-            size_t k = 0;
-            for (int r = 0; r < n && words > 0; ++r) {
-                const Hit& h = hits_[t * n + r];
-                if (!Front(h) || !(h.triangle & kShort)) continue;
-                const glm::vec3& ny = tris[h.triangle & kIndex].normal;
-                uint32_t* bits = shortSeen.data() + k++ * words;
-                See(HitPoint(h) + rays_->Epsilon() * ny, ny, bits, marked ? bits : nullptr, nullptr,
-                    marked);
-            }
+            SeeShortOf(t, !marked, nullptr, marked);  // the short hits' view
             if (!glossy_) continue;
             std::vector<uint32_t>& seen = seen_[t];
             if (!marked) seen.assign(lobes_[t].size() * words, 0u);

@@ -332,6 +332,9 @@ class GatherStage : public Solver {
     // (`touched`; all of them without `moved`), and the others' lights whose segments the
     // move can have cut. Returns the shadow rays traced.
     size_t SeeShort(const Moved* moved, const std::vector<uint8_t>& touched);
+    // Target t's part of it: every short hit's lights traced (`fresh`, its words laid out
+    // anew), or each light again where `which` marks it or `moved` can have cut its segment.
+    size_t SeeShortOf(size_t t, bool fresh, const Moved* moved, const std::vector<uint8_t>* which);
     // The punctual lights' irradiance at target t's k-th short hit h (shortSeen_).
     glm::vec3 ShortDirect(size_t t, size_t k, const Hit& h) const;
     bool fresh_ = false;                        // indirect_, direct_ hold the current answer
