@@ -293,8 +293,44 @@ bool RefuseWrite(std::string* err, const std::string& path, const std::vector<un
 
 }  // namespace
 
+namespace {
+
+// glTF 1.0 is another format (its materials are shader programs, its meshes keyed by name):
+// tinygltf reads a 1.0 .gltf as an empty 2.0 scene and fails a 1.0 .glb as "invalid", so
+// both are told apart here and sent to a converter.
+[[noreturn]] void RefuseGltf1(const std::string& path) {
+    throw Error(path +
+                ": a glTF 1.0 file; penumbra reads glTF 2.0. Convert it first, e.g. with "
+                "Debian's assimp-utils: assimp export " +
+                path + " OUT.glb");
+}
+
+// Whether the .gltf at `path` is glTF 1.0 in a form tinygltf refuses outright: its top-level
+// lists are objects keyed by id (2.0's are arrays), or its asset says 1.x.
+bool LooksLikeGltf1(const std::string& path) {
+    std::ifstream in(path);
+    const nlohmann::json doc = nlohmann::json::parse(in, nullptr, false);
+    if (!doc.is_object()) return false;
+    if (doc.contains("asset") && doc["asset"].is_object() && doc["asset"].contains("version") &&
+        doc["asset"]["version"].is_string())
+        return doc["asset"]["version"].get<std::string>().rfind("1.", 0) == 0;
+    for (const char* list : {"meshes", "nodes", "accessors"})
+        if (doc.contains(list) && doc[list].is_object()) return true;
+    return false;
+}
+
+}  // namespace
+
 void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFiles& files) {
-    if (std::ifstream probe(path); !probe) throw Error(path + ": cannot open (no such file?)");
+    std::ifstream probe(path, std::ios::binary);
+    if (!probe) throw Error(path + ": cannot open (no such file?)");
+    if (IsGlbPath(path)) {  // the binary container's own version: 1 or 2
+        unsigned char header[8] = {};
+        probe.read(reinterpret_cast<char*>(header), sizeof header);
+        if (probe.gcount() == 8 && std::memcmp(header, "glTF", 4) == 0 && header[4] == 1 &&
+            header[5] == 0 && header[6] == 0 && header[7] == 0)
+            RefuseGltf1(path);
+    }
     tinygltf::TinyGLTF loader;
     std::error_code ec;
     Confinement confinement{&files, std::filesystem::weakly_canonical(path, ec)};
@@ -306,10 +342,12 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
     bool ok = IsGlbPath(path) ? loader.LoadBinaryFromFile(model, &err, &warn, path)
                               : loader.LoadASCIIFromFile(model, &err, &warn, path);
     if (!ok) {
+        if (!IsGlbPath(path) && LooksLikeGltf1(path)) RefuseGltf1(path);
         if (err.empty()) err = "unreadable glTF";
         while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
         throw Error(path + ": " + err);
     }
+    if (model->asset.version.rfind("1.", 0) == 0) RefuseGltf1(path);
 }
 
 // What LoadGltf read but ignored or approximated, one sentence each (Scene::warnings).

@@ -199,6 +199,37 @@ TEST(GltfLoader, ExternalFilesStayInsideTheirRoot) {
         << msg;
 }
 
+// Issue 62: a glTF 1.0 file, text or binary, with or without its asset's version, is refused
+// as such, with the command that converts it, not as an empty or invalid 2.0 scene.
+TEST(GltfLoader, GltfOneIsNamedWithItsConverter) {
+    const auto dir = testing::TempDir("gltf-one");
+    auto expectRefused = [](const std::filesystem::path& path) {
+        try {
+            LoadGltf(path.string());
+            ADD_FAILURE() << path << " loaded";
+        } catch (const Error& e) {
+            const std::string what = e.what();
+            EXPECT_NE(what.find("a glTF 1.0 file"), std::string::npos) << what;
+            EXPECT_NE(what.find("assimp export"), std::string::npos) << what;
+        }
+    };
+    // 1.0's lists are objects keyed by id; its asset (when it has one) says 1.0.
+    const std::string meshes = R"("meshes": {"box": {"primitives": []}}, "nodes": {}, )";
+    std::ofstream(dir / "versioned.gltf")
+        << "{" << meshes << R"("asset": {"version": "1.0"}, "scene": "s", "scenes": {}})";
+    std::ofstream(dir / "unversioned.gltf") << "{" << meshes << R"("scene": "s", "scenes": {}})";
+    // A 1.0 binary: magic, version 1, length, then its content (JSON) chunk.
+    const std::string json = R"({"asset": {"version": "1.0"}})";
+    std::ofstream glb(dir / "binary.glb", std::ios::binary);
+    const uint32_t header[5] = {0x46546C67u, 1u, uint32_t(20 + json.size()),
+                                uint32_t(json.size()), 0u};
+    glb.write(reinterpret_cast<const char*>(header), sizeof header);
+    glb << json;
+    glb.close();
+    for (const char* name : {"versioned.gltf", "unversioned.gltf", "binary.glb"})
+        expectRefused(dir / name);
+}
+
 // What the loader ignores or approximates is said, one warning each (issue 23): averaged
 // and ignored textures, skins, morph targets, animations, unsupported extensions, unnamed
 // nodes; the bundled Cornell box has none, and a scene without light gets SceneWarnings'.
