@@ -221,8 +221,8 @@ TEST(GltfLoader, GltfOneIsNamedWithItsConverter) {
     // A 1.0 binary: magic, version 1, length, then its content (JSON) chunk.
     const std::string json = R"({"asset": {"version": "1.0"}})";
     std::ofstream glb(dir / "binary.glb", std::ios::binary);
-    const uint32_t header[5] = {0x46546C67u, 1u, uint32_t(20 + json.size()),
-                                uint32_t(json.size()), 0u};
+    const uint32_t header[5] = {0x46546C67u, 1u, uint32_t(20 + json.size()), uint32_t(json.size()),
+                                0u};
     glb.write(reinterpret_cast<const char*>(header), sizeof header);
     glb << json;
     glb.close();
