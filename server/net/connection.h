@@ -34,6 +34,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
     // Scene `name` was unloaded: a subscription to it ends with a pushed Error NoScene
     // carrying `why` (nothing for a connection not subscribed to it).
     void SceneGone(const std::string& name, const std::string& why);
+    // Scene `fresh->Name()` was reloaded as `fresh`: a subscription to it moves to the new
+    // session (same channel and format), announced by a pushed SceneInfo of the new build.
+    void SceneReplaced(const std::shared_ptr<service::Session>& fresh);
 
   private:
     struct Outgoing {
@@ -43,6 +46,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
     struct Subscription {
         std::weak_ptr<service::Session> session;
         int id = 0;
+        service::Channel channel = service::Channel::kIndirect;
+        protocol::fb::Format format = protocol::fb::Format::Float32;
     };
 
     // --- I/O (connection.cpp) ---
@@ -87,6 +92,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
     void OnGetStats(uint32_t id, const protocol::fb::GetStats& g);
     // "" unsubscribes from every scene.
     void Unsubscribe(const std::string& scene);
+    // Subscribes this connection to `session`'s frames in `channel` and `format` (any earlier
+    // subscription to a scene of that name ends).
+    void SubscribeTo(const std::shared_ptr<service::Session>& session, service::Channel channel,
+                     protocol::fb::Format format);
     // LoadScene's progress callback when the client asked for Progress messages.
     ProgressFn ProgressSender(uint32_t id);
     // The session a request's `scene` names; "" is the one this connection loaded or joined

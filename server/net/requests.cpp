@@ -158,6 +158,8 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
                 for (const auto* w : *info->warnings())
                     server_.Log("warning: " + r.session->Name() + ": " + w->str());
             Send(MessageType::kSceneInfo, id, b);  // after the log: a client sees both
+            // A reload: the old build's subscribers move to the new one.
+            if (r.replaced) server_.SceneReplaced(r.session);
         });
 }
 
@@ -239,12 +241,15 @@ void Connection::OnSetEnvironment(uint32_t id, const fb::SetEnvironment& s) {
 }
 
 void Connection::OnSubscribe(uint32_t id, const fb::Subscribe& s) {
-    auto session = SessionOf(s.scene());
-    const service::Channel channel = ChannelOf(s.channel());
+    SubscribeTo(SessionOf(s.scene()), ChannelOf(s.channel()), s.format());
+    SendOk(id);
+}
+
+void Connection::SubscribeTo(const std::shared_ptr<service::Session>& session,
+                             service::Channel channel, fb::Format format) {
     Unsubscribe(session->Name());
     std::weak_ptr<Connection> weak = shared_from_this();
     Server* server = &server_;
-    const fb::Format format = s.format();
     int sub =
         session->AddSubscriber([weak, server, channel, format](const service::FramePtr& frame) {
             asio::post(server->Io(), [weak, server, channel, format, frame] {
@@ -252,8 +257,17 @@ void Connection::OnSubscribe(uint32_t id, const fb::Subscribe& s) {
                     c->PushFrame(server->EncodedFrame(frame, channel, format));
             });
         });
-    subscriptions_[session->Name()] = {session, sub};
-    SendOk(id);
+    subscriptions_[session->Name()] = {session, sub, channel, format};
+}
+
+void Connection::SceneReplaced(const std::shared_ptr<service::Session>& fresh) {
+    auto it = subscriptions_.find(fresh->Name());
+    if (it == subscriptions_.end() || it->second.session.lock() == fresh) return;
+    const Subscription was = it->second;
+    flatbuffers::FlatBufferBuilder b;
+    BuildSceneInfo(b, *fresh, false);
+    Send(MessageType::kSceneInfo, 0, b);  // before the new build's frames
+    SubscribeTo(fresh, was.channel, was.format);
 }
 
 void Connection::OnGetIrradiance(uint32_t id, const fb::GetIrradiance& g) {

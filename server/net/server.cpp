@@ -208,6 +208,13 @@ void Server::SceneGone(const std::string& name, const std::string& why) {
     for (auto& c : open) c->SceneGone(name, why);
 }
 
+void Server::SceneReplaced(const std::shared_ptr<service::Session>& fresh) {
+    std::vector<std::shared_ptr<Connection>> open;
+    for (auto& [p, weak] : connections_)
+        if (auto c = weak.lock()) open.push_back(c);
+    for (auto& c : open) c->SceneReplaced(fresh);
+}
+
 void Server::Stop() {
     if (stopping_) return;
     stopping_ = true;

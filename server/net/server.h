@@ -88,6 +88,9 @@ class Server {
     // Scene `name` is gone (unloaded): every connection subscribed to it gets `why` as a
     // pushed Error NoScene and its subscription ends (I/O thread).
     void SceneGone(const std::string& name, const std::string& why);
+    // Scene `fresh->Name()` was reloaded: every connection subscribed to it moves to the new
+    // session (Connection::SceneReplaced; I/O thread).
+    void SceneReplaced(const std::shared_ptr<service::Session>& fresh);
     std::atomic<uint64_t> framesSent{0}, framesDropped{0}, protocolErrors{0};
     // Connections refused at the door (--max-clients, --max-clients-per-address) and closed
     // for no Hello in time or idleness.

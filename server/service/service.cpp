@@ -229,6 +229,7 @@ LoadResult Service::Load(const LoadRequest& request) {
         order_.push_back(name);
     }
     result.session = session;
+    result.replaced = replaced != nullptr;
     return result;  // `replaced` stops once its last user lets go
 }
 

@@ -46,6 +46,9 @@ struct LoadResult {
     bool reused = false;
     // Scenes dropped to make room (no connection held them and nobody watched them).
     std::vector<std::string> evicted;
+    // A reload: the scene's earlier session was replaced by `session` (its subscribers are
+    // to be moved over: net::Server::SceneReplaced).
+    bool replaced = false;
 };
 
 // The solver settings a service starts from: the library's defaults, with dynamic nodes

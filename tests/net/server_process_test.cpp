@@ -1064,6 +1064,17 @@ TEST(ServerProcess, AReloadedSceneStreamsItsOwnFrames) {
         EXPECT_NEAR(MeanOf(got, "floor"), MeanOf(fresh.frames.back(), "floor"),
                     1e-5f * MeanOf(got, "floor"));
     }
+    // `a`, subscribed to the old build, was moved to the new one: its frames turn blue too.
+    bool moved = false;
+    for (int i = 0; i < 500 && !moved; ++i) {
+        {
+            std::lock_guard watched(old.m);
+            moved = !old.frames.empty() &&
+                    blueOverRed(old.frames.back()) > 1.5 * blueOverRed(before);
+        }
+        if (!moved) std::this_thread::sleep_for(20ms);
+    }
+    EXPECT_TRUE(moved) << "the old build's subscriber got no frames of the new one";
     EXPECT_TRUE(a.Connected());
 }
 
