@@ -54,6 +54,12 @@ int main(int argc, char** argv) {
     app.add_option("--max-scenes", serviceLimits.maxScenes, "scenes loaded at once")
         ->capture_default_str()
         ->check(CLI::Range(1, 1000));
+    app.add_option("--scene-idle-timeout", serviceLimits.sceneIdleSeconds,
+                   "seconds a scene may stay loaded with no connected client that loaded or "
+                   "joined it and no subscriber; then it is dropped (0: kept until "
+                   "--max-scenes needs room)")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 31536000.0));
     app.add_option("--max-scene-triangles", serviceLimits.maxSceneTriangles,
                    "largest scene accepted (input triangles)")
         ->capture_default_str();

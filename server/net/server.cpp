@@ -46,7 +46,26 @@ ListenAddress ParseListenAddress(const std::string& url) {
 }
 
 Server::Server(asio::io_context& io, service::Service& service, NetLimits limits)
-    : io_(io), service_(service), limits_(limits) {}
+    : io_(io), service_(service), limits_(limits) {
+    if (service_.Limits().sceneIdleSeconds > 0.0) SweepIdleScenes();
+}
+
+void Server::SweepIdleScenes() {
+    std::vector<std::string> names;
+    auto dropped = service_.DropIdle(std::chrono::steady_clock::now(), names);
+    for (const std::string& name : names)
+        Log("dropped " + name + ": no client held or watched it for " +
+            std::to_string(int(service_.Limits().sceneIdleSeconds)) + " s (--scene-idle-timeout)");
+    // A session's worker stops as its last reference goes, which can wait out an iteration.
+    if (!dropped.empty())
+        asio::post(blocking_, [dropped = std::move(dropped)]() mutable { dropped.clear(); });
+    const double period = std::min(1.0, service_.Limits().sceneIdleSeconds / 4.0);
+    sweep_.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(period)));
+    sweep_.async_wait([this](std::error_code ec) {
+        if (!ec && !stopping_) SweepIdleScenes();
+    });
+}
 
 Server::~Server() {
     blocking_.join();
@@ -221,6 +240,7 @@ void Server::Stop() {
     std::error_code ec;
     for (auto& a : tcp_) a->close(ec);
     for (auto& a : unix_) a->close(ec);
+    sweep_.cancel();
     std::vector<std::shared_ptr<Connection>> open;
     for (auto& [p, weak] : connections_)
         if (auto c = weak.lock()) open.push_back(c);

@@ -97,6 +97,9 @@ class Server {
     std::atomic<uint64_t> refusedFull{0}, refusedAddress{0}, helloTimeouts{0}, idleTimeouts{0};
 
   private:
+    // Every second or so, the scenes idle past --scene-idle-timeout are dropped
+    // (Service::DropIdle; logged, their sessions let go of on the blocking pool).
+    void SweepIdleScenes();
     void Accept(std::shared_ptr<asio::ip::tcp::acceptor> acceptor);
     void Accept(std::shared_ptr<asio::local::stream_protocol::acceptor> acceptor);
     // `peer`: the TCP peer's address ("" for a Unix socket's client).
@@ -108,6 +111,7 @@ class Server {
     service::Service& service_;
     NetLimits limits_;
     asio::thread_pool blocking_{2};
+    asio::steady_timer sweep_{io_};  // SweepIdleScenes
     std::vector<std::shared_ptr<asio::ip::tcp::acceptor>> tcp_;
     std::vector<std::shared_ptr<asio::local::stream_protocol::acceptor>> unix_;
     std::vector<std::string> unixPaths_;

@@ -286,6 +286,39 @@ std::shared_ptr<Session> Service::Find(const std::string& name) const {
     return it->second;
 }
 
+std::vector<std::shared_ptr<Session>> Service::DropIdle(std::chrono::steady_clock::time_point now,
+                                                        std::vector<std::string>& names) {
+    std::vector<std::shared_ptr<Session>> dropped;
+    if (!(limits_.sceneIdleSeconds > 0.0)) return dropped;
+    const auto limit = std::chrono::duration<double>(limits_.sceneIdleSeconds);
+    std::lock_guard lock(mutex_);
+    for (auto it = order_.begin(); it != order_.end();) {
+        const std::string name = *it;
+        auto held = holders_.find(name);
+        const bool idle = (held == holders_.end() || held->second.empty()) &&
+                          sessions_.at(name)->SubscriberCount() == 0;
+        if (!idle) {
+            idleSince_.erase(name);
+            ++it;
+            continue;
+        }
+        const auto since = idleSince_.try_emplace(name, now).first->second;
+        if (now - since < limit) {
+            ++it;
+            continue;
+        }
+        names.push_back(name);
+        dropped.push_back(sessions_.at(name));
+        sessions_.erase(name);
+        holders_.erase(name);
+        owners_.erase(name);
+        idleSince_.erase(name);
+        ++expirations_;
+        it = order_.erase(it);
+    }
+    return dropped;
+}
+
 nlohmann::json Service::StatsJson() const {
     std::vector<std::shared_ptr<Session>> sessions;
     {
@@ -297,6 +330,7 @@ nlohmann::json Service::StatsJson() const {
         std::lock_guard lock(mutex_);
         j["evicted_scenes"] = evictions_;
         j["unloaded_scenes"] = unloads_;
+        j["expired_scenes"] = expirations_;
     }
     j["scenes"] = nlohmann::json::array();
     for (const auto& s : sessions) j["scenes"].push_back(s->StatsJson());

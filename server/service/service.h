@@ -3,6 +3,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -18,6 +19,9 @@ namespace penumbra::service {
 
 struct ServiceLimits {
     size_t maxScenes = 4;  // sessions loaded at once
+    // A scene no connection holds (Service::Hold) and nobody watches is dropped once it has
+    // been so for this many seconds (Service::DropIdle); 0: kept until --max-scenes needs room.
+    double sceneIdleSeconds = 0.0;
     size_t maxSceneTriangles = 2'000'000;
     size_t maxUploadBytes = 64u << 20;  // an uploaded .glb
 };
@@ -98,6 +102,11 @@ class Service {
     // kLoadFailed for a bad file, kInvalidArgument for a bad colour or both given).
     Environment MakeEnvironment(const std::string& path,
                                 const std::optional<glm::vec3>& color) const;
+    // The scenes that no connection has held and nobody has watched for
+    // limits.sceneIdleSeconds by `now` (the first call that finds one so starts its clock),
+    // taken out of the service; their names in `names`. The caller lets go of them.
+    std::vector<std::shared_ptr<Session>> DropIdle(std::chrono::steady_clock::time_point now,
+                                                   std::vector<std::string>& names);
     nlohmann::json StatsJson() const;
     // Drops every session (their workers stop); later loads are refused.
     void Shutdown();
@@ -117,7 +126,9 @@ class Service {
     std::vector<std::string> order_;                     // load order, newest last
     std::map<std::string, std::set<uint64_t>> holders_;  // scene -> connections holding it
     std::map<std::string, uint64_t> owners_;             // scene -> the connection that built it
-    uint64_t evictions_ = 0, unloads_ = 0;
+    // Scenes found unheld and unwatched (DropIdle), since when.
+    std::map<std::string, std::chrono::steady_clock::time_point> idleSince_;
+    uint64_t evictions_ = 0, unloads_ = 0, expirations_ = 0;
     size_t loading_ = 0;
     bool shutdown_ = false;
     // Set by Shutdown before anything else: a load in flight stops at its next progress

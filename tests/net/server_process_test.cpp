@@ -653,6 +653,38 @@ TEST(ServerProcess, OnlyTheOwnerUnloadsItsSceneAndSubscribersAreTold) {
     EXPECT_NE(server.Log().find("unloaded cornell-box.gltf"), std::string::npos) << server.Log();
 }
 
+// Issue 63: with --scene-idle-timeout a scene that no connected client loaded or joined and
+// nobody watches is dropped after that long (logged, stats expired_scenes); one a connected
+// client holds stays.
+TEST(ServerProcess, AnIdleSceneIsDroppedAHeldOneStays) {
+    ServerProcess server("idle-scene", "--scene-idle-timeout 1");
+    client::LoadOptions blocker;
+    blocker.path = "blocker.gltf";
+    blocker.device = "cpu";
+    blocker.elementSize = 0.2f;
+    {
+        client::Client gone(server.Unix(), "gone");
+        gone.Load(blocker);
+    }  // leaves: nobody holds the blocker
+    client::Client stays(server.Unix(), "stays");
+    stays.Load(Cornell());
+    nlohmann::json stats;
+    for (int i = 0; i < 200; ++i) {  // the blocker goes after about a second
+        stats = nlohmann::json::parse(stays.Stats(""));
+        if (stats["scenes"].size() == 1) break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    ASSERT_EQ(stats["scenes"].size(), 1u) << stats.dump() << server.Log();
+    EXPECT_EQ(stats["scenes"][0].value("scene", ""), "cornell-box.gltf") << stats.dump();
+    EXPECT_EQ(stats.value("expired_scenes", 0), 1) << stats.dump();
+    EXPECT_NE(server.Log().find("dropped blocker.gltf: no client held or watched it"),
+              std::string::npos)
+        << server.Log();
+    std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // held: it stays
+    stats = nlohmann::json::parse(stays.Stats(""));
+    EXPECT_EQ(stats["scenes"].size(), 1u) << stats.dump();
+}
+
 // Issue 63: a connection that sends nothing, subscribes to nothing and waits on nothing is
 // closed after --idle-timeout (Error Stalled, counted); a subscriber stays, however quiet.
 TEST(ServerProcess, IdleConnectionsCloseSubscribersStay) {
