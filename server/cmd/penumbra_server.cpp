@@ -54,6 +54,10 @@ int main(int argc, char** argv) {
     app.add_option("--max-scenes", serviceLimits.maxScenes, "scenes loaded at once")
         ->capture_default_str()
         ->check(CLI::Range(1, 1000));
+    app.add_option("--max-scenes-per-client", serviceLimits.maxScenesPerClient,
+                   "scenes one connection may have built and hold at once (joins do not count)")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 1000));
     app.add_option("--scene-idle-timeout", serviceLimits.sceneIdleSeconds,
                    "seconds a scene may stay loaded with no connected client that loaded or "
                    "joined it and no subscriber; then it is dropped (0: kept until "

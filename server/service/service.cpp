@@ -111,6 +111,17 @@ LoadResult Service::Load(const LoadRequest& request) {
         if (shutdown_) throw ServiceError(ErrorKind::kShuttingDown, "the server is shutting down");
         auto it = sessions_.find(name);
         if (it != sessions_.end() && !request.reload) return {it->second, true, {}};
+        if (request.by != 0 && it == sessions_.end()) {
+            const size_t owned = std::count_if(owners_.begin(), owners_.end(), [&](const auto& o) {
+                return o.second == request.by;
+            });
+            if (owned >= limits_.maxScenesPerClient)
+                throw ServiceError(ErrorKind::kLimitReached,
+                                   "this client already owns " + std::to_string(owned) +
+                                       " loaded scenes (--max-scenes-per-client " +
+                                       std::to_string(limits_.maxScenesPerClient) +
+                                       "): unload one first");
+        }
         if (auto owner = owners_.find(name);
             it != sessions_.end() && owner != owners_.end() && owner->second != request.by)
             throw ServiceError(ErrorKind::kForbidden,

@@ -22,6 +22,9 @@ struct ServiceLimits {
     // A scene no connection holds (Service::Hold) and nobody watches is dropped once it has
     // been so for this many seconds (Service::DropIdle); 0: kept until --max-scenes needs room.
     double sceneIdleSeconds = 0.0;
+    // Scenes one connection may own (build, not join) at once: no client can take every
+    // slot of maxScenes and keep them.
+    size_t maxScenesPerClient = 2;
     size_t maxSceneTriangles = 2'000'000;
     size_t maxUploadBytes = 64u << 20;  // an uploaded .glb
 };

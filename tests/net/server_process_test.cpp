@@ -653,6 +653,33 @@ TEST(ServerProcess, OnlyTheOwnerUnloadsItsSceneAndSubscribersAreTold) {
     EXPECT_NE(server.Log().find("unloaded cornell-box.gltf"), std::string::npos) << server.Log();
 }
 
+// Issue 63: one client owns at most --max-scenes-per-client scenes (2 by default): a third
+// load of its own is refused with the limit named until it unloads one; joins do not count.
+TEST(ServerProcess, OneClientCannotOwnEverySceneSlot) {
+    ServerProcess server("quota", "--max-scenes 4");
+    auto coarse = [](const std::string& path) {
+        client::LoadOptions o;
+        o.path = path;
+        o.device = "cpu";
+        o.elementSize = 0.3f;
+        return o;
+    };
+    client::Client greedy(server.Unix(), "greedy");
+    greedy.Load(coarse("blocker.gltf"));
+    greedy.Load(coarse("maze.gltf"));
+    std::string message;
+    EXPECT_EQ(ErrorCodeOf([&] { greedy.Load(coarse("glossy-box.gltf")); }, &message),
+              int(fb::ErrorCode::LimitReached))
+        << message;
+    EXPECT_NE(message.find("--max-scenes-per-client 2"), std::string::npos) << message;
+    client::Client other(server.Unix(), "other");
+    EXPECT_TRUE(other.Load(coarse("maze.gltf")).reused);  // a join takes no slot of its own
+    other.Load(coarse("glossy-box.gltf"));
+    greedy.UnloadScene("blocker.gltf");
+    EXPECT_TRUE(greedy.Load(coarse("glossy-box.gltf")).reused);
+    EXPECT_EQ(greedy.Load(coarse("cornell-box.gltf")).scene, "cornell-box.gltf");
+}
+
 // Issue 63: with --scene-idle-timeout a scene that no connected client loaded or joined and
 // nobody watches is dropped after that long (logged, stats expired_scenes); one a connected
 // client holds stays.
