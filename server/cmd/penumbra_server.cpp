@@ -64,6 +64,9 @@ int main(int argc, char** argv) {
                    "--max-scenes needs room)")
         ->capture_default_str()
         ->check(CLI::Range(0.0, 31536000.0));
+    app.add_option("--max-scene-bytes", serviceLimits.maxSceneBytes,
+                   "largest sum of buffers a scene file may declare (checked before reading)")
+        ->capture_default_str();
     app.add_option("--max-scene-triangles", serviceLimits.maxSceneTriangles,
                    "largest scene accepted (input triangles)")
         ->capture_default_str();

@@ -319,6 +319,87 @@ bool LooksLikeGltf1(const std::string& path) {
     return false;
 }
 
+// The JSON of a .gltf, or of a .glb's first chunk, read up to `most` bytes (null: longer, or
+// not a glTF 2.0 container).
+nlohmann::json DeclaredJson(const std::string& path, uint64_t most) {
+    std::ifstream in(path, std::ios::binary);
+    std::string text;
+    if (IsGlbPath(path)) {
+        uint32_t head[5] = {};  // magic, version, length; chunk length, chunk type
+        in.read(reinterpret_cast<char*>(head), sizeof head);
+        if (in.gcount() != sizeof head || head[0] != 0x46546C67u || head[4] != 0x4E4F534Au ||
+            head[3] > most)
+            return nullptr;
+        text.resize(head[3]);
+    } else {
+        std::error_code ec;
+        const uint64_t size = std::filesystem::file_size(path, ec);
+        if (ec || size > most) return nullptr;
+        text.resize(size);
+    }
+    in.read(text.data(), std::streamsize(text.size()));
+    if (in.gcount() != std::streamsize(text.size())) return nullptr;
+    return nlohmann::json::parse(text, nullptr, false);
+}
+
+// What the file declares, against files' limits, before tinygltf reads (and allocates) its
+// buffers: the buffers' byteLength summed, and the triangles its primitives' accessor counts
+// make times the nodes that place each mesh. Throws GltfLimitError.
+void CheckDeclaredSize(const std::string& path, const GltfFiles& files) {
+    if (files.maxTriangles == 0 && files.maxBufferBytes == 0) return;
+    // The JSON itself: a .gltf may carry its buffers as data URIs (4/3 of their bytes).
+    const uint64_t most =
+        files.maxBufferBytes > 0 ? files.maxBufferBytes * 2 + (16u << 20) : uint64_t(1) << 40;
+    const nlohmann::json doc = DeclaredJson(path, most);
+    if (doc.is_discarded() || !doc.is_object()) return;  // tinygltf names what is wrong
+    auto count = [](const nlohmann::json& j, const char* key) -> uint64_t {
+        const auto it = j.find(key);
+        return it != j.end() && it->is_number_unsigned() ? it->get<uint64_t>() : 0;
+    };
+    if (files.maxBufferBytes > 0 && doc.contains("buffers") && doc["buffers"].is_array()) {
+        uint64_t bytes = 0;
+        for (const auto& b : doc["buffers"])
+            if (b.is_object()) bytes += count(b, "byteLength");
+        if (bytes > files.maxBufferBytes)
+            throw GltfLimitError(path + ": its buffers declare " + std::to_string(bytes) +
+                                 " bytes; the limit is " + std::to_string(files.maxBufferBytes));
+    }
+    if (files.maxTriangles == 0 || !doc.contains("meshes") || !doc["meshes"].is_array() ||
+        !doc.contains("nodes") || !doc["nodes"].is_array())
+        return;
+    const nlohmann::json& accessors = doc.contains("accessors") && doc["accessors"].is_array()
+                                          ? doc["accessors"]
+                                          : nlohmann::json();
+    auto countOf = [&](const nlohmann::json& index) -> uint64_t {
+        if (!index.is_number_unsigned() || index.get<uint64_t>() >= accessors.size()) return 0;
+        const nlohmann::json& a = accessors[index.get<size_t>()];
+        return a.is_object() ? count(a, "count") : 0;
+    };
+    std::vector<uint64_t> perMesh(doc["meshes"].size(), 0);
+    for (size_t m = 0; m < perMesh.size(); ++m) {
+        const nlohmann::json& mesh = doc["meshes"][m];
+        if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array())
+            continue;
+        for (const auto& prim : mesh["primitives"]) {
+            if (!prim.is_object()) continue;
+            const uint64_t mode = count(prim, "mode") + (prim.contains("mode") ? 0 : 4);
+            uint64_t n = prim.contains("indices") ? countOf(prim["indices"]) : 0;
+            if (!prim.contains("indices") && prim.contains("attributes") &&
+                prim["attributes"].is_object() && prim["attributes"].contains("POSITION"))
+                n = countOf(prim["attributes"]["POSITION"]);
+            perMesh[m] += mode == 4 ? n / 3 : (mode == 5 || mode == 6) && n > 2 ? n - 2 : 0;
+        }
+    }
+    uint64_t triangles = 0;
+    for (const auto& node : doc["nodes"])
+        if (node.is_object() && node.contains("mesh") && node["mesh"].is_number_unsigned() &&
+            node["mesh"].get<uint64_t>() < perMesh.size())
+            triangles += perMesh[node["mesh"].get<size_t>()];
+    if (triangles > files.maxTriangles)
+        throw GltfLimitError(path + ": its accessors declare " + std::to_string(triangles) +
+                             " triangles; the limit is " + std::to_string(files.maxTriangles));
+}
+
 }  // namespace
 
 void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFiles& files) {
@@ -331,6 +412,7 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
             header[5] == 0 && header[6] == 0 && header[7] == 0)
             RefuseGltf1(path);
     }
+    CheckDeclaredSize(path, files);
     tinygltf::TinyGLTF loader;
     std::error_code ec;
     Confinement confinement{&files, std::filesystem::weakly_canonical(path, ec)};

@@ -2,10 +2,12 @@
 // Errors name the file, the offending object and the reason (penumbra::Error).
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
 
+#include "base/check.h"
 #include "scene/scene.h"
 
 namespace tinygltf {
@@ -22,8 +24,20 @@ bool IsGlbPath(const std::string& path);
 // resolve, symlinks followed, to a file inside that folder (the service's --scene-root);
 // set to an empty path: none at all (an uploaded .glb must hold everything it uses). A URI
 // that leads elsewhere fails the load, naming it.
+//
+// `maxTriangles` and `maxBufferBytes` (0: none): what the file declares (its accessors'
+// counts times the nodes that place each mesh, its buffers' byteLength) is checked against
+// them before any buffer is read or allocated; past either, GltfLimitError.
 struct GltfFiles {
     std::optional<std::filesystem::path> root;
+    size_t maxTriangles = 0;
+    uint64_t maxBufferBytes = 0;
+};
+
+// A file that declares more than GltfFiles allows.
+class GltfLimitError : public Error {
+  public:
+    using Error::Error;
 };
 
 // Reads a .gltf/.glb file into a tinygltf model; throws penumbra::Error naming the file.

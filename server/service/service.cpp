@@ -176,7 +176,8 @@ LoadResult Service::Load(const LoadRequest& request) {
                 if (!out) throw Error("cannot stage the upload in " + tmp.string());
             }
             try {
-                scene = LoadGltf(tmp.string(), GltfFiles{fs::path()});
+                scene = LoadGltf(tmp.string(), GltfFiles{fs::path(), limits_.maxSceneTriangles,
+                                                         limits_.maxUploadBytes});
             } catch (...) {
                 fs::remove(tmp);
                 throw;
@@ -184,9 +185,15 @@ LoadResult Service::Load(const LoadRequest& request) {
             fs::remove(tmp);
             scene.source = name;
         } else {
-            scene = LoadGltf(file.string(), GltfFiles{root_});
+            scene = LoadGltf(file.string(),
+                             GltfFiles{root_, limits_.maxSceneTriangles, limits_.maxSceneBytes});
             scene.source = name;
         }
+    } catch (const GltfLimitError& e) {
+        // Refused from what the file declares, before its buffers were read.
+        throw ServiceError(ErrorKind::kLimitReached,
+                           Replace(Replace(e.what(), staged, name), root_.string() + "/", "") +
+                               " (--max-scene-triangles, --max-scene-bytes)");
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kLoadFailed,
                            Replace(Replace(e.what(), staged, name), root_.string() + "/", ""));

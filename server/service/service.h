@@ -26,7 +26,8 @@ struct ServiceLimits {
     // slot of maxScenes and keep them.
     size_t maxScenesPerClient = 2;
     size_t maxSceneTriangles = 2'000'000;
-    size_t maxUploadBytes = 64u << 20;  // an uploaded .glb
+    uint64_t maxSceneBytes = uint64_t(1) << 30;  // the buffers a scene file declares
+    size_t maxUploadBytes = 64u << 20;           // an uploaded .glb
 };
 
 struct LoadRequest {

@@ -732,6 +732,39 @@ TEST(ServerProcess, IdleConnectionsCloseSubscribersStay) {
 
 // Issue 63: a load that fails names the file relative to the scene root, never the server's
 // own paths (its root, its temporary files).
+// Issue 63: limits before work. A file that declares more triangles than
+// --max-scene-triangles, or buffers past --max-scene-bytes, is refused (LimitReached) from its
+// JSON alone, before its buffers are read: here the buffer it declares (1 TB) does not exist.
+TEST(ServerProcess, DeclaredSizesAreCheckedBeforeReading) {
+    const auto root = testing::TempDir("declared-root");
+    const std::string mesh =
+        R"("meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+           "nodes": [{"mesh": 0}, {"mesh": 0}], "scenes": [{"nodes": [0, 1]}],
+           "accessors": [{"count": 4, "componentType": 5126, "type": "VEC3"},
+                         {"count": 3000, "componentType": 5125, "type": "SCALAR"}], )";
+    std::ofstream(root / "huge.gltf")
+        << R"({"asset": {"version": "2.0"}, )" << mesh
+        << R"("buffers": [{"byteLength": 1000000000000, "uri": "nowhere.bin"}]})";
+    std::ofstream(root / "many.gltf")
+        << R"({"asset": {"version": "2.0"}, )" << mesh
+        << R"("buffers": [{"byteLength": 12, "uri": "nowhere.bin"}]})";
+    ServerProcess server("declared", "--max-scene-triangles 1500", "penumbra-server",
+                         root.string());
+    client::Client c(server.Unix(), "loader");
+    client::LoadOptions o;
+    o.device = "cpu";
+    std::string message;
+    o.path = "huge.gltf";
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(o); }, &message), int(fb::ErrorCode::LimitReached));
+    EXPECT_NE(message.find("huge.gltf: its buffers declare 1000000000000 bytes"), std::string::npos)
+        << message;
+    o.path = "many.gltf";  // 1,000 triangles, placed by two nodes
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(o); }, &message), int(fb::ErrorCode::LimitReached));
+    EXPECT_NE(message.find("many.gltf: its accessors declare 2000 triangles"), std::string::npos)
+        << message;
+    EXPECT_NE(message.find("--max-scene-triangles"), std::string::npos) << message;
+}
+
 TEST(ServerProcess, LoadErrorsNameFilesRelativeToTheRoot) {
     const auto root = testing::TempDir("relative-root");
     std::filesystem::create_directories(root / "rooms");
@@ -1128,8 +1161,8 @@ TEST(ServerProcess, AReloadedSceneStreamsItsOwnFrames) {
     for (int i = 0; i < 500 && !moved; ++i) {
         {
             std::lock_guard watched(old.m);
-            moved = !old.frames.empty() &&
-                    blueOverRed(old.frames.back()) > 1.5 * blueOverRed(before);
+            moved =
+                !old.frames.empty() && blueOverRed(old.frames.back()) > 1.5 * blueOverRed(before);
         }
         if (!moved) std::this_thread::sleep_for(20ms);
     }
