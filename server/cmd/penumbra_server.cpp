@@ -70,6 +70,10 @@ int main(int argc, char** argv) {
     app.add_option("--max-scene-triangles", serviceLimits.maxSceneTriangles,
                    "largest scene accepted (input triangles)")
         ->capture_default_str();
+    std::string metrics;
+    app.add_option("--metrics", metrics,
+                   "tcp://HOST:PORT: serve HTTP there for a supervisor: /metrics (Prometheus "
+                   "text), /healthz, /readyz (docs/SERVICE.md)");
     app.add_option("--ready-file", readyFile,
                    "write the bound addresses here, one per line, once listening");
     std::string moves = "bounds";
@@ -110,6 +114,8 @@ int main(int argc, char** argv) {
         std::vector<std::string> bound;
         for (const auto& url : listen)
             bound.push_back(server.Listen(net::ParseListenAddress(url), allowRemote));
+        if (!metrics.empty())
+            bound.push_back(server.ListenMetrics(net::ParseListenAddress(metrics), allowRemote));
 
         asio::signal_set signals(io, SIGINT, SIGTERM);
         signals.async_wait([&](std::error_code ec, int signal) {

@@ -75,30 +75,41 @@ Server::~Server() {
     }
 }
 
+std::shared_ptr<asio::ip::tcp::acceptor> Server::OpenTcp(const ListenAddress& address,
+                                                         bool allowRemote) {
+    std::error_code ec;
+    asio::ip::address ip =
+        asio::ip::make_address(address.host == "localhost" ? "127.0.0.1" : address.host, ec);
+    if (ec) throw Error("tcp://" + address.host + ": not an IP address (" + ec.message() + ")");
+    if (!ip.is_loopback() && !allowRemote)
+        throw Error("tcp://" + address.host + ":" + std::to_string(address.port) +
+                    " is not a loopback address; pass --allow-remote to listen on it");
+    auto acceptor = std::make_shared<asio::ip::tcp::acceptor>(io_);
+    asio::ip::tcp::endpoint ep(ip, address.port);
+    acceptor->open(ep.protocol(), ec);
+    if (!ec) acceptor->set_option(asio::socket_base::reuse_address(true), ec);
+    if (!ec) acceptor->bind(ep, ec);
+    if (!ec) acceptor->listen(asio::socket_base::max_listen_connections, ec);
+    if (ec)
+        throw Error("cannot listen on tcp://" + address.host + ":" + std::to_string(address.port) +
+                    ": " + ec.message());
+    return acceptor;
+}
+
+std::string Server::BoundHostPort(const asio::ip::tcp::acceptor& acceptor) {
+    auto bound = acceptor.local_endpoint();
+    std::string host = bound.address().to_string();
+    if (bound.address().is_v6()) host.insert(0, 1, '[').push_back(']');
+    return host + ":" + std::to_string(bound.port());
+}
+
 std::string Server::Listen(const ListenAddress& address, bool allowRemote) {
     std::error_code ec;
     if (address.kind == ListenAddress::Kind::kTcp) {
-        asio::ip::address ip =
-            asio::ip::make_address(address.host == "localhost" ? "127.0.0.1" : address.host, ec);
-        if (ec) throw Error("tcp://" + address.host + ": not an IP address (" + ec.message() + ")");
-        if (!ip.is_loopback() && !allowRemote)
-            throw Error("tcp://" + address.host + ":" + std::to_string(address.port) +
-                        " is not a loopback address; pass --allow-remote to listen on it");
-        auto acceptor = std::make_shared<asio::ip::tcp::acceptor>(io_);
-        asio::ip::tcp::endpoint ep(ip, address.port);
-        acceptor->open(ep.protocol(), ec);
-        if (!ec) acceptor->set_option(asio::socket_base::reuse_address(true), ec);
-        if (!ec) acceptor->bind(ep, ec);
-        if (!ec) acceptor->listen(asio::socket_base::max_listen_connections, ec);
-        if (ec)
-            throw Error("cannot listen on tcp://" + address.host + ":" +
-                        std::to_string(address.port) + ": " + ec.message());
+        auto acceptor = OpenTcp(address, allowRemote);
         tcp_.push_back(acceptor);
         Accept(acceptor);
-        auto bound = acceptor->local_endpoint();
-        std::string host = bound.address().to_string();
-        if (bound.address().is_v6()) host.insert(0, 1, '[').push_back(']');
-        return "tcp://" + host + ":" + std::to_string(bound.port());
+        return "tcp://" + BoundHostPort(*acceptor);
     }
     // A socket file left by a server that died is removed; a live one is not taken over.
     if (std::filesystem::exists(address.path)) {
@@ -240,6 +251,7 @@ void Server::Stop() {
     std::error_code ec;
     for (auto& a : tcp_) a->close(ec);
     for (auto& a : unix_) a->close(ec);
+    for (auto& a : metrics_) a->close(ec);
     sweep_.cancel();
     std::vector<std::shared_ptr<Connection>> open;
     for (auto& [p, weak] : connections_)

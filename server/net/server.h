@@ -64,6 +64,14 @@ class Server {
     // Returns the bound address as a URL (port 0 becomes the chosen port). Throws
     // penumbra::Error naming the address and the reason.
     std::string Listen(const ListenAddress& address, bool allowRemote = false);
+    // Serves HTTP on a TCP address for a supervisor (metrics.cpp): GET /metrics (Prometheus
+    // text: clients, scenes, frames sent and dropped, refusals and timeouts by reason, scenes
+    // evicted, unloaded and expired, each scene's frames, subscribers, frame time and edits),
+    // /healthz (200 while the I/O loop answers) and /readyz (200 while accepting, 503 once
+    // stopping). Returns "http://HOST:PORT".
+    std::string ListenMetrics(const ListenAddress& address, bool allowRemote = false);
+    // The Prometheus text /metrics answers.
+    std::string MetricsText() const;
     // Stops accepting, closes every connection, shuts the service down. I/O thread only
     // (post it there from elsewhere).
     void Stop();
@@ -101,6 +109,11 @@ class Server {
     // (Service::DropIdle; logged, their sessions let go of on the blocking pool).
     void SweepIdleScenes();
     void Accept(std::shared_ptr<asio::ip::tcp::acceptor> acceptor);
+    void AcceptMetrics(std::shared_ptr<asio::ip::tcp::acceptor> acceptor);
+    // A TCP acceptor bound and listening at `address` (loopback unless `allowRemote`).
+    std::shared_ptr<asio::ip::tcp::acceptor> OpenTcp(const ListenAddress& address,
+                                                     bool allowRemote);
+    static std::string BoundHostPort(const asio::ip::tcp::acceptor& acceptor);
     void Accept(std::shared_ptr<asio::local::stream_protocol::acceptor> acceptor);
     // `peer`: the TCP peer's address ("" for a Unix socket's client).
     void Adopt(asio::generic::stream_protocol::socket socket, const std::string& peer);
@@ -114,6 +127,7 @@ class Server {
     asio::steady_timer sweep_{io_};  // SweepIdleScenes
     std::vector<std::shared_ptr<asio::ip::tcp::acceptor>> tcp_;
     std::vector<std::shared_ptr<asio::local::stream_protocol::acceptor>> unix_;
+    std::vector<std::shared_ptr<asio::ip::tcp::acceptor>> metrics_;
     std::vector<std::string> unixPaths_;
     std::map<Connection*, std::weak_ptr<Connection>> connections_;
     std::map<Connection*, std::string> peers_;  // a TCP connection's peer address

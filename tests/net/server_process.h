@@ -43,7 +43,10 @@ class ServerProcess {
         std::ifstream in(ready);
         std::string line;
         while (std::getline(in, line))
-            if (line.rfind("tcp://", 0) == 0) tcpUrl_ = line;
+            if (line.rfind("tcp://", 0) == 0)
+                tcpUrl_ = line;
+            else if (line.rfind("http://", 0) == 0)
+                httpUrl_ = line;
         EXPECT_FALSE(tcpUrl_.empty()) << "server did not become ready: " << Log();
     }
     ~ServerProcess() {
@@ -71,13 +74,14 @@ class ServerProcess {
     }
     const std::string& Unix() const { return unixUrl_; }
     const std::string& Tcp() const { return tcpUrl_; }
+    const std::string& Http() const { return httpUrl_; }  // with --metrics
     std::filesystem::path Dir() const { return dir_; }
     std::string SocketPath() const { return unixUrl_.substr(7); }
     pid_t Pid() const { return pid_; }
 
   private:
     std::filesystem::path dir_;
-    std::string unixUrl_, tcpUrl_;
+    std::string unixUrl_, tcpUrl_, httpUrl_;
     pid_t pid_ = -1;
 };
 

@@ -712,6 +712,47 @@ TEST(ServerProcess, AnIdleSceneIsDroppedAHeldOneStays) {
     EXPECT_EQ(stats["scenes"].size(), 1u) << stats.dump();
 }
 
+// The response to one HTTP GET of `path` from `url` (http://HOST:PORT), whole.
+std::string HttpGet(const std::string& url, const std::string& path) {
+    const std::string hostPort = url.substr(7);
+    const size_t colon = hostPort.rfind(':');
+    asio::io_context io;
+    asio::ip::tcp::socket socket(io);
+    socket.connect({asio::ip::make_address(hostPort.substr(0, colon)),
+                    uint16_t(std::stoi(hostPort.substr(colon + 1)))});
+    const std::string request = "GET " + path + " HTTP/1.1\r\nHost: x\r\n\r\n";
+    asio::write(socket, asio::buffer(request));
+    std::string response;
+    std::error_code ec;
+    asio::read(socket, asio::dynamic_buffer(response), ec);  // until the server closes
+    return response;
+}
+
+// Issue 63: --metrics serves Prometheus text with the clients, scenes and frames, and health
+// and readiness for a supervisor; the protocol's clients are unaffected.
+TEST(ServerProcess, MetricsAndHealthOverHttp) {
+    ServerProcess server("metrics", "--metrics tcp://127.0.0.1:0");
+    ASSERT_FALSE(server.Http().empty()) << server.Log();
+    client::Client c(server.Unix(), "watched");
+    c.Load(Cornell());
+    c.Step(2);
+    EXPECT_EQ(HttpGet(server.Http(), "/healthz").rfind("HTTP/1.1 200 OK", 0), 0u);
+    EXPECT_NE(HttpGet(server.Http(), "/readyz").find("\r\n\r\nready"), std::string::npos);
+    const std::string metrics = HttpGet(server.Http(), "/metrics");
+    EXPECT_EQ(metrics.rfind("HTTP/1.1 200 OK", 0), 0u) << metrics;
+    EXPECT_NE(metrics.find("text/plain; version=0.0.4"), std::string::npos) << metrics;
+    EXPECT_NE(metrics.find("\npenumbra_clients 1\n"), std::string::npos) << metrics;
+    EXPECT_NE(metrics.find("\npenumbra_scenes 1\n"), std::string::npos) << metrics;
+    EXPECT_NE(metrics.find("penumbra_scene_frames_total{scene=\"cornell-box.gltf\"}"),
+              std::string::npos)
+        << metrics;
+    EXPECT_NE(metrics.find("penumbra_refused_connections_total{reason=\"hello_timeout\"} 0"),
+              std::string::npos)
+        << metrics;
+    EXPECT_EQ(HttpGet(server.Http(), "/nothing").rfind("HTTP/1.1 404", 0), 0u);
+    EXPECT_TRUE(c.Connected());
+}
+
 // Issue 63: a connection that sends nothing, subscribes to nothing and waits on nothing is
 // closed after --idle-timeout (Error Stalled, counted); a subscriber stays, however quiet.
 TEST(ServerProcess, IdleConnectionsCloseSubscribersStay) {
