@@ -231,18 +231,19 @@ void Server::Forget(Connection* connection) {
     }
 }
 
-void Server::SceneGone(const std::string& name, const std::string& why) {
+std::vector<std::shared_ptr<Connection>> Server::OpenConnections() const {
     std::vector<std::shared_ptr<Connection>> open;
     for (auto& [p, weak] : connections_)
         if (auto c = weak.lock()) open.push_back(c);
-    for (auto& c : open) c->SceneGone(name, why);
+    return open;
+}
+
+void Server::SceneGone(const std::string& name, const std::string& why) {
+    for (auto& c : OpenConnections()) c->SceneGone(name, why);
 }
 
 void Server::SceneReplaced(const std::shared_ptr<service::Session>& fresh) {
-    std::vector<std::shared_ptr<Connection>> open;
-    for (auto& [p, weak] : connections_)
-        if (auto c = weak.lock()) open.push_back(c);
-    for (auto& c : open) c->SceneReplaced(fresh);
+    for (auto& c : OpenConnections()) c->SceneReplaced(fresh);
 }
 
 void Server::Stop() {
@@ -253,10 +254,7 @@ void Server::Stop() {
     for (auto& a : unix_) a->close(ec);
     for (auto& a : metrics_) a->close(ec);
     sweep_.cancel();
-    std::vector<std::shared_ptr<Connection>> open;
-    for (auto& [p, weak] : connections_)
-        if (auto c = weak.lock()) open.push_back(c);
-    for (auto& c : open) c->Close();
+    for (auto& c : OpenConnections()) c->Close();
     service_.Shutdown();
 }
 

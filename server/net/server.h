@@ -110,6 +110,8 @@ class Server {
     void SweepIdleScenes();
     void Accept(std::shared_ptr<asio::ip::tcp::acceptor> acceptor);
     void AcceptMetrics(std::shared_ptr<asio::ip::tcp::acceptor> acceptor);
+    // The connections still open, held while the caller calls each (I/O thread).
+    std::vector<std::shared_ptr<Connection>> OpenConnections() const;
     // A TCP acceptor bound and listening at `address` (loopback unless `allowRemote`).
     std::shared_ptr<asio::ip::tcp::acceptor> OpenTcp(const ListenAddress& address,
                                                      bool allowRemote);

@@ -122,19 +122,12 @@ LoadResult Service::Load(const LoadRequest& request) {
                                        std::to_string(limits_.maxScenesPerClient) +
                                        "): unload one first");
         }
-        if (auto owner = owners_.find(name);
-            it != sessions_.end() && owner != owners_.end() && owner->second != request.by)
-            throw ServiceError(ErrorKind::kForbidden,
-                               "scene '" + name +
-                                   "' was loaded by another client, which is still connected: "
-                                   "only it may reload the scene");
+        if (it != sessions_.end()) CheckOwner(name, request.by, "reload");
         size_t others = sessions_.size() - (it != sessions_.end() ? 1 : 0);
         while (others + loading_ >= limits_.maxScenes) {
             // The scene loaded longest ago that no connection holds and nobody watches.
             auto victim = std::find_if(order_.begin(), order_.end(), [&](const std::string& n) {
-                auto h = holders_.find(n);
-                return n != name && (h == holders_.end() || h->second.empty()) &&
-                       sessions_.at(n)->SubscriberCount() == 0;
+                return n != name && Unheld(n);
             });
             if (victim == order_.end())
                 throw ServiceError(ErrorKind::kLimitReached,
@@ -142,12 +135,8 @@ LoadResult Service::Load(const LoadRequest& request) {
                                        " scenes loaded or loading, each held by a connected "
                                        "client or watched (--max-scenes " +
                                        std::to_string(limits_.maxScenes) + ")");
-            dropped.push_back(sessions_.at(*victim));
             result.evicted.push_back(*victim);
-            sessions_.erase(*victim);
-            holders_.erase(*victim);
-            owners_.erase(*victim);
-            order_.erase(victim);
+            dropped.push_back(Take(*victim));
             ++evictions_;
             --others;
         }
@@ -275,18 +264,34 @@ std::shared_ptr<Session> Service::Unload(const std::string& name, uint64_t by) {
     auto it = sessions_.find(scene);
     if (it == sessions_.end())
         throw ServiceError(ErrorKind::kNoScene, "no scene '" + scene + "' is loaded");
-    if (auto owner = owners_.find(scene); owner != owners_.end() && owner->second != by)
-        throw ServiceError(ErrorKind::kForbidden,
-                           "scene '" + scene +
-                               "' was loaded by another client, which is still connected: only "
-                               "it may unload the scene");
-    std::shared_ptr<Session> session = it->second;
-    sessions_.erase(it);
-    holders_.erase(scene);
-    owners_.erase(scene);
-    std::erase(order_, scene);
+    CheckOwner(scene, by, "unload");
     ++unloads_;
+    return Take(scene);
+}
+
+bool Service::Unheld(const std::string& name) const {
+    auto held = holders_.find(name);
+    return (held == holders_.end() || held->second.empty()) &&
+           sessions_.at(name)->SubscriberCount() == 0;
+}
+
+std::shared_ptr<Session> Service::Take(std::string name) {  // a copy: order_ holds `name`
+    std::shared_ptr<Session> session = sessions_.at(name);
+    sessions_.erase(name);
+    holders_.erase(name);
+    owners_.erase(name);
+    idleSince_.erase(name);
+    std::erase(order_, name);
     return session;
+}
+
+void Service::CheckOwner(const std::string& name, uint64_t by, const char* verb) const {
+    if (auto owner = owners_.find(name); owner != owners_.end() && owner->second != by)
+        throw ServiceError(ErrorKind::kForbidden,
+                           "scene '" + name +
+                               "' was loaded by another client, which is still connected: only "
+                               "it may " +
+                               verb + " the scene");
 }
 
 std::shared_ptr<Session> Service::Find(const std::string& name) const {
@@ -309,31 +314,19 @@ std::vector<std::shared_ptr<Session>> Service::DropIdle(std::chrono::steady_cloc
     std::vector<std::shared_ptr<Session>> dropped;
     if (!(limits_.sceneIdleSeconds > 0.0)) return dropped;
     const auto limit = std::chrono::duration<double>(limits_.sceneIdleSeconds);
+    std::vector<std::string> expired;
     std::lock_guard lock(mutex_);
-    for (auto it = order_.begin(); it != order_.end();) {
-        const std::string name = *it;
-        auto held = holders_.find(name);
-        const bool idle = (held == holders_.end() || held->second.empty()) &&
-                          sessions_.at(name)->SubscriberCount() == 0;
-        if (!idle) {
+    for (const std::string& name : order_) {
+        if (!Unheld(name)) {
             idleSince_.erase(name);
-            ++it;
             continue;
         }
         const auto since = idleSince_.try_emplace(name, now).first->second;
-        if (now - since < limit) {
-            ++it;
-            continue;
-        }
-        names.push_back(name);
-        dropped.push_back(sessions_.at(name));
-        sessions_.erase(name);
-        holders_.erase(name);
-        owners_.erase(name);
-        idleSince_.erase(name);
-        ++expirations_;
-        it = order_.erase(it);
+        if (now - since >= limit) expired.push_back(name);
     }
+    for (const std::string& name : expired) dropped.push_back(Take(name));
+    expirations_ += expired.size();
+    names.insert(names.end(), expired.begin(), expired.end());
     return dropped;
 }
 

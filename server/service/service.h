@@ -122,6 +122,13 @@ class Service {
     SolverSettings DefaultsFor(const std::string& name) const;
 
   private:
+    // With mutex_ held: whether no connection holds scene `name` and nobody watches it;
+    // scene `name` taken out of every table (its session returned); kForbidden unless
+    // connection `by` may `verb` scene `name` (its owner, or nobody connected owns it).
+    bool Unheld(const std::string& name) const;
+    std::shared_ptr<Session> Take(std::string name);
+    void CheckOwner(const std::string& name, uint64_t by, const char* verb) const;
+
     const std::filesystem::path root_;
     const ServiceLimits limits_;
     const SolverSettings defaults_;
