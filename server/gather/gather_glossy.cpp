@@ -241,7 +241,6 @@ size_t GatherStage::SeeShort(const Moved* moved, const std::vector<uint8_t>& tou
         }
         traced += rays;
     });
-    pointDirect_.clear();
     return traced.load();
 }
 
