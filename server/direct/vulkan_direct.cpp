@@ -11,6 +11,7 @@
 #include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
+#include "gpu/dispatch.h"
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
 #include "gpu/render_target.h"
@@ -135,7 +136,7 @@ struct VulkanDirect::Impl {
                 ShadowPush push{plan.views[v].viewProj,
                                 static_cast<uint32_t>(v * size_t(size) * size),
                                 static_cast<uint32_t>(size)};
-                cb.pushConstants<ShadowPush>(shadow.Layout(), gpu::RenderTarget::kStages, 0, push);
+                shadow.Push(cb, push);
                 if (first[v + 1] > first[v]) cb.draw(first[v + 1] - first[v], 1, first[v], 0);
                 shadow.EndAndCopy(cb, *maps, v * size_t(size) * size * sizeof(float));
             }
@@ -143,14 +144,12 @@ struct VulkanDirect::Impl {
                          vk::AccessFlagBits::eTransferWrite,
                          vk::PipelineStageFlagBits::eComputeShader);
             stamps.Write(cb, 1, vk::PipelineStageFlagBits::eTransfer);
-            cb.bindPipeline(vk::PipelineBindPoint::eCompute, directPass.Handle());
-            cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, directPass.Layout(), 0,
-                                  {*directSet}, {});
-            DirectPush dp{static_cast<uint32_t>(receiverList.size()),
-                          static_cast<uint32_t>(plan.lights.size()), static_cast<uint32_t>(size)};
-            cb.pushConstants<DirectPush>(directPass.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
-                                         dp);
-            cb.dispatch(static_cast<uint32_t>((receiverList.size() + 63) / 64), 1, 1);
+            directPass.Bind(cb, directSet);
+            directPass.Dispatch(
+                cb,
+                DirectPush{static_cast<uint32_t>(receiverList.size()),
+                           static_cast<uint32_t>(plan.lights.size()), static_cast<uint32_t>(size)},
+                gpu::Groups(receiverList.size()));
             gpu::ComputeBarrier(cb);
             stamps.Write(cb, 2);
         });

@@ -90,12 +90,23 @@ Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, std::vector<Sl
 Pipeline::Pipeline(Context& ctx, std::span<const uint32_t> spirv, std::vector<Slot> slots,
                    std::vector<std::vector<uint32_t>> variants, uint32_t pushConstantBytes)
     : ctx_(ctx),
+      pushConstantBytes_(pushConstantBytes),
       sets_(ctx, std::move(slots), vk::ShaderStageFlagBits::eCompute),
       variants_(std::move(variants)) {
     PENUMBRA_CHECK(!variants_.empty());
     layout_ = MakePipelineLayout(ctx, sets_, vk::ShaderStageFlagBits::eCompute, pushConstantBytes);
     module_ = MakeShaderModule(ctx, spirv);
     Handle(0);  // the first variant now, so that a broken shader fails at set-up
+}
+
+void Pipeline::Bind(const vk::raii::CommandBuffer& cb, const vk::raii::DescriptorSet& set,
+                    size_t variant) const {
+    BindVariant(cb, variant);
+    cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, *layout_, 0, {*set}, {});
+}
+
+void Pipeline::BindVariant(const vk::raii::CommandBuffer& cb, size_t variant) const {
+    cb.bindPipeline(vk::PipelineBindPoint::eCompute, Handle(variant));
 }
 
 vk::Pipeline Pipeline::Handle(size_t variant) const {

@@ -8,6 +8,7 @@
 #include <span>
 #include <vector>
 
+#include "base/check.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
 
@@ -61,8 +62,23 @@ class Pipeline {
     vk::Pipeline Handle(size_t variant = 0) const;
     vk::PipelineLayout Layout() const { return *layout_; }
 
+    // Recording a compute pass: binds a variant and the descriptor set its dispatches read
+    // (Bind), or only another variant, the set bound before staying (the variants share the
+    // layout); then each Dispatch sets the push-constant block (the size the pipeline was
+    // made with) and dispatches `groups` workgroups along x.
+    void Bind(const vk::raii::CommandBuffer& cb, const vk::raii::DescriptorSet& set,
+              size_t variant = 0) const;
+    void BindVariant(const vk::raii::CommandBuffer& cb, size_t variant) const;
+    template <typename Push>
+    void Dispatch(const vk::raii::CommandBuffer& cb, const Push& push, uint32_t groups) const {
+        PENUMBRA_CHECK_EQ(sizeof(Push), pushConstantBytes_);
+        cb.pushConstants<Push>(*layout_, vk::ShaderStageFlagBits::eCompute, 0, push);
+        cb.dispatch(groups, 1, 1);
+    }
+
   private:
     Context& ctx_;
+    uint32_t pushConstantBytes_ = 0;
     BufferSetLayout sets_;
     vk::raii::PipelineLayout layout_{nullptr};
     vk::raii::ShaderModule module_{nullptr};

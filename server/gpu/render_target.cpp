@@ -32,7 +32,10 @@ RenderTarget::RenderTarget(Context& ctx, std::span<const uint32_t> vertexSpirv,
                            std::span<const uint32_t> fragmentSpirv, uint32_t bufferCount,
                            uint32_t pushConstantBytes, uint32_t width, uint32_t height,
                            vk::Format color)
-    : sets_(ctx, bufferCount, kStages), width_(width), height_(height) {
+    : sets_(ctx, bufferCount, kStages),
+      width_(width),
+      height_(height),
+      pushConstantBytes_(pushConstantBytes) {
     PENUMBRA_CHECK(color == vk::Format::eR32G32B32A32Sfloat || color == vk::Format::eR32Sfloat);
     texelBytes_ = color == vk::Format::eR32Sfloat ? 4 : 16;
     const auto& dev = ctx.Device();

@@ -45,13 +45,19 @@ class RenderTarget {
     // into `out` from byte `offset`; the copy is made visible to the host and to transfers
     // (other readers need their own barrier).
     void EndAndCopy(const vk::raii::CommandBuffer& cb, const Buffer& out, size_t offset = 0) const;
+    // Sets the push-constant block (the size the target was made with) for the next draw.
+    template <typename Block>
+    void Push(const vk::raii::CommandBuffer& cb, const Block& block) const {
+        PENUMBRA_CHECK_EQ(sizeof(Block), pushConstantBytes_);
+        cb.pushConstants<Block>(*layout_, kStages, 0, block);
+    }
     vk::PipelineLayout Layout() const { return *layout_; }
     static constexpr vk::ShaderStageFlags kStages =
         vk::ShaderStageFlagBits::eVertex | vk::ShaderStageFlagBits::eFragment;
 
   private:
     BufferSetLayout sets_;
-    uint32_t width_, height_, texelBytes_;
+    uint32_t width_, height_, texelBytes_, pushConstantBytes_;
     Attachment color_, depth_;
     vk::raii::PipelineLayout layout_{nullptr};
     vk::raii::RenderPass renderPass_{nullptr};

@@ -224,7 +224,7 @@ RenderOutput Rasterize(const Mesh& mesh, const Camera& camera, const RenderSetti
     const float clear[4] = {0.0f, 0.0f, 0.0f, 1.0f};
     ctx.RunNow([&](const vk::raii::CommandBuffer& cb) {
         target.Begin(cb, set, clear);
-        cb.pushConstants<GpuPush>(target.Layout(), gpu::RenderTarget::kStages, 0, push);
+        target.Push(cb, push);
         cb.draw(static_cast<uint32_t>(vertices.size()), 1, 0, 0);
         target.EndAndCopy(cb, pixels);
     });

@@ -156,9 +156,7 @@ void VulkanLinkUpdate::Update(const std::vector<uint8_t>& moved) {
     ctx_.RunNow([&](const vk::raii::CommandBuffer& cb) {
         u.stamps.Reset(cb);
         u.stamps.Write(cb, 0);
-        cb.bindPipeline(vk::PipelineBindPoint::eCompute, u.pipeline.Handle());
-        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, u.pipeline.Layout(), 0, {*u.set},
-                              {});
+        u.pipeline.Bind(cb, u.set);
         for (uint32_t first = 0; first < total; first += kLinkChunk) {
             LinkPush pc{first,
                         std::min(kLinkChunk, total - first),
@@ -166,9 +164,7 @@ void VulkanLinkUpdate::Update(const std::vector<uint8_t>& moved) {
                         u.adjacentWidth,
                         m.dirs.BinSolidAngle(),
                         m.dirs.LevelSigma(0)};
-            cb.pushConstants<LinkPush>(u.pipeline.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
-                                       pc);
-            cb.dispatch(Groups(pc.count), 1, 1);
+            u.pipeline.Dispatch(cb, pc, Groups(pc.count));
         }
         u.stamps.Write(cb, 1);
     });

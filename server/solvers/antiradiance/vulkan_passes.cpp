@@ -277,13 +277,9 @@ struct VulkanAntiradiance::Impl {
     // Clusters depth by depth from the root down: each depth starts from the rows the
     // previous one wrote.
     void RecordGlobal(const vk::raii::CommandBuffer& cb) {
-        cb.bindPipeline(vk::PipelineBindPoint::eCompute, global.Handle());
-        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, global.Layout(), 0,
-                              {*globalSet[cur]}, {});
+        global.Bind(cb, globalSet[cur]);
         for (const auto& level : globalLevels) {
-            cb.pushConstants<RangePush>(global.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
-                                        level);
-            cb.dispatch(Groups(level.count), 1, 1);
+            global.Dispatch(cb, level, Groups(level.count));
             gpu::ComputeBarrier(cb);
         }
     }
@@ -295,20 +291,15 @@ struct VulkanAntiradiance::Impl {
             LocalPush pc{glossy ? 0u : glossyLeaves, glossy ? glossyLeaves : total - glossyLeaves,
                          m.dirs.BinSolidAngle(), static_cast<uint32_t>(m.Nodes())};
             if (pc.count == 0) continue;
-            cb.bindPipeline(vk::PipelineBindPoint::eCompute,
-                            local.Handle(LocalVariant(mode, glossy)));
-            cb.pushConstants<LocalPush>(local.Layout(), vk::ShaderStageFlagBits::eCompute, 0, pc);
-            cb.dispatch(Groups(pc.count), 1, 1);
+            local.BindVariant(cb, LocalVariant(mode, glossy));
+            local.Dispatch(cb, pc, Groups(pc.count));
         }
     }
     // Pulls into the table the local pass just wrote (`target` parity).
     void RecordPull(const vk::raii::CommandBuffer& cb, int target) {
-        cb.bindPipeline(vk::PipelineBindPoint::eCompute, pull.Handle());
-        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, pull.Layout(), 0, {*pullSet[target]},
-                              {});
+        pull.Bind(cb, pullSet[target]);
         for (const auto& level : pullLevels) {
-            cb.pushConstants<RangePush>(pull.Layout(), vk::ShaderStageFlagBits::eCompute, 0, level);
-            cb.dispatch(Groups(level.count), 1, 1);
+            pull.Dispatch(cb, level, Groups(level.count));
             // The next (shallower) depth sums the rows this one wrote.
             gpu::ComputeBarrier(cb);
         }

@@ -147,13 +147,10 @@ std::vector<glm::vec3> VulkanBounce::Gather(const std::vector<glm::vec3>& radian
     push.environmentAt = uint32_t(s.Table().EnvironmentAt());
     s.busy.Clear();
     s.busy.Run([&](const vk::raii::CommandBuffer& cb) {
-        cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.pipeline.Handle());
-        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.pipeline.Layout(), 0, {*set}, {});
+        s.pipeline.Bind(cb, set);
         auto run = [&](uint32_t mode, size_t items) {
             push.mode = mode;
-            cb.pushConstants<BouncePush>(s.pipeline.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
-                                         push);
-            cb.dispatch(gpu::StridedGroups(items), 1, 1);
+            s.pipeline.Dispatch(cb, push, gpu::StridedGroups(items));
             gpu::ComputeBarrier(cb);
         };
         run(0, s.leaves * (s.bins + 1) + s.bins);

@@ -291,14 +291,11 @@ bool VulkanCompositing::Composite(const Hierarchy& h, const gpu::Buffer& frontAr
     CompositePush push = s.Push(h, solid, thin, ends.size(), mergedAt, environmentAt);
 
     auto record = [&](const vk::raii::CommandBuffer& cb, const vk::raii::DescriptorSet& set) {
-        cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.pipeline.Handle());
-        cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.pipeline.Layout(), 0, {*set}, {});
+        s.pipeline.Bind(cb, set);
     };
     auto run = [&](const vk::raii::CommandBuffer& cb, uint32_t mode, uint32_t groups) {
         push.mode = mode;
-        cb.pushConstants<CompositePush>(s.pipeline.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
-                                        push);
-        cb.dispatch(groups, 1, 1);
+        s.pipeline.Dispatch(cb, push, groups);
         gpu::ComputeBarrier(cb);
     };
     // An exclusive scan of counts[first, first + n), the total after it.

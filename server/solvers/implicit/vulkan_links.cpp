@@ -242,12 +242,8 @@ void VulkanLinkCreation::Impl::Rounds(const Hierarchy& h, const std::vector<floa
                 gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,
                              vk::AccessFlagBits::eTransferWrite,
                              vk::PipelineStageFlagBits::eComputeShader);
-                cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.pairs.Handle());
-                cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.pairs.Layout(), 0, {*set},
-                                      {});
-                cb.pushConstants<PairPush>(s.pairs.Layout(), vk::ShaderStageFlagBits::eCompute, 0,
-                                           push);
-                cb.dispatch(gpu::Groups(n), 1, 1);
+                s.pairs.Bind(cb, set);
+                s.pairs.Dispatch(cb, push, gpu::Groups(n));
                 gpu::HostReadBarrier(cb);
             });
             ++rounds;

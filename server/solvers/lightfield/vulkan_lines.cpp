@@ -112,8 +112,7 @@ struct VulkanLines::Impl {
                     target.Begin(cb, set, clear);
                     const PeelPush push{view, uint32_t(done + l), uint32_t(g.n),
                                         uint32_t(size_t(l) * texels)};
-                    cb.pushConstants<PeelPush>(target.Layout(), gpu::RenderTarget::kStages, 0,
-                                               push);
+                    target.Push(cb, push);
                     cb.draw(vertexCount, 1, 0, 0);
                     target.EndAndCopy(cb, layers, size_t(l + 1) * slotBytes);
                     gpu::Barrier(cb, vk::PipelineStageFlagBits::eTransfer,

@@ -8,6 +8,7 @@
 #include "base/numeric.h"
 #include "gpu/buffer.h"
 #include "gpu/context.h"
+#include "gpu/dispatch.h"
 #include "gpu/layout.h"
 #include "gpu/pipeline.h"
 #include "shaders/lf_flush_spv.h"
@@ -181,22 +182,16 @@ void VulkanWalk::Walk(size_t index, const LineBatch& b, float cellArea,
         for (size_t first = 0; first < d; first += group) {
             const size_t n = std::min(group, d - first);
             const uint32_t line0 = b.directionLines[first], line1 = b.directionLines[first + n];
-            cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.walk.Handle());
-            cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.walk.Layout(), 0, {*walkSet},
-                                  {});
+            s.walk.Bind(cb, walkSet);
             const WalkPush wp{line0,           line1 - line0, uint32_t(d),    uint32_t(s.surfels),
                               uint32_t(first), uint32_t(n),   gloss ? 1u : 0u};
-            cb.pushConstants<WalkPush>(s.walk.Layout(), vk::ShaderStageFlagBits::eCompute, 0, wp);
-            if (line1 > line0) cb.dispatch((line1 - line0 + 63) / 64, 1, 1);
+            if (line1 > line0) s.walk.Dispatch(cb, wp, gpu::Groups(line1 - line0));
             gpu::ComputeBarrier(cb);
-            cb.bindPipeline(vk::PipelineBindPoint::eCompute, s.flush.Handle());
-            cb.bindDescriptorSets(vk::PipelineBindPoint::eCompute, s.flush.Layout(), 0, {*flushSet},
-                                  {});
+            s.flush.Bind(cb, flushSet);
             const FlushPush fp{uint32_t(s.surfels), uint32_t(d), uint32_t(first),
                                uint32_t(n),         cellArea,    kRatioCells,
                                gloss ? 1u : 0u};
-            cb.pushConstants<FlushPush>(s.flush.Layout(), vk::ShaderStageFlagBits::eCompute, 0, fp);
-            cb.dispatch(uint32_t((s.surfels + 63) / 64), 1, 1);
+            s.flush.Dispatch(cb, fp, gpu::Groups(s.surfels));
             gpu::ComputeBarrier(cb);
         }
         gpu::HostReadBarrier(cb);
