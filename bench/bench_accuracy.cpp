@@ -135,9 +135,9 @@ StageRun RunStage(const Scene& scene, const std::string& solverName, float eleme
     run.seconds = Seconds(t);
     run.perVertex = r.primitives;
     const SolverStats st = solver->Stats();
-    run.gatherMs = st.msEmitterDirect + st.msGatherTrace + st.msGatherEvaluate;
-    run.off =
-        stage.gatherRays > 0 ? st.gatherRays == 0 : stage.emitterRays > 0 && st.emitterRays == 0;
+    run.gatherMs = st.gather.msFirstShot + st.gather.msTrace + st.gather.msEvaluate;
+    run.off = stage.gatherRays > 0 ? st.gather.rays == 0
+                                   : stage.emitterRays > 0 && st.gather.emitterRays == 0;
     for (const std::string& n : notes) run.declined += (run.declined.empty() ? "" : "; ") + n;
     return run;
 }

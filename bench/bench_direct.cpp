@@ -116,19 +116,19 @@ int main(int argc, char** argv) {
                                        std::chrono::steady_clock::now() - u0)
                                        .count());
                     SolverStats st = solver->Stats();
-                    shadow.push_back(st.msShadow);
-                    direct.push_back(st.msDirect);
+                    shadow.push_back(st.lighting.msShadow);
+                    direct.push_back(st.lighting.msDirect);
                 }
                 SolverStats st = solver->Stats();
                 double device = Median(shadow) + Median(direct);
                 double share = device / iterMs;
-                size = st.shadowMapSize;
+                size = st.lighting.shadowMapSize;
                 std::printf("%-34.34s %6d %8zu %10.2f %10.2f %10.2f %10.2f %7.1f%%\n",
                             st.device.c_str(), size, st.elements, Median(shadow), Median(direct),
                             Median(wall), iterMs, 100.0 * share);
                 report["results"].push_back({{"device", st.device},
                                              {"map_size", size},
-                                             {"shadow_views", st.shadowViews},
+                                             {"shadow_views", st.lighting.shadowViews},
                                              {"elements", st.elements},
                                              {"links", st.links},
                                              {"shadow_ms_median", Median(shadow)},

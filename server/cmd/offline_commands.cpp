@@ -120,37 +120,40 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
         for (const auto& p : s.passes)
             std::fprintf(stderr, " | %s %.2f", p.name.c_str(),
                          s.gathers ? p.msTotal / s.gathers : 0.0);
-        if (s.lights && s.shadowViews)
+        if (s.lights && s.lighting.shadowViews)
             std::fprintf(stderr,
                          "\n  %d punctual lights: %d shadow maps of %d² in %.2f ms, direct light "
                          "%.2f ms",
-                         s.lights, s.shadowViews, s.shadowMapSize, s.msShadow, s.msDirect);
+                         s.lights, s.lighting.shadowViews, s.lighting.shadowMapSize,
+                         s.lighting.msShadow, s.lighting.msDirect);
         else if (s.lights)
             std::fprintf(stderr,
                          "\n  %d punctual lights: shadow rays (their BVH in %.2f ms), direct "
                          "light %.2f ms",
-                         s.lights, s.msShadow, s.msDirect);
-        if (!s.environment.empty())
+                         s.lights, s.lighting.msShadow, s.lighting.msDirect);
+        if (!s.lighting.environment.empty())
             std::fprintf(stderr,
                          "\n  environment %s × %.3g, turned %.1f°; %zu of %zu elements occlude "
                          "from both sides",
-                         s.environment.c_str(), s.environmentIntensity,
-                         glm::degrees(s.environmentRotation), s.twoSidedElements, s.elements);
+                         s.lighting.environment.c_str(), s.lighting.environmentIntensity,
+                         glm::degrees(s.lighting.environmentRotation), s.twoSidedElements,
+                         s.elements);
         if (s.glossyElements)
             std::fprintf(stderr, "\n  %zu of %zu elements glossy (%zu lobes)", s.glossyElements,
                          s.elements, size_t(s.Number("glossy_lobes")));
-        if (s.emitterRays)
-            std::fprintf(stderr, "\n  first shot: %d rays a surfel%s in %.0f ms", s.emitterRays,
-                         s.sunRays
-                             ? (" and " + std::to_string(s.sunRays) + " to the sky's sun").c_str()
-                             : "",
-                         s.msEmitterDirect);
-        if (s.gatherRays)
+        if (s.gather.emitterRays)
+            std::fprintf(
+                stderr, "\n  first shot: %d rays a surfel%s in %.0f ms", s.gather.emitterRays,
+                s.gather.sunRays
+                    ? (" and " + std::to_string(s.gather.sunRays) + " to the sky's sun").c_str()
+                    : "",
+                s.gather.msFirstShot);
+        if (s.gather.rays)
             std::fprintf(stderr,
                          "\n  final gather: %d rays at %zu vertices, traced in %.0f ms, "
                          "evaluated in %.1f ms (%s)",
-                         s.gatherRays, s.gatherTargets, s.msGatherTrace, s.msGatherEvaluate,
-                         s.gatherDevice.c_str());
+                         s.gather.rays, s.gather.targets, s.gather.msTrace, s.gather.msEvaluate,
+                         s.gather.device.c_str());
         std::fprintf(stderr, "\n  wrote %s (channel %s; %s)\n",
                      outPath == "-" ? "standard output" : outPath.c_str(), result.channel.c_str(),
                      kIrradianceUnits);

@@ -17,6 +17,7 @@
 #include "hierarchy/directions.h"
 #include "scene/environment.h"
 #include "scene/scene.h"
+#include "solver/stage_figures.h"
 
 namespace penumbra {
 namespace direct {
@@ -104,19 +105,8 @@ class SkyBins {
     bool binned_ = false;
 };
 
-// What the direct stage and the sky report in a solver's stats (the solvers copy them in:
-// solvers/lighting_stats.h); the stage knows nothing of the solver's stats itself.
-struct LightingFigures {
-    bool direct = false;      // a direct stage (punctual lights) ran
-    int shadowViews = 0;      // shadow maps rendered per light update (cube faces count 6)
-    int shadowMapSize = 0;    // texels per side
-    double msShadow = 0.0;    // last shadow pass
-    double msDirect = 0.0;    // last direct-light initialisation
-    std::string environment;  // the sky's source (file or "constant"); empty: none
-    float environmentIntensity = 0.0f;
-    float environmentRotation = 0.0f;  // radians
-};
-// The direct stage's figures (null: none; `mapSize` its maps') and the sky's.
+// The direct stage's figures (null: none; `mapSize` its maps') and the sky's: their part of a
+// solver's stats (SolverStats::lighting).
 LightingFigures DescribeLighting(const DirectStage* stage, int mapSize, const SkyBins& sky);
 
 }  // namespace direct

@@ -437,18 +437,19 @@ std::string GatherStage::WarmStart(Solver& previous, const SurfelCarry& carry) {
 
 SolverStats GatherStage::Stats() const {
     SolverStats s = inner_->Stats();
-    s.emitterRays = shot_.empty() ? 0 : settings_.emitterRays;
-    s.sunRays = sun_ ? sun_->Rays() : 0;
-    s.msEmitterDirect = msShot_;
-    s.gatherRays = targets_.empty() ? 0 : settings_.gatherRays;
-    s.gatherTargets = targets_.size();
-    s.msGatherTrace = msTrace_;
-    s.msGatherEvaluate = msEvaluate_;
-    s.gatherRaysRetraced = raysRetraced_;
-    s.gatherTraces = traces_;
-    s.gatherDevice =
+    GatherFigures& g = s.gather;
+    g.emitterRays = shot_.empty() ? 0 : settings_.emitterRays;
+    g.sunRays = sun_ ? sun_->Rays() : 0;
+    g.msFirstShot = msShot_;
+    g.rays = targets_.empty() ? 0 : settings_.gatherRays;
+    g.targets = targets_.size();
+    g.msTrace = msTrace_;
+    g.msEvaluate = msEvaluate_;
+    g.raysRetraced = raysRetraced_;
+    g.traces = traces_;
+    g.device =
         tracer_ ? "vulkan:" + tracer_->DeviceName() + " (ray tracing pipeline)" : "cpu (Embree)";
-    if (!tracer_ && !tracerNote_.empty()) s.gatherDevice += "; no GPU ray tracing: " + tracerNote_;
+    if (!tracer_ && !tracerNote_.empty()) g.device += "; no GPU ray tracing: " + tracerNote_;
     // Every target has GlintCount() glints where there are glossy triangles to draw them on
     // (TraceGlints).
     if (!glossyTriangles_.empty())

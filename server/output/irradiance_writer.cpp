@@ -46,39 +46,40 @@ nlohmann::json StatsToJson(const SolverStats& s) {
     j["ms_per_pass"] = s.gathers ? s.msTotal / s.gathers : 0.0;
     if (s.lights > 0) {
         j["punctual_lights"] = s.lights;
-        j["shadow_views"] = s.shadowViews;
-        j["shadow_map_size"] = s.shadowMapSize;
-        j["shadow_ms"] = s.msShadow;
-        j["direct_ms"] = s.msDirect;
+        j["shadow_views"] = s.lighting.shadowViews;
+        j["shadow_map_size"] = s.lighting.shadowMapSize;
+        j["shadow_ms"] = s.lighting.msShadow;
+        j["direct_ms"] = s.lighting.msDirect;
     }
-    if (!s.environment.empty())
-        j["environment"] = {{"source", s.environment},
-                            {"intensity", s.environmentIntensity},
-                            {"rotation_degrees", s.environmentRotation * 57.29577951308232}};
+    if (!s.lighting.environment.empty())
+        j["environment"] = {
+            {"source", s.lighting.environment},
+            {"intensity", s.lighting.environmentIntensity},
+            {"rotation_degrees", s.lighting.environmentRotation * 57.29577951308232}};
     j["two_sided_elements"] = s.twoSidedElements;
     j["glossy_elements"] = s.glossyElements;
-    if (s.motionGroups > 0)
-        j["motion"] = {{"groups", s.motionGroups},
-                       {"links", s.motionLinks},
-                       {"moves", s.geometryUpdates},
-                       {"links_updated", s.linksUpdated},
-                       {"last_move_ms", s.msGeometry}};
-    if (!s.motionDeclined.empty()) j["motion_declined"] = s.motionDeclined;
+    if (s.motion.groups > 0)
+        j["motion"] = {{"groups", s.motion.groups},
+                       {"links", s.motion.links},
+                       {"moves", s.motion.moves},
+                       {"links_updated", s.motion.linksUpdated},
+                       {"last_move_ms", s.motion.msLastMove}};
+    if (!s.motion.declined.empty()) j["motion_declined"] = s.motion.declined;
     j["bounces"] = s.bounces;
     if (std::isfinite(s.irradianceBound)) j["irradiance_bound"] = s.irradianceBound;
     if (!s.divergence.empty()) j["divergence"] = s.divergence;
-    if (s.emitterRays > 0)
-        j["emitter_direct"] = {{"rays", s.emitterRays},
-                               {"sun_rays", s.sunRays},
-                               {"ms", s.msEmitterDirect},
-                               {"device", s.gatherDevice}};
-    if (s.gatherRays > 0)
-        j["final_gather"] = {{"rays", s.gatherRays},
-                             {"targets", s.gatherTargets},
-                             {"ms_trace", s.msGatherTrace},
-                             {"ms_evaluate", s.msGatherEvaluate},
-                             {"rays_retraced_by_last_move", s.gatherRaysRetraced},
-                             {"device", s.gatherDevice}};
+    if (s.gather.emitterRays > 0)
+        j["emitter_direct"] = {{"rays", s.gather.emitterRays},
+                               {"sun_rays", s.gather.sunRays},
+                               {"ms", s.gather.msFirstShot},
+                               {"device", s.gather.device}};
+    if (s.gather.rays > 0)
+        j["final_gather"] = {{"rays", s.gather.rays},
+                             {"targets", s.gather.targets},
+                             {"ms_trace", s.gather.msTrace},
+                             {"ms_evaluate", s.gather.msEvaluate},
+                             {"rays_retraced_by_last_move", s.gather.raysRetraced},
+                             {"device", s.gather.device}};
     nlohmann::json passes = nlohmann::json::object();
     for (const auto& p : s.passes)
         passes[p.name + "_ms_per_iteration"] = s.iterations ? p.msTotal / s.iterations : 0.0;

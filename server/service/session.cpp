@@ -65,7 +65,7 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     for (const std::string& n : notes) gatherNote_ += (gatherNote_.empty() ? "" : "; ") + n;
     buildSeconds_ = MsSince(start) / 1000.0;
     solverStatsRaw_ = solver_->Stats();
-    motionDeclined_ = !solverStatsRaw_.motionDeclined.empty();
+    motionDeclined_ = !solverStatsRaw_.motion.declined.empty();
     for (const auto& n : scene.nodes)
         for (uint32_t pi : n.primitives) {
             if (!glm::any(glm::greaterThan(scene.materials[scene.primitives[pi].material].emission,

@@ -16,6 +16,7 @@
 #include "scene/scene.h"
 #include "scene/surfels.h"
 #include "solver/options.h"
+#include "solver/stage_figures.h"
 
 namespace penumbra {
 
@@ -88,27 +89,11 @@ struct SolverStats {
     std::vector<PassTiming> passes;
     size_t tableBytes = 0;  // the radiance it keeps
     size_t linkBytes = 0;
-    int lights = 0;           // punctual lights
-    int shadowViews = 0;      // shadow maps rendered per light update (cube faces count 6)
-    int shadowMapSize = 0;    // texels per side
-    double msShadow = 0.0;    // last shadow pass
-    double msDirect = 0.0;    // last direct-light initialisation
-    std::string environment;  // its source (file or "constant"); empty: none
-    float environmentIntensity = 0.0f;
-    float environmentRotation = 0.0f;  // radians
-    size_t twoSidedElements = 0;       // elements that occlude from both sides
-    size_t glossyElements = 0;         // elements with a glossy lobe (Material::Glossy)
-    // Moves in place (SolverSettings::prepareMoves): dynamic nodes prepared to move inside
-    // their motion bounds, the links touching them (recomputed when they move; 0 for a solver
-    // without links), moves taken by UpdateGeometry, links those recomputed in all, the last
-    // one's time (links, leaves,
-    // uploads, shadow maps), and why moves in place were asked for and not prepared.
-    size_t motionGroups = 0;
-    size_t motionLinks = 0;
-    size_t geometryUpdates = 0;
-    size_t linksUpdated = 0;
-    double msGeometry = 0.0;
-    std::string motionDeclined;
+    int lights = 0;  // punctual lights
+    LightingFigures lighting;
+    size_t twoSidedElements = 0;  // elements that occlude from both sides
+    size_t glossyElements = 0;    // elements with a glossy lobe (Material::Glossy)
+    MotionFigures motion;
     // Work an edit left for the iterations that follow (a moved emitter's first shot traced
     // in parts: GatherSettings::shotPartMs): what and how far; empty when none. The answer
     // is not settled while it is not empty.
@@ -120,23 +105,7 @@ struct SolverStats {
     // the solver stops iterating (Iterate does nothing more).
     float irradianceBound = 0.0f;
     std::string divergence;
-    // The gather stage's first shot (gather/gather_stage.h): shadow rays a surfel for the
-    // emitters' direct light (0: the solver carries the emission itself), and the last
-    // computation's milliseconds.
-    int emitterRays = 0;
-    int sunRays = 0;  // of those, rays a surfel to an environment map's sun (0: no sun)
-    double msEmitterDirect = 0.0;
-    // Its final gather (0 rays: none): rays a surfel, the surfels gathered at, the last
-    // tracing of their hits and the last evaluation of those hits, in milliseconds.
-    int gatherRays = 0;
-    size_t gatherTargets = 0;
-    double msGatherTrace = 0.0;
-    double msGatherEvaluate = 0.0;
-    size_t gatherRaysRetraced = 0;  // rays the last move traced again (both parts)
-    size_t gatherTraces = 0;        // tracings of either part so far (edits that traced)
-    // Where the gather stage traces: the CPU (Embree) on every solver device for now (no
-    // Vulkan ray-query path yet); empty without a gather stage.
-    std::string gatherDevice;
+    GatherFigures gather;  // empty without a gather stage
     // The solver's own figures by name (docs/SOLVER.md lists each solver's): a number or a
     // word. StatsToJson writes them beside the fields above.
     std::vector<std::pair<std::string, std::variant<double, std::string>>> details;

@@ -298,7 +298,7 @@ TEST(DirectLight, LightEditsTakeOneShadowPass) {
     glm::vec3 e = solver->SurfelIrradiance(Channel::kDirect)[under];
     EXPECT_NEAR(e.x, want / 4.0f, 0.02f * want);
     EXPECT_EQ(e.y, 0.0f);
-    EXPECT_GT(solver->Stats().msDirect, 0.0);
+    EXPECT_GT(solver->Stats().lighting.msDirect, 0.0);
 }
 
 // Direct light bounces: a lamp that only lights the floor makes a wall that it cannot see

@@ -59,7 +59,7 @@ TEST(FirstShot, BlockerShadowGetsCloserToTheReference) {
     const double a = Rmse(scene, *alone, truth), b = Rmse(scene, shot, truth);
     std::printf("blocker: solver alone %.2f%%, with the first shot %.2f%%\n", 100 * a, 100 * b);
     EXPECT_LT(b, 0.5 * a);
-    EXPECT_GT(shot.Stats().emitterRays, 0);
+    EXPECT_GT(shot.Stats().gather.emitterRays, 0);
 }
 
 // A yard under a sky map with a small sun: a floor, a box and a wall. The sun (2° across,
@@ -93,8 +93,8 @@ TEST(FirstShot, TheSkyMapsSunIsTracedAsALight) {
     IterateUntilConverged(*old, 1e-3, 200);
     auto now = CreateGatheredSolver(scene, Cpu(), GatherSettings{});
     IterateUntilConverged(*now, 1e-3, 200);
-    EXPECT_EQ(old->Stats().sunRays, 0);
-    EXPECT_EQ(now->Stats().sunRays, 128);
+    EXPECT_EQ(old->Stats().gather.sunRays, 0);
+    EXPECT_EQ(now->Stats().gather.sunRays, 128);
     const double a = Rmse(scene, *old, truth), b = Rmse(scene, *now, truth);
     std::printf("sunny yard: gathered without the sun's shot %.2f%%, with it %.2f%%\n", 100 * a,
                 100 * b);
@@ -243,12 +243,12 @@ void EditsMatchAFreshGather(Scene scene, const std::vector<std::pair<std::string
     SolverSettings settings = Cpu();
     settings.prepareMoves = true;
     GatherStage stage(CreateSolver(scene, settings), scene, {});
-    ASSERT_GT(stage.Stats().gatherRays, 0);
-    ASSERT_GT(stage.Stats().emitterRays, 0);
+    ASSERT_GT(stage.Stats().gather.rays, 0);
+    ASSERT_GT(stage.Stats().gather.emitterRays, 0);
     IterateUntilConverged(stage, 1e-4, 300);
     for (const auto& [name, edit] : edits) {
         const std::vector<glm::vec3> before = testing::AllVertices(stage, scene, Channel::kTotal);
-        const size_t traces = stage.Stats().gatherTraces;
+        const size_t traces = stage.Stats().gather.traces;
         edit(scene);
         if (name.rfind("light", 0) == 0 || name.rfind("sky", 0) == 0) {
             stage.UpdateLights(scene);
@@ -272,21 +272,21 @@ void EditsMatchAFreshGather(Scene scene, const std::vector<std::pair<std::string
         // Only a move traces the gather's or the shot's rays (part of them); the other edits
         // re-read the cached ones (an emissive edit re-weights them, emission being linear).
         if (name.rfind("move", 0) != 0 && name != "sky turn") {
-            EXPECT_EQ(stage.Stats().gatherTraces, traces) << name;
+            EXPECT_EQ(stage.Stats().gather.traces, traces) << name;
         }
         if (name == "move") {
             // Only the rays near the box were traced again: fewer than a third of them.
             const SolverStats st = stage.Stats();
             // The glints: a view from the vertex and one of each light each; the short hits:
             // one of each light each.
-            const size_t all = st.gatherTargets * st.gatherRays +
-                               stage.GetSurfels().size() * st.emitterRays +
+            const size_t all = st.gather.targets * st.gather.rays +
+                               stage.GetSurfels().size() * st.gather.emitterRays +
                                size_t(st.Number("gather_glints")) * (1 + scene.lights.size()) +
                                size_t(st.Number("gather_short_hits")) * scene.lights.size();
-            std::printf("the move traced %zu of at least %zu rays again\n", st.gatherRaysRetraced,
+            std::printf("the move traced %zu of at least %zu rays again\n", st.gather.raysRetraced,
                         all);
-            EXPECT_GT(st.gatherRaysRetraced, 0u);
-            EXPECT_LT(st.gatherRaysRetraced, all / 3);
+            EXPECT_GT(st.gather.raysRetraced, 0u);
+            EXPECT_LT(st.gather.raysRetraced, all / 3);
         }
         if (name == "move emitter") {
             // The first shot is traced again whole (its rays aim at the emitter; a full trace
@@ -294,13 +294,13 @@ void EditsMatchAFreshGather(Scene scene, const std::vector<std::pair<std::string
             // emitter's old or new place (here most of the ceiling: 71% of them), with the
             // short hits' shadow rays at the targets whose rays were traced again.
             const SolverStats st = stage.Stats();
-            const size_t gather = st.gatherTargets * st.gatherRays +
+            const size_t gather = st.gather.targets * st.gather.rays +
                                   size_t(st.Number("gather_short_hits")) * scene.lights.size();
             std::printf("the emitter's move traced %zu of %zu gather rays again\n",
-                        st.gatherRaysRetraced, gather);
-            EXPECT_GT(st.gatherTraces, traces);
-            EXPECT_GT(st.gatherRaysRetraced, 0u);
-            EXPECT_LT(st.gatherRaysRetraced, gather * 3 / 4);
+                        st.gather.raysRetraced, gather);
+            EXPECT_GT(st.gather.traces, traces);
+            EXPECT_GT(st.gather.raysRetraced, 0u);
+            EXPECT_LT(st.gather.raysRetraced, gather * 3 / 4);
         }
     }
 }
@@ -432,12 +432,12 @@ TEST(FinalGather, SolverBehindTheGatherDefaultsToFewerBins) {
     const Scene glossy = LoadGltf(std::string(PENUMBRA_SOURCE_DIR) + "/scenes/glossy-box.gltf");
     const SolverStats g = CreateGatheredSolver(glossy, s, {})->Stats();
     EXPECT_EQ(g.bins, kDefaultBins);
-    EXPECT_GT(g.gatherRays, 0);
+    EXPECT_GT(g.gather.rays, 0);
     Scene metal = cornell;  // emitters and a glossy material
     metal.materials[0] = PbrMaterial(metal.materials[0].name, glm::vec3(0.8f), 1.0f, 0.3f);
     const SolverStats m = CreateGatheredSolver(metal, s, {}, {}, &notes)->Stats();
     EXPECT_EQ(m.bins, kDefaultBins);
-    EXPECT_GT(m.emitterRays, 0);
+    EXPECT_GT(m.gather.emitterRays, 0);
     ASSERT_EQ(notes.size(), 1u);
     EXPECT_NE(notes[0].find("not the solver"), std::string::npos) << notes[0];
     SetOption(s.options, "bins", 96);

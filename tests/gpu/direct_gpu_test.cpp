@@ -119,7 +119,7 @@ TEST(VulkanDirect, LavapipeSolverWithLightsMatchesTheCpuSolver) {
     EXPECT_LT(testing::RelativeRms(gpu->SurfelIrradiance(Channel::kDirect),
                                    cpu->SurfelIrradiance(Channel::kDirect)),
               2e-3);
-    EXPECT_GT(gpu->Stats().msShadow, 0.0);
+    EXPECT_GT(gpu->Stats().lighting.msShadow, 0.0);
     for (const auto& m : dynamic_cast<AntiradianceSolver&>(*gpu).ValidationMessages())
         ADD_FAILURE() << "validation: " << m;
 }

@@ -126,15 +126,15 @@ TEST(FinalGather, GpuTracingMatchesEmbree) {
     GatherStage cpu(CreateSolver(scene, On(DeviceChoice::kCpu)), scene, GatherSettings{});
     IterateUntilConverged(gpu, 1e-3, 200);
     IterateUntilConverged(cpu, 1e-3, 200);
-    const std::string device = gpu.Stats().gatherDevice;
+    const std::string device = gpu.Stats().gather.device;
     EXPECT_NE(device.find("ray tracing pipeline"), std::string::npos) << device;
-    EXPECT_EQ(cpu.Stats().gatherDevice, "cpu (Embree)");
+    EXPECT_EQ(cpu.Stats().gather.device, "cpu (Embree)");
     const double rms = testing::RelativeRms(gpu.SurfelIrradiance(Channel::kIndirect),
                                             cpu.SurfelIrradiance(Channel::kIndirect));
     std::printf(
         "Cornell box gathered on %s vs Embree: %.4f%% relative RMS; traced in %.1f vs "
         "%.1f ms\n",
-        device.c_str(), 100 * rms, gpu.Stats().msGatherTrace, cpu.Stats().msGatherTrace);
+        device.c_str(), 100 * rms, gpu.Stats().gather.msTrace, cpu.Stats().gather.msTrace);
     EXPECT_LT(rms, 1e-3);
 }
 
@@ -146,7 +146,7 @@ TEST(FinalGather, OnLavapipeTheGatherSaysWhyItTracesOnTheCpu) {
     g.gatherRays = 16;
     g.emitterRays = 16;
     GatherStage stage(CreateSolver(scene, On(DeviceChoice::kCpu)), scene, g);
-    const std::string device = stage.Stats().gatherDevice;
+    const std::string device = stage.Stats().gather.device;
     if (device.find("ray tracing pipeline") != std::string::npos)
         GTEST_SKIP() << "this lavapipe traces rays: " << device;
     if (device.find("no CPU Vulkan device") != std::string::npos)

@@ -294,11 +294,11 @@ TEST_P(MovedSolver, MatchesTheCpuBackEnd) {
         std::printf(
             "%s, %s moved: lavapipe vs cpu %.2e (before the move %.2e); direct vs a fresh "
             "direct stage %.2e; links updated %zu\n",
-            c.file, c.node, rel, unmoved, directVsFresh, gpu->Stats().linksUpdated);
+            c.file, c.node, rel, unmoved, directVsFresh, gpu->Stats().motion.linksUpdated);
         EXPECT_LT(unmoved, 1e-5);
         EXPECT_LT(rel, c.tolerance);
-        EXPECT_GT(gpu->Stats().linksUpdated, 0u);
-        EXPECT_EQ(gpu->Stats().linksUpdated, cpu->Stats().linksUpdated);
+        EXPECT_GT(gpu->Stats().motion.linksUpdated, 0u);
+        EXPECT_EQ(gpu->Stats().motion.linksUpdated, cpu->Stats().motion.linksUpdated);
         EXPECT_EQ(gpu->Stats().Text("link_update"), onDevice ? "device" : "host");
         for (const auto& m : dynamic_cast<AntiradianceSolver&>(*gpu).ValidationMessages())
             ADD_FAILURE() << "validation: " << m;

@@ -327,11 +327,11 @@ TEST(Session, MaterialTurnedGlossyConvergesToAFreshBake) {
     Scene scene = LoadGltf(kBlocker);
     Session session("blocker", scene, Settings());
     WaitFor(session, 0);
-    ASSERT_GT(session.SolverStatistics().gatherRays, 0);
+    ASSERT_GT(session.SolverStatistics().gather.rays, 0);
     uint64_t edit = session.Submit(MaterialEdit{"grey", glm::vec3(0.8f), std::nullopt, 0.3f, 1.0f});
     FramePtr f = WaitFor(session, edit);
     ASSERT_TRUE(f);
-    EXPECT_GT(session.SolverStatistics().gatherRays, 0);
+    EXPECT_GT(session.SolverStatistics().gather.rays, 0);
     for (Material& m : scene.materials)
         if (m.name == "grey") m = PbrMaterial("grey", glm::vec3(0.8f), 1.0f, 0.3f);
     auto fresh = Fresh(scene, Settings());

@@ -194,7 +194,7 @@ TEST(MotionLinks, MovedGlossyCubeUnderASpotMatchesAFreshBake) {
     std::printf("glossy box, cube moved: direct %.2e, total %.4f vs a fresh bake\n", direct, total);
     EXPECT_LT(direct, 1e-3);  // same shadow maps, same receivers
     EXPECT_LT(total, 0.02);
-    EXPECT_EQ(solver.Stats().geometryUpdates, 1u);
+    EXPECT_EQ(solver.Stats().motion.moves, 1u);
 }
 
 // The motion link budget (AntiradianceSettings::motionLinkBudget): the build refines the static

@@ -9,7 +9,6 @@
 #include "gpu/context.h"
 #include "solvers/antiradiance/cpu_passes.h"
 #include "solvers/antiradiance/vulkan_passes.h"
-#include "solvers/lighting_stats.h"
 
 namespace penumbra {
 
@@ -365,16 +364,16 @@ SolverStats AntiradianceSolver::Stats() const {
         s.twoSidedElements += leaf.flags & kLeafTwoSided;
     s.glossyElements = model_.glossy.size();
     s.SetDetail("glossy_lobes", double(model_.lobes.size()));
-    s.motionGroups = model_.motion.size();
-    s.motionLinks = model_.links.dynamic.size();
-    s.geometryUpdates = geometryUpdates_;
-    s.linksUpdated = linksUpdated_;
-    s.msGeometry = msGeometry_;
+    s.motion.groups = model_.motion.size();
+    s.motion.links = model_.links.dynamic.size();
+    s.motion.moves = geometryUpdates_;
+    s.motion.linksUpdated = linksUpdated_;
+    s.motion.msLastMove = msGeometry_;
     if (!model_.links.dynamic.empty()) {
         s.SetDetail("link_update", DeviceLinkUpdate() ? "device" : "host");
         s.SetDetail("last_link_update_device_ms", backend_->LinkUpdateMs());
     }
-    s.motionDeclined = model_.motionDeclined;
+    s.motion.declined = model_.motionDeclined;
     s.gathers = schedule_.passes;
     s.bounces = schedule_.bounces;
     s.SetDetail("scheme", SchemeName(own_.scheme));
@@ -382,7 +381,7 @@ SolverStats AntiradianceSolver::Stats() const {
     s.SetDetail("antiradiance_cap_hits", double(schedule_.capHits));
     s.irradianceBound = bound_;
     s.divergence = divergence_;
-    AddLightingFigures(direct::DescribeLighting(direct_.get(), mapSize_, sky_), s);
+    s.lighting = direct::DescribeLighting(direct_.get(), mapSize_, sky_);
     s.passes = backend_->PassTimings();
     s.tableBytes = backend_->TableBytes();
     s.SetDetail("tables", backend_->Tables());

@@ -15,7 +15,6 @@
 #include "solvers/implicit/vulkan_bounce.h"
 #include "solvers/implicit/vulkan_composite.h"
 #include "solvers/implicit/vulkan_links.h"
-#include "solvers/lighting_stats.h"
 
 namespace penumbra {
 namespace {
@@ -469,9 +468,9 @@ SolverStats ImplicitSolver::Stats() const {
     // Per share: bin, sender, weight and travel, and the bounce's index and factor.
     s.linkBytes = links_.sender.size() * (4 * sizeof(uint32_t) + 2 * sizeof(float));
     s.lights = lights_;
-    AddLightingFigures(direct::DescribeLighting(directStage_.get(), mapSize_, sky_), s);
-    s.geometryUpdates = geometryUpdates_;
-    s.msGeometry = msGeometry_;
+    s.lighting = direct::DescribeLighting(directStage_.get(), mapSize_, sky_);
+    s.motion.moves = geometryUpdates_;
+    s.motion.msLastMove = msGeometry_;
     s.divergence = divergence_;
     // No furnace bound is computed (a Jacobi bounce with albedos below 1 cannot grow without
     // bound); infinite: none is checked, only that the light stays finite.

@@ -15,7 +15,6 @@
 #include "base/check.h"
 #include "base/numeric.h"
 #include "gpu/context.h"
-#include "solvers/lighting_stats.h"
 
 namespace penumbra {
 namespace {
@@ -428,9 +427,9 @@ SolverStats LightfieldSolver::Stats() const {
     s.tableBytes = surfels_.size() * (6 * sizeof(glm::vec3) + sizeof(float)) + glossyBytes;
     s.linkBytes = bytes;
     s.lights = lights_;
-    AddLightingFigures(direct::DescribeLighting(directStage_.get(), mapSize_, sky_), s);
-    s.geometryUpdates = geometryUpdates_;
-    s.msGeometry = msGeometry_;
+    s.lighting = direct::DescribeLighting(directStage_.get(), mapSize_, sky_);
+    s.motion.moves = geometryUpdates_;
+    s.motion.msLastMove = msGeometry_;
     s.divergence = divergence_;
     // No furnace bound is computed; only that the light stays finite is checked.
     s.irradianceBound = std::numeric_limits<float>::infinity();
