@@ -8,7 +8,8 @@
 #
 # usage: scripts/real-corpus.sh [BUILD] [OUT]   (BUILD default build, OUT default bench/results)
 # env:   SOLVERS (default "antiradiance lightfield"), SAMPLES (reference paths a vertex,
-#        default 1024), SCENES (names below; default all but the engine), DEVICE (default cpu)
+#        default 1024), SCENES (names below; default all but
+#        the engines, minutes and gigabytes each), DEVICE (default cpu)
 # Needs Debian's assimp-testmodels and assimp-utils (installed when missing, as install-deps).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -17,7 +18,7 @@ out=${2:-bench/results}
 solvers=${SOLVERS:-antiradiance lightfield}
 samples=${SAMPLES:-1024}
 device=${DEVICE:-cpu}
-scenes=${SCENES:-house bookshelf-faces office-faces sunlit-maze box-textured}
+scenes=${SCENES:-house bookshelf-faces office-faces sunlit-maze box-textured clearcoat}
 models=/usr/share/assimp/models
 
 need=()
@@ -40,6 +41,11 @@ file_of() {
         assimp export "$models/IFC/AC14-FZK-Haus.ifc" "$work/house.glb" >/dev/null
         echo "$work/house.glb" ;;
     engine) echo "$models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb" ;;
+    engines) # two copies 255 units apart: parts that barely see each other
+        /usr/bin/python3 scripts/copies.py "$models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb" \
+            "$work/engines.glb" 2 255
+        echo "$work/engines.glb" ;;
+    clearcoat) echo "$models/glTF2/ClearCoat-glTF/ClearCoatTest.gltf" ;; # Khronos' sample model
     box-textured) echo "$models/glTF2/BoxTextured-glTF-Binary/BoxTextured.glb" ;;
     bookshelf-faces) echo "$work/bookshelf-5mm-faces.gltf" ;;
     office-faces)
@@ -51,7 +57,7 @@ file_of() {
 }
 sky_of() {
     case $1 in
-    house | engine | box-textured | office-faces) echo "--environment-color 1,1,1" ;;
+    house | engine | engines | box-textured | office-faces | clearcoat) echo "--environment-color 1,1,1" ;;
     *) echo "" ;;
     esac
 }
