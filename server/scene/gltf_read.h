@@ -27,6 +27,9 @@ struct Context {
     }
 };
 
+// Why `filepath`, a file a glTF names, may not be read under `files` ("" when it may):
+// outside the scene root, or any external file of an uploaded .glb (gltf_files.cpp).
+std::string FileRefusal(const GltfFiles& files, const std::string& filepath);
 // "node N 'name'", as messages name a node.
 std::string NodeLabel(const tinygltf::Model& model, int node);
 // A node's local transform: its matrix, else translation × rotation × scale.
