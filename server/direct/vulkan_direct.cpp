@@ -38,9 +38,7 @@ struct DirectPush {
     uint32_t size;
 };
 // shaders/direct.comp (push constants).
-PENUMBRA_GPU_FIELD(DirectPush, receiverCount, 0);
-PENUMBRA_GPU_FIELD(DirectPush, lightCount, 4);
-PENUMBRA_GPU_FIELD(DirectPush, size, 8);
+PENUMBRA_GPU_WORDS(DirectPush, 3);
 
 }  // namespace
 

@@ -17,9 +17,7 @@ struct BinWeight {
     uint32_t bin;
     float weight;
 };
-static_assert(sizeof(BinWeight) == 8);
-PENUMBRA_GPU_FIELD(BinWeight, bin, 0);
-PENUMBRA_GPU_FIELD(BinWeight, weight, 4);
+PENUMBRA_GPU_WORDS(BinWeight, 2);
 
 class Directions {
   public:

@@ -26,11 +26,7 @@ struct GlossyLobe {
     float exponent;  // n as used: min(n, m/π) (below)
     float norm;      // 1/N
 };
-static_assert(sizeof(GlossyLobe) == 16);
-PENUMBRA_GPU_FIELD(GlossyLobe, start, 0);
-PENUMBRA_GPU_FIELD(GlossyLobe, width, 4);
-PENUMBRA_GPU_FIELD(GlossyLobe, exponent, 8);
-PENUMBRA_GPU_FIELD(GlossyLobe, norm, 12);
+PENUMBRA_GPU_WORDS(GlossyLobe, 4);
 inline constexpr float kLobeCutoff = 1e-3f;
 // The sharpest lobe m bins resolve: σ = 1/√n at half the bin spacing √(4π/m) gives n = m/π.
 // Sharper lobes (roughness below ≈ 0.33 at 128 bins) are widened to it.

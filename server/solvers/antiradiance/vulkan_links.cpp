@@ -49,12 +49,7 @@ struct LinkPush {
     float sigma0;
 };
 // shaders/links.comp (push constants).
-PENUMBRA_GPU_FIELD(LinkPush, first, 0);
-PENUMBRA_GPU_FIELD(LinkPush, count, 4);
-PENUMBRA_GPU_FIELD(LinkPush, cubeRes, 8);
-PENUMBRA_GPU_FIELD(LinkPush, adjacentWidth, 12);
-PENUMBRA_GPU_FIELD(LinkPush, binSolidAngle, 16);
-PENUMBRA_GPU_FIELD(LinkPush, sigma0, 20);
+PENUMBRA_GPU_WORDS(LinkPush, 6);
 
 // Invocations a dispatch of the link update covers (its workgroup count stays far below
 // the 65,535 every device allows).

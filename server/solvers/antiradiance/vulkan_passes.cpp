@@ -33,17 +33,13 @@ struct LocalPush {
     uint32_t envRow;
 };
 // shaders/local.comp (push constants).
-PENUMBRA_GPU_FIELD(LocalPush, first, 0);
-PENUMBRA_GPU_FIELD(LocalPush, count, 4);
-PENUMBRA_GPU_FIELD(LocalPush, binSolidAngle, 8);
-PENUMBRA_GPU_FIELD(LocalPush, envRow, 12);
+PENUMBRA_GPU_WORDS(LocalPush, 4);
 struct RangePush {
     uint32_t first;
     uint32_t count;
 };
 // shaders/global.comp, pull.comp (push constants).
-PENUMBRA_GPU_FIELD(RangePush, first, 0);
-PENUMBRA_GPU_FIELD(RangePush, count, 4);
+PENUMBRA_GPU_WORDS(RangePush, 2);
 
 // Receivers are dispatched window by window in node order (depth first, so a window is a
 // patch of nearby surfaces), and by link count within a window, so the lanes of a workgroup

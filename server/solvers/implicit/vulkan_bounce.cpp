@@ -22,13 +22,7 @@ namespace {
 struct BouncePush {
     uint32_t mode, bins, leaves, first, count, sumsAt, environmentAt;
 };
-PENUMBRA_GPU_FIELD(BouncePush, mode, 0);
-PENUMBRA_GPU_FIELD(BouncePush, bins, 4);
-PENUMBRA_GPU_FIELD(BouncePush, leaves, 8);
-PENUMBRA_GPU_FIELD(BouncePush, first, 12);
-PENUMBRA_GPU_FIELD(BouncePush, count, 16);
-PENUMBRA_GPU_FIELD(BouncePush, sumsAt, 20);
-PENUMBRA_GPU_FIELD(BouncePush, environmentAt, 24);
+PENUMBRA_GPU_WORDS(BouncePush, 7);
 
 }  // namespace
 

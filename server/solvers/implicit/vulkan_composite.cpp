@@ -52,23 +52,7 @@ struct CompositePush {
         cubeRes, adjacentWidth, hasSolids;
     float binSolidAngle, thin, cosBinRadius, sinBinRadius, aboveHorizon;
 };
-PENUMBRA_GPU_FIELD(CompositePush, mode, 0);
-PENUMBRA_GPU_FIELD(CompositePush, bins, 4);
-PENUMBRA_GPU_FIELD(CompositePush, leafCount, 8);
-PENUMBRA_GPU_FIELD(CompositePush, endCount, 12);
-PENUMBRA_GPU_FIELD(CompositePush, slots, 16);
-PENUMBRA_GPU_FIELD(CompositePush, scanFirst, 20);
-PENUMBRA_GPU_FIELD(CompositePush, scanCount, 24);
-PENUMBRA_GPU_FIELD(CompositePush, mergedAt, 28);
-PENUMBRA_GPU_FIELD(CompositePush, environmentAt, 32);
-PENUMBRA_GPU_FIELD(CompositePush, cubeRes, 36);
-PENUMBRA_GPU_FIELD(CompositePush, adjacentWidth, 40);
-PENUMBRA_GPU_FIELD(CompositePush, hasSolids, 44);
-PENUMBRA_GPU_FIELD(CompositePush, binSolidAngle, 48);
-PENUMBRA_GPU_FIELD(CompositePush, thin, 52);
-PENUMBRA_GPU_FIELD(CompositePush, cosBinRadius, 56);
-PENUMBRA_GPU_FIELD(CompositePush, sinBinRadius, 60);
-PENUMBRA_GPU_FIELD(CompositePush, aboveHorizon, 64);
+PENUMBRA_GPU_WORDS(CompositePush, 17);
 
 // The shader's limits: the deepest chain, a scan's block.
 constexpr size_t kMaxDepth = 64;

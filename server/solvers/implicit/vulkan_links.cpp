@@ -52,17 +52,7 @@ struct PairPush {
     float limit, binSolidAngle, splat, adjacentAngle, binRadius;
 };
 // shaders/implicit_pairs.comp (push constants).
-PENUMBRA_GPU_FIELD(PairPush, count, 0);
-PENUMBRA_GPU_FIELD(PairPush, nextCapacity, 4);
-PENUMBRA_GPU_FIELD(PairPush, endCapacity, 8);
-PENUMBRA_GPU_FIELD(PairPush, bins, 12);
-PENUMBRA_GPU_FIELD(PairPush, cubeRes, 16);
-PENUMBRA_GPU_FIELD(PairPush, adjacentWidth, 20);
-PENUMBRA_GPU_FIELD(PairPush, limit, 24);
-PENUMBRA_GPU_FIELD(PairPush, binSolidAngle, 28);
-PENUMBRA_GPU_FIELD(PairPush, splat, 32);
-PENUMBRA_GPU_FIELD(PairPush, adjacentAngle, 36);
-PENUMBRA_GPU_FIELD(PairPush, binRadius, 40);
+PENUMBRA_GPU_WORDS(PairPush, 11);
 
 }  // namespace
 

@@ -21,26 +21,14 @@ struct WalkPush {
     uint32_t firstLine, lineCount, directions, surfels, firstDirection, group, glossy;
 };
 // shaders/lf_walk.comp (push constants).
-PENUMBRA_GPU_FIELD(WalkPush, firstLine, 0);
-PENUMBRA_GPU_FIELD(WalkPush, lineCount, 4);
-PENUMBRA_GPU_FIELD(WalkPush, directions, 8);
-PENUMBRA_GPU_FIELD(WalkPush, surfels, 12);
-PENUMBRA_GPU_FIELD(WalkPush, firstDirection, 16);
-PENUMBRA_GPU_FIELD(WalkPush, group, 20);
-PENUMBRA_GPU_FIELD(WalkPush, glossy, 24);
+PENUMBRA_GPU_WORDS(WalkPush, 7);
 struct FlushPush {
     uint32_t surfels, directions, firstDirection, group;
     float cellArea, ratioCells;
     uint32_t glossy;
 };
 // shaders/lf_flush.comp (push constants).
-PENUMBRA_GPU_FIELD(FlushPush, surfels, 0);
-PENUMBRA_GPU_FIELD(FlushPush, directions, 4);
-PENUMBRA_GPU_FIELD(FlushPush, firstDirection, 8);
-PENUMBRA_GPU_FIELD(FlushPush, group, 12);
-PENUMBRA_GPU_FIELD(FlushPush, cellArea, 16);
-PENUMBRA_GPU_FIELD(FlushPush, ratioCells, 20);
-PENUMBRA_GPU_FIELD(FlushPush, glossy, 24);
+PENUMBRA_GPU_WORDS(FlushPush, 7);
 
 }  // namespace
 
