@@ -13,17 +13,22 @@
 #include "output/irradiance_writer.h"
 #include "reference/path_tracer.h"
 #include "scene/environment.h"
+#include "scene/sun_sky.h"
 #include "solver/solver.h"
 
 namespace penumbra::cli {
 
-// `--environment FILE.exr | --environment-color R,G,B`, `--environment-intensity`,
-// `--environment-rotation` (degrees about +Y), shared by bake and reference.
+// `--environment FILE.exr | --environment-color R,G,B | --sky clear`, `--environment-intensity`,
+// `--environment-rotation` (degrees about +Y), `--sun AZIMUTH,ELEVATION,LUX`, `--turbidity`,
+// shared by bake, reference and render (scene/sun_sky.h).
 struct EnvironmentOptions {
     std::string file;
     std::vector<float> color;
     float intensity = 1.0f;
     float rotationDegrees = 0.0f;
+    std::vector<float> sun;  // azimuth, elevation (degrees), illuminance (lux)
+    std::string sky;         // "clear": Preetham's sky for the sun
+    float turbidity = kDefaultTurbidity;
 
     void Add(CLI::App* app) {
         auto* f = app->add_option("--environment", file,
@@ -34,6 +39,22 @@ struct EnvironmentOptions {
                       ->delimiter(',')
                       ->expected(3);
         f->excludes(c);
+        auto* s = app->add_option("--sun", sun,
+                                  "a sun (a directional light on a node 'sun'): azimuth "
+                                  "(degrees from north, -Z, towards east, +X), elevation "
+                                  "(degrees above the horizon), illuminance (lux on a surface "
+                                  "facing it), e.g. 135,30,80000")
+                      ->delimiter(',')
+                      ->expected(3);
+        auto* k = app->add_option("--sky", sky,
+                                  "clear: Preetham's analytic clear sky for the --sun position "
+                                  "(instead of --environment or --environment-color)")
+                      ->check(CLI::IsMember({"clear"}));
+        k->excludes(f)->excludes(c)->needs(s);
+        app->add_option("--turbidity", turbidity,
+                        "the clear sky's turbidity, 1.7 (very clear) … 10 (hazy)")
+            ->capture_default_str()
+            ->needs(k);
         app->add_option("--environment-intensity", intensity, "scales the sky")
             ->capture_default_str();
         app->add_option("--environment-rotation", rotationDegrees,
@@ -42,9 +63,17 @@ struct EnvironmentOptions {
     }
 
     void Apply(Scene& scene) const {
-        if (file.empty() && color.empty()) return;
-        scene.environment = file.empty() ? ConstantEnvironment({color[0], color[1], color[2]})
-                                         : LoadEnvironment(file);
+        SunPosition position;
+        if (!sun.empty()) {
+            position = {sun[0], sun[1]};
+            AddSun(scene, position, sun[2]);
+        }
+        if (file.empty() && color.empty() && sky.empty()) return;
+        if (!sky.empty() && rotationDegrees != 0.0f)
+            throw Error("--environment-rotation does not turn a clear sky: turn the --sun");
+        scene.environment = !sky.empty()   ? ClearSky(position, turbidity)
+                            : file.empty() ? ConstantEnvironment({color[0], color[1], color[2]})
+                                           : LoadEnvironment(file);
         scene.environment.intensity = intensity;
         scene.environment.rotation = glm::radians(rotationDegrees);
         ValidateEnvironment(scene.environment);

@@ -15,6 +15,7 @@
 #include "gpu/context.h"
 #include "output/irradiance_writer.h"
 #include "scene/scene_builder.h"
+#include "scene/sun_sky.h"
 #include "test_util.h"
 
 namespace penumbra {
@@ -306,6 +307,57 @@ TEST(BakeCli, EnvironmentLightsTheSceneThroughItsOpening) {
     EXPECT_NE(both.run.exitCode, 0);
     auto negative = BakeJson("bake-sky-neg", base + " --environment-color 1,-1,1");
     EXPECT_EQ(negative.run.exitCode, 1) << negative.run.output;
+}
+
+// Issue 62: `--sun AZIMUTH,ELEVATION,LUX` and `--sky clear` on an open plane facing up: the sun
+// gives E = lux · sin(elevation), the clear sky its integral ∫ L cos θ dω over the map.
+TEST(BakeCli, SunAndClearSkyLightAnOpenPlaneAsTheirClosedForms) {
+    auto dir = testing::TempDir("sun-sky");
+    SceneBuilder b;
+    b.AddQuad("ground", b.AddMaterial("grey", glm::vec3(0.5f)), {-5, 0, -5}, {5, 0, -5}, {5, 0, 5},
+              {-5, 0, 5}, {0, 1, 0}, 2);
+    b.WriteGltf((dir / "ground.gltf").string());
+    auto bake = [&](const std::string& name, const std::string& options) {
+        JsonBake r{Execute("bake " + (dir / "ground.gltf").string() + " -o " +
+                           (dir / (name + ".json")).string() + " --device cpu " + options),
+                   {}};
+        if (r.run.exitCode == 0)
+            r.json = nlohmann::json::parse(std::ifstream(dir / (name + ".json")));
+        return r;
+    };
+    auto sun = bake("sun", "--sun 135,30,80000 --channel direct");
+    ASSERT_EQ(sun.run.exitCode, 0) << sun.run.output;
+    for (const auto& e : sun.json["primitives"][0]["irradiance"])
+        EXPECT_NEAR(e[1].get<double>(), 40000.0, 4.0);
+
+    // The sky's irradiance on the plane by quadrature over the map's pixels.
+    const Environment sky = ClearSky({135.0f, 30.0f}, 3.0f, 256);
+    glm::dvec3 skyE(0.0);
+    const int w = sky.image->width, h = sky.image->height;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const glm::vec3 d = EquirectDirection((x + 0.5f) / w, (y + 0.5f) / h);
+            const double solidAngle =
+                (2.0 * M_PI / w) * (M_PI / h) * std::sin(M_PI * (y + 0.5) / h);
+            skyE += glm::dvec3(sky.image->At(x, y)) * double(std::max(d.y, 0.0f)) * solidAngle;
+        }
+    EXPECT_GT(skyE.y, 5000.0);  // a clear day's sky: thousands of lux
+    auto both = bake("sun-sky", "--sun 135,30,80000 --sky clear --channel total");
+    ASSERT_EQ(both.run.exitCode, 0) << both.run.output;
+    EXPECT_NE(both.json["stats"]["environment"]["source"].get<std::string>().find("Preetham"),
+              std::string::npos);
+    for (const auto& e : both.json["primitives"][0]["irradiance"])
+        for (int c = 0; c < 3; ++c)
+            EXPECT_NEAR(e[c].get<double>(), 40000.0 + skyE[c], 0.02 * (40000.0 + skyE[c])) << c;
+
+    // A clear sky needs a sun; a turbidity outside the model's range is refused by name.
+    EXPECT_EQ(bake("no-sun", "--sky clear").run.exitCode, 2);
+    auto hazy = bake("hazy", "--sun 0,30,1000 --sky clear --turbidity 20");
+    EXPECT_EQ(hazy.run.exitCode, 1);
+    EXPECT_NE(hazy.run.output.find("turbidity"), std::string::npos) << hazy.run.output;
+    auto below = bake("below", "--sun 0,-10,1000");
+    EXPECT_EQ(below.run.exitCode, 1);
+    EXPECT_NE(below.run.output.find("elevation"), std::string::npos) << below.run.output;
 }
 
 }  // namespace

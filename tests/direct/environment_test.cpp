@@ -15,6 +15,7 @@
 #include "rays/sampling.h"
 #include "reference/path_tracer.h"
 #include "scene/solids.h"
+#include "scene/sun_sky.h"
 #include "solver/solver.h"
 #include "test_util.h"
 
@@ -400,6 +401,75 @@ TEST(Environment, ReferenceFindsASmallSunInTheMap) {
     }
     std::printf("worst vertex %.2f%% off\n", 100.0 * worst);
     EXPECT_LT(worst, 0.015);  // measured 0.29%
+}
+
+}  // namespace
+}  // namespace penumbra
+
+namespace penumbra {
+namespace {
+
+// Issue 62: a sun and Preetham's clear sky from a position (scene/sun_sky.h).
+TEST(SunSky, DirectionsFollowTheCompass) {
+    auto near = [](glm::vec3 a, glm::vec3 b) { return glm::length(a - b) < 1e-5f; };
+    EXPECT_TRUE(near(SunDirection({0.0f, 0.0f}), {0, 0, -1}));   // north: −Z
+    EXPECT_TRUE(near(SunDirection({90.0f, 0.0f}), {1, 0, 0}));   // east: +X
+    EXPECT_TRUE(near(SunDirection({180.0f, 0.0f}), {0, 0, 1}));  // south
+    EXPECT_TRUE(near(SunDirection({37.0f, 90.0f}), {0, 1, 0}));  // overhead
+    const glm::vec3 d = SunDirection({135.0f, 30.0f});
+    EXPECT_NEAR(d.y, 0.5f, 1e-6f);
+    EXPECT_NEAR(d.x, d.z, 1e-6f);  // south-east: as far east (+X) as south (+Z)
+    EXPECT_GT(d.x, 0.0f);
+}
+
+TEST(SunSky, TheSunIsADirectionalLightOnANodeOfItsOwn) {
+    Scene scene;
+    const int li = AddSun(scene, {135.0f, 30.0f}, 80000.0f);
+    ASSERT_EQ(scene.lights.size(), 1u);
+    const PunctualLight& sun = scene.lights[li];
+    EXPECT_EQ(sun.type, LightType::kDirectional);
+    EXPECT_EQ(sun.intensity, 80000.0f);
+    EXPECT_EQ(FindLight(scene, "sun"), li);
+    EXPECT_EQ(scene.nodes[sun.node].name, "sun");
+    // It shines from the sun's direction: its light travels the other way.
+    EXPECT_LT(glm::length(sun.direction + SunDirection({135.0f, 30.0f})), 1e-5f);
+    // A surface facing up gets E sin(elevation).
+    const LightArrival a = PunctualArrival(sun, glm::vec3(0.0f), glm::vec3(0, 1, 0), 10.0f);
+    EXPECT_NEAR(a.irradiance.x, 40000.0f, 1.0f);
+    // One sun only, and a position the model holds for.
+    EXPECT_THROW(AddSun(scene, {0.0f, 45.0f}, 1000.0f), Error);
+    Scene other;
+    EXPECT_THROW(AddSun(other, {0.0f, -5.0f}, 1000.0f), Error);
+    EXPECT_THROW(AddSun(other, {0.0f, 30.0f}, -1.0f), Error);
+    EXPECT_THROW(AddSun(other, {NAN, 30.0f}, 1.0f), Error);
+}
+
+TEST(SunSky, TheClearSkyIsPreethamsAtTheZenithAndAroundTheSun) {
+    const SunPosition sun{135.0f, 30.0f};
+    // Preetham's zenith luminance for T = 3, θs = 60° worked by hand: χ = (4/9 − 3/120)(π −
+    // 2π/3) = 0.439241, tan χ = 0.469854, Yz = (4.0453·3 − 4.9710) tan χ − 0.2155·3 + 2.4192 =
+    // 5.13916 kcd/m².
+    EXPECT_NEAR(ClearSkyZenithLuminance(sun, 3.0f), 5139.16f, 1.0f);
+    const Environment sky = ClearSky(sun, 3.0f, 256);
+    ASSERT_TRUE(sky.image);
+    EXPECT_NE(sky.source.find("turbidity 3"), std::string::npos) << sky.source;
+    // The map's top row lies 0.7° from the zenith.
+    EXPECT_NEAR(Luminance(sky.MapRadiance({0, 1, 0})), 5139.16f, 0.02f * 5139.16f);
+    // Black below the horizon, brighter towards the sun than away from it, and symmetric
+    // about the sun's vertical plane.
+    EXPECT_EQ(sky.MapRadiance(glm::normalize(glm::vec3(0.3f, -0.5f, 0.2f))), glm::vec3(0.0f));
+    EXPECT_GT(Luminance(sky.MapRadiance(SunDirection({135.0f, 35.0f}))),
+              2.0f * Luminance(sky.MapRadiance(SunDirection({315.0f, 35.0f}))));
+    for (float offset : {20.0f, 60.0f, 100.0f}) {
+        const glm::vec3 a = sky.MapRadiance(SunDirection({135.0f + offset, 20.0f}));
+        const glm::vec3 b = sky.MapRadiance(SunDirection({135.0f - offset, 20.0f}));
+        EXPECT_LT(glm::length(a - b), 0.03f * glm::length(a)) << offset;
+    }
+    // A clear sky is blue: more blue than red away from the sun.
+    const glm::vec3 away = sky.MapRadiance(SunDirection({315.0f, 45.0f}));
+    EXPECT_GT(away.z, away.x);
+    EXPECT_THROW(ClearSky(sun, 20.0f), Error);
+    EXPECT_THROW(ClearSky({0.0f, 95.0f}, 3.0f), Error);
 }
 
 }  // namespace
