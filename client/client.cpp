@@ -348,6 +348,8 @@ SceneInfo Client::Load(const LoadOptions& o) {
     if (o.environmentColor)
         sky =
             fb::Vec3((*o.environmentColor)[0], (*o.environmentColor)[1], (*o.environmentColor)[2]);
+    std::optional<fb::Vec3> sun;
+    if (o.sun) sun = fb::Vec3((*o.sun)[0], (*o.sun)[1], (*o.sun)[2]);
     std::vector<flatbuffers::Offset<fb::SolverOption>> options;
     for (const auto& [name, value] : o.solverOptions)
         options.push_back(fb::CreateSolverOptionDirect(b, name.c_str(), value.c_str()));
@@ -358,7 +360,8 @@ SceneInfo Client::Load(const LoadOptions& o) {
         o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload, nullptr, 1.0f,
         o.convergedChange, o.environment.empty() ? nullptr : o.environment.c_str(),
         sky ? &*sky : nullptr, o.environmentIntensity, o.environmentRotation, o.emitterRays,
-        o.gatherRays, options.empty() ? nullptr : &options, bool(o.progress)));
+        o.gatherRays, options.empty() ? nullptr : &options, bool(o.progress),
+        sun ? &*sun : nullptr, o.clearSky ? "clear" : nullptr, o.turbidity));
     return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo,
                                    o.progress ? &o.progress : nullptr));
 }
@@ -435,10 +438,14 @@ uint64_t Client::SetEnvironment(const EnvironmentChange& change, const std::stri
     flatbuffers::FlatBufferBuilder b;
     fb::Vec3 c = change.color ? fb::Vec3((*change.color)[0], (*change.color)[1], (*change.color)[2])
                               : fb::Vec3();
+    const fb::Vec3 sun = change.sun ? fb::Vec3((*change.sun)[0], (*change.sun)[1],
+                                               change.sunIlluminance.value_or(-1.0f))
+                                    : fb::Vec3();
     b.Finish(fb::CreateSetEnvironmentDirect(
         b, scene.c_str(), change.path.empty() ? nullptr : change.path.c_str(),
         change.color ? &c : nullptr, change.off, change.intensity.value_or(-1.0f),
-        change.rotation.value_or(0.0f), change.rotation.has_value()));
+        change.rotation.value_or(0.0f), change.rotation.has_value(), change.sun ? &sun : nullptr,
+        change.clearSky ? "clear" : nullptr, change.turbidity.value_or(-1.0f)));
     return impl_->Call(MessageType::kSetEnvironment, b, MessageType::kEditAck)
         .As<fb::EditAck>()
         ->edit_id();

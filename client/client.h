@@ -116,6 +116,11 @@ struct LoadOptions {
     std::optional<std::array<float, 3>> environmentColor;
     float environmentIntensity = 1.0f;
     float environmentRotation = 0.0f;  // radians about +Y
+    // A sun: azimuth (degrees from north, −Z, towards east, +X), elevation (degrees), lux; on a
+    // node called "sun". With `clearSky`, Preetham's clear sky for it (instead of the above).
+    std::optional<std::array<float, 3>> sun;
+    bool clearSky = false;
+    float turbidity = 3.0f;
     // Set: the server sends how the build goes (Progress messages) and this gets them.
     ProgressCallback progress;
 };
@@ -175,6 +180,12 @@ class Client {
         std::optional<std::array<float, 3>> color;
         bool off = false;
         std::optional<float> intensity, rotation;
+        // The scene's sun moved (azimuth, elevation in degrees) and dimmed (lux); a clear sky
+        // follows it. `clearSky`: a new clear sky for the sun, of `turbidity`.
+        std::optional<std::array<float, 2>> sun;
+        std::optional<float> sunIlluminance;
+        bool clearSky = false;
+        std::optional<float> turbidity;
     };
     uint64_t SetEnvironment(const EnvironmentChange& change, const std::string& scene = "");
     // Frames arrive on the client's reader thread; keep the callback short. The callback

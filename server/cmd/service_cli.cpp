@@ -180,6 +180,17 @@ void ServiceCommands::AddLoad(CLI::App& app) {
         ->add_option("--environment-rotation", s.skyRotationDegrees,
                      "turns the sky about +Y, degrees")
         ->capture_default_str();
+    auto* sun = s.load
+                    ->add_option("--sun", s.sun,
+                                 "a sun on a node 'sun': azimuth (degrees from north, -Z, "
+                                 "towards east, +X), elevation (degrees), lux, e.g. 135,30,80000")
+                    ->delimiter(',')
+                    ->expected(3);
+    s.load
+        ->add_option("--sky", s.skyModel, "clear: Preetham's clear sky for the --sun position")
+        ->check(CLI::IsMember({"clear"}))
+        ->needs(sun);
+    s.load->add_option("--turbidity", s.turbidity, "the clear sky's, 1.7 … 10 (default 3)");
 }
 
 // `info` and `watch`.
@@ -271,6 +282,15 @@ void ServiceCommands::AddLightEdits(CLI::App& app) {
     s.sky->add_option("--environment-intensity", s.skyIntensity, "scales the sky (≥ 0)");
     s.sky->add_option("--environment-rotation", s.skyTurnDegrees,
                       "turns the sky about +Y, degrees");
+    s.sky
+        ->add_option("--sun", s.sun,
+                     "moves the scene's sun: azimuth,elevation (degrees)[,lux]; a clear sky "
+                     "follows it")
+        ->delimiter(',')
+        ->expected(2, 3);
+    s.sky->add_option("--sky", s.skyModel, "clear: a new clear sky for the sun")
+        ->check(CLI::IsMember({"clear"}));
+    s.sky->add_option("--turbidity", s.turbidity, "the clear sky's, 1.7 … 10");
 }
 
 // `get`, `step`, `stats` and `wait`.

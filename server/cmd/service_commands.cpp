@@ -77,6 +77,9 @@ int ServiceCommands::State::RunLoad(client::Client& c) {
     client::LoadOptions o = loadOptions;
     if (skyColor.size() == 3) o.environmentColor = {skyColor[0], skyColor[1], skyColor[2]};
     o.environmentRotation = skyRotationDegrees * 0.017453292519943295f;
+    if (sun.size() == 3) o.sun = {sun[0], sun[1], sun[2]};
+    o.clearSky = skyModel == "clear";
+    if (turbidity) o.turbidity = *turbidity;
     if (upload) {
         std::ifstream in(loadPath, std::ios::binary);
         if (!in) throw Error(loadPath + ": cannot read");
@@ -341,11 +344,15 @@ int ServiceCommands::State::RunSky(client::Client& c) {
     change.off = skyOff;
     change.intensity = skyIntensity;
     if (skyTurnDegrees) change.rotation = *skyTurnDegrees * 0.017453292519943295f;
+    if (sun.size() >= 2) change.sun = {sun[0], sun[1]};
+    if (sun.size() == 3) change.sunIlluminance = sun[2];
+    change.clearSky = skyModel == "clear";
+    change.turbidity = turbidity;
     if (change.path.empty() && !change.color && !change.off && !change.intensity &&
-        !change.rotation)
+        !change.rotation && !change.sun && !change.clearSky && !change.turbidity)
         throw Error(
-            "sky: give --environment, --environment-color or --off, and/or "
-            "--environment-intensity, --environment-rotation");
+            "sky: give --environment, --environment-color, --sky clear or --off, and/or "
+            "--environment-intensity, --environment-rotation, --sun, --turbidity");
     lastEdit = c.SetEnvironment(change, session);
     if (!quiet) std::printf("edit %llu: sky\n", (unsigned long long)lastEdit);
     return kExitOk;

@@ -32,6 +32,9 @@ struct ServiceCommands::State {
     bool upload = false;
     std::vector<float> skyColor;
     float skyRotationDegrees = 0.0f;
+    std::vector<float> sun;  // load: azimuth, elevation, lux; sky: azimuth, elevation[, lux]
+    std::string skyModel;    // "clear"
+    std::optional<float> turbidity;
 
     int watchFrames = 0;
     uint64_t minEdit = 0;

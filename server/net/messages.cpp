@@ -91,6 +91,13 @@ service::LoadRequest ReadLoadScene(const fb::LoadScene& load, const service::Ser
     }
     req.environmentIntensity = l->environment_intensity();
     req.environmentRotation = l->environment_rotation();
+    req.sun = Vec(l->sun());
+    const std::string sky = Str(l->sky());
+    if (!sky.empty() && sky != "clear")
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "LoadScene: sky \"" + sky + "\" is not known (\"clear\" or none)");
+    req.clearSky = sky == "clear";
+    req.turbidity = l->turbidity();
     // The solver and its options: each checked against the registry here, so a
     // bad one is refused before anything loads.
     const std::string solver = Str(l->solver());
@@ -208,6 +215,21 @@ EnvironmentRequest ReadSetEnvironment(const fb::SetEnvironment& s) {
     if (s.off()) e.replace = Environment{};
     if (Given(s.intensity())) e.intensity = s.intensity();
     if (s.set_rotation()) e.rotation = s.rotation();
+    if (const fb::Vec3* sun = s.sun()) {
+        e.sun = glm::vec2(sun->x(), sun->y());
+        if (Given(sun->z())) e.sunIlluminance = sun->z();
+    }
+    const std::string sky = Str(s.sky());
+    if (!sky.empty() && sky != "clear")
+        throw service::ServiceError(service::ErrorKind::kInvalidArgument,
+                                    "SetEnvironment: sky \"" + sky +
+                                        "\" is not known (\"clear\" or none)");
+    e.clearSky = sky == "clear";
+    if (e.clearSky && (s.off() || !r.path.empty() || r.color))
+        throw service::ServiceError(service::ErrorKind::kInvalidArgument,
+                                    "SetEnvironment: a clear sky and another sky cannot both be "
+                                    "given");
+    if (Given(s.turbidity())) e.turbidity = s.turbidity();
     return r;
 }
 

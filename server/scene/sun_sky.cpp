@@ -85,6 +85,12 @@ glm::mat4 SunTransform(const SunPosition& sun) {
     return glm::mat4_cast(glm::rotation(glm::vec3(0.0f, 0.0f, -1.0f), -SunDirection(sun)));
 }
 
+SunPosition SunPositionOf(const PunctualLight& sun) {
+    const glm::vec3 d = -sun.direction;
+    return {glm::degrees(std::atan2(d.x, -d.z)),
+            glm::degrees(std::asin(std::clamp(d.y, -1.0f, 1.0f)))};
+}
+
 int AddSun(Scene& scene, const SunPosition& sun, float illuminance) {
     ValidateSunPosition(sun);
     if (!std::isfinite(illuminance) || illuminance < 0.0f)
@@ -153,6 +159,7 @@ Environment ClearSky(const SunPosition& sun, float turbidity, int width) {
                   double(turbidity), double(sun.azimuth), double(sun.elevation));
     env.source = source;
     env.image = std::move(image);
+    env.turbidity = turbidity;
     return env;
 }
 

@@ -33,6 +33,9 @@ inline constexpr const char* kSunName = "sun";
 // index. Throws penumbra::Error for a position ValidateSunPosition refuses, an illuminance
 // that is not a finite number ≥ 0, or a scene that already has a node or light called "sun".
 int AddSun(Scene& scene, const SunPosition& sun, float illuminance);
+// Where a directional light shines from (the inverse of SunDirection; below the horizon, a
+// negative elevation).
+SunPosition SunPositionOf(const PunctualLight& sun);
 // The local transform of the sun's node: its −Z (where the light travels) away from `sun`.
 glm::mat4 SunTransform(const SunPosition& sun);
 

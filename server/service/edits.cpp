@@ -9,6 +9,7 @@
 #include "base/check.h"
 #include "base/numeric.h"
 #include "scene/motion.h"
+#include "scene/sun_sky.h"
 #include "service/session.h"
 
 namespace penumbra::service {
@@ -326,6 +327,43 @@ uint64_t Session::Submit(const EnvironmentEdit& edit) {
     if (edit.rotation && !std::isfinite(*edit.rotation))
         throw ServiceError(ErrorKind::kInvalidArgument, "environment rotation must be finite");
     Environment next = edit.replace ? *edit.replace : validated_.environment;
+    uint64_t sunEdit = 0;
+    if (edit.sun || edit.sunIlluminance || edit.clearSky || edit.turbidity) {
+        const int li = FindLight(validated_, kSunName);
+        if (li < 0 || validated_.lights[li].type != LightType::kDirectional)
+            throw ServiceError(ErrorKind::kNotFound,
+                               "scene '" + name_ +
+                                   "' has no sun: load it with one (LoadScene `sun`) or give it a "
+                                   "directional light called 'sun'");
+        SunPosition at = SunPositionOf(validated_.lights[li]);
+        try {
+            if (edit.sun) at = {edit.sun->x, edit.sun->y};
+            ValidateSunPosition(at);
+            const float turbidity = edit.turbidity              ? *edit.turbidity
+                                    : next.turbidity > 0.0f ? next.turbidity
+                                                            : kDefaultTurbidity;
+            // A clear sky follows its sun; one asked for replaces the sky.
+            if (edit.turbidity && !edit.clearSky && next.turbidity <= 0.0f)
+                throw Error("turbidity is a clear sky's: the sky is not one (ask for sky clear)");
+            if (edit.clearSky || (!edit.replace && next.turbidity > 0.0f)) {
+                const float intensity = next.intensity;
+                next = ClearSky(at, turbidity);
+                next.intensity = edit.clearSky ? 1.0f : intensity;
+            }
+        } catch (const Error& e) {
+            throw ServiceError(ErrorKind::kInvalidArgument, e.what());
+        }
+        if (edit.sun || edit.sunIlluminance) {
+            LightEdit move;
+            move.light = kSunName;
+            if (edit.sun) move.direction = -SunDirection(at);
+            move.intensity = edit.sunIlluminance;
+            sunEdit = SubmitPunctual(li, move);
+        }
+        if (!edit.clearSky && !edit.replace && !edit.intensity && !edit.rotation &&
+            next.turbidity <= 0.0f)
+            return sunEdit;  // the sun alone: the sky is not its own
+    }
     if (edit.intensity) next.intensity = *edit.intensity;
     if (edit.rotation) next.rotation = *edit.rotation;
     try {

@@ -7,6 +7,7 @@
 
 #include "base/check.h"
 #include "scene/gltf_loader.h"
+#include "scene/sun_sky.h"
 #include "solvers/registry.h"
 
 namespace penumbra::service {
@@ -193,9 +194,20 @@ LoadResult Service::Load(const LoadRequest& request) {
                                             request.hasEnvironmentColor
                                                 ? std::optional<glm::vec3>(request.environmentColor)
                                                 : std::nullopt);
-    scene.environment.intensity = request.environmentIntensity;
-    scene.environment.rotation = request.environmentRotation;
     try {
+        // A sun and its clear sky (scene/sun_sky.h).
+        if (request.sun) AddSun(scene, {request.sun->x, request.sun->y}, request.sun->z);
+        if (request.clearSky) {
+            if (!request.sun)
+                throw Error("a clear sky (sky \"clear\") needs a sun: its position sets it");
+            if (scene.environment.Present())
+                throw Error("give a clear sky or an environment, not both");
+            if (request.environmentRotation != 0.0f)
+                throw Error("environment rotation does not turn a clear sky: turn the sun");
+            scene.environment = ClearSky({request.sun->x, request.sun->y}, request.turbidity);
+        }
+        scene.environment.intensity = request.environmentIntensity;
+        scene.environment.rotation = request.environmentRotation;
         ValidateEnvironment(scene.environment);
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kInvalidArgument, e.what());

@@ -42,6 +42,10 @@ struct LoadRequest {
     glm::vec3 environmentColor{0.0f};
     float environmentIntensity = 1.0f;
     float environmentRotation = 0.0f;  // radians
+    // A sun (azimuth°, elevation°, lux: scene/sun_sky.h AddSun), and a clear sky for it.
+    std::optional<glm::vec3> sun;
+    bool clearSky = false;
+    float turbidity = 3.0f;
     // Told how the build goes (stage, fraction of it), from the loading thread; may be empty.
     ProgressFn progress;
     // The connection asking (Service::Own), 0 in-process: a reload of a scene another

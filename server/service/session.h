@@ -147,6 +147,14 @@ struct EnvironmentEdit {
     std::optional<Environment> replace;
     std::optional<float> intensity;
     std::optional<float> rotation;  // radians about +Y
+    // The scene's sun (its light called "sun") moved to azimuth°, elevation° and, when given,
+    // `sunIlluminance` lux; a clear sky follows it (a new one for its turbidity).
+    std::optional<glm::vec2> sun;
+    std::optional<float> sunIlluminance;
+    // A new clear sky for the sun (where it is, or `sun`), of `turbidity` (or the current
+    // clear sky's, else 3).
+    bool clearSky = false;
+    std::optional<float> turbidity;
 };
 
 class Session {

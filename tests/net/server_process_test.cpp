@@ -26,6 +26,7 @@
 #include "output/irradiance_writer.h"
 #include "protocol/frame.h"
 #include "scene/gltf_loader.h"
+#include "scene/sun_sky.h"
 #include "solver/solver.h"
 #include "test_util.h"
 
@@ -425,6 +426,69 @@ TEST(ServerProcess, SkyChangedInALoadedSession) {
     bad = {};
     bad.intensity = std::nanf("");
     EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(bad); }), int(fb::ErrorCode::InvalidArgument));
+    EXPECT_TRUE(c.Connected());
+}
+
+// Issue 62: a scene loaded with a sun and a clear sky, the sun moved live (SetEnvironment
+// `sun`): the light turns, the clear sky follows it, and a frame including the edit comes.
+TEST(ServerProcess, ASunAndItsClearSkyMoveLive) {
+    ServerProcess server("sun-sky");
+    client::Client c(server.Unix(), "sun");
+    client::LoadOptions o = Cornell();
+    o.solver = "";  // the default solver
+    o.solverOptions.clear();
+    o.sun = std::array<float, 3>{135.0f, 30.0f, 80000.0f};
+    o.clearSky = true;
+    client::SceneInfo info = c.Load(o);
+    ASSERT_EQ(info.lights.size(), 1u);
+    EXPECT_EQ(info.lights[0].name, "sun");
+    EXPECT_EQ(info.lights[0].type, "directional");
+    EXPECT_NEAR(info.lights[0].direction[1], -0.5f, 1e-5f);  // shining down from 30°
+    EXPECT_NE(info.environment.find("Preetham, turbidity 3, sun at azimuth 135"),
+              std::string::npos)
+        << info.environment;
+    c.Step(2);
+    const client::Frame before = c.Get(client::Channel::kTotal);
+
+    client::Client::EnvironmentChange move;
+    move.sun = std::array<float, 2>{225.0f, 60.0f};
+    move.sunIlluminance = 90000.0f;
+    const uint64_t edit = c.SetEnvironment(move);
+    client::Frame after = c.Get(client::Channel::kTotal);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (after.lastEdit < edit && std::chrono::steady_clock::now() < deadline) {
+        c.Step(1);
+        after = c.Get(client::Channel::kTotal);
+    }
+    ASSERT_GE(after.lastEdit, edit);
+    info = c.Info();
+    const glm::vec3 to = SunDirection({225.0f, 60.0f});
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(info.lights[0].direction[k], -to[k], 1e-4f) << k;
+    EXPECT_EQ(info.lights[0].intensity, 90000.0f);
+    EXPECT_NE(info.environment.find("azimuth 225°, elevation 60°"), std::string::npos)
+        << info.environment;
+    double changed = 0;
+    for (size_t i = 0; i < before.primitives[0].rgb.size(); ++i)
+        changed += std::abs(after.primitives[0].rgb[i] - before.primitives[0].rgb[i]);
+    EXPECT_GT(changed, 0.0);
+
+    // A sun below the horizon, an unknown sky, a turbidity past the model: refused, the
+    // connection kept; a scene without a sun has none to move.
+    client::Client::EnvironmentChange bad;
+    bad.sun = std::array<float, 2>{0.0f, -10.0f};
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(bad); }), int(fb::ErrorCode::InvalidArgument));
+    bad = {};
+    bad.clearSky = true;
+    bad.turbidity = 25.0f;
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(bad); }), int(fb::ErrorCode::InvalidArgument));
+    client::LoadOptions plain = Cornell();
+    plain.path = "blocker.gltf";
+    c.Load(plain);
+    EXPECT_EQ(ErrorCodeOf([&] { c.SetEnvironment(move); }), int(fb::ErrorCode::NotFound));
+    client::LoadOptions skyOnly = Cornell();
+    skyOnly.reload = true;
+    skyOnly.clearSky = true;  // a clear sky needs a sun
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(skyOnly); }), int(fb::ErrorCode::InvalidArgument));
     EXPECT_TRUE(c.Connected());
 }
 

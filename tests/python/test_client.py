@@ -138,6 +138,24 @@ class ClientAgainstALiveServer(unittest.TestCase):
             with self.assertRaises(jsonschema.ValidationError):
                 jsonschema.validate(broken, SCHEMA)
 
+    def test_sun_and_clear_sky(self):
+        with Client(self.server.unix, name="python-sun") as c:
+            info = c.load("blocker.gltf", sun=(135, 30, 80000), sky="clear", reload=True,
+                          **CORNELL)
+            self.assertIn("sun", info.lights)
+            self.assertIn("Preetham", info.environment)
+            before = c.wait(0)
+            edit = c.sky(sun=(225, 60, 90000))
+            after = c.wait(edit)
+            self.assertGreaterEqual(after.last_edit, edit)
+            info = c.info()
+            self.assertAlmostEqual(info.lights["sun"]["intensity"], 90000.0)
+            self.assertIn("azimuth 225", info.environment)
+            self.assertNotEqual(mean(before, "floor"), mean(after, "floor"))
+            with self.assertRaises(ValueError):
+                c.sky(sun=(0,))
+            c.unload("blocker.gltf")  # test_unload loads it afresh
+
     def test_frames_stream_over_tcp(self):
         with Client(self.server.tcp) as c:
             c.load("cornell-box.gltf", **CORNELL)

@@ -325,13 +325,16 @@ class Client:
              environment_color: Optional[Sequence[float]] = None,
              environment_intensity: float = 1.0, environment_rotation: float = 0.0,
              emitter_rays: int = 256, gather_rays: int = 256, progress=None,
+             sun: Optional[Sequence[float]] = None, sky: str = "", turbidity: float = 3.0,
              **solver_options) -> SceneInfo:
         """Loads a scene (a path under the server's --scene-root, or `glb` bytes), or joins
         the session that has it. `solver` "" is the server's default (lightfield). Other
         keywords are the solver's own options (`penumbra --help`), `_` for `-`:
         `load("office.gltf", solver="antiradiance", bins=64, link_oracle="paper")`.
         `progress(stage, fraction, seconds_left)` is called (on the reader thread) as the
-        server builds; `seconds_left` < 0 while not known.
+        server builds; `seconds_left` < 0 while not known. `sun` (azimuth, elevation in
+        degrees, lux) adds a sun on a node "sun" (north −Z, east +X); `sky="clear"` Preetham's
+        clear sky for it, of `turbidity`.
         """
         if (path is None) == (glb is None):
             raise ValueError("give a path or glb bytes")
@@ -349,7 +352,7 @@ class Client:
         opts = b.EndVector()
         p = b.CreateString(path) if path is not None else None
         g = b.CreateByteVector(glb) if glb is not None else None
-        n, s, d, env = (b.CreateString(x) for x in (name, solver, device, environment))
+        n, s, d, env, k = (b.CreateString(x) for x in (name, solver, device, environment, sky))
         LoadScene.Start(b)
         if p is not None:
             LoadScene.AddPath(b, p)
@@ -372,6 +375,10 @@ class Client:
         LoadScene.AddGatherRays(b, int(gather_rays))
         LoadScene.AddOptions(b, opts)
         LoadScene.AddProgress(b, progress is not None)
+        if sun is not None:
+            LoadScene.AddSun(b, Vec3.CreateVec3(b, *_finite("sun", sun, 3)))
+        LoadScene.AddSky(b, k)
+        LoadScene.AddTurbidity(b, float(turbidity))
         b.Finish(LoadScene.End(b))
         _, payload = self._request(LOAD_SCENE, b, SCENE_INFO, progress)
         return self._scene_info(payload)
@@ -540,15 +547,20 @@ class Client:
 
     def sky(self, path: Optional[str] = None, color: Optional[Sequence[float]] = None,
             off: bool = False, intensity: Optional[float] = None,
-            rotation: Optional[float] = None, scene: str = "") -> int:
+            rotation: Optional[float] = None, scene: str = "",
+            sun: Optional[Sequence[float]] = None, clear: bool = False,
+            turbidity: Optional[float] = None) -> int:
         """A new sky (`path`, an EXR under the server's scene root, or a constant `color` in
-        nits) or `off`; then `intensity` (≥ 0) and `rotation` (radians about +Y) if given."""
+        nits, or `clear`: a clear sky for the sun, of `turbidity`) or `off`; then `intensity`
+        (≥ 0) and `rotation` (radians about +Y) if given. `sun` (azimuth, elevation in
+        degrees[, lux]) moves the scene's sun; a clear sky follows it."""
         if sum(x is not None and x is not False for x in (path, color, off or None)) > 1:
             raise ValueError("give one of path, color, off")
         if intensity is not None and not (math.isfinite(intensity) and intensity >= 0):
             raise ValueError(f"intensity must be a finite number ≥ 0, got {intensity}")
         b = flatbuffers.Builder(128)
         s, e = b.CreateString(scene), b.CreateString(path or "")
+        k = b.CreateString("clear" if clear else "")
         SetEnvironment.Start(b)
         SetEnvironment.AddScene(b, s)
         SetEnvironment.AddEnvironment(b, e)
@@ -560,6 +572,15 @@ class Client:
         if rotation is not None:
             SetEnvironment.AddRotation(b, _finite("rotation", [rotation], 1)[0])
             SetEnvironment.AddSetRotation(b, True)
+        if sun is not None:
+            if len(sun) not in (2, 3):
+                raise ValueError("sun: azimuth, elevation[, lux]")
+            a, el = _finite("sun", sun[:2], 2)
+            lux = _finite("sun", sun[2:], 1)[0] if len(sun) == 3 else -1.0
+            SetEnvironment.AddSun(b, Vec3.CreateVec3(b, a, el, lux))
+        SetEnvironment.AddSky(b, k)
+        if turbidity is not None:
+            SetEnvironment.AddTurbidity(b, _finite("turbidity", [turbidity], 1)[0])
         b.Finish(SetEnvironment.End(b))
         return self._edit(SET_ENVIRONMENT, b)
 
