@@ -206,6 +206,17 @@ float SrgbToLinear(float c) {
     return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
 }
 
+namespace {
+
+// The extensions whose meaning the loader takes in: emissive strength, punctual lights, and
+// Draco-compressed meshes (decoded by tinygltf with Debian's libdraco as the file is read).
+bool Supported(const std::string& extension) {
+    return extension == "KHR_materials_emissive_strength" || extension == "KHR_lights_punctual" ||
+           extension == "KHR_draco_mesh_compression";
+}
+
+}  // namespace
+
 // What LoadGltf read but ignored or approximated, one sentence each (Scene::warnings).
 std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene& scene) {
     std::vector<std::string> out;
@@ -240,8 +251,7 @@ std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene&
         out.push_back(std::to_string(model.animations.size()) +
                       " animation(s) ignored: nodes keep their rest transforms");
     for (const auto& ext : model.extensionsUsed)
-        if (ext != "KHR_materials_emissive_strength" && ext != "KHR_lights_punctual")
-            out.push_back("extension '" + ext + "' ignored (not supported)");
+        if (!Supported(ext)) out.push_back("extension '" + ext + "' ignored (not supported)");
     size_t unnamed = 0;
     for (const auto& n : model.nodes) unnamed += n.name.empty() && n.mesh >= 0 ? 1 : 0;
     if (unnamed > 0)
@@ -337,7 +347,7 @@ Scene LoadGltf(const std::string& path, const GltfFiles& files) {
     Context ctx{path, model, files, &readNotes};
 
     for (const auto& ext : model.extensionsRequired) {
-        if (ext != "KHR_materials_emissive_strength" && ext != "KHR_lights_punctual")
+        if (!Supported(ext))
             ctx.Fail("extensionsRequired", "extension '" + ext + "' is not supported");
     }
 
