@@ -6,7 +6,7 @@ set -euo pipefail
 packages=(
     build-essential cmake pkg-config
     libvulkan-dev vulkan-validationlayers mesa-vulkan-drivers glslang-tools vulkan-tools
-    libtinygltf-dev libdraco-dev nlohmann-json3-dev libstb-dev libglm-dev
+    libtinygltf-dev libdraco-dev libmeshoptimizer-dev gltfpack nlohmann-json3-dev libstb-dev libglm-dev
     libcli11-dev libtbb-dev libgtest-dev libembree-dev
     libflatbuffers-dev flatbuffers-compiler libasio-dev libopenexr-dev
     clang-format

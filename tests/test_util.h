@@ -187,12 +187,9 @@ struct ProcessResult {
     int exitCode;
     std::string output;  // stdout and stderr together
 };
-// Runs the penumbra CLI (or `program`, under the build folder) with `args` (and `env`,
-// "NAME=value ..." before it, when given).
-inline ProcessResult Execute(const std::string& args, const std::string& env = "",
-                             const std::string& program = "penumbra") {
-    std::string cmd = (env.empty() ? "" : env + " ") + std::string(PENUMBRA_BINARY_DIR) + "/" +
-                      program + " " + args + " 2>&1";
+// Runs a shell command line, its standard error joined to its output.
+inline ProcessResult Shell(const std::string& command) {
+    const std::string cmd = command + " 2>&1";
     FILE* pipe = popen(cmd.c_str(), "r");
     ProcessResult r{-1, ""};
     std::array<char, 4096> buf;
@@ -200,6 +197,13 @@ inline ProcessResult Execute(const std::string& args, const std::string& env = "
     int status = pclose(pipe);
     r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
     return r;
+}
+// Runs the penumbra CLI (or `program`, under the build folder) with `args` (and `env`,
+// "NAME=value ..." before it, when given).
+inline ProcessResult Execute(const std::string& args, const std::string& env = "",
+                             const std::string& program = "penumbra") {
+    return Shell((env.empty() ? "" : env + " ") + std::string(PENUMBRA_BINARY_DIR) + "/" + program +
+                 " " + args);
 }
 
 // An equirectangular map of `w` × w/2 pixels holding f(direction at the pixel centre).

@@ -1,4 +1,6 @@
 // Accessors and node transforms of a glTF file (gltf_read.h).
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
@@ -65,67 +67,93 @@ glm::mat4 LocalTransform(const tinygltf::Node& node) {
     return m;
 }
 
-std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, int accessorIndex,
-                                const char* attribute) {
-    const auto& model = ctx.model;
-    if (accessorIndex < 0 || accessorIndex >= static_cast<int>(model.accessors.size()))
-        ctx.Fail(where, std::string(attribute) + " names accessor " +
-                            std::to_string(accessorIndex) + ", which does not exist");
-    const auto& acc = model.accessors[accessorIndex];
-    if (acc.sparse.isSparse)
-        ctx.Fail(where, std::string(attribute) + " uses a sparse accessor (not supported)");
-    if (acc.type != TINYGLTF_TYPE_VEC3 || acc.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT ||
-        acc.normalized)
-        ctx.Fail(where, std::string(attribute) +
-                            " must be float VEC3 (quantized attributes are not supported)");
-    size_t stride = 0;
-    const unsigned char* bytes =
-        AccessorBytes(ctx, where, acc, sizeof(float) * 3, stride, attribute);
-    std::vector<glm::vec3> out(acc.count);
-    for (size_t i = 0; i < acc.count; ++i) {
-        float v[3];
-        std::memcpy(v, bytes + stride * i, sizeof(v));
-        out[i] = glm::vec3(v[0], v[1], v[2]);
+namespace {
+
+// The bytes of one component of `type` (0 for a type an attribute may not have).
+size_t ComponentBytes(int type) {
+    switch (type) {
+        case TINYGLTF_COMPONENT_TYPE_FLOAT:
+            return 4;
+        case TINYGLTF_COMPONENT_TYPE_SHORT:
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+            return 2;
+        case TINYGLTF_COMPONENT_TYPE_BYTE:
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+            return 1;
+        default:
+            return 0;
     }
-    return out;
 }
 
-std::vector<glm::vec2> ReadTexcoords(const Context& ctx, const std::string& where,
-                                     int accessorIndex, const std::string& attribute) {
+// One component as a float: a float as it is, an integer as its value, or, normalised, as
+// glTF 2.0 (3.11) maps it: c / 255 or c / 65535 unsigned, max(c / 127, −1) or max(c / 32767,
+// −1) signed.
+float Component(const unsigned char* p, int type, bool normalized) {
+    switch (type) {
+        case TINYGLTF_COMPONENT_TYPE_FLOAT: {
+            float v;
+            std::memcpy(&v, p, 4);
+            return v;
+        }
+        case TINYGLTF_COMPONENT_TYPE_SHORT: {
+            int16_t v;
+            std::memcpy(&v, p, 2);
+            return normalized ? std::max(float(v) / 32767.0f, -1.0f) : float(v);
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+            uint16_t v;
+            std::memcpy(&v, p, 2);
+            return normalized ? float(v) / 65535.0f : float(v);
+        }
+        case TINYGLTF_COMPONENT_TYPE_BYTE: {
+            const int8_t v = static_cast<int8_t>(p[0]);
+            return normalized ? std::max(float(v) / 127.0f, -1.0f) : float(v);
+        }
+        default:  // unsigned byte
+            return normalized ? float(p[0]) / 255.0f : float(p[0]);
+    }
+}
+
+// A VEC2 or VEC3 attribute's elements as floats: float components, or the integer ones
+// KHR_mesh_quantization allows (signed or unsigned bytes and shorts, normalised or not; the
+// node's transform or the texture transform takes them back to the model's units).
+template <int N>
+std::vector<glm::vec<N, float>> ReadFloats(const Context& ctx, const std::string& where,
+                                           int accessorIndex, const std::string& attribute) {
     const auto& model = ctx.model;
     if (accessorIndex < 0 || accessorIndex >= static_cast<int>(model.accessors.size()))
         ctx.Fail(where, attribute + " names accessor " + std::to_string(accessorIndex) +
                             ", which does not exist");
     const auto& acc = model.accessors[accessorIndex];
     if (acc.sparse.isSparse) ctx.Fail(where, attribute + " uses a sparse accessor (not supported)");
-    const int type = acc.componentType;
-    const size_t size = type == TINYGLTF_COMPONENT_TYPE_FLOAT            ? 4
-                        : type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ? 2
-                        : type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE  ? 1
-                                                                         : 0;
-    if (acc.type != TINYGLTF_TYPE_VEC2 || size == 0 || (size < 4 && !acc.normalized))
-        ctx.Fail(where,
-                 attribute + " must be VEC2 of floats or normalised unsigned bytes or shorts");
+    const size_t size = ComponentBytes(acc.componentType);
+    const int type = N == 3 ? TINYGLTF_TYPE_VEC3 : TINYGLTF_TYPE_VEC2;
+    if (acc.type != type || size == 0 || (size == 4 && acc.normalized))
+        ctx.Fail(where, attribute + " must be VEC" + std::to_string(N) +
+                            " of floats, or of bytes or shorts (KHR_mesh_quantization)");
     size_t stride = 0;
-    const unsigned char* bytes = AccessorBytes(ctx, where, acc, size * 2, stride, attribute);
-    std::vector<glm::vec2> out(acc.count);
+    const unsigned char* bytes = AccessorBytes(ctx, where, acc, size * N, stride, attribute);
+    std::vector<glm::vec<N, float>> out(acc.count);
     for (size_t i = 0; i < acc.count; ++i) {
         const unsigned char* p = bytes + stride * i;
-        for (int c = 0; c < 2; ++c) {
-            if (size == 4) {
-                std::memcpy(&out[i][c], p + 4 * c, 4);
-            } else if (size == 2) {
-                uint16_t v;
-                std::memcpy(&v, p + 2 * c, 2);
-                out[i][c] = static_cast<float>(v) / 65535.0f;
-            } else {
-                out[i][c] = static_cast<float>(p[c]) / 255.0f;
-            }
+        for (int c = 0; c < N; ++c) {
+            out[i][c] = Component(p + size * c, acc.componentType, acc.normalized);
+            if (!std::isfinite(out[i][c])) ctx.Fail(where, attribute + " has NaN or infinity");
         }
-        if (!std::isfinite(out[i].x) || !std::isfinite(out[i].y))
-            ctx.Fail(where, attribute + " has NaN or infinity");
     }
     return out;
+}
+
+}  // namespace
+
+std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, int accessorIndex,
+                                const char* attribute) {
+    return ReadFloats<3>(ctx, where, accessorIndex, attribute);
+}
+
+std::vector<glm::vec2> ReadTexcoords(const Context& ctx, const std::string& where,
+                                     int accessorIndex, const std::string& attribute) {
+    return ReadFloats<2>(ctx, where, accessorIndex, attribute);
 }
 
 std::vector<uint32_t> ReadIndices(const Context& ctx, const std::string& where, int accessorIndex) {

@@ -34,10 +34,12 @@ std::string FileRefusal(const GltfFiles& files, const std::string& filepath);
 std::string NodeLabel(const tinygltf::Model& model, int node);
 // A node's local transform: its matrix, else translation × rotation × scale.
 glm::mat4 LocalTransform(const tinygltf::Node& node);
-// Reads a float VEC3 accessor (POSITION, NORMAL), honouring byteStride.
+// Reads a VEC3 accessor (POSITION, NORMAL, morph targets), honouring byteStride: floats, or
+// the bytes and shorts KHR_mesh_quantization allows.
 std::vector<glm::vec3> ReadVec3(const Context& ctx, const std::string& where, int accessorIndex,
                                 const char* attribute);
-// Reads a TEXCOORD_n accessor: float, or normalised unsigned byte or short VEC2.
+// Reads a TEXCOORD_n accessor: VEC2 of floats, or of bytes or shorts (normalised, or with
+// KHR_mesh_quantization not).
 std::vector<glm::vec2> ReadTexcoords(const Context& ctx, const std::string& where,
                                      int accessorIndex, const std::string& attribute);
 // Reads an index accessor: unsigned byte, short or int SCALAR.

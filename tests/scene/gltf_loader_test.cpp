@@ -413,6 +413,33 @@ TEST(GltfLoader, UnsupportedRequiredExtensionIsRefused) {
     EXPECT_NE(msg.find("EXT_meshopt_compression"), std::string::npos) << msg;
 }
 
+// Issue 62: quantised attributes (KHR_mesh_quantization) read as the floats they stand for: the
+// Cornell box packed by Debian's gltfpack (positions as unsigned shorts under a dequantising
+// node transform, normals as normalised bytes) is the same geometry as the file it came from,
+// up to 14-bit positions.
+TEST(GltfLoader, AQuantizedFileReadsAsItsSource) {
+    const auto dir = testing::TempDir("quantized");
+    const std::string packed = (dir / "cornell-q.glb").string();
+    const auto run = testing::Shell("gltfpack -i " + kCornell + " -o " + packed + " -kn -km");
+    ASSERT_EQ(run.exitCode, 0) << run.output;
+    const Scene q = LoadGltf(packed);
+    const Scene plain = LoadGltf(kCornell);
+    EXPECT_EQ(q.TriangleCount(), plain.TriangleCount());
+    auto area = [](const Scene& s) {
+        double a = 0.0;
+        for (const Primitive& p : s.primitives)
+            for (size_t t = 0; t + 2 < p.indices.size(); t += 3)
+                a += 0.5 * glm::length(glm::cross(
+                               p.positions[p.indices[t + 1]] - p.positions[p.indices[t]],
+                               p.positions[p.indices[t + 2]] - p.positions[p.indices[t]]));
+        return a;
+    };
+    EXPECT_NEAR(area(q), area(plain), 1e-3 * area(plain));
+    EXPECT_NEAR(q.Diameter(), plain.Diameter(), 1e-3f * plain.Diameter());
+    for (const Primitive& p : q.primitives)
+        for (const glm::vec3& n : p.normals) EXPECT_NEAR(glm::length(n), 1.0f, 1e-4f);
+}
+
 // Issue 62: a Draco-compressed file (KHR_draco_mesh_compression; Khronos' 2CylinderEngine as
 // Debian's assimp-testmodels has it both ways) reads as the same geometry as the plain one:
 // the same triangles, the same area, the same bounds, up to Draco's quantisation.
@@ -433,14 +460,12 @@ TEST(GltfLoader, ADracoFileReadsAsItsPlainTwin) {
     };
     EXPECT_EQ(proper(draco), draco.TriangleCount());
     EXPECT_NEAR(double(proper(draco)), double(proper(plain)), 1e-4 * double(proper(plain)));
-    for (const std::string& w : draco.warnings)
-        EXPECT_EQ(w.find("draco"), std::string::npos) << w;
+    for (const std::string& w : draco.warnings) EXPECT_EQ(w.find("draco"), std::string::npos) << w;
     auto area = [](const Scene& s) {
         double a = 0.0;
         for (const Primitive& p : s.primitives)
             for (size_t t = 0; t + 2 < p.indices.size(); t += 3) {
-                const glm::vec3 x = p.positions[p.indices[t]],
-                                y = p.positions[p.indices[t + 1]],
+                const glm::vec3 x = p.positions[p.indices[t]], y = p.positions[p.indices[t + 1]],
                                 z = p.positions[p.indices[t + 2]];
                 a += 0.5 * glm::length(glm::cross(y - x, z - x));
             }
