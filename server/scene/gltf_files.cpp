@@ -3,6 +3,7 @@
 // refused with the command that converts it, images kept encoded until a material uses them.
 #include <tiny_gltf.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -232,8 +233,30 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
     loader.SetFsCallbacks(fs);
     loader.SetImageLoader(&KeepEncoded, model);
     std::string err, warn;
-    bool ok = IsGlbPath(path) ? loader.LoadBinaryFromFile(model, &err, &warn, path)
-                              : loader.LoadASCIIFromFile(model, &err, &warn, path);
+    bool ok = false;
+    if (IsGlbPath(path)) {
+        // Read whole, so that EXT_meshopt_compression can be decoded before tinygltf parses.
+        probe.clear();
+        probe.seekg(0, std::ios::end);
+        std::vector<unsigned char> glb(size_t(std::max<std::streamoff>(probe.tellg(), 0)));
+        probe.seekg(0);
+        probe.read(reinterpret_cast<char*>(glb.data()), std::streamsize(glb.size()));
+        const uint64_t most = files.maxBufferBytes > 0 ? files.maxBufferBytes : uint64_t(1) << 32;
+        if (gltf::DecodeMeshopt(glb, path, most))
+            ok = loader.LoadBinaryFromMemory(model, &err, &warn, glb.data(), unsigned(glb.size()),
+                                             std::filesystem::path(path).parent_path().string());
+        else
+            ok = loader.LoadBinaryFromFile(model, &err, &warn, path);
+    } else {
+        const nlohmann::json doc = DeclaredJson(path, uint64_t(1) << 32);
+        if (doc.is_object() && doc.contains("extensionsUsed") && doc["extensionsUsed"].is_array())
+            for (const auto& e : doc["extensionsUsed"])
+                if (e == "EXT_meshopt_compression")
+                    throw Error(path +
+                                ": EXT_meshopt_compression is read from binary glTF (.glb) "
+                                "only: `gltfpack -i FILE -o FILE.glb -c` packs one");
+        ok = loader.LoadASCIIFromFile(model, &err, &warn, path);
+    }
     if (!ok) {
         if (!IsGlbPath(path) && LooksLikeGltf1(path)) RefuseGltf1(path);
         if (err.empty()) err = "unreadable glTF";

@@ -209,11 +209,12 @@ float SrgbToLinear(float c) {
 namespace {
 
 // The extensions whose meaning the loader takes in: emissive strength, punctual lights,
-// Draco-compressed meshes (decoded by tinygltf with Debian's libdraco as the file is read) and
-// quantised attributes (gltf_accessors.cpp).
+// Draco-compressed meshes (decoded by tinygltf with Debian's libdraco as the file is read),
+// quantised attributes (gltf_accessors.cpp) and meshopt-compressed buffers (gltf_meshopt.cpp).
 bool Supported(const std::string& extension) {
     return extension == "KHR_materials_emissive_strength" || extension == "KHR_lights_punctual" ||
-           extension == "KHR_draco_mesh_compression" || extension == "KHR_mesh_quantization";
+           extension == "KHR_draco_mesh_compression" || extension == "KHR_mesh_quantization" ||
+           extension == "EXT_meshopt_compression";
 }
 
 }  // namespace

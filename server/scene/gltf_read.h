@@ -27,6 +27,12 @@ struct Context {
     }
 };
 
+// A binary glTF (its bytes) with EXT_meshopt_compression: every compressed buffer view decoded
+// (Debian's libmeshoptimizer: its mode and filter) into the bytes of a .glb without the
+// extension, which tinygltf then reads; false, `glb` untouched, for a file without it. Throws
+// penumbra::Error naming the view for data that does not decode or does not fit, and for
+// decoded buffers past `most` bytes (gltf_meshopt.cpp).
+bool DecodeMeshopt(std::vector<unsigned char>& glb, const std::string& path, uint64_t most);
 // Why `filepath`, a file a glTF names, may not be read under `files` ("" when it may):
 // outside the scene root, or any external file of an uploaded .glb (gltf_files.cpp).
 std::string FileRefusal(const GltfFiles& files, const std::string& filepath);

@@ -5,8 +5,11 @@
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>
 
+#include <algorithm>
+#include <cstring>
 #include <fstream>
 #include <glm/gtc/matrix_transform.hpp>
+#include <iterator>
 #include <limits>
 #include <nlohmann/json.hpp>
 
@@ -407,10 +410,10 @@ TEST(GltfLoader, PointsAreRefused) {
 
 TEST(GltfLoader, UnsupportedRequiredExtensionIsRefused) {
     auto doc = Cornell();
-    doc["extensionsRequired"] = {"EXT_meshopt_compression"};
-    doc["extensionsUsed"] = {"EXT_meshopt_compression"};
-    std::string msg = LoadError(doc, "meshopt.gltf");
-    EXPECT_NE(msg.find("EXT_meshopt_compression"), std::string::npos) << msg;
+    doc["extensionsRequired"] = {"EXT_texture_webp"};
+    doc["extensionsUsed"] = {"EXT_texture_webp"};
+    std::string msg = LoadError(doc, "webp.gltf");
+    EXPECT_NE(msg.find("EXT_texture_webp"), std::string::npos) << msg;
 }
 
 // Issue 62: quantised attributes (KHR_mesh_quantization) read as the floats they stand for: the
@@ -438,6 +441,61 @@ TEST(GltfLoader, AQuantizedFileReadsAsItsSource) {
     EXPECT_NEAR(q.Diameter(), plain.Diameter(), 1e-3f * plain.Diameter());
     for (const Primitive& p : q.primitives)
         for (const glm::vec3& n : p.normals) EXPECT_NEAR(glm::length(n), 1.0f, 1e-4f);
+}
+
+// Issue 62: meshopt-compressed buffers (EXT_meshopt_compression, gltfpack -c) decode to the
+// very bytes of the uncompressed packing; compressed data that does not decode is refused by
+// view, and the extension in a text .gltf is named as not read.
+TEST(GltfLoader, AMeshoptFileReadsAsItsUncompressedTwin) {
+    const auto dir = testing::TempDir("meshopt");
+    const std::string packed = (dir / "cornell-q.glb").string(),
+                      compressed = (dir / "cornell-c.glb").string();
+    for (const auto& [out, flags] : {std::pair{packed, ""}, {compressed, " -c"}}) {
+        const auto run =
+            testing::Shell("gltfpack -i " + kCornell + " -o " + out + " -kn -km" + flags);
+        ASSERT_EQ(run.exitCode, 0) << run.output;
+    }
+    const Scene q = LoadGltf(packed), c = LoadGltf(compressed);
+    ASSERT_EQ(c.primitives.size(), q.primitives.size());
+    // The index codec keeps each triangle and its winding, not which corner comes first.
+    auto rotated = [](std::vector<uint32_t> indices) {
+        for (size_t t = 0; t + 2 < indices.size(); t += 3)
+            std::rotate(indices.begin() + t,
+                        std::min_element(indices.begin() + t, indices.begin() + t + 3),
+                        indices.begin() + t + 3);
+        return indices;
+    };
+    for (size_t p = 0; p < q.primitives.size(); ++p) {
+        EXPECT_EQ(rotated(c.primitives[p].indices), rotated(q.primitives[p].indices)) << p;
+        EXPECT_EQ(c.primitives[p].positions, q.primitives[p].positions) << p;
+        EXPECT_EQ(c.primitives[p].normals, q.primitives[p].normals) << p;
+    }
+    for (const std::string& w : c.warnings) EXPECT_EQ(w.find("meshopt"), std::string::npos) << w;
+
+    // Zeros over the start of the binary chunk: the first compressed view's header is gone.
+    std::vector<char> bytes;
+    {
+        std::ifstream in(compressed, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    uint32_t jsonLength;
+    std::memcpy(&jsonLength, bytes.data() + 12, 4);
+    std::fill_n(bytes.begin() + 20 + jsonLength + 8, 16, '\0');
+    const std::string broken = (dir / "broken.glb").string();
+    std::ofstream(broken, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
+    std::string what;
+    try {
+        LoadGltf(broken);
+    } catch (const Error& e) {
+        what = e.what();
+    }
+    EXPECT_NE(what.find("does not decode"), std::string::npos) << what;
+    EXPECT_NE(what.find("buffer view"), std::string::npos) << what;
+
+    auto doc = Cornell();
+    doc["extensionsUsed"] = {"EXT_meshopt_compression"};
+    std::string msg = LoadError(doc, "meshopt.gltf");
+    EXPECT_NE(msg.find("binary glTF (.glb) only"), std::string::npos) << msg;
 }
 
 // Issue 62: a Draco-compressed file (KHR_draco_mesh_compression; Khronos' 2CylinderEngine as
