@@ -406,7 +406,7 @@ void Irradiance(const Plan& plan, const std::vector<GpuReceiver>& receivers, flo
             }
             float cosine = glm::dot(n, toLight);
             if (cosine <= 0.0f || scale <= 0.0f) continue;
-            float seen = 0.0f;
+            glm::vec3 seen(0.0f);  // per channel: a tap behind glass sees its transmittance
             for (int k = 0; k < kTaps; ++k) {
                 float rr = r.position.w * std::sqrt((k + 0.5f) / kTaps);
                 float phi = 2.3999632f * k;  // the golden angle: a Vogel disc
@@ -416,7 +416,7 @@ void Irradiance(const Plan& plan, const std::vector<GpuReceiver>& receivers, flo
                                          : glm::normalize(glm::vec3(light.position) - q);
                 seen += visible(li, q, n, qToLight, r.position.w);
             }
-            glm::vec3 ek = glm::vec3(light.radiant) * (scale * cosine * seen / kTaps);
+            glm::vec3 ek = glm::vec3(light.radiant) * seen * (scale * cosine / kTaps);
             e += ek;
             if (mine) mine[0] = ek.x, mine[1] = ek.y, mine[2] = ek.z;
         }
@@ -454,7 +454,7 @@ void DirectIrradianceByRays(const Plan& plan, const RayScene& rays,
                    const glm::vec3 from = q + n * (0.1f * radius + rays.Epsilon());
                    const glm::vec3 span =
                        light.position.w == 2.0f ? toLight * far : glm::vec3(light.position) - from;
-                   return rays.Occluded(from, span) ? 0.0f : 1.0f;
+                   return rays.Transmittance(from, span);
                });
 }
 

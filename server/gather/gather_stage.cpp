@@ -193,7 +193,7 @@ void GatherStage::Evaluate() {
                 const Hit& h = hits_[t * n + r];
                 if (!Front(h)) continue;
                 if (!(h.triangle & kShort)) {
-                    sum += at(radiance, h);
+                    sum += Through(t, r) * at(radiance, h);
                     continue;
                 }
                 // A short hit: its irradiance gathered again, E = first shot (interpolated) +
@@ -206,8 +206,8 @@ void GatherStage::Evaluate() {
                     if (Front(h2)) second += at(radiance, h2);
                 }
                 e += second * (kPi / m);
-                sum +=
-                    at(albedo, h) / kPi * e + (shot_.empty() ? at(emission, h) : glm::vec3(0.0f));
+                sum += Through(t, r) * (at(albedo, h) / kPi * e +
+                                        (shot_.empty() ? at(emission, h) : glm::vec3(0.0f)));
                 ++k;
             }
             // Glossy hits: what their lobes reflect towards the target, F0 times the lobe

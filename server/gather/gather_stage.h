@@ -299,6 +299,12 @@ class GatherStage : public Solver {
     std::vector<uint32_t> targets_;    // surfels gathered at
     std::vector<glm::vec2> rotation_;  // per target: its rotation of the ray pattern
     std::vector<Hit> hits_;            // targets × gatherRays
+    // Per gather ray, the transmittance of the surfaces it looked through (glass: the ray
+    // scene's Passing); empty when nothing passes light. Through(t, r): 1 then.
+    std::vector<glm::vec3> through_;
+    glm::vec3 Through(size_t t, int r) const {
+        return through_.empty() ? glm::vec3(1.0f) : through_[t * settings_.gatherRays + r];
+    }
     std::vector<glm::vec3> sky_;       // per target: π/N Σ over escaped rays of L_env
     // Secondary gathers: per target SecondRays() hits per short hit in ray order; per short
     // hit π/M Σ over its escaped rays of L_env (target t's from secondStart_[t]).

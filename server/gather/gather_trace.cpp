@@ -243,6 +243,7 @@ struct GatherStage::TargetTracer {
     // The rays a target traces on the CPU go out in packets of 8 from its point, and a short
     // hit's from the hit (`packed` holds the answers of either).
     std::vector<RayHit> packed;
+    std::vector<glm::vec3> through;  // the gather rays' transmittances, as `packed`
     std::vector<glm::vec3> dirs, secondDirs;
     std::vector<int> batch, secondBatch;
     size_t t = 0;    // the target being traced
@@ -260,6 +261,7 @@ struct GatherStage::TargetTracer {
           kept(n),
           was(n),
           packed(std::max(n, m)),
+          through(std::max(n, m)),
           dirs(n),
           secondDirs(m) {}
 
@@ -340,7 +342,8 @@ struct GatherStage::TargetTracer {
             }
         }
         stage.rays_->IntersectFrom(o, dirs.data(), batch.size(),
-                                   std::numeric_limits<float>::infinity(), packed.data());
+                                   std::numeric_limits<float>::infinity(), packed.data(),
+                                   stage.through_.empty() ? nullptr : through.data());
         size_t next = 0;  // the next of `batch`
         for (int r = 0; r < n; ++r) {
             if (kept[r]) continue;
@@ -351,6 +354,7 @@ struct GatherStage::TargetTracer {
             } else {
                 dist = packed[next].hit ? packed[next].t : dist;
                 hit = stage.Cached(packed[next], dirs[next]);
+                if (!stage.through_.empty()) stage.through_[t * n + r] = through[next];
                 ++next;
             }
             ++count;
@@ -455,9 +459,14 @@ void GatherStage::Trace(const Moved* moved) {
     const int n = settings_.gatherRays, m = SecondRays();
     const float shortHit = kShortHit * inner_->Stats().elementSize;
     hits_.resize(targets_.size() * n);  // in place: a target's hits are read, then written
+    if (rays_->Passing())
+        through_.resize(targets_.size() * n, glm::vec3(1.0f));
+    else
+        through_.clear();
     // All of them at once on the GPU where there is one (then only the secondaries below).
     std::vector<float> gpuDistances;
-    const bool onGpu = !moved && tracer_ && TraceOnGpu(gpuDistances);
+    // The GPU's tracer knows no surface that passes light: those scenes trace with Embree.
+    const bool onGpu = !moved && tracer_ && !rays_->Passing() && TraceOnGpu(gpuDistances);
     second_.resize(targets_.size());
     // Per target: a gather ray was traced again (its emitter hits are weighed again).
     std::vector<uint8_t> touched(targets_.size(), moved ? 0 : 1);
@@ -513,8 +522,9 @@ void GatherStage::WeighEmitterHits(bool afterMove, const std::vector<uint8_t>& t
                 const glm::vec3 tinted =
                     c *
                     rays_->TintsAt(tri, h.u * (1.0f / 65535.0f), h.v * (1.0f / 65535.0f)).emission;
-                emitterHits_[t] += rays_->MaterialOf(tri).emission * tinted;
-                if (coef) coef[rays_->EmitterSlot(tris[tri].primitive)] += tinted;
+                const glm::vec3 seen = Through(t, r) * tinted;
+                emitterHits_[t] += rays_->MaterialOf(tri).emission * seen;
+                if (coef) coef[rays_->EmitterSlot(tris[tri].primitive)] += seen;
             }
         }
     });
@@ -538,7 +548,7 @@ void GatherStage::Sky() {
             size_t k = 0;  // this target's short hits so far
             for (int r = 0; r < n; ++r) {
                 const Hit& h = hits_[t * n + r];
-                if (h.triangle == kEscaped) sum += sky.Radiance(Direction(t, r));
+                if (h.triangle == kEscaped) sum += Through(t, r) * sky.Radiance(Direction(t, r));
                 if (!Front(h) || !(h.triangle & kShort)) continue;
                 glm::vec3 second(0.0f);
                 for (int j = 0; j < m; ++j)

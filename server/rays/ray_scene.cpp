@@ -65,6 +65,42 @@ void RecordHit(const RTCFilterFunctionNArguments* args) {
     }
 }
 
+// The context of a query through passing surfaces (Material::transmittance): Embree's, then
+// what the filter gathers. An occlusion query multiplies `through` by each passing surface it
+// meets and goes on (an opaque one ends it); an intersection query records each passing hit
+// (they come in no order) and goes on to the nearest opaque one.
+struct PassContext {
+    RTCIntersectContext ctx;
+    const RayScene* rays = nullptr;
+    glm::vec3 through{1.0f};
+    // Passing triangles met: Embree can meet one twice (its spatial splits).
+    uint32_t seen[16];
+    int seenCount = 0;
+    std::vector<std::pair<float, uint32_t>>* passed = nullptr;  // intersection: (t, triangle)
+
+    bool Seen(uint32_t triangle) {
+        for (int i = 0; i < seenCount; ++i)
+            if (seen[i] == triangle) return true;
+        if (seenCount < 16) seen[seenCount++] = triangle;
+        return false;
+    }
+};
+
+void PassFilter(const RTCFilterFunctionNArguments* args) {
+    auto* c = reinterpret_cast<PassContext*>(args->context);
+    for (unsigned i = 0; i < args->N; ++i) {
+        if (args->valid[i] == 0) continue;
+        const uint32_t t = RTCHitN_primID(args->hit, args->N, i);
+        const glm::vec3& pass = c->rays->MaterialOf(t).transmittance;
+        if (pass == glm::vec3(0.0f)) continue;  // opaque: the hit stands
+        if (c->passed)
+            c->passed->emplace_back(RTCRayN_tfar(args->ray, args->N, i), t);
+        else if (!c->Seen(t))
+            c->through *= pass;
+        args->valid[i] = 0;
+    }
+}
+
 }  // namespace
 
 RayScene::RayScene(const Scene& scene) : scene_(scene), mapped_(AnyMapped(scene)) {
@@ -161,6 +197,8 @@ void RayScene::Build() {
     // a grid of quads met along an axis) hits one of them instead of slipping through both.
     rtcSetSceneFlags(rtcScene_, RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION | RTC_SCENE_FLAG_ROBUST);
     eps_ = 1e-4f * std::max(scene_.Diameter(), 1e-6f);
+    passing_ = false;
+    for (const Material& m : scene_.materials) passing_ = passing_ || m.Passes();
     Sample();
     BuildBvh();
 }
@@ -311,6 +349,7 @@ std::vector<glm::vec3> RayScene::Vertices() const {
 }
 
 bool RayScene::Occluded(const glm::vec3& from, const glm::vec3& span) const {
+    if (passing_) return Transmittance(from, span) == glm::vec3(0.0f);
     RTCRay r;
     InitRay(r, from, span, 1.0f - 1e-4f);
     RTCIntersectContext ctx;
@@ -319,7 +358,70 @@ bool RayScene::Occluded(const glm::vec3& from, const glm::vec3& span) const {
     return r.tfar < 0.0f;
 }
 
-RayHit RayScene::Intersect(const glm::vec3& origin, const glm::vec3& dir, float tfar) const {
+glm::vec3 RayScene::Transmittance(const glm::vec3& from, const glm::vec3& span) const {
+    RTCRay r;
+    InitRay(r, from, span, 1.0f - 1e-4f);
+    PassContext context;
+    rtcInitIntersectContext(&context.ctx);
+    if (passing_) {
+        context.ctx.filter = &PassFilter;
+        context.rays = this;
+    }
+    rtcOccluded1(rtcScene_, &context.ctx, &r);
+    return r.tfar < 0.0f ? glm::vec3(0.0f) : context.through;
+}
+
+void RayScene::TransmittanceFrom(const glm::vec3& from, const glm::vec3* spans, size_t count,
+                                 glm::vec3* out) const {
+    if (!passing_) {
+        std::vector<uint8_t> blocked(count);
+        OccludedFrom(from, spans, count, blocked.data());
+        for (size_t i = 0; i < count; ++i) out[i] = glm::vec3(blocked[i] ? 0.0f : 1.0f);
+        return;
+    }
+    for (size_t i = 0; i < count; ++i) out[i] = Transmittance(from, spans[i]);
+}
+
+RayHit RayScene::IntersectThrough(const glm::vec3& origin, const glm::vec3& dir, float tfar,
+                                  glm::vec3& through) const {
+    through = glm::vec3(1.0f);
+    std::vector<std::pair<float, uint32_t>> passed;
+    PassContext context;
+    rtcInitIntersectContext(&context.ctx);
+    context.ctx.filter = &PassFilter;
+    context.rays = this;
+    context.passed = &passed;
+    RTCRayHit rh;
+    InitRay(rh.ray, origin, dir, tfar);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(rtcScene_, &context.ctx, &rh);
+    RayHit hit;
+    if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) {
+        hit.hit = true;
+        hit.triangle = rh.hit.primID;
+        hit.t = rh.ray.tfar;
+        hit.u = rh.hit.u;
+        hit.v = rh.hit.v;
+    }
+    // The passing surfaces before the hit (all of them when the ray escapes), each once.
+    std::sort(passed.begin(), passed.end(),
+              [](const auto& a, const auto& b) { return a.second < b.second; });
+    for (size_t i = 0; i < passed.size(); ++i)
+        if ((i == 0 || passed[i].second != passed[i - 1].second) &&
+            (!hit.hit || passed[i].first < hit.t))
+            through *= MaterialOf(passed[i].second).transmittance;
+    return hit;
+}
+
+RayHit RayScene::Intersect(const glm::vec3& origin, const glm::vec3& dir, float tfar,
+                           glm::vec3* through) const {
+    if (passing_) {
+        glm::vec3 t;
+        const RayHit hit = IntersectThrough(origin, dir, tfar, t);
+        if (through) *through = t;
+        return hit;
+    }
+    if (through) *through = glm::vec3(1.0f);
     RTCRayHit rh;
     InitRay(rh.ray, origin, dir, tfar);
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
@@ -338,6 +440,10 @@ RayHit RayScene::Intersect(const glm::vec3& origin, const glm::vec3& dir, float 
 
 void RayScene::OccludedFrom(const glm::vec3& from, const glm::vec3* spans, size_t count,
                             uint8_t* out) const {
+    if (passing_) {
+        for (size_t i = 0; i < count; ++i) out[i] = Occluded(from, spans[i]) ? 1 : 0;
+        return;
+    }
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     for (size_t k = 0; k < count; k += 8) {
@@ -355,7 +461,16 @@ void RayScene::OccludedFrom(const glm::vec3& from, const glm::vec3* spans, size_
 }
 
 void RayScene::IntersectFrom(const glm::vec3& origin, const glm::vec3* dirs, size_t count,
-                             float tfar, RayHit* out) const {
+                             float tfar, RayHit* out, glm::vec3* through) const {
+    if (passing_) {
+        for (size_t i = 0; i < count; ++i) {
+            glm::vec3 t;
+            out[i] = IntersectThrough(origin, dirs[i], tfar, t);
+            if (through) through[i] = t;
+        }
+        return;
+    }
+    if (through) std::fill(through, through + count, glm::vec3(1.0f));
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     for (size_t k = 0; k < count; k += 8) {
@@ -449,28 +564,29 @@ glm::vec3 VertexLightDirect(const RayScene& rays, const std::vector<PunctualLigh
     for (const PunctualLight& light : lights) {
         const LightArrival a = PunctualArrival(light, x, n, diameter);
         if (!a.reaches) continue;
-        // Whether the light reaches the disc's point x + offset: a directional light along
-        // the same span, a point or spot light at its place.
+        // What of the light reaches the disc's point x + offset (per channel: through glass,
+        // its transmittance): a directional light along the same span, a point or spot light
+        // at its place.
         auto lit = [&](const glm::vec3& offset) {
             ++traced;
             const glm::vec3 span = light.type == LightType::kDirectional ? a.span : a.span - offset;
-            return !rays.Occluded(x + offset + lift, span);
+            return rays.Transmittance(x + offset + lift, span);
         };
-        const bool centre = lit(glm::vec3(0.0f));
+        const glm::vec3 centre = lit(glm::vec3(0.0f));
         bool agree = true;
         for (int k = 0; k < kRim && agree; ++k) {
             const float phi = k * (2.0f * kPi / kRim);
             agree = lit(radius * (std::cos(phi) * t + std::sin(phi) * s)) == centre;
         }
-        float seen = centre ? 1.0f : 0.0f;
+        glm::vec3 seen = centre;
         if (!agree) {
             // Vogel's spiral: even over the disc, no two points at one radius.
-            int hits = 0;
+            seen = glm::vec3(0.0f);
             for (int k = 0; k < kSpread; ++k) {
                 const float r = radius * std::sqrt((k + 0.5f) / kSpread), phi = k * kGoldenAngle;
-                hits += lit(r * (std::cos(phi) * t + std::sin(phi) * s));
+                seen += lit(r * (std::cos(phi) * t + std::sin(phi) * s));
             }
-            seen = static_cast<float>(hits) / kSpread;
+            seen /= float(kSpread);
         }
         e += seen * a.irradiance;
     }

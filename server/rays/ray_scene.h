@@ -98,19 +98,34 @@ class RayScene {
     RayScene(const RayScene&) = delete;
     RayScene& operator=(const RayScene&) = delete;
 
-    // Whether anything lies on the segment from `from` to `from + span` (its last 10⁻⁴
-    // excluded, so that a ray aimed at a surface point is not stopped by that surface).
+    // Whether an opaque surface lies on the segment from `from` to `from + span` (its last
+    // 10⁻⁴ excluded, so that a ray aimed at a surface point is not stopped by that surface).
+    // Surfaces that pass light (Material::Passes: glass, cutouts) do not stop it.
     bool Occluded(const glm::vec3& from, const glm::vec3& span) const;
-    // The nearest triangle along origin + t·dir, t in (0, tfar).
-    RayHit Intersect(const glm::vec3& origin, const glm::vec3& dir, float tfar) const;
+    // What of the light along that segment gets through, per channel: 0 where an opaque
+    // surface lies on it, else the product of the transmittances of the passing surfaces it
+    // crosses (1 when none).
+    glm::vec3 Transmittance(const glm::vec3& from, const glm::vec3& span) const;
+    // Transmittance for `count` segments from one point, into out[0, count).
+    void TransmittanceFrom(const glm::vec3& from, const glm::vec3* spans, size_t count,
+                           glm::vec3* out) const;
+    // The nearest opaque triangle along origin + t·dir, t in (0, tfar): passing surfaces are
+    // looked through, and `through` (when given) gets the product of their transmittances
+    // before the hit (all of them when nothing is hit).
+    RayHit Intersect(const glm::vec3& origin, const glm::vec3& dir, float tfar,
+                     glm::vec3* through = nullptr) const;
     // Occluded for `count` segments from one point, in Embree packets of 8 (rtcOccluded8):
     // per segment 1 where something lies on it, else 0, into out[0, count).
     void OccludedFrom(const glm::vec3& from, const glm::vec3* spans, size_t count,
                       uint8_t* out) const;
     // Intersect for `count` rays from one origin, in packets of 8 (rtcIntersect8): the same
-    // hits as one at a time, for less where the rays start together; into out[0, count).
+    // hits as one at a time, for less where the rays start together; into out[0, count),
+    // and each ray's `through` into through[0, count) when given.
     void IntersectFrom(const glm::vec3& origin, const glm::vec3* dirs, size_t count, float tfar,
-                       RayHit* out) const;
+                       RayHit* out, glm::vec3* through = nullptr) const;
+    // Whether some material passes light (Material::Passes) when the BVH was built: the
+    // queries above then look through those surfaces, one ray at a time.
+    bool Passing() const { return passing_; }
     // Every triangle along origin + t·dir, t in (0, tfar), nearest first, in one traversal (a
     // filter that records each hit and lets the ray go on); a triangle Embree meets twice
     // (its spatial splits) counted once. For the light field's lines (solvers/lightfield/).
@@ -167,8 +182,11 @@ class RayScene {
     void BuildBvh();                     // Embree's BVH over tris_
     void WriteVertices(float* v) const;  // tris_' corners, 9 floats a triangle
     void CheckError() const;
+    RayHit IntersectThrough(const glm::vec3& origin, const glm::vec3& dir, float tfar,
+                            glm::vec3& through) const;
 
     const Scene& scene_;
+    bool passing_ = false;
     RTCDeviceTy* device_ = nullptr;
     RTCSceneTy* rtcScene_ = nullptr;
     std::string error_;

@@ -121,8 +121,9 @@ class Tracer {
             if (!a.reaches || a.scale <= 0.0f) continue;
             ++rays;
             glm::vec3 from = x + eps_ * n;
-            if (Occluded(from, x + a.span - from)) continue;
-            e += (bsdf ? bsdf->Eval(a.toLight) : glm::vec3(1.0f)) * a.irradiance;
+            const glm::vec3 pass = rays_.Transmittance(from, x + a.span - from);
+            if (pass == glm::vec3(0.0f)) continue;
+            e += (bsdf ? bsdf->Eval(a.toLight) : glm::vec3(1.0f)) * pass * a.irradiance;
         }
         return e;
     }
@@ -155,12 +156,13 @@ class Tracer {
         if (cx <= 0.0f || cy <= 0.0f) return glm::vec3(0.0f);
         glm::vec3 from = x + eps_ * n, to = y + eps_ * t.normal;
         ++rays;
-        if (Occluded(from, to - from)) return glm::vec3(0.0f);
+        const glm::vec3 pass = rays_.Transmittance(from, to - from);
+        if (pass == glm::vec3(0.0f)) return glm::vec3(0.0f);
         float pdfArea = rays_.AreaPdf(ti);
         float weight = PowerHeuristic(pdfArea * dist2 / cy, bsdf ? bsdf->Pdf(w) : cx / kPi);
         glm::vec3 le = scene_.materials[t.material].emission * rays_.TintsAt(ti, a, b).emission;
         if (bsdf) le *= bsdf->Eval(w);
-        return le * (weight * cx * cy / (dist2 * pdfArea));
+        return pass * le * (weight * cx * cy / (dist2 * pdfArea));
     }
 
     // The environment map's light at `x` (normal `n`) along one direction drawn by the map's
@@ -176,9 +178,10 @@ class Tracer {
         const float cx = glm::dot(n, w);
         if (!(pdf > 0.0f) || cx <= 0.0f) return glm::vec3(0.0f);
         ++rays;
-        if (Occluded(x + eps_ * n, w * (2.0f * diameter_))) return glm::vec3(0.0f);
+        const glm::vec3 pass = rays_.Transmittance(x + eps_ * n, w * (2.0f * diameter_));
+        if (pass == glm::vec3(0.0f)) return glm::vec3(0.0f);
         const float weight = PowerHeuristic(pdf, bsdf ? bsdf->Pdf(w) : cx / kPi);
-        glm::vec3 l = scene_.environment.Radiance(w);
+        glm::vec3 l = pass * scene_.environment.Radiance(w);
         if (bsdf) l *= bsdf->Eval(w);
         return l * (weight * cx / pdf);
     }
@@ -190,9 +193,13 @@ class Tracer {
         glm::vec3 radiance(0.0f), throughput(1.0f);
         float pdfDir = glm::dot(n, dir) / kPi;  // the pdf `dir` was drawn with
         for (int depth = 0; depth <= s_.maxDepth; ++depth) {
+            // Surfaces that pass light are looked through, their transmittance carried along
+            // (what they reflect themselves is left out: docs/MATERIALS.md).
+            glm::vec3 pass;
             const RayHit hit =
-                rays_.Intersect(x + eps_ * n, dir, std::numeric_limits<float>::infinity());
+                rays_.Intersect(x + eps_ * n, dir, std::numeric_limits<float>::infinity(), &pass);
             ++rays;
+            throughput *= pass;
             if (!hit.hit) {
                 // Escaped: the environment's radiance from that direction, weighted against
                 // the map's next-event estimate (SkyEvent) where there is one.
@@ -239,10 +246,6 @@ class Tracer {
             }
         }
         return radiance;
-    }
-
-    bool Occluded(const glm::vec3& from, const glm::vec3& span) const {
-        return rays_.Occluded(from, span);
     }
 
     const Scene& scene_;

@@ -154,6 +154,21 @@ Material ReadMaterial(const Context& ctx, int index, Scene& scene, std::vector<i
     if (!(roughness >= 0.0f && roughness <= 1.0f))
         ctx.Fail(where, "roughnessFactor is not a number in [0, 1]");
     Material out = PbrMaterial(m.name, base, metallic, roughness, emission);
+    // Coverage (alphaMode) and thin transmission (KHR_materials_transmission).
+    const float alpha =
+        pbr.baseColorFactor.size() == 4 ? static_cast<float>(pbr.baseColorFactor[3]) : 1.0f;
+    if (!(alpha >= 0.0f && alpha <= 1.0f)) ctx.Fail(where, "base colour alpha is not in [0, 1]");
+    float coverage = 1.0f;
+    if (m.alphaMode == "BLEND") coverage = alpha;
+    if (m.alphaMode == "MASK") coverage = alpha >= static_cast<float>(m.alphaCutoff) ? 1.0f : 0.0f;
+    float transmission = 0.0f;
+    if (auto t = m.extensions.find("KHR_materials_transmission");
+        t != m.extensions.end() && t->second.Has("transmissionFactor"))
+        transmission =
+            static_cast<float>(t->second.Get("transmissionFactor").GetNumberAsDouble());
+    if (!(transmission >= 0.0f && transmission <= 1.0f))
+        ctx.Fail(where, "KHR_materials_transmission's transmissionFactor is not in [0, 1]");
+    if (coverage < 1.0f || transmission > 0.0f) PassThrough(out, coverage, transmission);
     out.baseColorMap = baseMap, out.baseColorSet = pbr.baseColorTexture.texCoord;
     out.emissionMap = emissionMap, out.emissionSet = m.emissiveTexture.texCoord;
     return out;
@@ -214,7 +229,7 @@ namespace {
 bool Supported(const std::string& extension) {
     return extension == "KHR_materials_emissive_strength" || extension == "KHR_lights_punctual" ||
            extension == "KHR_draco_mesh_compression" || extension == "KHR_mesh_quantization" ||
-           extension == "EXT_meshopt_compression";
+           extension == "EXT_meshopt_compression" || extension == "KHR_materials_transmission";
 }
 
 }  // namespace
@@ -243,8 +258,14 @@ std::vector<std::string> IgnoredInput(const tinygltf::Model& model, const Scene&
             out.push_back(where + ": " + list +
                           " ignored (geometric normals and the factors are used)");
         }
-        if (m.alphaMode == "BLEND" || m.alphaMode == "MASK")
-            out.push_back(where + ": alphaMode " + m.alphaMode + " ignored (surfaces are opaque)");
+        if ((m.alphaMode == "BLEND" || m.alphaMode == "MASK") &&
+            m.pbrMetallicRoughness.baseColorTexture.index >= 0)
+            out.push_back(where + ": alphaMode " + m.alphaMode +
+                          ": coverage from the base colour factor's alpha alone (the texture's "
+                          "alpha, a cutout's shape, is not read)");
+        if (m.extensions.count("KHR_materials_transmission") &&
+            m.extensions.at("KHR_materials_transmission").Has("transmissionTexture"))
+            out.push_back(where + ": transmissionTexture ignored (the factor is used)");
     }
     if (!model.skins.empty())
         out.push_back(std::to_string(model.skins.size()) +

@@ -31,6 +31,10 @@ void DeriveReflectance(Material& m) {
         m.specular = glm::vec3(0.0f);
         m.phongExponent = 0.0f;
     }
+    // What passes straight through is neither reflected nor absorbed.
+    m.transmittance = glm::vec3(1.0f - m.coverage) + m.coverage * m.transmission * m.baseColor;
+    m.albedo *= m.coverage * (1.0f - m.transmission);
+    m.specular *= m.coverage;
 }
 
 Material PbrMaterial(const std::string& name, glm::vec3 baseColor, float metallic, float roughness,
@@ -43,6 +47,13 @@ Material PbrMaterial(const std::string& name, glm::vec3 baseColor, float metalli
     m.emission = emission;
     DeriveReflectance(m);
     return m;
+}
+
+void PassThrough(Material& m, float coverage, float transmission) {
+    m.coverage = coverage;
+    m.transmission = transmission;
+    m.emission *= coverage;
+    DeriveReflectance(m);
 }
 
 Material DiffuseMaterial(const std::string& name, glm::vec3 albedo, glm::vec3 emission) {
@@ -111,6 +122,19 @@ Tints TintsAt(const Scene& scene, uint32_t p, const glm::uvec3& abc, float u, fl
 
 std::vector<std::string> SceneWarnings(const Scene& scene, bool lightFromScene) {
     std::vector<std::string> out = scene.warnings;
+    // Surfaces that pass light: what each stage makes of them (docs/MATERIALS.md).
+    std::string passing;
+    size_t count = 0;
+    for (const Material& m : scene.materials)
+        if (m.Passes() && passing.find("'" + m.name + "'") == std::string::npos && ++count <= 3)
+            passing += (passing.empty() ? "'" : ", '") + m.name + "'";
+    if (count > 0)
+        out.push_back("material(s) " + passing + (count > 3 ? " and others" : "") +
+                      " pass light (alpha coverage, transmission): the direct light, the final "
+                      "gather, the light-field solver and the reference let it through tinted, "
+                      "the first shot untinted; the antiradiance and implicit solvers' own "
+                      "bounces treat them as opaque; their own reflection is left out where a "
+                      "ray looks through them");
     if (!lightFromScene) return out;
     const bool emits = std::any_of(
         scene.materials.begin(), scene.materials.end(),

@@ -36,8 +36,16 @@ struct Material {
     // means. The glossy lobe's colour (specular) takes the base colour map's mean only.
     int baseColorMap = -1, baseColorSet = 0;
     int emissionMap = -1, emissionSet = 0;
+    // Light passing straight through, per channel (a thin surface: glass, a cutout, a veil;
+    // both ways, its direction kept): from alpha coverage c (alphaMode BLEND: the base colour
+    // factor's alpha; MASK: 0 or 1 by the cutoff) and KHR_materials_transmission's factor t,
+    // T = (1 − c) + c · t · base colour. Zero: opaque. The albedo and the lobe then hold only
+    // the covered, untransmitted part (c · (1 − t)), the emission c of it (PassThrough).
+    float coverage = 1.0f, transmission = 0.0f;  // c and t as given
+    glm::vec3 transmittance{0.0f};               // derived
 
     bool Glossy() const { return phongExponent > 0.0f; }
+    bool Passes() const { return transmittance != glm::vec3(0.0f); }
     bool Mapped() const { return baseColorMap >= 0 || emissionMap >= 0; }
 };
 
@@ -53,11 +61,16 @@ inline constexpr float kGlossyRoughness = 0.7598357f;  // (1/3)^(1/4): n = 1
 // The sharpest lobe kept (roughness ≈ 0.06): sharper ones are mirrors to every solver here.
 inline constexpr float kMaxPhongExponent = 10000.0f;
 
-// Fills albedo, specular and phongExponent from baseColor, metallic and roughness.
+// Fills albedo, specular and phongExponent from baseColor, metallic and roughness, and the
+// transmittance from coverage and transmission (the albedo and lobe scaled by what passes).
 void DeriveReflectance(Material& m);
 // A material from glTF's factors (name, base colour, metallic, roughness, emission).
 Material PbrMaterial(const std::string& name, glm::vec3 baseColor, float metallic, float roughness,
                      glm::vec3 emission = glm::vec3(0.0f));
+// Gives `m` alpha coverage `coverage` and a transmission factor `transmission`, both in
+// [0, 1]: its transmittance, and its albedo, lobe (DeriveReflectance keeps them so) and
+// emission scaled to the part that neither passes nor is uncovered (Material::transmittance).
+void PassThrough(Material& m, float coverage, float transmission);
 // A purely diffuse material of albedo ρ (metallic 0, roughness 1).
 Material DiffuseMaterial(const std::string& name, glm::vec3 albedo,
                          glm::vec3 emission = glm::vec3(0.0f));

@@ -309,6 +309,65 @@ TEST(BakeCli, EnvironmentLightsTheSceneThroughItsOpening) {
     EXPECT_EQ(negative.run.exitCode, 1) << negative.run.output;
 }
 
+// Issue 62: surfaces that pass light. A floor under a box of glass (no bottom) sees the sky and
+// the sun only through one pane: E = π L T under a constant sky L, E = lux · sin(elevation) · T
+// in the sun, where T is the glass's transmittance: 1 − α for alphaMode BLEND, the base colour
+// for KHR_materials_transmission (black glass: it reflects nothing itself). The default bake and
+// the reference both.
+TEST(BakeCli, GlassLetsTheSkyAndTheSunThroughTinted) {
+    auto dir = testing::TempDir("glass");
+    SceneBuilder b;
+    b.AddQuad("floor", b.AddMaterial("grey", glm::vec3(0.5f)), {-1, 0, -1}, {1, 0, -1}, {1, 0, 1},
+              {-1, 0, 1}, {0, 1, 0}, 4);
+    b.AddBox("glass", b.AddMaterial("glass", glm::vec3(0.0f)), {0, 0.6f, 0}, {2.4f, 1.2f, 2.4f},
+             0.0f, false);
+    b.WriteGltf((dir / "plain.gltf").string());
+    nlohmann::json doc = nlohmann::json::parse(std::ifstream(dir / "plain.gltf"));
+    for (auto& m : doc["materials"])
+        if (m["name"] == "glass") {
+            m["alphaMode"] = "BLEND";
+            m["pbrMetallicRoughness"]["baseColorFactor"] = {0.0, 0.0, 0.0, 0.2};
+        }
+    std::ofstream(dir / "blend.gltf") << doc.dump();
+    for (auto& m : doc["materials"])
+        if (m["name"] == "glass") {
+            m.erase("alphaMode");
+            m["pbrMetallicRoughness"]["baseColorFactor"] = {1.0, 0.5, 0.25, 1.0};
+            m["extensions"]["KHR_materials_transmission"]["transmissionFactor"] = 1.0;
+        }
+    doc["extensionsUsed"] = {"KHR_materials_transmission"};
+    std::ofstream(dir / "tinted.gltf") << doc.dump();
+
+    auto floorOf = [&](const std::string& command, const std::string& scene) {
+        const auto out = dir / (scene + ".json");
+        const auto run = Execute(command + " " + (dir / (scene + ".gltf")).string() + " -o " +
+                                 out.string());
+        EXPECT_EQ(run.exitCode, 0) << run.output;
+        EXPECT_NE(run.output.find("pass light"), std::string::npos) << run.output;
+        std::vector<glm::vec3> floor;
+        if (run.exitCode != 0) return floor;
+        for (const auto& p : nlohmann::json::parse(std::ifstream(out))["primitives"])
+            if (p["node"] == "floor")
+                for (const auto& e : p["irradiance"])
+                    floor.emplace_back(e[0].get<float>(), e[1].get<float>(), e[2].get<float>());
+        return floor;
+    };
+    const float pi = 3.14159265f;
+    for (const std::string& command :
+         {std::string("bake --device cpu"), std::string("reference --samples 256")}) {
+        for (const glm::vec3& e :
+             floorOf(command + " --environment-color 1,1,1 --channel total", "blend"))
+            for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[c], pi * 0.8f, 0.03f * pi) << command;
+        const glm::vec3 tint(1.0f, 0.5f, 0.25f);
+        for (const glm::vec3& e :
+             floorOf(command + " --environment-color 1,1,1 --channel total", "tinted"))
+            for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[c], pi * tint[c], 0.03f * pi) << command;
+        // The sun at 60°: 1,000 lux · sin 60° through the pane.
+        for (const glm::vec3& e : floorOf(command + " --sun 30,60,1000 --channel direct", "tinted"))
+            for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[c], 866.0f * tint[c], 5.0f) << command;
+    }
+}
+
 // Issue 62: `--sun AZIMUTH,ELEVATION,LUX` and `--sky clear` on an open plane facing up: the sun
 // gives E = lux · sin(elevation), the clear sky its integral ∫ L cos θ dω over the map.
 TEST(BakeCli, SunAndClearSkyLightAnOpenPlaneAsTheirClosedForms) {

@@ -61,7 +61,8 @@ LightfieldSolver::LightfieldSolver(const Scene& scene, const SolverSettings& set
                                                      : gpu::DeviceKind::kRealGpu,
                                                  settings.validation);
         vulkanLines_ = std::make_unique<VulkanLines>(*device_, *rays_, grid_, own.layers);
-        if (device_->FloatAtomics()) {
+        // The device's walk knows no surface that passes light (glass): the CPU walks those.
+        if (device_->FloatAtomics() && !rays_->Passing()) {
             vulkanWalk_ = std::make_unique<VulkanWalk>(*device_, *rays_, surfels_.size());
             vulkanWalk_->SetFacets(*facets_);
         }

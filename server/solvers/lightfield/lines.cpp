@@ -392,6 +392,13 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
                         l += w[k] * glossy->exitant[size_t(g) * columns + column];
             return l;
         };
+        // What of the interface a surface lets through (glass, a cutout: Material::Passes;
+        // 0 for an opaque one, whose black back follows what it receives).
+        const bool passing = rays.Passing();
+        auto pass = [&](const LineHit& h) {
+            return passing ? rays.MaterialOf(h.triangle & ~kFacesAlong).transmittance
+                           : glm::vec3(0.0f);
+        };
         const uint32_t lines0 = b.directionLines[k], lines1 = b.directionLines[k + 1];
         // The sky's light travelling along +d arrives from −d, and along −d from +d.
         const glm::vec3 skyAlong = sky ? sky->Radiance(-d) : glm::vec3(0.0f);
@@ -402,10 +409,10 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
             for (uint32_t i = b.lineHits[line]; i < b.lineHits[line + 1]; ++i) {
                 const LineHit& h = b.hits[i];
                 if (h.triangle & kFacesAlong) {
-                    l = exitant(h, k);  // a sender overwrites the interface
+                    l = pass(h) * l + exitant(h, k);  // a sender overwrites the interface
                 } else {
                     receive(h, l);  // a receiver takes it; its black back follows
-                    l = glm::vec3(0.0f);
+                    l *= pass(h);
                 }
             }
         }
@@ -417,9 +424,9 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
                 const LineHit& h = b.hits[i];
                 if (h.triangle & kFacesAlong) {
                     receive(h, l);
-                    l = glm::vec3(0.0f);
+                    l *= pass(h);
                 } else {
-                    l = exitant(h, b.directions.size() + k);
+                    l = pass(h) * l + exitant(h, b.directions.size() + k);
                 }
             }
         }
