@@ -106,6 +106,25 @@ for material in bpy.data.materials:
         material.node_tree.links.new(diffuse.outputs["BSDF"], mix.inputs[1])
         material.node_tree.links.new(black.outputs["BSDF"], mix.inputs[2])
         shader = mix.outputs["Shader"]
+    # Light passing straight through (penumbra's Material::transmittance): alpha coverage c
+    # (BLEND: the factor's alpha; MASK: by the cutoff) and KHR_materials_transmission's t give
+    # T = (1 - c) + c t base, a Transparent BSDF of that colour beside the diffuse of c (1 - t).
+    alpha = colour[3] if len(colour) > 3 else 1.0
+    mode = spec.get("alphaMode", "OPAQUE")
+    cover = alpha if mode == "BLEND" else (
+        (1.0 if alpha >= spec.get("alphaCutoff", 0.5) else 0.0) if mode == "MASK" else 1.0)
+    trans = spec.get("extensions", {}).get("KHR_materials_transmission", {}).get(
+        "transmissionFactor", 0.0)
+    if cover < 1.0 or trans > 0.0:
+        passing = nodes.new("ShaderNodeBsdfTransparent")
+        passing.inputs["Color"].default_value = (
+            *[(1.0 - cover) + cover * trans * c for c in colour[:3]], 1.0)
+        diffuse.inputs["Color"].default_value = (
+            *[c * cover * (1.0 - trans) for c in colour[:3]], 1.0)
+        add = nodes.new("ShaderNodeAddShader")
+        material.node_tree.links.new(shader, add.inputs[0])
+        material.node_tree.links.new(passing.outputs["BSDF"], add.inputs[1])
+        shader = add.outputs["Shader"]
     if max(emission) * strength > 0.0:
         emit = nodes.new("ShaderNodeEmission")
         emit.inputs["Color"].default_value = (*emission, 1.0)
