@@ -396,8 +396,11 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
         // 0 for an opaque one, whose black back follows what it receives).
         const bool passing = rays.Passing();
         auto pass = [&](const LineHit& h) {
-            return passing ? rays.MaterialOf(h.triangle & ~kFacesAlong).transmittance
-                           : glm::vec3(0.0f);
+            return rays.MaterialOf(h.triangle & ~kFacesAlong).transmittance;
+        };
+        // Through a surface: an opaque one stops the interface, a passing one lets T of it on.
+        auto through = [&](const LineHit& h, const glm::vec3& l) {
+            return passing ? pass(h) * l : glm::vec3(0.0f);
         };
         const uint32_t lines0 = b.directionLines[k], lines1 = b.directionLines[k + 1];
         // The sky's light travelling along +d arrives from −d, and along −d from +d.
@@ -409,10 +412,10 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
             for (uint32_t i = b.lineHits[line]; i < b.lineHits[line + 1]; ++i) {
                 const LineHit& h = b.hits[i];
                 if (h.triangle & kFacesAlong) {
-                    l = pass(h) * l + exitant(h, k);  // a sender overwrites the interface
+                    l = through(h, l) + exitant(h, k);  // a sender overwrites the interface
                 } else {
                     receive(h, l);  // a receiver takes it; its black back follows
-                    l *= pass(h);
+                    l = through(h, l);
                 }
             }
         }
@@ -424,9 +427,9 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
                 const LineHit& h = b.hits[i];
                 if (h.triangle & kFacesAlong) {
                     receive(h, l);
-                    l *= pass(h);
+                    l = through(h, l);
                 } else {
-                    l = pass(h) * l + exitant(h, b.directions.size() + k);
+                    l = through(h, l) + exitant(h, b.directions.size() + k);
                 }
             }
         }
