@@ -360,8 +360,8 @@ SceneInfo Client::Load(const LoadOptions& o) {
         o.elementSize, o.device.empty() ? nullptr : o.device.c_str(), o.reload, nullptr, 1.0f,
         o.convergedChange, o.environment.empty() ? nullptr : o.environment.c_str(),
         sky ? &*sky : nullptr, o.environmentIntensity, o.environmentRotation, o.emitterRays,
-        o.gatherRays, options.empty() ? nullptr : &options, bool(o.progress),
-        sun ? &*sun : nullptr, o.clearSky ? "clear" : nullptr, o.turbidity));
+        o.gatherRays, options.empty() ? nullptr : &options, bool(o.progress), sun ? &*sun : nullptr,
+        o.clearSky ? "clear" : nullptr, o.turbidity));
     return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo,
                                    o.progress ? &o.progress : nullptr));
 }

@@ -186,8 +186,7 @@ void ServiceCommands::AddLoad(CLI::App& app) {
                                  "towards east, +X), elevation (degrees), lux, e.g. 135,30,80000")
                     ->delimiter(',')
                     ->expected(3);
-    s.load
-        ->add_option("--sky", s.skyModel, "clear: Preetham's clear sky for the --sun position")
+    s.load->add_option("--sky", s.skyModel, "clear: Preetham's clear sky for the --sun position")
         ->check(CLI::IsMember({"clear"}))
         ->needs(sun);
     s.load->add_option("--turbidity", s.turbidity, "the clear sky's, 1.7 … 10 (default 3)");

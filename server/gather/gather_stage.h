@@ -305,7 +305,7 @@ class GatherStage : public Solver {
     glm::vec3 Through(size_t t, int r) const {
         return through_.empty() ? glm::vec3(1.0f) : through_[t * settings_.gatherRays + r];
     }
-    std::vector<glm::vec3> sky_;       // per target: π/N Σ over escaped rays of L_env
+    std::vector<glm::vec3> sky_;  // per target: π/N Σ over escaped rays of L_env
     // Secondary gathers: per target SecondRays() hits per short hit in ray order; per short
     // hit π/M Σ over its escaped rays of L_env (target t's from secondStart_[t]).
     std::vector<std::vector<LobeHit>> lobes_;  // per target, in ray order

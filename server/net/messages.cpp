@@ -221,9 +221,9 @@ EnvironmentRequest ReadSetEnvironment(const fb::SetEnvironment& s) {
     }
     const std::string sky = Str(s.sky());
     if (!sky.empty() && sky != "clear")
-        throw service::ServiceError(service::ErrorKind::kInvalidArgument,
-                                    "SetEnvironment: sky \"" + sky +
-                                        "\" is not known (\"clear\" or none)");
+        throw service::ServiceError(
+            service::ErrorKind::kInvalidArgument,
+            "SetEnvironment: sky \"" + sky + "\" is not known (\"clear\" or none)");
     e.clearSky = sky == "clear";
     if (e.clearSky && (s.off() || !r.path.empty() || r.color))
         throw service::ServiceError(service::ErrorKind::kInvalidArgument,

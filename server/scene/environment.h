@@ -21,7 +21,8 @@ struct Environment {
     glm::vec3 constant{0.0f};            // radiance of a constant sky (nits)
     float intensity = 1.0f;              // scales the map or the constant
     float rotation = 0.0f;               // radians about +Y (counter-clockwise seen from above)
-    float turbidity = 0.0f;  // a clear sky's (scene/sun_sky.h ClearSky: it follows its sun); 0: not one
+    float turbidity =
+        0.0f;  // a clear sky's (scene/sun_sky.h ClearSky: it follows its sun); 0: not one
 
     bool Active() const;
     // A sky is given (a map or a non-zero colour), whatever its intensity: what decides back

@@ -164,8 +164,7 @@ Material ReadMaterial(const Context& ctx, int index, Scene& scene, std::vector<i
     float transmission = 0.0f;
     if (auto t = m.extensions.find("KHR_materials_transmission");
         t != m.extensions.end() && t->second.Has("transmissionFactor"))
-        transmission =
-            static_cast<float>(t->second.Get("transmissionFactor").GetNumberAsDouble());
+        transmission = static_cast<float>(t->second.Get("transmissionFactor").GetNumberAsDouble());
     if (!(transmission >= 0.0f && transmission <= 1.0f))
         ctx.Fail(where, "KHR_materials_transmission's transmissionFactor is not in [0, 1]");
     if (coverage < 1.0f || transmission > 0.0f) PassThrough(out, coverage, transmission);

@@ -339,7 +339,7 @@ uint64_t Session::Submit(const EnvironmentEdit& edit) {
         try {
             if (edit.sun) at = {edit.sun->x, edit.sun->y};
             ValidateSunPosition(at);
-            const float turbidity = edit.turbidity              ? *edit.turbidity
+            const float turbidity = edit.turbidity          ? *edit.turbidity
                                     : next.turbidity > 0.0f ? next.turbidity
                                                             : kDefaultTurbidity;
             // A clear sky follows its sun; one asked for replaces the sky.

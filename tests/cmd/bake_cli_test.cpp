@@ -340,8 +340,8 @@ TEST(BakeCli, GlassLetsTheSkyAndTheSunThroughTinted) {
 
     auto floorOf = [&](const std::string& command, const std::string& scene) {
         const auto out = dir / (scene + ".json");
-        const auto run = Execute(command + " " + (dir / (scene + ".gltf")).string() + " -o " +
-                                 out.string());
+        const auto run =
+            Execute(command + " " + (dir / (scene + ".gltf")).string() + " -o " + out.string());
         EXPECT_EQ(run.exitCode, 0) << run.output;
         EXPECT_NE(run.output.find("pass light"), std::string::npos) << run.output;
         std::vector<glm::vec3> floor;

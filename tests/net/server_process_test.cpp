@@ -444,8 +444,7 @@ TEST(ServerProcess, ASunAndItsClearSkyMoveLive) {
     EXPECT_EQ(info.lights[0].name, "sun");
     EXPECT_EQ(info.lights[0].type, "directional");
     EXPECT_NEAR(info.lights[0].direction[1], -0.5f, 1e-5f);  // shining down from 30°
-    EXPECT_NE(info.environment.find("Preetham, turbidity 3, sun at azimuth 135"),
-              std::string::npos)
+    EXPECT_NE(info.environment.find("Preetham, turbidity 3, sun at azimuth 135"), std::string::npos)
         << info.environment;
     c.Step(2);
     const client::Frame before = c.Get(client::Channel::kTotal);
