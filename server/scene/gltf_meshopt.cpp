@@ -35,6 +35,22 @@ void Drop(nlohmann::json& doc, const char* list) {
     doc[list] = kept;
 }
 
+// A .glb of `json` and `bin` (each padded to 4 bytes), its header's magic as given.
+std::vector<unsigned char> Glb(uint32_t magic, std::string json, std::vector<unsigned char> bin) {
+    json.resize((json.size() + 3) & ~size_t(3), ' ');
+    bin.resize((bin.size() + 3) & ~size_t(3), 0);
+    std::vector<unsigned char> out(12 + 8 + json.size() + 8 + bin.size());
+    const uint32_t header[3] = {magic, 2, uint32_t(out.size())};
+    std::memcpy(out.data(), header, 12);
+    const uint32_t jsonChunk[2] = {uint32_t(json.size()), kJson};
+    std::memcpy(out.data() + 12, jsonChunk, 8);
+    std::memcpy(out.data() + 20, json.data(), json.size());
+    const uint32_t binChunk[2] = {uint32_t(bin.size()), kBin};
+    std::memcpy(out.data() + 20 + json.size(), binChunk, 8);
+    std::memcpy(out.data() + 28 + json.size(), bin.data(), bin.size());
+    return out;
+}
+
 }  // namespace
 
 bool DecodeMeshopt(std::vector<unsigned char>& glb, const std::string& path, uint64_t most) {
@@ -173,19 +189,7 @@ bool DecodeMeshopt(std::vector<unsigned char>& glb, const std::string& path, uin
     Drop(doc, "extensionsUsed");
     Drop(doc, "extensionsRequired");
 
-    std::string json = doc.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-    json.resize((json.size() + 3) & ~size_t(3), ' ');
-    bin.resize((bin.size() + 3) & ~size_t(3), 0);
-    std::vector<unsigned char> out(12 + 8 + json.size() + 8 + bin.size());
-    const uint32_t header[3] = {head[0], 2, uint32_t(out.size())};
-    std::memcpy(out.data(), header, 12);
-    const uint32_t jsonChunk[2] = {uint32_t(json.size()), kJson};
-    std::memcpy(out.data() + 12, jsonChunk, 8);
-    std::memcpy(out.data() + 20, json.data(), json.size());
-    const uint32_t binChunk[2] = {uint32_t(bin.size()), kBin};
-    std::memcpy(out.data() + 20 + json.size(), binChunk, 8);
-    std::memcpy(out.data() + 28 + json.size(), bin.data(), bin.size());
-    glb = std::move(out);
+    glb = Glb(head[0], doc.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace), bin);
     return true;
 }
 
