@@ -34,7 +34,11 @@ glm::vec3 SunDirect::Sum(const SkyParts& sky, size_t i, const glm::vec3& n) cons
         if (!(bits[k / 64] >> (k % 64) & 1u)) continue;
         float pdf;
         const glm::vec3 w = Direction(sky, i, k, pdf);
-        e += sky.sun.Radiance(w) * (glm::dot(n, w) / pdf);
+        glm::vec3 through(1.0f);
+        if (!passed_.empty())
+            for (const auto& [ray, t] : passed_[i])
+                if (ray == k) through = t;
+        e += through * sky.sun.Radiance(w) * (glm::dot(n, w) / pdf);
     }
     return e / float(rays_);
 }
@@ -53,6 +57,11 @@ std::vector<glm::vec3> SunDirect::Retrace(const RayScene& rays, const SkyParts& 
     PENUMBRA_CHECK_EQ(points.size(), normals.size());
     PENUMBRA_CHECK_EQ(points.size(), moved.size());
     if (seen_.size() != points.size() * words_) seen_.assign(points.size() * words_, 0);
+    PENUMBRA_CHECK_LE(rays_, 65536);
+    if (!rays.Passing())
+        passed_.clear();
+    else if (passed_.size() != points.size())
+        passed_.assign(points.size(), {});
     std::vector<glm::vec3> e(points.size(), glm::vec3(0.0f));
     if (!sky.Split()) {
         std::fill(seen_.begin(), seen_.end(), 0);
@@ -77,9 +86,18 @@ std::vector<glm::vec3> SunDirect::Retrace(const RayScene& rays, const SkyParts& 
                     if (!meets) continue;  // its bit holds
                 }
                 bits[k / 64] &= ~bit;
+                if (!passed_.empty())
+                    std::erase_if(passed_[i], [k](const auto& p) { return p.first == k; });
                 if (!(pdf > 0.0f) || glm::dot(n, w) <= 0.0f) continue;
                 ++mine;
-                if (!rays.Occluded(from, span)) bits[k / 64] |= bit;
+                if (passed_.empty()) {
+                    if (!rays.Occluded(from, span)) bits[k / 64] |= bit;
+                    continue;
+                }
+                const glm::vec3 through = rays.Transmittance(from, span);
+                if (through == glm::vec3(0.0f)) continue;
+                bits[k / 64] |= bit;
+                if (through != glm::vec3(1.0f)) passed_[i].emplace_back(uint16_t(k), through);
             }
             e[i] = Sum(sky, i, n);
         }

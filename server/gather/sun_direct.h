@@ -53,6 +53,10 @@ class SunDirect {
     int rays_, words_;
     uint64_t seed_;
     std::vector<uint64_t> seen_;  // points × words_: bit k, ray k reaches the sky
+    // Per point, the rays that reach the sky through surfaces that pass light (glass) and
+    // what of it they carry (RayScene::Transmittance); empty in a scene without such
+    // surfaces. A seen ray not listed carries all of it.
+    std::vector<std::vector<std::pair<uint16_t, glm::vec3>>> passed_;
 };
 
 }  // namespace penumbra

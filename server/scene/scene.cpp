@@ -131,8 +131,9 @@ std::vector<std::string> SceneWarnings(const Scene& scene, bool lightFromScene) 
     if (count > 0)
         out.push_back("material(s) " + passing + (count > 3 ? " and others" : "") +
                       " pass light (alpha coverage, transmission): the direct light, the final "
-                      "gather, the light-field solver and the reference let it through tinted, "
-                      "the first shot untinted; the antiradiance and implicit solvers' own "
+                      "gather, a sky map's sun, the light-field solver and the reference let it "
+                      "through tinted, the first shot to emitters untinted; the antiradiance and "
+                      "implicit solvers' own "
                       "bounces treat them as opaque; their own reflection is left out where a "
                       "ray looks through them");
     if (!lightFromScene) return out;

@@ -337,7 +337,16 @@ TEST(BakeCli, GlassLetsTheSkyAndTheSunThroughTinted) {
         }
     doc["extensionsUsed"] = {"KHR_materials_transmission"};
     std::ofstream(dir / "tinted.gltf") << doc.dump();
+    for (auto& m : doc["materials"])
+        if (m["name"] == "glass")
+            m["extensions"]["KHR_materials_transmission"]["transmissionFactor"] = 0.0,
+            m["alphaMode"] = "BLEND",
+            m["pbrMetallicRoughness"]["baseColorFactor"] = {0.0, 0.0, 0.0, 0.0};
+    std::ofstream(dir / "open.gltf") << doc.dump();  // the glass wholly transparent: T = 1
 
+    WriteExr(
+        (dir / "sunny.exr").string(),
+        testing::SunnyMap(64, glm::normalize(glm::vec3(0.3f, 1.0f, -0.2f)), 0.1f, 500.0f, 0.5f));
     auto floorOf = [&](const std::string& command, const std::string& scene) {
         const auto out = dir / (scene + ".json");
         const auto run =
@@ -362,6 +371,16 @@ TEST(BakeCli, GlassLetsTheSkyAndTheSunThroughTinted) {
         for (const glm::vec3& e :
              floorOf(command + " --environment-color 1,1,1 --channel total", "tinted"))
             for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[c], pi * tint[c], 0.03f * pi) << command;
+        // A sky map with a sun in it (the first shot's rays to the sun, the gather's to the
+        // rest): through the tinted glass, T times what the open box lets in.
+        const std::string map =
+            " --environment " + (dir / "sunny.exr").string() + " --channel total";
+        const std::vector<glm::vec3> open = floorOf(command + map, "open"),
+                                     tinted = floorOf(command + map, "tinted");
+        ASSERT_EQ(open.size(), tinted.size());
+        for (size_t i = 0; i < open.size(); ++i)
+            for (int c = 0; c < 3; ++c)
+                EXPECT_NEAR(tinted[i][c], tint[c] * open[i][c], 0.03f * open[i][c]) << command;
         // The sun at 60°: 1,000 lux · sin 60° through the pane.
         for (const glm::vec3& e : floorOf(command + " --sun 30,60,1000 --channel direct", "tinted"))
             for (int c = 0; c < 3; ++c) EXPECT_NEAR(e[c], 866.0f * tint[c], 5.0f) << command;
