@@ -371,17 +371,6 @@ glm::vec3 RayScene::Transmittance(const glm::vec3& from, const glm::vec3& span) 
     return r.tfar < 0.0f ? glm::vec3(0.0f) : context.through;
 }
 
-void RayScene::TransmittanceFrom(const glm::vec3& from, const glm::vec3* spans, size_t count,
-                                 glm::vec3* out) const {
-    if (!passing_) {
-        std::vector<uint8_t> blocked(count);
-        OccludedFrom(from, spans, count, blocked.data());
-        for (size_t i = 0; i < count; ++i) out[i] = glm::vec3(blocked[i] ? 0.0f : 1.0f);
-        return;
-    }
-    for (size_t i = 0; i < count; ++i) out[i] = Transmittance(from, spans[i]);
-}
-
 RayHit RayScene::IntersectThrough(const glm::vec3& origin, const glm::vec3& dir, float tfar,
                                   glm::vec3& through) const {
     through = glm::vec3(1.0f);

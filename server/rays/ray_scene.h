@@ -106,9 +106,6 @@ class RayScene {
     // surface lies on it, else the product of the transmittances of the passing surfaces it
     // crosses (1 when none).
     glm::vec3 Transmittance(const glm::vec3& from, const glm::vec3& span) const;
-    // Transmittance for `count` segments from one point, into out[0, count).
-    void TransmittanceFrom(const glm::vec3& from, const glm::vec3* spans, size_t count,
-                           glm::vec3* out) const;
     // The nearest opaque triangle along origin + t·dir, t in (0, tfar): passing surfaces are
     // looked through, and `through` (when given) gets the product of their transmittances
     // before the hit (all of them when nothing is hit).

@@ -242,23 +242,31 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
         probe.seekg(0);
         probe.read(reinterpret_cast<char*>(glb.data()), std::streamsize(glb.size()));
         const uint64_t most = files.maxBufferBytes > 0 ? files.maxBufferBytes : uint64_t(1) << 32;
-        if (gltf::DecodeMeshopt(glb, path, most))
-            ok = loader.LoadBinaryFromMemory(model, &err, &warn, glb.data(), unsigned(glb.size()),
-                                             std::filesystem::path(path).parent_path().string());
-        else
-            ok = loader.LoadBinaryFromFile(model, &err, &warn, path);
+        gltf::DecodeMeshopt(glb, path, most);  // in place, when the file uses it
+        ok = loader.LoadBinaryFromMemory(model, &err, &warn, glb.data(), unsigned(glb.size()),
+                                         std::filesystem::path(path).parent_path().string());
     } else {
-        const nlohmann::json doc = DeclaredJson(path, uint64_t(1) << 32);
-        if (doc.is_object() && doc.contains("extensionsUsed") && doc["extensionsUsed"].is_array())
-            for (const auto& e : doc["extensionsUsed"])
-                if (e == "EXT_meshopt_compression")
-                    throw Error(path +
-                                ": EXT_meshopt_compression is read from binary glTF (.glb) "
-                                "only: `gltfpack -i FILE -o FILE.glb -c` packs one");
         ok = loader.LoadASCIIFromFile(model, &err, &warn, path);
     }
+    // EXT_meshopt_compression in a text .gltf: its fallback buffers have no data to read.
+    auto refuseMeshopt = [&path](const std::vector<std::string>& used) {
+        if (std::find(used.begin(), used.end(), "EXT_meshopt_compression") != used.end())
+            throw Error(path +
+                        ": EXT_meshopt_compression is read from binary glTF (.glb) only: "
+                        "`gltfpack -i FILE -o FILE.glb -c` packs one");
+    };
+    if (ok && !IsGlbPath(path)) refuseMeshopt(model->extensionsUsed);
     if (!ok) {
-        if (!IsGlbPath(path) && LooksLikeGltf1(path)) RefuseGltf1(path);
+        if (!IsGlbPath(path)) {
+            if (LooksLikeGltf1(path)) RefuseGltf1(path);
+            const nlohmann::json doc = DeclaredJson(path, uint64_t(1) << 32);
+            std::vector<std::string> used;
+            if (doc.is_object() && doc.contains("extensionsUsed") &&
+                doc["extensionsUsed"].is_array())
+                for (const auto& e : doc["extensionsUsed"])
+                    if (e.is_string()) used.push_back(e.get<std::string>());
+            refuseMeshopt(used);
+        }
         if (err.empty()) err = "unreadable glTF";
         while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
         throw Error(path + ": " + err);

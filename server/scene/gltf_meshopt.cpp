@@ -72,6 +72,7 @@ bool DecodeMeshopt(std::vector<unsigned char>& glb, const std::string& path, uin
         if (chunk[1] == kBin && !hasBin) bin.assign(data, data + chunk[0]), hasBin = true;
         at += 8 + size_t(chunk[0]);
     }
+    if (text.find(kExtension) == std::string::npos) return false;  // most files: no parse
     nlohmann::json doc = nlohmann::json::parse(text, nullptr, false);
     if (!doc.is_object() || !doc.contains("extensionsUsed") || !doc["extensionsUsed"].is_array())
         return false;

@@ -392,15 +392,12 @@ void WalkBatch(const LineBatch& b, const RayScene& rays, const SurfelFacets& fac
                         l += w[k] * glossy->exitant[size_t(g) * columns + column];
             return l;
         };
-        // What of the interface a surface lets through (glass, a cutout: Material::Passes;
-        // 0 for an opaque one, whose black back follows what it receives).
+        // What of the interface a surface lets through: T of it for glass or a cutout
+        // (Material::Passes), nothing for an opaque one, whose black back follows.
         const bool passing = rays.Passing();
-        auto pass = [&](const LineHit& h) {
-            return rays.MaterialOf(h.triangle & ~kFacesAlong).transmittance;
-        };
-        // Through a surface: an opaque one stops the interface, a passing one lets T of it on.
         auto through = [&](const LineHit& h, const glm::vec3& l) {
-            return passing ? pass(h) * l : glm::vec3(0.0f);
+            return passing ? rays.MaterialOf(h.triangle & ~kFacesAlong).transmittance * l
+                           : glm::vec3(0.0f);
         };
         const uint32_t lines0 = b.directionLines[k], lines1 = b.directionLines[k + 1];
         // The sky's light travelling along +d arrives from −d, and along −d from +d.
