@@ -75,6 +75,15 @@ std::optional<glm::vec3> Vec(const fb::Vec3* v) {
     return glm::vec3(v->x(), v->y(), v->z());
 }
 
+// A request's `sky`: "clear" (a clear sky for the scene's sun) or none; anything else refused.
+bool ClearSkyAsked(const flatbuffers::String* sky, const char* request) {
+    const std::string name = Str(sky);
+    if (!name.empty() && name != "clear")
+        throw ServiceError(ErrorKind::kInvalidArgument, std::string(request) + ": sky \"" + name +
+                                                            "\" is not known (\"clear\" or none)");
+    return name == "clear";
+}
+
 }  // namespace
 
 service::LoadRequest ReadLoadScene(const fb::LoadScene& load, const service::Service& service) {
@@ -92,11 +101,7 @@ service::LoadRequest ReadLoadScene(const fb::LoadScene& load, const service::Ser
     req.environmentIntensity = l->environment_intensity();
     req.environmentRotation = l->environment_rotation();
     req.sun = Vec(l->sun());
-    const std::string sky = Str(l->sky());
-    if (!sky.empty() && sky != "clear")
-        throw ServiceError(ErrorKind::kInvalidArgument,
-                           "LoadScene: sky \"" + sky + "\" is not known (\"clear\" or none)");
-    req.clearSky = sky == "clear";
+    req.clearSky = ClearSkyAsked(l->sky(), "LoadScene");
     req.turbidity = l->turbidity();
     // The solver and its options: each checked against the registry here, so a
     // bad one is refused before anything loads.
@@ -219,12 +224,7 @@ EnvironmentRequest ReadSetEnvironment(const fb::SetEnvironment& s) {
         e.sun = glm::vec2(sun->x(), sun->y());
         if (Given(sun->z())) e.sunIlluminance = sun->z();
     }
-    const std::string sky = Str(s.sky());
-    if (!sky.empty() && sky != "clear")
-        throw service::ServiceError(
-            service::ErrorKind::kInvalidArgument,
-            "SetEnvironment: sky \"" + sky + "\" is not known (\"clear\" or none)");
-    e.clearSky = sky == "clear";
+    e.clearSky = ClearSkyAsked(s.sky(), "SetEnvironment");
     if (e.clearSky && (s.off() || !r.path.empty() || r.color))
         throw service::ServiceError(service::ErrorKind::kInvalidArgument,
                                     "SetEnvironment: a clear sky and another sky cannot both be "
