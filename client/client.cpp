@@ -144,6 +144,7 @@ struct Client::Impl {
     EndCallback ended;                                       // the subscription's end (Subscribe)
     std::map<uint32_t, ProgressCallback> progressCallbacks;  // by request id
     uint16_t version = 0;
+    std::string role;
 
     void Connect(const std::string& url) {
         std::error_code ec;
@@ -295,7 +296,9 @@ Client::Client(const std::string& url, const std::string& clientName, const std:
                                    token.empty() ? nullptr : token.c_str()));
     try {
         auto m = impl_->Call(MessageType::kHello, b, MessageType::kWelcome);
-        impl_->version = m.As<fb::Welcome>()->version();
+        const auto* welcome = m.As<fb::Welcome>();
+        impl_->version = welcome->version();
+        impl_->role = welcome->role() ? welcome->role()->str() : "user";
     } catch (...) {
         // Refused at Hello (a version mismatch, a wrong token): stop the reader before the
         // exception leaves, so that nothing is left running.
@@ -341,6 +344,7 @@ bool Client::Connected() const {
 }
 
 uint16_t Client::ProtocolVersion() const { return impl_->version; }
+const std::string& Client::Role() const { return impl_->role; }
 
 SceneInfo Client::Load(const LoadOptions& o) {
     flatbuffers::FlatBufferBuilder b(1024 + o.glb.size());

@@ -213,6 +213,9 @@ class Client {
     bool Connected() const;
 
     uint16_t ProtocolVersion() const;
+    // What the server lets this connection do (Welcome's `role`; protocol/SPEC.md "Roles"):
+    // "viewer", "user", "editor" or "admin".
+    const std::string& Role() const;
 
   private:
     struct Impl;

@@ -84,8 +84,9 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"bounds", "rebuild"}));
     std::string tokenFile;
     app.add_option("--token-file", tokenFile,
-                   "every client must give the token in this file (its first line) in Hello; "
-                   "for servers reachable from other machines (--allow-remote)")
+                   "every client must give one of this file's tokens in Hello, which gives it a "
+                   "role: a line \"ROLE TOKEN\" (viewer, editor or admin) or the token alone "
+                   "(editor); for servers reachable from other machines (--allow-remote)")
         ->check(CLI::ExistingFile);
     app.add_flag("-q,--quiet", quiet, "no log lines on stderr");
     CLI11_PARSE(app, argc, argv);
@@ -93,13 +94,10 @@ int main(int argc, char** argv) {
     serviceLimits.maxUploadBytes = netLimits.maxFrameBytes;
     netLimits.log = !quiet;
     if (!tokenFile.empty()) {
-        std::ifstream in(tokenFile);
-        std::getline(in, netLimits.token);
-        while (!netLimits.token.empty() && std::isspace(uint8_t(netLimits.token.back())))
-            netLimits.token.pop_back();
-        if (netLimits.token.empty()) {
-            std::fprintf(stderr, "penumbra-server: error: %s: no token on its first line\n",
-                         tokenFile.c_str());
+        try {
+            netLimits.tokens = net::ReadTokenFile(tokenFile);
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "penumbra-server: error: %s\n", e.what());
             return 2;
         }
     }

@@ -336,16 +336,18 @@ bool ServiceCommands::Parsed() const {
 
 namespace {
 
-// The first line of the file PENUMBRA_TOKEN_FILE names (a server started with --token-file
-// asks for it in Hello); empty when the variable is not set.
+// The token on the first line of the file PENUMBRA_TOKEN_FILE names (a server started with
+// --token-file asks for it in Hello): the line's last word, so that a line of the server's
+// file ("editor TOKEN") serves as it is; empty when the variable is not set.
 std::string TokenFromEnvironment() {
     const char* path = std::getenv("PENUMBRA_TOKEN_FILE");
     if (!path || !*path) return {};
     std::ifstream in(path);
     if (!in) throw Error(std::string(path) + " (PENUMBRA_TOKEN_FILE): cannot read");
-    std::string token;
-    std::getline(in, token);
-    while (!token.empty() && std::isspace(uint8_t(token.back()))) token.pop_back();
+    std::string line, token;
+    std::getline(in, line);
+    std::istringstream words(line);
+    for (std::string word; words >> word;) token = word;
     return token;
 }
 

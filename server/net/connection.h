@@ -101,6 +101,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
     // The session a request's `scene` names; "" is the one this connection loaded or joined
     // last, or the server's newest when it has not loaded any. Throws ServiceError.
     std::shared_ptr<service::Session> SessionOf(const flatbuffers::String* scene);
+    // SessionOf's session, if this connection may edit it (Service::CheckMay); else throws
+    // ServiceError kForbidden.
+    std::shared_ptr<service::Session> EditableSession(const flatbuffers::String* scene);
 
     Server& server_;
     asio::generic::stream_protocol::socket socket_;
@@ -120,6 +123,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     uint64_t stallEpoch_ = 0;   // which arming a firing belongs to
     bool stallArmed_ = false;
     std::string client_;
+    service::Role role_ = service::Role::kUser;  // from Hello's token (NetLimits::tokens)
     std::string lastScene_;  // the scene this connection loaded or joined last
     std::map<std::string, Subscription> subscriptions_;
 };

@@ -158,6 +158,25 @@ std::string Server::MetricsText() const {
             out << name << "{scene=\"" << Label(scene.value("scene", "")) << "\"} "
                 << number(scene, key) << "\n";
     }
+    // Each scene's histograms (service::LatencyHistogram), as Prometheus histograms.
+    for (const auto& [name, key, help] :
+         {std::tuple{"penumbra_edit_to_frame_seconds", "edit_to_frame_seconds",
+                     "Time from an edit's acknowledgement to the first frame that includes it."},
+          {"penumbra_frame_seconds", "frame_seconds", "Time a frame took to make."}}) {
+        Family(out, name, "histogram", help);
+        for (const auto& scene : scenes) {
+            if (!scene.contains(key)) continue;
+            const nlohmann::json& h = scene[key];
+            const std::string label = "scene=\"" + Label(scene.value("scene", "")) + "\"";
+            for (size_t i = 0; i < h["le"].size(); ++i)
+                out << name << "_bucket{" << label << ",le=\"" << h["le"][i].get<double>()
+                    << "\"} " << h["cumulative"][i].get<uint64_t>() << "\n";
+            out << name << "_bucket{" << label << ",le=\"+Inf\"} " << h["count"].get<uint64_t>()
+                << "\n";
+            out << name << "_sum{" << label << "} " << h["sum"].get<double>() << "\n";
+            out << name << "_count{" << label << "} " << h["count"].get<uint64_t>() << "\n";
+        }
+    }
     return out.str();
 }
 

@@ -60,22 +60,22 @@ void Connection::Handle(const protocol::Message& m) {
         }
         case MessageType::kSetTransform: {
             const auto* t = m.As<fb::SetTransform>();
-            auto session = SessionOf(t->scene());
+            auto session = EditableSession(t->scene());
             return SendAck(id, session->Submit(ReadSetTransform(*t)));
         }
         case MessageType::kSetVertices: {
             const auto* v = m.As<fb::SetVertices>();
-            auto session = SessionOf(v->scene());
+            auto session = EditableSession(v->scene());
             return SendAck(id, session->Submit(ReadSetVertices(*v)));
         }
         case MessageType::kSetLight: {
             const auto* l = m.As<fb::SetLight>();
-            auto session = SessionOf(l->scene());
+            auto session = EditableSession(l->scene());
             return SendAck(id, session->Submit(ReadSetLight(*l)));
         }
         case MessageType::kSetMaterial: {
             const auto* s = m.As<fb::SetMaterial>();
-            auto session = SessionOf(s->scene());
+            auto session = EditableSession(s->scene());
             return SendAck(id, session->Submit(ReadSetMaterial(*s)));
         }
         case MessageType::kSetEnvironment:
@@ -116,18 +116,25 @@ void Connection::OnHello(uint32_t id, const fb::Hello& h) {
                   true);
         return;
     }
-    if (!server_.Limits().token.empty() && Str(h.token()) != server_.Limits().token) {
-        SendError(id, fb::ErrorCode::Unauthorized,
-                  "this server asks for a token in Hello (--token-file); the one given does "
-                  "not match",
-                  true);
-        return;
+    if (const auto& tokens = server_.Limits().tokens; !tokens.empty()) {
+        auto token = tokens.find(Str(h.token()));
+        if (token == tokens.end()) {
+            SendError(id, fb::ErrorCode::Unauthorized,
+                      h.token() ? "this server asks for a token in Hello (--token-file); the one "
+                                  "given is not one of its tokens"
+                                : "this server asks for a token in Hello (--token-file); none "
+                                  "was given",
+                      true);
+            return;
+        }
+        role_ = token->second;
     }
     helloDone_ = true;
     hello_.cancel();
     client_ = Str(h.client());
     flatbuffers::FlatBufferBuilder b;
-    b.Finish(fb::CreateWelcomeDirect(b, "penumbra-server", hi, server_.Limits().maxFrameBytes));
+    b.Finish(fb::CreateWelcomeDirect(b, "penumbra-server", hi, server_.Limits().maxFrameBytes,
+                                     service::RoleName(role_)));
     Send(MessageType::kWelcome, id, b);
 }
 
@@ -136,6 +143,7 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
     // Checked whole here, so a bad request is refused before anything loads.
     service::LoadRequest req = ReadLoadScene(l, service);
     req.by = id_;
+    req.role = role_;
     if (l.progress()) req.progress = ProgressSender(id);
     Blocking(
         id, [&service, req] { return service.Load(req); },
@@ -165,7 +173,7 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
 
 void Connection::OnUnloadScene(uint32_t id, const fb::UnloadScene& u) {
     const std::string name = Str(u.scene()).empty() ? lastScene_ : Str(u.scene());
-    std::shared_ptr<service::Session> session = server_.GetService().Unload(name, id_);
+    std::shared_ptr<service::Session> session = server_.GetService().Unload(name, id_, role_);
     const std::string scene = session->Name();
     server_.Log(Who() + ": unloaded " + scene);
     if (lastScene_ == scene) lastScene_.clear();
@@ -225,9 +233,15 @@ std::shared_ptr<service::Session> Connection::SessionOf(const flatbuffers::Strin
     return server_.GetService().Find(name.empty() ? lastScene_ : name);
 }
 
+std::shared_ptr<service::Session> Connection::EditableSession(const flatbuffers::String* scene) {
+    auto session = SessionOf(scene);
+    server_.GetService().CheckMay(session->Name(), id_, role_, service::Change::kEdit);
+    return session;
+}
+
 void Connection::OnSetEnvironment(uint32_t id, const fb::SetEnvironment& s) {
     service::Service& service = server_.GetService();
-    auto session = SessionOf(s.scene());
+    auto session = EditableSession(s.scene());
     EnvironmentRequest r = ReadSetEnvironment(s);
     // Reading a sky map takes a while: on the blocking pool.
     Blocking(
@@ -284,7 +298,7 @@ void Connection::OnGetIrradiance(uint32_t id, const fb::GetIrradiance& g) {
 }
 
 void Connection::OnStep(uint32_t id, const fb::Step& s) {
-    auto session = SessionOf(s.scene());
+    auto session = EditableSession(s.scene());  // its iterations are the scene's, everyone's
     const int n = s.iterations();
     Blocking(
         id, [session, n] { return session->Step(n); },

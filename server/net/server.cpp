@@ -6,7 +6,9 @@
 #include <cstdio>
 #include <deque>
 #include <filesystem>
+#include <fstream>
 #include <limits>
+#include <sstream>
 
 #include "base/check.h"
 #include "net/connection.h"
@@ -43,6 +45,32 @@ ListenAddress ParseListenAddress(const std::string& url) {
         throw Error("'" + url + "': port must be a number 0…65535");
     a.port = static_cast<uint16_t>(std::stoul(port));
     return a;
+}
+
+std::map<std::string, service::Role> ReadTokenFile(const std::string& path) {
+    std::ifstream in(path);
+    if (!in) throw Error(path + ": cannot be read");
+    std::map<std::string, service::Role> tokens;
+    std::string line;
+    for (int number = 1; std::getline(in, line); ++number) {
+        line = line.substr(0, line.find('#'));
+        std::istringstream words(line);
+        std::vector<std::string> w;
+        for (std::string word; words >> word;) w.push_back(word);
+        if (w.empty()) continue;
+        const std::string where = path + ":" + std::to_string(number) + ": ";
+        if (w.size() > 2)
+            throw Error(where + "expected ROLE TOKEN or TOKEN, got " + std::to_string(w.size()) +
+                        " words (a token has no spaces)");
+        std::optional<service::Role> role =
+            w.size() == 2 ? service::RoleNamed(w[0]) : service::Role::kEditor;
+        if (!role)
+            throw Error(where + "unknown role '" + w[0] + "' (roles: viewer, editor, admin)");
+        if (!tokens.emplace(w.back(), *role).second)
+            throw Error(where + "this token is given twice");
+    }
+    if (tokens.empty()) throw Error(path + ": no token in it");
+    return tokens;
 }
 
 Server::Server(asio::io_context& io, service::Service& service, NetLimits limits)

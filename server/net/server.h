@@ -36,12 +36,18 @@ struct NetLimits {
     // subscription and no request in progress, gets Error Stalled and closes (0: no limit);
     // --idle-timeout.
     double idleTimeoutSeconds = 300.0;
-    // Every Hello must carry this token (empty: none asked for); --token-file.
-    std::string token;
+    // Every Hello must carry one of these tokens, which gives the connection its role
+    // (empty: none asked for, every client a service::Role::kUser); --token-file.
+    std::map<std::string, service::Role> tokens;
     // One line on stderr for each load, refusal and protocol error (penumbra-server sets it
     // unless -q; off for servers inside other programs).
     bool log = false;
 };
+
+// The tokens of a --token-file: one a line, "ROLE TOKEN" (ROLE viewer, editor or admin) or
+// the token alone (an editor's); blank lines and lines from '#' on are skipped. Throws
+// penumbra::Error naming the file and line of anything else, a token given twice, or none.
+std::map<std::string, service::Role> ReadTokenFile(const std::string& path);
 
 // "tcp://HOST:PORT" or "unix:///PATH".
 struct ListenAddress {

@@ -28,6 +28,26 @@ std::string Replace(std::string message, const std::string& path, const std::str
 
 }  // namespace
 
+const char* RoleName(Role role) {
+    switch (role) {
+        case Role::kViewer:
+            return "viewer";
+        case Role::kUser:
+            return "user";
+        case Role::kEditor:
+            return "editor";
+        case Role::kAdmin:
+            return "admin";
+    }
+    return "?";
+}
+
+std::optional<Role> RoleNamed(const std::string& name) {
+    for (Role r : {Role::kViewer, Role::kEditor, Role::kAdmin})
+        if (name == RoleName(r)) return r;
+    return std::nullopt;
+}
+
 Service::Service(fs::path sceneRoot, ServiceLimits limits, SolverSettings defaults)
     : root_(fs::weakly_canonical(sceneRoot)), limits_(limits), defaults_(std::move(defaults)) {}
 
@@ -112,7 +132,12 @@ LoadResult Service::Load(const LoadRequest& request) {
         if (shutdown_) throw ServiceError(ErrorKind::kShuttingDown, "the server is shutting down");
         auto it = sessions_.find(name);
         if (it != sessions_.end() && !request.reload) return {it->second, true, {}};
-        if (request.by != 0 && it == sessions_.end()) {
+        if (it == sessions_.end() && request.role == Role::kViewer)
+            throw ServiceError(ErrorKind::kForbidden,
+                               "this client's token has the viewer role: it may join a loaded "
+                               "scene (LoadScene of its name), not load '" +
+                                   name + "'");
+        if (request.by != 0 && it == sessions_.end() && request.role != Role::kAdmin) {
             const size_t owned = std::count_if(owners_.begin(), owners_.end(), [&](const auto& o) {
                 return o.second == request.by;
             });
@@ -123,7 +148,7 @@ LoadResult Service::Load(const LoadRequest& request) {
                                        std::to_string(limits_.maxScenesPerClient) +
                                        "): unload one first");
         }
-        if (it != sessions_.end()) CheckOwner(name, request.by, "reload");
+        if (it != sessions_.end()) CheckMayLocked(name, request.by, request.role, Change::kReload);
         size_t others = sessions_.size() - (it != sessions_.end() ? 1 : 0);
         while (others + loading_ >= limits_.maxScenes) {
             // The scene loaded longest ago that no connection holds and nobody watches.
@@ -259,7 +284,9 @@ void Service::Hold(const std::string& name, uint64_t holder) {
 
 void Service::Own(const std::string& name, uint64_t owner) {
     std::lock_guard lock(mutex_);
-    if (sessions_.count(name)) owners_[name] = owner;
+    // A reload keeps the scene's owner while it is connected: an editor's reload of another
+    // client's scene does not take it over.
+    if (sessions_.count(name)) owners_.emplace(name, owner);
 }
 
 void Service::Release(uint64_t holder) {
@@ -268,7 +295,7 @@ void Service::Release(uint64_t holder) {
     std::erase_if(owners_, [&](const auto& entry) { return entry.second == holder; });
 }
 
-std::shared_ptr<Session> Service::Unload(const std::string& name, uint64_t by) {
+std::shared_ptr<Session> Service::Unload(const std::string& name, uint64_t by, Role role) {
     std::lock_guard lock(mutex_);
     if (sessions_.empty())
         throw ServiceError(ErrorKind::kNoScene, "no scene is loaded, so none can be unloaded");
@@ -276,7 +303,7 @@ std::shared_ptr<Session> Service::Unload(const std::string& name, uint64_t by) {
     auto it = sessions_.find(scene);
     if (it == sessions_.end())
         throw ServiceError(ErrorKind::kNoScene, "no scene '" + scene + "' is loaded");
-    CheckOwner(scene, by, "unload");
+    CheckMayLocked(scene, by, role, Change::kUnload);
     ++unloads_;
     return Take(scene);
 }
@@ -297,15 +324,31 @@ std::shared_ptr<Session> Service::Take(std::string name) {  // a copy: order_ ho
     return session;
 }
 
-void Service::CheckOwner(const std::string& name, uint64_t by, const char* verb) const {
+void Service::CheckMay(const std::string& name, uint64_t by, Role role, Change change) const {
+    std::lock_guard lock(mutex_);
+    CheckMayLocked(name, by, role, change);
+}
+
+void Service::CheckMayLocked(const std::string& name, uint64_t by, Role role,
+                             Change change) const {
+    const char* verb = change == Change::kEdit     ? "edit"
+                       : change == Change::kReload ? "reload"
+                                                   : "unload";
+    if (role == Role::kViewer)
+        throw ServiceError(ErrorKind::kForbidden, std::string("this client's token has the viewer "
+                                                              "role: it may watch scene '") +
+                                                      name + "', not " + verb + " it");
+    if (role == Role::kAdmin || (role == Role::kEditor && change != Change::kUnload)) return;
     if (auto owner = owners_.find(name); owner != owners_.end() && owner->second != by)
         throw ServiceError(ErrorKind::kForbidden,
                            "scene '" + name +
                                "' was loaded by another client, which is still connected: only "
                                "it may " +
-                               verb + " the scene");
+                               verb + " the scene" +
+                               (change == Change::kUnload
+                                    ? " (or a client whose token has the admin role)"
+                                    : " (or a client whose token has the editor role)"));
 }
-
 std::shared_ptr<Session> Service::Find(const std::string& name) const {
     std::lock_guard lock(mutex_);
     if (sessions_.empty())

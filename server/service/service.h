@@ -30,6 +30,22 @@ struct ServiceLimits {
     size_t maxUploadBytes = 64u << 20;           // an uploaded .glb
 };
 
+// What a connection may do (protocol/SPEC.md, "Roles"). A server without --token-file gives
+// every client kUser; a token file gives each of its tokens a role. Every role may join
+// scenes, subscribe and read; beyond that:
+//   viewer  nothing more;
+//   user    loads scenes (which it then owns), edits, reloads and unloads the scenes it owns
+//           and those whose owner has gone (or that no connection built);
+//   editor  a user that also edits and reloads scenes other clients own;
+//   admin   an editor that also unloads them, and owns scenes beyond --max-scenes-per-client.
+enum class Role { kViewer, kUser, kEditor, kAdmin };
+const char* RoleName(Role role);
+// "viewer", "editor", "admin" (the roles a token file names); nullopt for anything else.
+std::optional<Role> RoleNamed(const std::string& name);
+
+// What a request would do to a scene, for Service::CheckMay.
+enum class Change { kEdit, kReload, kUnload };
+
 struct LoadRequest {
     std::string path;          // relative to the scene root
     std::vector<uint8_t> glb;  // or an uploaded .glb
@@ -48,9 +64,10 @@ struct LoadRequest {
     float turbidity = 3.0f;
     // Told how the build goes (stage, fraction of it), from the loading thread; may be empty.
     ProgressFn progress;
-    // The connection asking (Service::Own), 0 in-process: a reload of a scene another
-    // connected client owns is refused.
+    // The connection asking (Service::Own), 0 in-process, and its role: a reload of a scene
+    // another connected client owns is refused unless the role allows it (CheckMay).
     uint64_t by = 0;
+    Role role = Role::kUser;
 };
 
 struct LoadResult {
@@ -91,15 +108,20 @@ class Service {
     // goes (every scene it held).
     void Hold(const std::string& name, uint64_t holder);
     // Connection `owner` built scene `name` (its load was no join): it owns the scene until
-    // it goes (Release) or the scene does.
+    // it goes (Release) or the scene does, unless another connected client owns it already
+    // (a reload by an editor keeps the owner).
     void Own(const std::string& name, uint64_t owner);
     void Release(uint64_t holder);
-    // Drops scene `name` ("": the newest) for connection `by`: while its owner (Own) is
-    // connected only the owner may; a scene whose owner has gone, or that no connection
-    // built, any connection may. Returns the session, for the caller to tell its subscribers
-    // and to let go of (its worker stops when the last reference goes). Throws ServiceError
-    // kNoScene, kForbidden.
-    std::shared_ptr<Session> Unload(const std::string& name, uint64_t by);
+    // Drops scene `name` ("": the newest) for connection `by` of role `role`, if CheckMay
+    // allows. Returns the session, for the caller to tell its subscribers and to let go of
+    // (its worker stops when the last reference goes). Throws ServiceError kNoScene,
+    // kForbidden.
+    std::shared_ptr<Session> Unload(const std::string& name, uint64_t by, Role role);
+    // Throws ServiceError kForbidden unless connection `by`, of role `role`, may make
+    // `change` to scene `name`: a viewer never; its owner (Own) always; anyone but a viewer
+    // once the owner has gone, or when no connection built it; while the owner is connected,
+    // an editor may edit or reload it and only an admin unload it.
+    void CheckMay(const std::string& name, uint64_t by, Role role, Change change) const;
     // The named session; "" means the only one loaded, or the newest if several are.
     std::shared_ptr<Session> Find(const std::string& name) const;
     // A path under the scene root, refusing absolute paths, ".." escapes and symlinks that
@@ -127,11 +149,10 @@ class Service {
 
   private:
     // With mutex_ held: whether no connection holds scene `name` and nobody watches it;
-    // scene `name` taken out of every table (its session returned); kForbidden unless
-    // connection `by` may `verb` scene `name` (its owner, or nobody connected owns it).
+    // scene `name` taken out of every table (its session returned); CheckMay's test.
     bool Unheld(const std::string& name) const;
     std::shared_ptr<Session> Take(std::string name);
-    void CheckOwner(const std::string& name, uint64_t by, const char* verb) const;
+    void CheckMayLocked(const std::string& name, uint64_t by, Role role, Change change) const;
 
     const std::filesystem::path root_;
     const ServiceLimits limits_;

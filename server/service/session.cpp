@@ -168,6 +168,21 @@ SolverStats Session::SolverStatistics() const {
     return solverStatsRaw_;
 }
 
+void LatencyHistogram::Observe(double seconds) {
+    size_t bucket = 0;
+    while (bucket < kBounds.size() && seconds > kBounds[bucket]) ++bucket;
+    ++counts[bucket];
+    sumSeconds += seconds;
+    ++count;
+}
+
+nlohmann::json LatencyHistogram::Json() const {
+    nlohmann::json cumulative = nlohmann::json::array();
+    uint64_t total = 0;
+    for (size_t i = 0; i < kBounds.size(); ++i) cumulative.push_back(total += counts[i]);
+    return {{"le", kBounds}, {"cumulative", cumulative}, {"sum", sumSeconds}, {"count", count}};
+}
+
 nlohmann::json Session::StatsJson() const {
     std::lock_guard lock(mutex_);
     nlohmann::json j;
@@ -194,6 +209,8 @@ nlohmann::json Session::StatsJson() const {
         if (now - t < std::chrono::seconds(1)) ++recent;
     j["fps"] = recent;
     j["last_frame_ms"] = latest_ ? latest_->frameMs : 0.0;
+    j["edit_to_frame_seconds"] = editLatency_.Json();
+    j["frame_seconds"] = frameTime_.Json();
     j["solver"] = StatsToJson(solverStatsRaw_);
     if (!lastError_.empty()) j["last_error"] = lastError_;
     return j;
@@ -273,6 +290,8 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
             frame->editLatencyMs = MsSince(appliedReceived_);
             latencyReported_ = true;
         }
+        for (const auto& received : unreported_) editLatency_.Observe(MsSince(received) / 1e3);
+        unreported_.clear();
         ++framesSinceEdit_;
         settled_ =
             divergence.empty() && !edited && stats.catchingUp.empty() &&
@@ -286,6 +305,7 @@ void Session::ProduceFrame(int iterations, std::string note, bool interruptible)
         }
         frame->converged = converged_;
         frame->frameMs = MsSince(start);
+        frameTime_.Observe(frame->frameMs / 1e3);
         latest_ = frame;
         solverStatsRaw_ = stats;
         auto now = Clock::now();
@@ -400,6 +420,7 @@ bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string&
     }
     const uint64_t last = pending_.back().id;
     const auto received = pending_.back().received;
+    for (const auto& p : pending_) unreported_.push_back(p.received);
     pending_.clear();
     editWaiting_ = false;
     applied_ = std::move(next);
@@ -476,6 +497,8 @@ void Session::Run() {
             }
             appliedEdit_ = rebuild_->lastEdit;
             appliedReceived_ = rebuild_->received;
+            unreported_.insert(unreported_.end(), rebuild_->receivedEach.begin(),
+                               rebuild_->receivedEach.end());
             latencyReported_ = false;
             converged_ = settled_ = false;
             framesSinceEdit_ = 0;
@@ -504,6 +527,7 @@ void Session::Run() {
             rebuild_->scene = std::move(next);
             rebuild_->lastEdit = pending_.back().id;
             rebuild_->received = pending_.back().received;
+            for (const auto& p : pending_) rebuild_->receivedEach.push_back(p.received);
             rebuild_->what = what;
             rebuild_->reason = rebuildReason_;
             rebuildReason_.clear();

@@ -3,6 +3,7 @@
 // while the scene changes and idles once it has converged.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -78,6 +79,21 @@ inline constexpr double kShotPartMs = 30.0;
 // (CheckGatherRays), the element size (≥ 0, finite). The solver's own options are
 // CheckSolverSettings' (solvers/registry.h).
 void CheckSessionSettings(const SessionSettings& settings);
+
+// Durations counted in fixed buckets, the shape of a Prometheus histogram (net/metrics.cpp):
+// how long edits took to reach a frame, and how long frames took to make.
+struct LatencyHistogram {
+    // Upper bounds in seconds; one bucket more holds what is over the last.
+    static constexpr std::array<double, 12> kBounds{0.005, 0.01, 0.025, 0.05, 0.1,  0.25,
+                                                    0.5,   1.0,  2.5,   5.0,  10.0, 30.0};
+    std::array<uint64_t, kBounds.size() + 1> counts{};
+    double sumSeconds = 0.0;
+    uint64_t count = 0;
+
+    void Observe(double seconds);
+    // {"le": bounds, "cumulative": counts at or under each bound, "sum": s, "count": n}.
+    nlohmann::json Json() const;
+};
 
 // Which glTF primitive an irradiance array belongs to.
 struct PrimitiveKey {
@@ -218,6 +234,7 @@ class Session {
         Scene scene;
         uint64_t lastEdit = 0;
         std::chrono::steady_clock::time_point received;
+        std::vector<std::chrono::steady_clock::time_point> receivedEach;  // every edit's
         std::string what;
         std::string reason;  // why the move could not update the links in place
         bool done = false;   // set by the thread, under mutex_
@@ -293,6 +310,10 @@ class Session {
     uint64_t appliedEdit_ = 0;
     std::chrono::steady_clock::time_point appliedReceived_{};
     bool latencyReported_ = true;
+    // When each edit applied since the last frame was acknowledged: the next frame observes
+    // their latencies in editLatency_. frameTime_ observes every frame's time.
+    std::vector<std::chrono::steady_clock::time_point> unreported_;
+    LatencyHistogram editLatency_, frameTime_;
     std::map<int, FrameSink> subscribers_;
     int nextSubscriber_ = 1;
     FramePtr latest_;

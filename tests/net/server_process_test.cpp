@@ -797,8 +797,14 @@ TEST(ServerProcess, MetricsAndHealthOverHttp) {
     ServerProcess server("metrics", "--metrics tcp://127.0.0.1:0");
     ASSERT_FALSE(server.Http().empty()) << server.Log();
     client::Client c(server.Unix(), "watched");
-    c.Load(Cornell());
+    const std::string material = c.Load(Cornell()).materials.at(0).name;
     c.Step(2);
+    // Two edits: each one's time to its first frame goes into the edit-to-frame histogram.
+    c.SetMaterial(material, std::array{0.5f, 0.5f, 0.5f}, {});
+    const uint64_t edit = c.SetMaterial(material, std::array{0.6f, 0.6f, 0.6f}, {});
+    for (int i = 0; i < 500 && c.Get().lastEdit < edit; ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    ASSERT_GE(c.Get().lastEdit, edit);
     EXPECT_EQ(HttpGet(server.Http(), "/healthz").rfind("HTTP/1.1 200 OK", 0), 0u);
     EXPECT_NE(HttpGet(server.Http(), "/readyz").find("\r\n\r\nready"), std::string::npos);
     const std::string metrics = HttpGet(server.Http(), "/metrics");
@@ -811,6 +817,21 @@ TEST(ServerProcess, MetricsAndHealthOverHttp) {
         << metrics;
     EXPECT_NE(metrics.find("penumbra_refused_connections_total{reason=\"hello_timeout\"} 0"),
               std::string::npos)
+        << metrics;
+    const std::string scene = "{scene=\"cornell-box.gltf\"";
+    EXPECT_NE(metrics.find("# TYPE penumbra_edit_to_frame_seconds histogram"), std::string::npos)
+        << metrics;
+    EXPECT_NE(metrics.find("penumbra_edit_to_frame_seconds_count" + scene + "} 2\n"),
+              std::string::npos)
+        << metrics;
+    EXPECT_NE(metrics.find("penumbra_edit_to_frame_seconds_bucket" + scene + ",le=\"+Inf\"} 2\n"),
+              std::string::npos)
+        << metrics;
+    // The buckets count up to the total: the one at 30 s holds both edits.
+    EXPECT_NE(metrics.find("penumbra_edit_to_frame_seconds_bucket" + scene + ",le=\"30\"} 2\n"),
+              std::string::npos)
+        << metrics;
+    EXPECT_NE(metrics.find("penumbra_frame_seconds_count" + scene + "}"), std::string::npos)
         << metrics;
     EXPECT_EQ(HttpGet(server.Http(), "/nothing").rfind("HTTP/1.1 404", 0), 0u);
     EXPECT_TRUE(c.Connected());
@@ -1531,6 +1552,110 @@ TEST(ServerProcess, TokenFileGuardsHello) {
                                       "PENUMBRA_TOKEN_FILE=" + tokenFile);
     EXPECT_EQ(let.exitCode, 0) << let.output;
     EXPECT_NE(let.output.find("blocker"), std::string::npos) << let.output;
+    std::filesystem::remove_all(dir);
+}
+
+// Issue 63: on a server without --token-file every client is a "user": it edits the scenes it
+// loaded, not another connected client's (Error Forbidden naming the editor role), though it
+// may watch and read them; once the owner has gone, anyone may edit.
+TEST(ServerProcess, OnlyTheOwnerEditsItsSceneWhileConnected) {
+    ServerProcess server("owner-edits");
+    client::Client owner(server.Unix(), "owner");
+    const client::SceneInfo info = owner.Load(Cornell());
+    const std::string material = info.materials.at(0).name;
+    client::Client other(server.Unix(), "other");
+    EXPECT_EQ(other.Role(), "user");
+    std::string message;
+    EXPECT_EQ(ErrorCodeOf([&] { other.SetMaterial(material, std::array{0.f, 0.f, 0.f}, {}); },
+                          &message),
+              int(fb::ErrorCode::Forbidden))
+        << message;
+    EXPECT_NE(message.find("editor role"), std::string::npos) << message;
+    EXPECT_EQ(ErrorCodeOf([&] { other.Step(1); }), int(fb::ErrorCode::Forbidden));
+    client::Client::EnvironmentChange sky;
+    sky.color = std::array{1.f, 1.f, 1.f};
+    EXPECT_EQ(ErrorCodeOf([&] { other.SetEnvironment(sky); }), int(fb::ErrorCode::Forbidden));
+    EXPECT_GT(other.Get().frame, 0u);  // reading is anyone's
+    EXPECT_GT(owner.SetMaterial(material, std::array{0.5f, 0.5f, 0.5f}, {}), 0u);
+    owner.Close();
+    uint64_t edit = 0;
+    for (int i = 0; i < 100 && edit == 0; ++i) {  // once the server saw the owner go
+        try {
+            edit = other.SetMaterial(material, std::array{0.4f, 0.4f, 0.4f}, {});
+        } catch (const client::ClientError&) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        }
+    }
+    EXPECT_GT(edit, 1u) << server.Log();
+}
+
+// Issue 63: a token file gives each token a role. A viewer joins and watches but loads,
+// edits and steps nothing; an editor edits and reloads another client's scene but may not
+// unload it; an admin may, and owns scenes beyond --max-scenes-per-client. A token alone on
+// its line is an editor's; a bad file stops the server with the line named.
+TEST(ServerProcess, TokenRolesLimitWhatAClientMayDo) {
+    const auto dir = testing::TempDir("roles");
+    const std::string tokenFile = (dir / "tokens").string();
+    testing::WriteFile(tokenFile,
+                       "# who may do what\n"
+                       "admin a-token\n"
+                       "editor e-token   # the loader\n"
+                       "\n"
+                       "viewer v-token\n"
+                       "bare-token\n");
+    ServerProcess server("roles", "--token-file " + tokenFile + " --max-scenes-per-client 1");
+    client::Client loader(server.Unix(), "loader", "e-token");
+    client::Client viewer(server.Unix(), "viewer", "v-token");
+    client::Client editor(server.Unix(), "editor", "bare-token");
+    client::Client admin(server.Unix(), "admin", "a-token");
+    EXPECT_EQ(loader.Role(), "editor");
+    EXPECT_EQ(editor.Role(), "editor");
+    EXPECT_EQ(viewer.Role(), "viewer");
+    EXPECT_EQ(admin.Role(), "admin");
+    std::string message;
+    EXPECT_EQ(ErrorCodeOf([&] { viewer.Load(Cornell()); }, &message),
+              int(fb::ErrorCode::Forbidden))
+        << message;
+    EXPECT_NE(message.find("viewer role"), std::string::npos) << message;
+    const client::SceneInfo info = loader.Load(Cornell());
+    const std::string material = info.materials.at(0).name;
+    EXPECT_TRUE(viewer.Load(Cornell()).reused);  // joining is a viewer's
+    EXPECT_EQ(ErrorCodeOf([&] { viewer.SetMaterial(material, std::array{0.f, 0.f, 0.f}, {}); },
+                          &message),
+              int(fb::ErrorCode::Forbidden))
+        << message;
+    EXPECT_EQ(ErrorCodeOf([&] { viewer.Step(1); }), int(fb::ErrorCode::Forbidden));
+    EXPECT_EQ(ErrorCodeOf([&] { viewer.UnloadScene(); }), int(fb::ErrorCode::Forbidden));
+    EXPECT_GT(viewer.Get().frame, 0u);
+
+    EXPECT_GT(editor.SetMaterial(material, std::array{0.5f, 0.5f, 0.5f}, {}), 0u);
+    client::LoadOptions reload = Cornell();
+    reload.reload = true;
+    EXPECT_EQ(editor.Load(reload).scene, "cornell-box.gltf");
+    EXPECT_EQ(ErrorCodeOf([&] { editor.UnloadScene("cornell-box.gltf"); }, &message),
+              int(fb::ErrorCode::Forbidden))
+        << message;
+    EXPECT_NE(message.find("admin role"), std::string::npos) << message;
+    // The quota of one: the loader's second scene is refused, the admin's are not.
+    client::LoadOptions blocker;
+    blocker.path = "blocker.gltf";
+    blocker.device = "cpu";
+    blocker.elementSize = 0.3f;
+    EXPECT_EQ(ErrorCodeOf([&] { loader.Load(blocker); }), int(fb::ErrorCode::LimitReached));
+    admin.Load(blocker);
+    blocker.path = "maze.gltf";
+    admin.Load(blocker);
+    admin.UnloadScene("cornell-box.gltf");
+    const nlohmann::json stats = nlohmann::json::parse(admin.Stats(""));
+    EXPECT_EQ(stats["scenes"].size(), 2u) << stats.dump();
+
+    testing::WriteFile(tokenFile, "admin a\nroot b\n");
+    const auto bad = testing::Execute("--token-file " + tokenFile + " --listen unix://" +
+                                          (dir / "s").string(),
+                                      "", "penumbra-server");
+    EXPECT_EQ(bad.exitCode, 2) << bad.output;
+    EXPECT_NE(bad.output.find(tokenFile + ":2: unknown role 'root'"), std::string::npos)
+        << bad.output;
     std::filesystem::remove_all(dir);
 }
 

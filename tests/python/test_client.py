@@ -238,6 +238,13 @@ class ClientAgainstALiveServer(unittest.TestCase):
             with self.assertRaises(PenumbraError) as e:
                 other.unload("blocker.gltf")
             self.assertEqual(e.exception.name, "Forbidden")
+            # Nor edit it: without --token-file every client is a "user", who edits its own.
+            self.assertEqual(other.role, "user")
+            with self.assertRaises(PenumbraError) as e:
+                other.light("emitter", intensity=0.0, scene="blocker.gltf")
+            self.assertEqual(e.exception.name, "Forbidden")
+            self.assertIn("editor role", str(e.exception))
+            owner.light("emitter", intensity=2.0, scene="blocker.gltf")
             owner.unload("blocker.gltf")
             with self.assertRaises(PenumbraError) as e:
                 while True:

@@ -214,6 +214,9 @@ class Client:
         w = Welcome.Welcome.GetRootAs(payload)
         self.server, self.protocol_version = _text(w.Server()), w.Version()
         self.max_frame_bytes = w.MaxFrameBytes()
+        # What the server lets this connection do: viewer, user, editor or admin (SPEC.md,
+        # "Roles").
+        self.role = _text(w.Role()) or "user"
 
     # --- framing ------------------------------------------------------------------------
     def _read_exactly(self, n: int) -> bytes:
