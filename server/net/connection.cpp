@@ -199,6 +199,8 @@ void Connection::SendError(uint32_t requestId, fb::ErrorCode code, const std::st
     b.Finish(fb::CreateErrorDirect(b, code, message.c_str()));
     server_.Log(Who() + ": " + fb::EnumNameErrorCode(code) + ": " + message +
                 (close ? " (connection closed)" : ""));
+    if (code == fb::ErrorCode::Unauthorized) ++server_.refusedUnauthorized;
+    if (code == fb::ErrorCode::Forbidden) ++server_.forbiddenRequests;
     Send(MessageType::kError, requestId, b);
     if (close) CloseAfterWrites();
 }

@@ -127,7 +127,9 @@ std::string Server::MetricsText() const {
           {"penumbra_frames_dropped_total", "frames_dropped",
            "Frames not sent to a client that was behind (it got a newer one)."},
           {"penumbra_protocol_errors_total", "protocol_errors",
-           "Connections closed for a framing error."}}) {
+           "Connections closed for a framing error."},
+          {"penumbra_forbidden_requests_total", "forbidden_requests",
+           "Requests refused for the connection's role (Error Forbidden)."}}) {
         Family(out, name, "counter", help);
         out << name << " " << number(net, key) << "\n";
     }
@@ -136,7 +138,8 @@ std::string Server::MetricsText() const {
     for (const auto& [reason, key] : {std::pair{"full", "refused_full"},
                                       {"address", "refused_address"},
                                       {"hello_timeout", "hello_timeouts"},
-                                      {"idle_timeout", "idle_timeouts"}})
+                                      {"idle_timeout", "idle_timeouts"},
+                                      {"unauthorized", "refused_unauthorized"}})
         out << "penumbra_refused_connections_total{reason=\"" << reason << "\"} "
             << number(net, key) << "\n";
     Family(out, "penumbra_scenes_dropped_total", "counter", "Scenes dropped, by why.");

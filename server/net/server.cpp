@@ -300,6 +300,8 @@ nlohmann::json Server::StatsJson() const {
     j["refused_address"] = refusedAddress.load();
     j["hello_timeouts"] = helloTimeouts.load();
     j["idle_timeouts"] = idleTimeouts.load();
+    j["refused_unauthorized"] = refusedUnauthorized.load();
+    j["forbidden_requests"] = forbiddenRequests.load();
     j["max_clients"] = limits_.maxClients;
     j["max_frame_bytes"] = limits_.maxFrameBytes;
     return j;

@@ -109,6 +109,9 @@ class Server {
     // Connections refused at the door (--max-clients, --max-clients-per-address) and closed
     // for no Hello in time or idleness.
     std::atomic<uint64_t> refusedFull{0}, refusedAddress{0}, helloTimeouts{0}, idleTimeouts{0};
+    // Hellos refused for their token (--token-file), and requests refused for the
+    // connection's role (Error Forbidden: protocol/SPEC.md "Roles").
+    std::atomic<uint64_t> refusedUnauthorized{0}, forbiddenRequests{0};
 
   private:
     // Every second or so, the scenes idle past --scene-idle-timeout are dropped

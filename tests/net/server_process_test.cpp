@@ -1546,6 +1546,7 @@ TEST(ServerProcess, TokenFileGuardsHello) {
     client::LoadOptions o;
     o.path = "blocker.gltf";
     EXPECT_GT(c.Load(o).elements, 0u);
+    EXPECT_EQ(nlohmann::json::parse(c.Stats(""))["server"].value("refused_unauthorized", 0), 2);
     const auto refused = testing::Execute("--connect " + server.Unix() + " info");
     EXPECT_NE(refused.exitCode, 0) << refused.output;
     const auto let = testing::Execute("--connect " + server.Unix() + " info",
@@ -1648,6 +1649,7 @@ TEST(ServerProcess, TokenRolesLimitWhatAClientMayDo) {
     admin.UnloadScene("cornell-box.gltf");
     const nlohmann::json stats = nlohmann::json::parse(admin.Stats(""));
     EXPECT_EQ(stats["scenes"].size(), 2u) << stats.dump();
+    EXPECT_EQ(stats["server"].value("forbidden_requests", 0), 5) << stats.dump();
 
     testing::WriteFile(tokenFile, "admin a\nroot b\n");
     const auto bad = testing::Execute("--token-file " + tokenFile + " --listen unix://" +
