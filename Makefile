@@ -6,7 +6,7 @@ JOBS ?= $(shell nproc)
 # work on a few files, a tree of its own with -DCMAKE_UNITY_BUILD=OFF rebuilds less per edit.
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release -DCMAKE_UNITY_BUILD=ON
 
-.PHONY: all deps build demo check check-asan fuzz benches bench bench-service bench-direct bench-glossy bench-stability bench-soak bench-lightfield bench-implicit accuracy accuracy-real images format clean
+.PHONY: all deps build demo check check-asan fuzz benches bench bench-service bench-direct bench-glossy bench-stability bench-soak bench-soak-attack bench-lightfield bench-implicit accuracy accuracy-real images format clean
 
 all: build
 
@@ -69,6 +69,12 @@ bench-stability: benches
 SOAK_SECONDS ?= 600
 bench-soak: benches
 	$(BUILD)/bench/penumbra-bench-soak --seconds $(SOAK_SECONDS) --out bench/results
+
+# The soak without issue 63's attackers and with them (silent and slow connections, loaders
+# that leave, a foreign reload), SOAK_ATTACK_SECONDS each: the legitimate clients' ratios.
+SOAK_ATTACK_SECONDS ?= 300
+bench-soak-attack: benches
+	$(BUILD)/bench/penumbra-bench-soak --compare --seconds $(SOAK_ATTACK_SECONDS) --name soak-attack --out bench/results
 
 # The real-world corpus (scripts/real-corpus.sh): Debian's assimp-testmodels (installed when
 # missing) and generated face-node and sunlit scenes, each solver at the defaults against the

@@ -1,6 +1,8 @@
 // Scene sessions by name, loading under the scene root, limits.
 #include "service/service.h"
 
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <fstream>
 #include <random>
@@ -258,7 +260,13 @@ LoadResult Service::Load(const LoadRequest& request) {
             std::atomic<bool>& loading;
             ~EndReports() { loading = false; }
         } endReports{*loading};
-        session = std::make_shared<Session>(name, std::move(scene), request.settings, cancel);
+        // The build's parallel work in a low-priority arena: TBB's workers serve the frames
+        // of the scenes already loaded first, so that a load (another client's, say) slows
+        // their streams as little as it can (docs/SERVICE.md).
+        tbb::task_arena arena(tbb::task_arena::automatic, 1, tbb::task_arena::priority::low);
+        arena.execute([&] {
+            session = std::make_shared<Session>(name, std::move(scene), request.settings, cancel);
+        });
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kInvalidArgument, name + ": " + e.what());
     }

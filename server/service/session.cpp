@@ -2,6 +2,8 @@
 // rebuild, warm starts, frames to subscribers (edit validation: edits.cpp).
 #include "service/session.h"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -89,6 +91,12 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     validated_ = scene;
     applied_ = std::move(scene);
     worker_ = std::thread([this] { Run(); });
+}
+
+Session::ReturnFreedMemory::~ReturnFreedMemory() {
+#ifdef __GLIBC__
+    malloc_trim(0);
+#endif
 }
 
 Session::~Session() {

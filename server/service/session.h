@@ -287,6 +287,12 @@ class Session {
     // building).
     bool FallBackToAnotherSolver(std::unique_lock<std::mutex>& lock, std::string& note);
 
+    // Declared first, so destroyed last: once the solver and its tables are freed, the heap's
+    // free pages go back to the system (glibc keeps them otherwise, in its per-thread arenas,
+    // and a server whose scenes come and go would never shrink).
+    struct ReturnFreedMemory {
+        ~ReturnFreedMemory();
+    } returnFreedMemory_;
     const std::string name_;
     const uint64_t id_;  // FrameData::session
     // Where a move may take geometry: the loaded scene's bounds grown by kMoveReach of its
