@@ -6,7 +6,7 @@ JOBS ?= $(shell nproc)
 # work on a few files, a tree of its own with -DCMAKE_UNITY_BUILD=OFF rebuilds less per edit.
 CMAKE_FLAGS ?= -DCMAKE_BUILD_TYPE=Release -DCMAKE_UNITY_BUILD=ON
 
-.PHONY: all deps build demo check check-asan fuzz benches bench bench-service bench-direct bench-glossy bench-stability bench-soak bench-soak-attack bench-lightfield bench-implicit accuracy accuracy-real images format clean
+.PHONY: all deps build demo check check-asan fuzz benches bench bench-service bench-direct bench-glossy bench-stability bench-soak bench-soak-attack bench-stream bench-lightfield bench-implicit accuracy accuracy-real images format clean
 
 all: build
 
@@ -69,6 +69,11 @@ bench-stability: benches
 SOAK_SECONDS ?= 600
 bench-soak: benches
 	$(BUILD)/bench/penumbra-bench-soak --seconds $(SOAK_SECONDS) --out bench/results
+
+# Bytes on the wire per frame encoding (f32, f16, delta streams) for the office and the
+# Cornell box: a light slider, moves, idle; 64 delta subscribers (bench/results/stream.json).
+bench-stream: benches
+	$(BUILD)/bench/penumbra-bench-stream --out bench/results
 
 # The soak without issue 63's attackers and with them (silent and slow connections, loaders
 # that leave, a foreign reload), SOAK_ATTACK_SECONDS each: the legitimate clients' ratios.

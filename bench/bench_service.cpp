@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "bench_client.h"
+#include "bench_server.h"
 #include "bench_util.h"
 #include "client/client.h"
 #include "net/server.h"
@@ -30,38 +31,10 @@ namespace {
 
 using bench::Clock;
 using bench::FrameToFile;
+using bench::InProcessServer;
 using bench::Ms;
 using bench::Percentile;
 namespace fs = std::filesystem;
-
-// A server with its I/O thread, on a private Unix socket.
-struct InProcessServer {
-    asio::io_context io;
-    service::Service service;
-    net::Server server;
-    std::string url;
-    std::thread thread;
-    fs::path dir;
-
-    explicit InProcessServer(const fs::path& root)
-        : service(root, service::ServiceLimits{}), server(io, service, net::NetLimits{}) {
-        char tmpl[] = "/tmp/penumbra-bench-XXXXXX";
-        dir = mkdtemp(tmpl);
-        net::ListenAddress a;
-        a.kind = net::ListenAddress::Kind::kUnix;
-        a.path = (dir / "s.sock").string();
-        url = server.Listen(a);
-        thread = std::thread([this] { io.run(); });
-    }
-    ~InProcessServer() {
-        asio::post(io, [this] {
-            server.Stop();
-            io.stop();
-        });
-        thread.join();
-        fs::remove_all(dir);
-    }
-};
 
 // Counts the frames a subscriber receives and remembers the newest.
 struct Counter {

@@ -9,6 +9,7 @@
 #include <mutex>
 #include <thread>
 
+#include "protocol/delta.h"
 #include "protocol/frame.h"
 
 namespace penumbra::client {
@@ -55,6 +56,57 @@ Frame ToFrame(const protocol::Message& m) {
             out.primitives.push_back(std::move(prim));
         }
     return out;
+}
+
+// What a delta subscription holds of its scene (SPEC.md "Delta frames"): the newest frame's
+// values, fp16, and the keyframe's primitives.
+struct DeltaCopy {
+    uint64_t frame = 0;
+    std::vector<uint16_t> values;  // 3 a vertex
+    std::vector<Frame::Primitive> layout;
+    std::vector<uint32_t> counts;
+};
+
+// A delta stream's frame applied to `copy`, whole in `out` (ToFrame's, with values).
+// Throws protocol::DeltaError for a frame that does not fit what the copy holds.
+void ApplyDeltaFrame(const fb::Frame& f, DeltaCopy& copy, Frame& out) {
+    const fb::DeltaIrradiance& d = *f.delta();
+    if (d.encoding() != protocol::kDeltaZstd)
+        throw protocol::DeltaError("delta frame in encoding " + std::to_string(d.encoding()) +
+                                   ", which this client does not know");
+    if (!d.data()) throw protocol::DeltaError("delta frame without data");
+    if (d.keyframe()) {
+        if (!d.counts() || d.counts()->size() != out.primitives.size())
+            throw protocol::DeltaError("keyframe whose counts do not match its primitives");
+        uint64_t total = 0;
+        for (uint32_t c : *d.counts()) total += c;
+        if (total != d.vertices()) throw protocol::DeltaError("keyframe counts ≠ its vertices");
+        DeltaCopy fresh;
+        fresh.values.assign(size_t(d.vertices()) * 3, 0);
+        protocol::ApplyDelta({d.data()->data(), d.data()->size()}, d.raw_bytes(), true,
+                             fresh.values);
+        fresh.layout = std::move(out.primitives);
+        fresh.counts.assign(d.counts()->begin(), d.counts()->end());
+        copy = std::move(fresh);
+    } else {
+        if (copy.frame == 0 || d.base_frame() != copy.frame ||
+            d.vertices() * 3 != copy.values.size())
+            throw protocol::DeltaError("delta frame " + std::to_string(f.frame()) +
+                                       " changes frame " + std::to_string(d.base_frame()) +
+                                       ", and this client holds frame " +
+                                       std::to_string(copy.frame));
+        protocol::ApplyDelta({d.data()->data(), d.data()->size()}, d.raw_bytes(), false,
+                             copy.values);
+    }
+    copy.frame = f.frame();
+    out.keyframe = d.keyframe();
+    out.primitives = copy.layout;
+    size_t at = 0;
+    for (size_t p = 0; p < out.primitives.size(); ++p) {
+        auto& rgb = out.primitives[p].rgb;
+        rgb.resize(size_t(copy.counts[p]) * 3);
+        for (float& v : rgb) v = protocol::HalfToFloat(copy.values[at++]);
+    }
 }
 
 SceneInfo ToSceneInfo(const protocol::Message& m) {
@@ -179,6 +231,9 @@ struct Client::Impl {
         std::vector<uint8_t> buf(256 * 1024);
         std::string reason = "the server closed the connection";
         uint16_t code = 0;
+        bool failed = false;
+        // A delta subscription's copy of each scene (reader thread only).
+        std::map<std::string, DeltaCopy> deltas;
         while (true) {
             std::error_code ec;
             size_t n = socket.read_some(asio::buffer(buf), ec);
@@ -196,7 +251,17 @@ struct Client::Impl {
                         std::lock_guard lock(mutex);
                         cb = callback;
                     }
-                    if (cb) cb(ToFrame(m));
+                    Frame frame = ToFrame(m);
+                    if (const auto* f = m.As<fb::Frame>(); f->delta()) {
+                        try {
+                            ApplyDeltaFrame(*f, deltas[frame.scene], frame);
+                        } catch (const protocol::DeltaError& e) {
+                            reason = std::string("bad frame from the server: ") + e.what();
+                            failed = true;
+                            break;
+                        }
+                    }
+                    if (cb) cb(frame);
                     continue;
                 }
                 if (m.header.type == MessageType::kProgress) {
@@ -233,6 +298,7 @@ struct Client::Impl {
                     code = static_cast<uint16_t>(m.As<fb::Error>()->code());
                 }
             }
+            if (failed) break;
             if (r == protocol::Decoder::Result::kError) {
                 reason = "bad data from the server: " + decoder.error();
                 break;
@@ -471,15 +537,21 @@ uint64_t Client::SetMaterial(const std::string& material, const MaterialChange& 
 }
 
 void Client::Subscribe(FrameCallback callback, Channel channel, Format format,
-                       const std::string& scene, EndCallback ended) {
+                       const std::string& scene, EndCallback ended, float tolerance) {
+    if (format == Format::kDelta && !(tolerance >= 0.0f && tolerance <= 1.0f))
+        throw ClientError(20,
+                          "a delta stream's tolerance is in [0, 1] (0.005: half a percent; "
+                          "0: every change of a vertex's fp16 value)");
     {
         std::lock_guard lock(impl_->mutex);
         impl_->callback = std::move(callback);
         impl_->ended = std::move(ended);
     }
     flatbuffers::FlatBufferBuilder b;
-    b.Finish(fb::CreateSubscribeDirect(b, scene.c_str(), static_cast<fb::Channel>(channel),
-                                       static_cast<fb::Format>(format)));
+    b.Finish(fb::CreateSubscribeDirect(
+        b, scene.c_str(), static_cast<fb::Channel>(channel),
+        format == Format::kDelta ? fb::Format::Float16 : static_cast<fb::Format>(format),
+        format == Format::kDelta ? tolerance : -1.0f));
     impl_->Call(MessageType::kSubscribe, b, MessageType::kOk);
 }
 
@@ -497,8 +569,10 @@ void Client::UnloadScene(const std::string& scene) {
 
 Frame Client::Get(Channel channel, Format format, const std::string& scene) {
     flatbuffers::FlatBufferBuilder b;
-    b.Finish(fb::CreateGetIrradianceDirect(b, scene.c_str(), static_cast<fb::Channel>(channel),
-                                           static_cast<fb::Format>(format)));
+    // One frame, whole: a delta stream's format asks for its values' fp16.
+    b.Finish(fb::CreateGetIrradianceDirect(
+        b, scene.c_str(), static_cast<fb::Channel>(channel),
+        format == Format::kDelta ? fb::Format::Float16 : static_cast<fb::Format>(format)));
     return ToFrame(impl_->Call(MessageType::kGetIrradiance, b, MessageType::kFrame));
 }
 

@@ -26,7 +26,14 @@ class ClientError : public std::runtime_error {
 };
 
 enum class Channel : uint8_t { kIndirect = 0, kDirect = 1, kTotal = 2 };
-enum class Format : uint8_t { kFloat32 = 0, kFloat16 = 1 };
+// How frames travel (protocol/SPEC.md, "Delta frames"): whole as f32 or f16 values, or as a
+// delta stream (subscriptions only): the server sends a vertex again once it drifts past a
+// tolerance of what this client holds, and the client applies it to its copy and hands on
+// whole frames of fp16 values. Get with kDelta fetches one whole frame in f16.
+enum class Format : uint8_t { kFloat32 = 0, kFloat16 = 1, kDelta = 2 };
+// A delta stream's default tolerance: half a percent of a vertex's value (or of a twentieth
+// of the frame's mean, where darker), below what a viewer sees in indirect light.
+inline constexpr float kDefaultTolerance = 0.005f;
 
 struct PrimitiveInfo {
     int mesh = -1, primitive = -1;
@@ -87,7 +94,8 @@ struct Frame {
         std::vector<float> rgb;  // 3 per vertex, in the primitive's vertex order (f16 widened)
     };
     std::vector<Primitive> primitives;
-    size_t wireBytes = 0;  // size of the message as received
+    size_t wireBytes = 0;   // size of the message as received
+    bool keyframe = false;  // a delta stream's frame the server sent whole
 };
 
 // How a LoadScene's build goes: its stage, the fraction of it done, the seconds it has left
@@ -195,9 +203,12 @@ class Client {
     // `ended` (optional, on the reader thread too): the server ended the subscription
     // because its scene went (UnloadScene), with the server's reason; no frames follow.
     using EndCallback = std::function<void(const std::string& why)>;
+    // By default a delta stream at kDefaultTolerance; a delta subscription's frames are
+    // whole (the client's copy), `keyframe` set on those the server sent whole. Subscribing
+    // again to the same scene asks for a keyframe.
     void Subscribe(FrameCallback callback, Channel channel = Channel::kIndirect,
-                   Format format = Format::kFloat32, const std::string& scene = "",
-                   EndCallback ended = {});
+                   Format format = Format::kDelta, const std::string& scene = "",
+                   EndCallback ended = {}, float tolerance = kDefaultTolerance);
     void Unsubscribe(const std::string& scene = "");
     // Drops the scene from the server (its owner, the client that loaded it, while that one
     // is connected; else anyone): Error Forbidden for another client's scene. Its

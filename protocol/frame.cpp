@@ -246,7 +246,34 @@ Decoder::Result Decoder::Next(Message& out) {
     return Result::kMessage;
 }
 
-uint16_t FloatToHalf(float value) { return glm::packHalf1x16(value); }
+uint16_t FloatToHalf(float value) {
+    // IEEE round to nearest, ties to even, as numpy's float16 and JavaScript's Float16Array
+    // convert (glm's packHalf1x16 rounds ties up): the half a delta stream's tolerance rule
+    // compares is the one every client would compute.
+    uint32_t bits;
+    std::memcpy(&bits, &value, sizeof bits);
+    const uint32_t sign = (bits >> 16) & 0x8000u;
+    bits &= 0x7fffffffu;
+    if (bits >= 0x47800000u)  // 2^16 and up, infinity, NaN
+        return static_cast<uint16_t>(sign | (bits > 0x7f800000u ? 0x7e00u : 0x7c00u));
+    if (bits < 0x38800000u) {
+        // Below 2^-14, half's subnormals: adding 0.5 puts the value's bits where a half's
+        // subnormal mantissa goes, rounded by the FPU (to nearest, ties to even).
+        constexpr uint32_t kHalfBits = 126u << 23;  // 0.5f
+        float f, half;
+        std::memcpy(&f, &bits, sizeof f);
+        std::memcpy(&half, &kHalfBits, sizeof half);
+        f += half;
+        uint32_t out;
+        std::memcpy(&out, &f, sizeof out);
+        return static_cast<uint16_t>(sign | (out - kHalfBits));
+    }
+    // Normal: rebias the exponent (127 → 15) and round the 13 bits that go, ties to even
+    // (0xfff plus the lowest kept bit); a carry into the exponent is the right result.
+    const uint32_t odd = (bits >> 13) & 1u;
+    bits += (uint32_t(15 - 127) << 23) + 0xfffu + odd;
+    return static_cast<uint16_t>(sign | (bits >> 13));
+}
 float HalfToFloat(uint16_t value) { return glm::unpackHalf1x16(value); }
 
 }  // namespace penumbra::protocol

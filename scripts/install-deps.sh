@@ -8,10 +8,10 @@ packages=(
     libvulkan-dev vulkan-validationlayers mesa-vulkan-drivers glslang-tools vulkan-tools
     libtinygltf-dev libdraco-dev libmeshoptimizer-dev gltfpack nlohmann-json3-dev libstb-dev libglm-dev
     libcli11-dev libtbb-dev libgtest-dev libembree-dev
-    libflatbuffers-dev flatbuffers-compiler libasio-dev libopenexr-dev
+    libflatbuffers-dev flatbuffers-compiler libasio-dev libopenexr-dev libzstd-dev
     clang-format
     clang libclang-rt-14-dev
-    python3 python3-venv python3-setuptools python3-flatbuffers python3-numpy python3-jsonschema
+    python3 python3-venv python3-setuptools python3-flatbuffers python3-numpy python3-jsonschema python3-zstandard
     assimp-testmodels assimp-utils
 )
 

@@ -206,10 +206,20 @@ void ServiceCommands::AddWatch(CLI::App& app) {
     s.watch->add_option("--min-edit", s.minEdit,
                         "with --until-converged: the frame must include this edit id");
     s.watch->add_option("--channel", s.channel, "indirect|direct|total")->capture_default_str();
-    s.watch->add_option("--format", s.format, "f32|f16")->capture_default_str();
+    s.watch
+        ->add_option("--format", s.format,
+                     "delta (only the vertices that drifted past --tolerance travel; "
+                     "protocol/SPEC.md \"Delta frames\"), f32 or f16 (every frame whole)")
+        ->capture_default_str();
+    s.watch
+        ->add_option("--tolerance", s.tolerance,
+                     "a delta stream's relative tolerance (0: every change of a vertex's "
+                     "fp16 value)")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0f, 1.0f));
     s.watch->add_flag("--json", s.watchJson,
                       "one JSON object per frame and line (scene, frame, edit, iterations, ms, "
-                      "device_ms, fps, converged, note, latency_ms, passes)");
+                      "device_ms, fps, converged, note, bytes, keyframe, latency_ms, passes)");
 }
 
 // `move` and `deform`.

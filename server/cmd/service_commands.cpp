@@ -42,7 +42,8 @@ const char* ChannelName(client::Channel c) { return ChannelName(static_cast<Chan
 client::Format ParseFormat(const std::string& s) {
     if (s == "f32" || s == "float32") return client::Format::kFloat32;
     if (s == "f16" || s == "float16") return client::Format::kFloat16;
-    throw Error("format must be f32 or f16, not '" + s + "'");
+    if (s == "delta") return client::Format::kDelta;
+    throw Error("format must be delta, f32 or f16, not '" + s + "'");
 }
 
 // Splits a script line into words; "double quotes" group words with spaces.
@@ -50,11 +51,17 @@ void PrintFrame(const client::Frame& f, double fps, bool json) {
     double device = 0.0;
     for (const auto& p : f.passes) device += p.second;
     if (json) {
-        nlohmann::json j = {{"scene", f.scene},   {"frame", f.frame},
-                            {"edit", f.lastEdit}, {"iterations", f.iterations},
-                            {"ms", f.frameMs},    {"device_ms", device},
-                            {"fps", fps},         {"converged", f.converged},
-                            {"note", f.note}};
+        nlohmann::json j = {{"scene", f.scene},
+                            {"frame", f.frame},
+                            {"edit", f.lastEdit},
+                            {"iterations", f.iterations},
+                            {"ms", f.frameMs},
+                            {"device_ms", device},
+                            {"fps", fps},
+                            {"converged", f.converged},
+                            {"note", f.note},
+                            {"bytes", f.wireBytes},
+                            {"keyframe", f.keyframe}};
         j["latency_ms"] = f.editLatencyMs > 0.0 ? nlohmann::json(f.editLatencyMs) : nullptr;
         for (const auto& [name, ms] : f.passes) j["passes"][name] = ms;
         std::printf("%s\n", j.dump().c_str());
@@ -199,7 +206,8 @@ int ServiceCommands::State::RunWatch(client::Client& c) {
             s.ended = why;
             s.done = true;
             s.cv.notify_all();
-        });
+        },
+        tolerance);
     Shared& s = *shared;
     std::unique_lock lock(s.m);
     auto stop = [&] { return s.done || !c.Connected(); };

@@ -41,7 +41,8 @@ struct ServiceCommands::State {
     double timeout = 0.0;
     bool untilConverged = false;
     bool watchJson = false;
-    std::string channel = "indirect", format = "f32";
+    std::string channel = "indirect", format = "delta";
+    float tolerance = client::kDefaultTolerance;  // watch's delta stream
 
     std::string node;
     std::vector<float> translate, matrix, color, albedo, emission, position, direction, cone;

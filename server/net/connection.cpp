@@ -90,19 +90,46 @@ void Connection::CloseAfterWrites() {
     if (!writing_) Close();
 }
 
-void Connection::PushFrame(std::shared_ptr<const std::vector<uint8_t>> bytes) {
+void Connection::PushFrame(const std::string& scene, const service::FramePtr& frame) {
     if (closed_) return;
+    auto sub = subscriptions_.find(scene);
+    if (sub == subscriptions_.end()) return;  // unsubscribed since the frame was posted
+    const size_t first = writing_ ? 1 : 0;    // the one being written stays
     size_t queued = 0;
-    for (size_t i = writing_ ? 1 : 0; i < queue_.size(); ++i) queued += queue_[i].frame;
+    for (size_t i = first; i < queue_.size(); ++i) queued += queue_[i].frame;
     if (queued >= server_.Limits().maxQueuedFrames) {
-        for (size_t i = writing_ ? 1 : 0; i < queue_.size(); ++i)
+        for (size_t i = first; i < queue_.size(); ++i)
             if (queue_[i].frame) {
+                const std::string dropped = queue_[i].scene;
                 queue_.erase(queue_.begin() + static_cast<std::ptrdiff_t>(i));
                 ++server_.framesDropped;
+                // A delta stream's later frames build on the one dropped: they go too, and
+                // its next frame is a keyframe.
+                auto lost = subscriptions_.find(dropped);
+                if (lost != subscriptions_.end() && lost->second.tolerance >= 0.0f) {
+                    lost->second.baseFrame = 0;
+                    for (size_t j = i; j < queue_.size();)
+                        if (queue_[j].frame && queue_[j].scene == dropped) {
+                            queue_.erase(queue_.begin() + static_cast<std::ptrdiff_t>(j));
+                            ++server_.framesDropped;
+                        } else {
+                            ++j;
+                        }
+                }
                 break;
             }
     }
-    Enqueue(std::move(bytes), true);
+    Subscription& s = sub->second;
+    std::shared_ptr<const std::vector<uint8_t>> bytes;
+    if (s.tolerance < 0.0f) {
+        bytes = server_.EncodedFrame(frame, s.channel, s.format);
+    } else {
+        const uint64_t base = s.baseSession == frame->session ? s.baseFrame : 0;
+        bytes = server_.DeltaFrame(frame, s.channel, s.tolerance, base);
+        s.baseSession = frame->session;
+        s.baseFrame = frame->frame;
+    }
+    Enqueue(std::move(bytes), &scene);
 }
 
 void Connection::Read() {
@@ -159,9 +186,10 @@ void Connection::WatchStall(bool decoded) {
     });
 }
 
-void Connection::Enqueue(std::shared_ptr<const std::vector<uint8_t>> bytes, bool frame) {
+void Connection::Enqueue(std::shared_ptr<const std::vector<uint8_t>> bytes,
+                         const std::string* scene) {
     if (closed_) return;
-    queue_.push_back({std::move(bytes), frame});
+    queue_.push_back({std::move(bytes), scene != nullptr, scene ? *scene : std::string()});
     if (!writing_) WriteNext();
 }
 

@@ -27,9 +27,12 @@ class Connection : public std::enable_shared_from_this<Connection> {
     void Start();
     // Closes the socket; pending writes are abandoned.
     void Close();
-    // Queues a subscribed frame (I/O thread). Keeps at most maxQueuedFrames unsent frames:
-    // a slow client sees fewer frames, never stale ones, and never holds up the others.
-    void PushFrame(std::shared_ptr<const std::vector<uint8_t>> bytes);
+    // Queues `frame` of the subscription to scene `scene` (I/O thread), encoded as it asked:
+    // whole, or a delta from what it holds (a keyframe if it holds nothing the stream's delta
+    // builds on). Keeps at most maxQueuedFrames unsent frames: a slow client sees fewer
+    // frames, never stale ones, and never holds up the others; a delta subscription that loses
+    // a frame so gets a keyframe next.
+    void PushFrame(const std::string& scene, const service::FramePtr& frame);
 
     // Scene `name` was unloaded: a subscription to it ends with a pushed Error NoScene
     // carrying `why` (nothing for a connection not subscribed to it).
@@ -42,17 +45,23 @@ class Connection : public std::enable_shared_from_this<Connection> {
     struct Outgoing {
         std::shared_ptr<const std::vector<uint8_t>> bytes;
         bool frame = false;
+        std::string scene;  // a frame's subscription
     };
     struct Subscription {
         std::weak_ptr<service::Session> session;
         int id = 0;
         service::Channel channel = service::Channel::kIndirect;
         protocol::fb::Format format = protocol::fb::Format::Float32;
+        float tolerance = -1.0f;  // ≥ 0: a delta stream (Server::DeltaFrame)
+        // A delta stream's frame the client holds once the queue is written (0: none).
+        uint64_t baseSession = 0, baseFrame = 0;
     };
 
     // --- I/O (connection.cpp) ---
     void Read();
-    void Enqueue(std::shared_ptr<const std::vector<uint8_t>> bytes, bool frame = false);
+    // `scene`: a subscribed frame's scene (queued as a frame, which PushFrame may drop).
+    void Enqueue(std::shared_ptr<const std::vector<uint8_t>> bytes,
+                 const std::string* scene = nullptr);
     void WriteNext();
     void Send(protocol::MessageType type, uint32_t requestId,
               const flatbuffers::FlatBufferBuilder& b);
@@ -92,10 +101,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
     void OnGetStats(uint32_t id, const protocol::fb::GetStats& g);
     // "" unsubscribes from every scene.
     void Unsubscribe(const std::string& scene);
-    // Subscribes this connection to `session`'s frames in `channel` and `format` (any earlier
-    // subscription to a scene of that name ends).
+    // Subscribes this connection to `session`'s frames in `channel` and `format`, or as a
+    // delta stream at `tolerance` ≥ 0 (any earlier subscription to a scene of that name ends).
     void SubscribeTo(const std::shared_ptr<service::Session>& session, service::Channel channel,
-                     protocol::fb::Format format);
+                     protocol::fb::Format format, float tolerance);
     // LoadScene's progress callback when the client asked for Progress messages.
     ProgressFn ProgressSender(uint32_t id);
     // The session a request's `scene` names; "" is the one this connection loaded or joined
@@ -124,7 +133,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     bool stallArmed_ = false;
     std::string client_;
     service::Role role_ = service::Role::kUser;  // from Hello's token (NetLimits::tokens)
-    std::string lastScene_;  // the scene this connection loaded or joined last
+    std::string lastScene_;                      // the scene this connection loaded or joined last
     std::map<std::string, Subscription> subscriptions_;
 };
 

@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "base/check.h"
+#include "protocol/delta.h"
 #include "solvers/registry.h"
 
 namespace penumbra::net {
@@ -293,11 +294,26 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
 }
 
 void BuildFramePayload(flatbuffers::FlatBufferBuilder& b, const service::FrameData& frame,
-                       service::Channel channel, fb::Format format) {
+                       service::Channel channel, fb::Format format, const DeltaPayload* delta) {
     std::vector<flatbuffers::Offset<fb::PrimitiveIrradiance>> prims;
     prims.reserve(frame.irradiance.size());
     std::vector<glm::vec3> scratch;
-    for (size_t p = 0; p < frame.irradiance.size(); ++p) {
+    flatbuffers::Offset<fb::DeltaIrradiance> deltaTable = 0;
+    if (delta) {
+        std::vector<uint32_t> counts;
+        if (delta->keyframe)
+            for (size_t p = 0; p < frame.irradiance.size(); ++p) {
+                const service::PrimitiveKey& key = (*frame.layout)[p];
+                prims.push_back(fb::CreatePrimitiveIrradiance(b, b.CreateSharedString(key.node),
+                                                              key.mesh, key.primitive));
+                counts.push_back(static_cast<uint32_t>(frame.irradiance[p].size()));
+            }
+        deltaTable = fb::CreateDeltaIrradianceDirect(
+            b, delta->keyframe, delta->baseFrame, delta->vertices,
+            delta->keyframe ? &counts : nullptr, protocol::kDeltaZstd,
+            static_cast<uint32_t>(delta->rawBytes), &delta->data, delta->tolerance);
+    }
+    for (size_t p = 0; !delta && p < frame.irradiance.size(); ++p) {
         const size_t n = frame.irradiance[p].size() * 3;
         // Null: all zero.
         const float* values = reinterpret_cast<const float*>(frame.Values(p, channel, scratch));
@@ -325,7 +341,7 @@ void BuildFramePayload(flatbuffers::FlatBufferBuilder& b, const service::FrameDa
     b.Finish(fb::CreateFrameDirect(b, frame.scene.c_str(), frame.frame, frame.lastEdit,
                                    frame.iterations, frame.frameMs, frame.editLatencyMs,
                                    frame.converged, ChannelOf(channel), &passes, &prims,
-                                   frame.note.c_str()));
+                                   frame.note.c_str(), deltaTable));
 }
 
 }  // namespace penumbra::net

@@ -5,6 +5,7 @@
 
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "protocol/frame.h"
 #include "service/service.h"
@@ -37,8 +38,19 @@ EnvironmentRequest ReadSetEnvironment(const protocol::fb::SetEnvironment& s);
 // The SceneInfo reply for `session` (`reused`: an already loaded scene was answered).
 void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& session,
                     bool reused);
-// The Frame payload of `frame` in `channel` and `format`.
+// A delta stream's values for one frame (net/delta_stream.h; SPEC.md "Delta frames").
+struct DeltaPayload {
+    bool keyframe = false;
+    uint64_t baseFrame = 0;
+    uint32_t vertices = 0;
+    size_t rawBytes = 0;
+    std::vector<uint8_t> data;  // zstd
+    float tolerance = 0.0f;
+};
+// The Frame payload of `frame` in `channel` and `format`; with `delta`, its values instead
+// (a keyframe names the primitives and their vertex counts, a delta neither).
 void BuildFramePayload(flatbuffers::FlatBufferBuilder& b, const service::FrameData& frame,
-                       service::Channel channel, protocol::fb::Format format);
+                       service::Channel channel, protocol::fb::Format format,
+                       const DeltaPayload* delta = nullptr);
 
 }  // namespace penumbra::net

@@ -1,6 +1,12 @@
 // A client's requests handled against the service (protocol/SPEC.md, "Messages"): fields
 // read and checked by messages.h, slow work on the blocking pool.
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 
 #include "net/connection.h"
@@ -11,6 +17,21 @@ namespace fb = protocol::fb;
 using protocol::MessageType;
 using service::ErrorKind;
 using service::ServiceError;
+
+namespace {
+
+// Loads run on the blocking pool's threads, which this lowers (nice 10, once a thread; a
+// thread's nice value is its own on Linux) so that the frames of the scenes already loaded
+// come first: the session workers stay at the server's priority.
+void LowerThreadPriority() {
+    thread_local bool lowered = false;
+    if (lowered) return;
+    lowered = true;
+    const int tid = static_cast<int>(syscall(SYS_gettid));
+    setpriority(PRIO_PROCESS, static_cast<id_t>(tid), std::max(10, getpriority(PRIO_PROCESS, tid)));
+}
+
+}  // namespace
 
 void Connection::Dispatch(const protocol::Message& m) {
     const uint32_t id = m.header.requestId;
@@ -146,7 +167,11 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
     req.role = role_;
     if (l.progress()) req.progress = ProgressSender(id);
     Blocking(
-        id, [&service, req] { return service.Load(req); },
+        id,
+        [&service, req] {
+            LowerThreadPriority();
+            return service.Load(req);
+        },
         [this, id](service::LoadResult& r) {
             flatbuffers::FlatBufferBuilder b;
             BuildSceneInfo(b, *r.session, r.reused);
@@ -255,23 +280,36 @@ void Connection::OnSetEnvironment(uint32_t id, const fb::SetEnvironment& s) {
 }
 
 void Connection::OnSubscribe(uint32_t id, const fb::Subscribe& s) {
-    SubscribeTo(SessionOf(s.scene()), ChannelOf(s.channel()), s.format());
+    const float tolerance = s.tolerance();
+    if (!std::isfinite(tolerance) || tolerance > 1.0f)
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "Subscribe tolerance " + std::to_string(tolerance) +
+                               ": give a relative tolerance in [0, 1] for a delta stream (0.005 "
+                               "is a half percent; 0 sends every change of a vertex's fp16 "
+                               "value), or a negative one for whole frames");
+    SubscribeTo(SessionOf(s.scene()), ChannelOf(s.channel()), s.format(),
+                tolerance < 0.0f ? -1.0f : tolerance);
     SendOk(id);
 }
 
 void Connection::SubscribeTo(const std::shared_ptr<service::Session>& session,
-                             service::Channel channel, fb::Format format) {
+                             service::Channel channel, fb::Format format, float tolerance) {
     Unsubscribe(session->Name());
     std::weak_ptr<Connection> weak = shared_from_this();
     Server* server = &server_;
-    int sub =
-        session->AddSubscriber([weak, server, channel, format](const service::FramePtr& frame) {
-            asio::post(server->Io(), [weak, server, channel, format, frame] {
-                if (auto c = weak.lock())
-                    c->PushFrame(server->EncodedFrame(frame, channel, format));
-            });
+    const std::string name = session->Name();
+    int sub = session->AddSubscriber([weak, server, name](const service::FramePtr& frame) {
+        asio::post(server->Io(), [weak, name, frame] {
+            if (auto c = weak.lock()) c->PushFrame(name, frame);
         });
-    subscriptions_[session->Name()] = {session, sub, channel, format};
+    });
+    Subscription& s = subscriptions_[name];
+    s = Subscription{};
+    s.session = session;
+    s.id = sub;
+    s.channel = channel;
+    s.format = format;
+    s.tolerance = tolerance;
 }
 
 void Connection::SceneReplaced(const std::shared_ptr<service::Session>& fresh) {
@@ -281,7 +319,7 @@ void Connection::SceneReplaced(const std::shared_ptr<service::Session>& fresh) {
     flatbuffers::FlatBufferBuilder b;
     BuildSceneInfo(b, *fresh, false);
     Send(MessageType::kSceneInfo, 0, b);  // before the new build's frames
-    SubscribeTo(fresh, was.channel, was.format);
+    SubscribeTo(fresh, was.channel, was.format, was.tolerance);
 }
 
 void Connection::OnGetIrradiance(uint32_t id, const fb::GetIrradiance& g) {

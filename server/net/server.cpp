@@ -12,6 +12,7 @@
 
 #include "base/check.h"
 #include "net/connection.h"
+#include "net/delta_stream.h"
 #include "net/messages.h"
 
 namespace penumbra::net {
@@ -329,6 +330,22 @@ std::shared_ptr<const std::vector<uint8_t>> Server::EncodedFrame(const service::
         encodedOrder_.pop_front();
     }
     return bytes;
+}
+
+std::shared_ptr<const std::vector<uint8_t>> Server::DeltaFrame(const service::FramePtr& frame,
+                                                               service::Channel channel,
+                                                               float tolerance, uint64_t base) {
+    std::lock_guard lock(deltaMutex_);
+    const DeltaKey key{frame->session, static_cast<int>(channel), tolerance};
+    DeltaEntry& entry = deltas_[key];
+    if (!entry.stream) entry.stream = std::make_shared<DeltaStream>(channel, tolerance);
+    entry.used = ++deltaClock_;
+    std::shared_ptr<DeltaStream> stream = entry.stream;
+    if (deltas_.size() > 16)
+        deltas_.erase(std::min_element(
+            deltas_.begin(), deltas_.end(),
+            [](const auto& a, const auto& b) { return a.second.used < b.second.used; }));
+    return stream->For(frame, base);
 }
 
 }  // namespace penumbra::net

@@ -60,6 +60,7 @@ struct ListenAddress {
 ListenAddress ParseListenAddress(const std::string& url);
 
 class Connection;
+class DeltaStream;
 
 class Server {
   public:
@@ -96,6 +97,14 @@ class Server {
     std::shared_ptr<const std::vector<uint8_t>> EncodedFrame(const service::FramePtr& frame,
                                                              service::Channel channel,
                                                              protocol::fb::Format format);
+
+    // A delta subscriber's Frame message (DeltaStream::For): the stream of `frame`'s session
+    // in `channel` at `tolerance`, shared by every subscriber asking for the same; `base` is
+    // the frame of that session the subscriber holds (0: none). The 16 streams used last are
+    // kept.
+    std::shared_ptr<const std::vector<uint8_t>> DeltaFrame(const service::FramePtr& frame,
+                                                           service::Channel channel,
+                                                           float tolerance, uint64_t base);
 
     // Connection bookkeeping (I/O thread).
     void Forget(Connection* connection);
@@ -156,6 +165,20 @@ class Server {
     };
     std::map<EncodedKey, std::shared_ptr<const std::vector<uint8_t>>> encoded_;
     std::deque<EncodedKey> encodedOrder_;  // oldest first
+
+    std::mutex deltaMutex_;
+    struct DeltaKey {
+        uint64_t session;
+        int channel;
+        float tolerance;
+        auto operator<=>(const DeltaKey&) const = default;
+    };
+    struct DeltaEntry {
+        std::shared_ptr<DeltaStream> stream;
+        uint64_t used = 0;  // deltaClock_ when last asked for
+    };
+    std::map<DeltaKey, DeltaEntry> deltas_;
+    uint64_t deltaClock_ = 0;
 };
 
 }  // namespace penumbra::net

@@ -15,6 +15,7 @@
 #include <condition_variable>
 #include <fstream>
 #include <glm/glm.hpp>
+#include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -1266,7 +1267,7 @@ TEST(ServerProcess, AReloadedSceneStreamsItsOwnFrames) {
     EXPECT_FALSE(a.Load(blue).reused);
     EXPECT_TRUE(b.Load(Cornell()).reused);
     Watcher fresh;
-    b.Subscribe(std::ref(fresh));
+    b.Subscribe(std::ref(fresh), client::Channel::kIndirect, client::Format::kFloat32);
     auto after = fresh.Until(0);
     ASSERT_TRUE(after);
     std::lock_guard lock(fresh.m);
@@ -1556,6 +1557,176 @@ TEST(ServerProcess, TokenFileGuardsHello) {
     std::filesystem::remove_all(dir);
 }
 
+// The most a delta stream's value may differ from the full stream's `e` at tolerance `t`
+// (SPEC.md "Delta frames"), `m` the frame's mean |E|; beside it fp16's rounding.
+float DeltaBound(float e, float t, float m) {
+    return t * std::max(std::abs(e), m / 20.0f) * 1.001f + std::abs(e) * 1e-3f + 1e-6f;
+}
+
+// Issue 64: a delta stream (the clients' default) sends only the vertices that drifted past
+// the subscriber's tolerance, and what the client holds stays within it of the full f32
+// stream, frame by frame; at tolerance 0 it is the full stream's fp16, exactly. The first
+// frame is a keyframe, later ones deltas of far fewer bytes.
+TEST(ServerProcess, ADeltaStreamStaysWithinItsToleranceOfTheFullStream) {
+    ServerProcess server("delta");
+    client::Client c(server.Unix(), "loader");
+    c.Load(Cornell());
+    Watcher full, delta, lossless;
+    client::Client fullClient(server.Unix(), "full"), deltaClient(server.Unix(), "delta"),
+        losslessClient(server.Unix(), "lossless");
+    fullClient.Subscribe(std::ref(full), client::Channel::kIndirect, client::Format::kFloat32);
+    deltaClient.Subscribe(std::ref(delta));  // the default: a delta stream at 0.005
+    losslessClient.Subscribe(std::ref(lossless), client::Channel::kIndirect, client::Format::kDelta,
+                             "", {}, 0.0f);
+    // A light dimmed like a slider, 1% a step, then left to converge.
+    uint64_t edit = 0;
+    for (int i = 1; i <= 10; ++i) {
+        edit = c.SetLight("ceiling_light", std::nullopt, 17.0f * (1.0f - 0.01f * i));
+        std::this_thread::sleep_for(50ms);
+    }
+    ASSERT_TRUE(full.Until(edit) && delta.Until(edit) && lossless.Until(edit)) << server.Log();
+    std::lock_guard a(full.m), b(delta.m), l(lossless.m);
+    std::map<uint64_t, const client::Frame*> byNumber;
+    size_t fullBytes = 0;
+    for (const auto& f : full.frames) byNumber[f.frame] = &f, fullBytes += f.wireBytes;
+    auto check = [&](const std::vector<client::Frame>& frames, float t, const char* what) {
+        size_t compared = 0, bytes = 0, keyframes = 0, wrong = 0;
+        std::string first;
+        for (const auto& f : frames) {
+            bytes += f.wireBytes;
+            keyframes += f.keyframe;
+            auto it = byNumber.find(f.frame);
+            if (it == byNumber.end()) continue;
+            const client::Frame& e = *it->second;
+            EXPECT_EQ(f.primitives.size(), e.primitives.size());
+            double sum = 0.0;
+            size_t n = 0;
+            for (const auto& p : e.primitives)
+                for (float v : p.rgb) sum += std::abs(v), ++n;
+            const float m = float(sum / n);
+            for (size_t p = 0; p < std::min(e.primitives.size(), f.primitives.size()); ++p) {
+                EXPECT_EQ(f.primitives[p].node, e.primitives[p].node);
+                EXPECT_EQ(f.primitives[p].rgb.size(), e.primitives[p].rgb.size());
+                for (size_t i = 0; i < e.primitives[p].rgb.size(); ++i) {
+                    const float want = e.primitives[p].rgb[i], got = f.primitives[p].rgb[i];
+                    const bool ok = t == 0.0f
+                                        ? got == protocol::HalfToFloat(protocol::FloatToHalf(want))
+                                        : std::abs(got - want) <= DeltaBound(want, t, m);
+                    if (!ok && wrong++ == 0)
+                        first = "frame " + std::to_string(f.frame) + " " + e.primitives[p].node +
+                                " value " + std::to_string(i) + ": " + std::to_string(got) +
+                                " for " + std::to_string(want);
+                }
+            }
+            ++compared;
+        }
+        EXPECT_EQ(wrong, 0u) << what << ": the first: " << first;
+        EXPECT_GT(compared, 5u) << what;
+        EXPECT_TRUE(frames.front().keyframe) << what;
+        EXPECT_EQ(keyframes, 1u) << what << ": one keyframe, then deltas";
+        std::printf("%s: %zu frames, %zu bytes (the f32 stream: %zu frames, %zu bytes)\n", what,
+                    frames.size(), bytes, full.frames.size(), fullBytes);
+        return double(bytes) / double(frames.size());
+    };
+    const double perDelta = check(delta.frames, 0.005f, "tolerance 0.005");
+    check(lossless.frames, 0.0f, "lossless to fp16");
+    EXPECT_LT(perDelta, 0.5 * double(fullBytes) / full.frames.size());
+}
+
+// Issue 64: a delta subscriber that reads too slowly loses frames at the server, and the
+// frame after a loss is a keyframe: what it holds is never built on a frame it did not get.
+// The office, lossless to fp16, its lamps dimmed and raised every few milliseconds: every
+// frame changes most vertices, so the socket's buffers fill while the reader stops.
+TEST(ServerProcess, ADeltaSubscriberThatFallsBehindGetsAKeyframe) {
+    ServerProcess server("delta-behind");
+    client::Client c(server.Unix(), "loader");
+    client::LoadOptions o;
+    o.path = "office.gltf";
+    o.device = "cpu";
+    c.Load(o);
+    Watcher full;
+    std::atomic<int> seen{0};
+    std::atomic<uint64_t> stoppedAt{0};
+    std::atomic<bool> stop{false};
+    std::mutex m;
+    std::condition_variable resume;
+    bool go = false;
+    std::vector<client::Frame> frames;
+    client::Client fullClient(server.Unix(), "full"), slow(server.Unix(), "slow");
+    fullClient.Subscribe(std::ref(full), client::Channel::kIndirect, client::Format::kFloat32);
+    slow.Subscribe(
+        [&](const client::Frame& f) {
+            std::unique_lock lock(m);
+            if (++seen == 2) {  // the reader stops until the server has made 60 more frames
+                stoppedAt = f.frame;
+                resume.wait_for(lock, 60s, [&] { return go; });
+            }
+            frames.push_back(f);
+        },
+        client::Channel::kIndirect, client::Format::kDelta, "", {}, 0.0f);
+    std::thread editor([&] {
+        for (int i = 0; !stop; ++i) {
+            c.SetLight("fixture_0", std::nullopt, i % 2 ? 40.0f : 20.0f);
+            std::this_thread::sleep_for(20ms);
+        }
+    });
+    // 60 frames of most vertices each are more than the sockets' buffers hold.
+    client::Client watcher(server.Unix(), "stats");
+    for (int i = 0; i < 1200; ++i) {
+        const uint64_t made =
+            nlohmann::json::parse(watcher.Stats("office.gltf")).value("frames", 0);
+        if (stoppedAt > 0 && made >= stoppedAt + 60) break;
+        std::this_thread::sleep_for(50ms);
+    }
+    {
+        std::lock_guard lock(m);
+        go = true;
+    }
+    resume.notify_all();
+    for (int i = 0; i < 300 && seen < 6; ++i) std::this_thread::sleep_for(50ms);
+    stop = true;
+    editor.join();
+    const uint64_t last = c.SetLight("fixture_0", std::nullopt, 30.0f);
+    ASSERT_TRUE(full.Until(last)) << server.Log();
+    for (int i = 0; i < 400; ++i) {  // the slow one's converged frame too
+        {
+            std::lock_guard lock(m);
+            if (!frames.empty() && frames.back().converged && frames.back().lastEdit >= last) break;
+        }
+        std::this_thread::sleep_for(25ms);
+    }
+    slow.Close();
+    fullClient.Close();
+    std::lock_guard lock(m), f(full.m);
+    ASSERT_GE(frames.size(), 3u) << server.Log();
+    size_t keyframes = 0, gaps = 0;
+    for (size_t i = 1; i < frames.size(); ++i) {
+        const bool gap = frames[i].frame != frames[i - 1].frame + 1;
+        gaps += gap;
+        if (gap) {
+            EXPECT_TRUE(frames[i].keyframe) << "frame " << frames[i].frame << " after a gap";
+        }
+        keyframes += frames[i].keyframe;
+    }
+    EXPECT_GE(gaps, 1u) << "the slow reader lost no frame";
+    EXPECT_GE(keyframes, 1u);
+    // What it holds is the full stream's values in fp16, exactly.
+    const client::Frame& mine = frames.back();
+    bool compared = false;
+    for (const auto& e : full.frames)
+        if (e.frame == mine.frame) {
+            compared = true;
+            ASSERT_EQ(e.primitives.size(), mine.primitives.size());
+            size_t wrong = 0;
+            for (size_t p = 0; p < e.primitives.size(); ++p)
+                for (size_t i = 0; i < e.primitives[p].rgb.size(); ++i)
+                    wrong += mine.primitives[p].rgb[i] !=
+                             protocol::HalfToFloat(protocol::FloatToHalf(e.primitives[p].rgb[i]));
+            EXPECT_EQ(wrong, 0u);
+        }
+    EXPECT_TRUE(compared) << "frame " << mine.frame << " not in the full stream";
+}
+
 // Issue 63: on a server without --token-file every client is a "user": it edits the scenes it
 // loaded, not another connected client's (Error Forbidden naming the editor role), though it
 // may watch and read them; once the owner has gone, anyone may edit.
@@ -1567,8 +1738,11 @@ TEST(ServerProcess, OnlyTheOwnerEditsItsSceneWhileConnected) {
     client::Client other(server.Unix(), "other");
     EXPECT_EQ(other.Role(), "user");
     std::string message;
-    EXPECT_EQ(ErrorCodeOf([&] { other.SetMaterial(material, std::array{0.f, 0.f, 0.f}, {}); },
-                          &message),
+    EXPECT_EQ(ErrorCodeOf(
+                  [&] {
+                      other.SetMaterial(material, std::array{0.f, 0.f, 0.f}, {});
+                  },
+                  &message),
               int(fb::ErrorCode::Forbidden))
         << message;
     EXPECT_NE(message.find("editor role"), std::string::npos) << message;
@@ -1614,15 +1788,17 @@ TEST(ServerProcess, TokenRolesLimitWhatAClientMayDo) {
     EXPECT_EQ(viewer.Role(), "viewer");
     EXPECT_EQ(admin.Role(), "admin");
     std::string message;
-    EXPECT_EQ(ErrorCodeOf([&] { viewer.Load(Cornell()); }, &message),
-              int(fb::ErrorCode::Forbidden))
+    EXPECT_EQ(ErrorCodeOf([&] { viewer.Load(Cornell()); }, &message), int(fb::ErrorCode::Forbidden))
         << message;
     EXPECT_NE(message.find("viewer role"), std::string::npos) << message;
     const client::SceneInfo info = loader.Load(Cornell());
     const std::string material = info.materials.at(0).name;
     EXPECT_TRUE(viewer.Load(Cornell()).reused);  // joining is a viewer's
-    EXPECT_EQ(ErrorCodeOf([&] { viewer.SetMaterial(material, std::array{0.f, 0.f, 0.f}, {}); },
-                          &message),
+    EXPECT_EQ(ErrorCodeOf(
+                  [&] {
+                      viewer.SetMaterial(material, std::array{0.f, 0.f, 0.f}, {});
+                  },
+                  &message),
               int(fb::ErrorCode::Forbidden))
         << message;
     EXPECT_EQ(ErrorCodeOf([&] { viewer.Step(1); }), int(fb::ErrorCode::Forbidden));
@@ -1652,9 +1828,9 @@ TEST(ServerProcess, TokenRolesLimitWhatAClientMayDo) {
     EXPECT_EQ(stats["server"].value("forbidden_requests", 0), 5) << stats.dump();
 
     testing::WriteFile(tokenFile, "admin a\nroot b\n");
-    const auto bad = testing::Execute("--token-file " + tokenFile + " --listen unix://" +
-                                          (dir / "s").string(),
-                                      "", "penumbra-server");
+    const auto bad =
+        testing::Execute("--token-file " + tokenFile + " --listen unix://" + (dir / "s").string(),
+                         "", "penumbra-server");
     EXPECT_EQ(bad.exitCode, 2) << bad.output;
     EXPECT_NE(bad.output.find(tokenFile + ":2: unknown role 'root'"), std::string::npos)
         << bad.output;

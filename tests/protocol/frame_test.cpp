@@ -5,6 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <random>
+
+#include "protocol/delta.h"
 
 namespace penumbra::protocol {
 namespace {
@@ -306,11 +309,93 @@ TEST(Decoder, StaysFailedAfterAnError) {
     EXPECT_EQ(DecodeRaw(ok, d), Result::kError);
 }
 
+// Every half value converts back to itself, and a float halfway between two halves goes to
+// the even one (IEEE's rounding, as numpy's and JavaScript's).
+TEST(Half, RoundsToNearestTiesToEven) {
+    for (uint32_t h = 0; h < 0x10000; ++h) {
+        if ((h & 0x7c00) == 0x7c00 && (h & 0x3ff)) continue;  // NaN
+        const float f = HalfToFloat(uint16_t(h));
+        ASSERT_EQ(FloatToHalf(f), h) << std::hex << h;
+        if ((h & 0x7fff) >= 0x7bff) continue;  // the largest finite half and beyond
+        const float next = HalfToFloat(uint16_t(h + 1));
+        const float middle = (f + next) / 2;  // exact in float
+        const uint32_t even = (h & 1) ? h + 1 : h;
+        if ((h & 0x8000) == 0) {
+            ASSERT_EQ(FloatToHalf(middle), even) << std::hex << h;
+        }
+    }
+    EXPECT_EQ(FloatToHalf(65520.0f), 0x7c00);  // rounds to infinity
+    EXPECT_EQ(FloatToHalf(65519.0f), 0x7bff);
+}
+
 TEST(Half, RoundTripsIrradianceValues) {
     for (float v : {0.0f, 1.0f, 0.3183f, 12.5f, 1000.0f}) {
         float back = HalfToFloat(FloatToHalf(v));
         EXPECT_NEAR(back, v, v * 1e-3f) << v;  // half has an 11-bit significand: 2^-11 ≈ 4.9e-4
     }
+}
+
+// SPEC.md "Delta frames", its example byte for byte: vertex 2 of 4 goes from (1, 0.5, 0.25)
+// to (1, 0.5, 0.5).
+TEST(Delta, PacksTheSpecExample) {
+    std::vector<uint16_t> base(12, 0), next;
+    for (int v = 0; v < 4; ++v) {
+        base[3 * v] = 0x3c00;
+        base[3 * v + 1] = 0x3800;
+        base[3 * v + 2] = 0x3400;
+    }
+    next = base;
+    next[3 * 2 + 2] = 0x3800;
+    const DeltaRun run{2, 1};
+    EXPECT_EQ(PackDelta({&run, 1}, next, base),
+              (std::vector<uint8_t>{0x01, 0x02, 0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x08}));
+    size_t raw = 0;
+    const std::vector<uint8_t> data = EncodeDelta({&run, 1}, next, base, raw);
+    EXPECT_EQ(raw, 9u);
+    std::vector<uint16_t> held = base;
+    ApplyDelta(data, raw, false, held);
+    EXPECT_EQ(held, next);
+}
+
+// Keyframes and deltas of random values (every bit pattern, wrapping residuals included)
+// come back exactly; the runs pick scattered vertices.
+TEST(Delta, KeyframesAndDeltasRoundTrip) {
+    std::mt19937 rng(64);
+    const size_t n = 1000;
+    std::vector<uint16_t> values(3 * n);
+    for (auto& v : values) v = static_cast<uint16_t>(rng());
+    size_t raw = 0;
+    const DeltaRun all{0, uint32_t(n)};
+    std::vector<uint16_t> held(3 * n, 0);
+    const std::vector<uint8_t> key = EncodeDelta({&all, 1}, values, {}, raw);
+    ApplyDelta(key, raw, true, held);
+    EXPECT_EQ(held, values);
+    std::vector<DeltaRun> runs{{3, 5}, {10, 1}, {500, 100}, {999, 1}};
+    std::vector<uint16_t> next = values;
+    for (const auto& r : runs)
+        for (size_t v = r.start; v < r.start + r.count; ++v)
+            for (int c = 0; c < 3; ++c) next[3 * v + c] = static_cast<uint16_t>(rng());
+    const std::vector<uint8_t> delta = EncodeDelta(runs, next, values, raw);
+    ApplyDelta(delta, raw, false, held);
+    EXPECT_EQ(held, next);
+}
+
+// A payload that does not fit what the client holds is refused and changes nothing.
+TEST(Delta, MalformedPayloadsAreRefused) {
+    std::vector<uint16_t> base(12, 0x3c00), held = base;
+    const DeltaRun past{3, 2};  // vertices 3 and 4 of 4
+    std::vector<uint16_t> bigger(15, 0x3800);
+    size_t raw = 0;
+    const auto data = EncodeDelta({&past, 1}, bigger, std::vector<uint16_t>(15, 0), raw);
+    EXPECT_THROW(ApplyDelta(data, raw, false, held), DeltaError);
+    EXPECT_EQ(held, base);
+    const DeltaRun one{0, 1};
+    const auto small = EncodeDelta({&one, 1}, base, base, raw);
+    EXPECT_THROW(ApplyDelta(small, raw + 1, false, held), DeltaError);  // not its size
+    EXPECT_THROW(ApplyDelta(small, raw, true, held), DeltaError);       // a keyframe of one vertex
+    std::vector<uint8_t> noise(small.size(), 0x5a);
+    EXPECT_THROW(ApplyDelta(noise, raw, false, held), DeltaError);
+    EXPECT_EQ(held, base);
 }
 
 }  // namespace

@@ -156,6 +156,55 @@ class ClientAgainstALiveServer(unittest.TestCase):
                 c.sky(sun=(0,))
             c.unload("blocker.gltf")  # test_unload loads it afresh
 
+    def test_delta_stream_matches_the_full_one(self):
+        # Issue 64: frames() defaults to a delta stream; at tolerance 0 what the client holds
+        # is the full stream's values in fp16, exactly, frame by frame; at the default within
+        # half a percent (SPEC.md "Delta frames"). The first frame is a keyframe.
+        import threading as th
+        with Client(self.server.unix) as c, Client(self.server.unix) as full_client, \
+                Client(self.server.unix) as exact_client:
+            c.load("cornell-box.gltf", **CORNELL)
+            full, exact, deltas = {}, {}, {}
+
+            def collect(client, into, **kw):
+                for f in client.frames(timeout=60, **kw):
+                    into[f.frame] = f
+                    if f.converged and f.last_edit >= edits[-1]:
+                        break
+            edits = [1 << 62]
+            threads = [th.Thread(target=collect, args=(full_client, full), kwargs={"format": "f32"}),
+                       th.Thread(target=collect, args=(exact_client, exact),
+                                 kwargs={"tolerance": 0.0})]
+            for t in threads:
+                t.start()
+            time.sleep(0.5)
+            for i in range(1, 6):
+                edits.append(c.light("ceiling_light", intensity=17.0 * (1 - 0.01 * i)))
+                time.sleep(0.05)
+            edits[0] = edits[-1]
+            for f in c.frames(timeout=60):  # the default: a delta stream at 0.005
+                deltas[f.frame] = f
+                if f.converged and f.last_edit >= edits[-1]:
+                    break
+            for t in threads:
+                t.join(60)
+            self.assertTrue(exact[min(exact)].keyframe)
+            common = 0
+            for number, f in full.items():
+                if number in exact:
+                    common += 1
+                    for p, q in zip(f.primitives, exact[number].primitives):
+                        np.testing.assert_array_equal(
+                            q.rgb, p.rgb.astype(np.float16).astype(np.float32))
+                if number in deltas:
+                    values = np.concatenate([p.rgb.ravel() for p in f.primitives])
+                    floor = np.abs(values).mean() / 20
+                    for p, q in zip(f.primitives, deltas[number].primitives):
+                        bound = 0.005 * np.maximum(np.abs(p.rgb), floor) * 1.001 + \
+                            np.abs(p.rgb) * 1e-3 + 1e-6
+                        self.assertTrue(np.all(np.abs(q.rgb - p.rgb) <= bound), p.node)
+            self.assertGreater(common, 2)
+
     def test_frames_stream_over_tcp(self):
         with Client(self.server.tcp) as c:
             c.load("cornell-box.gltf", **CORNELL)

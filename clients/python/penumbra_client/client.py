@@ -41,6 +41,61 @@ GET_STATS, STATS = 40, 41
 CHANNELS = {"indirect": Channel.Channel.Indirect, "direct": Channel.Channel.Direct,
             "total": Channel.Channel.Total}
 FORMATS = {"f32": Format.Format.Float32, "f16": Format.Format.Float16}
+# A delta stream's default tolerance (SPEC.md "Delta frames"): half a percent of a vertex's
+# value, or of a twentieth of the frame's mean where darker.
+DEFAULT_TOLERANCE = 0.005
+
+
+def _varint(data: bytes, at: int):
+    value, shift = 0, 0
+    while True:
+        if at >= len(data) or shift > 63:
+            raise ValueError("delta payload: a run count ends early")
+        byte = data[at]
+        at += 1
+        value |= (byte & 0x7F) << shift
+        shift += 7
+        if not byte & 0x80:
+            return value, at
+
+
+def apply_delta(data: bytes, raw_bytes: int, keyframe: bool, values: np.ndarray) -> np.ndarray:
+    """A delta stream's payload (SPEC.md "Delta frames") applied to `values`, the (vertices, 3)
+    uint16 fp16 bit patterns held; returns the new array. Raises ValueError if malformed."""
+    import zstandard  # Debian: python3-zstandard
+    vertices = len(values)
+    if raw_bytes > 10 + 16 * vertices:
+        raise ValueError(f"delta payload: {raw_bytes} raw bytes for {vertices} vertices")
+    raw = zstandard.ZstdDecompressor().decompress(data, max_output_size=raw_bytes)
+    if len(raw) != raw_bytes:
+        raise ValueError("delta payload: not the raw size it names")
+    count, at = _varint(raw, 0)
+    if count > vertices:
+        raise ValueError("delta payload: more runs than vertices")
+    index, position = [], 0
+    for _ in range(count):
+        gap, at = _varint(raw, at)
+        length, at = _varint(raw, at)
+        position += gap
+        if position + length > vertices:
+            raise ValueError("delta payload: a run goes past the scene's vertices")
+        index.append(np.arange(position, position + length))
+        position += length
+    index = np.concatenate(index) if index else np.zeros(0, dtype=np.int64)
+    n = len(index)
+    if keyframe and (count != 1 or n != vertices):
+        raise ValueError("delta payload: a keyframe is one run over every vertex")
+    if len(raw) - at != 6 * n:
+        raise ValueError("delta payload: value bytes do not match its runs")
+    planes = np.frombuffer(raw, dtype=np.uint8, offset=at)
+    z = planes[:3 * n].astype(np.uint16) | (planes[3 * n:].astype(np.uint16) << 8)
+    residual = ((z >> 1) ^ (-(z & 1)).astype(np.uint16)).reshape(-1, 3)
+    out = values.copy()
+    if keyframe:  # each vertex predicted from the one before it, channel by channel
+        out[:] = np.cumsum(residual, axis=0, dtype=np.uint64).astype(np.uint16)
+    else:
+        out[index] = out[index] + residual
+    return out
 ERROR_NAMES = {v: k for k, v in vars(ErrorCode.ErrorCode).items() if not k.startswith("_")}
 # Pushed frames kept for a reader that falls behind; older ones are dropped (and counted).
 FRAME_QUEUE = 16
@@ -76,6 +131,7 @@ class Frame:
     note: str
     passes: Dict[str, float]
     primitives: List[Primitive]
+    keyframe: bool = False  # a delta stream's frame the server sent whole
 
     def primitive(self, node: str, mesh: int = 0, primitive: int = 0) -> np.ndarray:
         """The (vertices, 3) irradiance of one primitive of `node`."""
@@ -190,6 +246,7 @@ class Client:
         self._frames: collections.deque = collections.deque(maxlen=FRAME_QUEUE)
         self.frames_dropped = 0
         self._subscribed: Dict[str, int] = {}
+        self._deltas: Dict[str, dict] = {}  # a delta stream's copy of each scene (reader)
         self._closed: Optional[str] = None
         # The server ended the subscription (its scene was unloaded): raised by frames().
         self._ended: Optional[PenumbraError] = None
@@ -237,11 +294,15 @@ class Client:
                 if magic != MAGIC or version != FRAMING_VERSION:
                     raise ConnectionError("not a Penumbra server (bad frame header)")
                 payload = self._read_exactly(length) if length else b""
+                if rid == 0 and kind == FRAME:
+                    # A delta stream's frame is applied here, in order, so that none is lost
+                    # to the queue's limit: the queue then holds whole frames.
+                    frame = self._apply_delta_frame(payload)
                 with self._lock:
                     if rid == 0 and kind == FRAME:
                         if len(self._frames) == self._frames.maxlen:
                             self.frames_dropped += 1
-                        self._frames.append(payload)
+                        self._frames.append(frame)
                     elif kind == PROGRESS:
                         report = self._progress.get(rid)
                         if report is not None:
@@ -594,15 +655,20 @@ class Client:
         _, payload = self._request(GET_IRRADIANCE, b, FRAME)
         return self._frame(payload)
 
-    def frames(self, channel: str = "indirect", format: str = "f32", scene: str = "",
-               timeout: Optional[float] = None) -> Iterator[Frame]:
+    def frames(self, channel: str = "indirect", format: str = "delta", scene: str = "",
+               timeout: Optional[float] = None,
+               tolerance: float = DEFAULT_TOLERANCE) -> Iterator[Frame]:
         """Subscribes and yields each frame the server pushes (first the newest so far); ends
-        the subscription when the loop stops. A reader that falls more than 16 frames behind
-        loses the oldest (`frames_dropped`); the server drops frames for a slow connection
-        too: a gap in `frame` numbers is how many were skipped. `timeout`: seconds to wait
-        for a frame before TimeoutError (None: wait as long as it takes). When the scene is
-        unloaded the loop ends with PenumbraError NoScene (the connection stays)."""
-        self._subscribe(scene, channel, format)
+        the subscription when the loop stops. `format` "delta" (the default) is a delta
+        stream at `tolerance` (SPEC.md "Delta frames": only the vertices that drifted past
+        it travel; this client applies them to its copy and yields whole frames of fp16
+        values; 0 sends every change of a vertex's fp16 value); "f32" and "f16" send every
+        frame whole. A reader that falls more than 16 frames behind loses the oldest
+        (`frames_dropped`); the server drops frames for a slow connection too: a gap in
+        `frame` numbers is how many were skipped. `timeout`: seconds to wait for a frame
+        before TimeoutError (None: wait as long as it takes). When the scene is unloaded the
+        loop ends with PenumbraError NoScene (the connection stays)."""
+        self._subscribe(scene, channel, format, tolerance)
         try:
             while True:
                 yield self._next_frame(timeout)
@@ -696,10 +762,23 @@ class Client:
         b.Finish(table.End(b))
         return b
 
-    def _subscribe(self, scene: str, channel: str, format: str):
-        b = self._channel_request(Subscribe, scene, channel, format)
+    def _subscribe(self, scene: str, channel: str, format: str, tolerance: float):
+        delta = format == "delta"
+        if delta:
+            if not 0.0 <= tolerance <= 1.0:
+                raise ValueError(f"tolerance {tolerance}: give a relative tolerance in [0, 1]")
+            import zstandard  # noqa: F401  (a clear ImportError here, not in the reader)
+        b = flatbuffers.Builder(64)
+        s = b.CreateString(scene)
+        Subscribe.Start(b)
+        Subscribe.AddScene(b, s)
+        Subscribe.AddChannel(b, self._channel(channel))
+        Subscribe.AddFormat(b, self._format("f16" if delta else format))
+        Subscribe.AddTolerance(b, float(tolerance) if delta else -1.0)
+        b.Finish(Subscribe.End(b))
         with self._lock:
             self._frames.clear()
+            self._deltas.clear()
         self._request(SUBSCRIBE, b, OK)
 
     def _unsubscribe(self, scene: str):
@@ -723,7 +802,44 @@ class Client:
                     raise TimeoutError(f"no frame within {timeout} s")
                 self._reply_ready.wait(left)
             payload = self._frames.popleft()
-        return self._frame(payload)
+        return payload if isinstance(payload, Frame) else self._frame(payload)
+
+    def _apply_delta_frame(self, payload: bytes):
+        """A delta stream's frame applied to this client's copy of its scene (reader thread):
+        the whole Frame; other frames are returned as they came, decoded when read."""
+        f = FbFrame.Frame.GetRootAs(payload)
+        d = f.Delta()
+        if d is None:
+            return payload
+        frame = self._frame(payload)
+        copy = self._deltas.get(frame.scene)
+        if d.Keyframe():
+            counts = d.CountsAsNumpy() if d.CountsLength() else np.zeros(0, dtype=np.uint32)
+            if len(counts) != len(frame.primitives) or int(counts.sum()) != d.Vertices():
+                raise ConnectionError("bad frame from the server: keyframe counts")
+            values = np.zeros((d.Vertices(), 3), dtype=np.uint16)
+            layout = [(p.node, p.mesh, p.primitive) for p in frame.primitives]
+            copy = {"layout": layout, "counts": [int(c) for c in counts]}
+        elif copy is None or d.BaseFrame() != copy["frame"]:
+            raise ConnectionError(
+                f"bad frame from the server: delta frame {f.Frame()} changes frame "
+                f"{d.BaseFrame()}, this client holds {copy['frame'] if copy else 'none'}")
+        else:
+            values = copy["values"]
+        try:
+            values = apply_delta(d.DataAsNumpy().tobytes(), d.RawBytes(), d.Keyframe(), values)
+        except ValueError as e:
+            raise ConnectionError(f"bad frame from the server: {e}") from None
+        copy["values"], copy["frame"] = values, f.Frame()
+        self._deltas[frame.scene] = copy
+        rgb = values.view(np.float16).astype(np.float32)
+        prims, at = [], 0
+        for (node, mesh, primitive), n in zip(copy["layout"], copy["counts"]):
+            prims.append(Primitive(node=node, mesh=mesh, primitive=primitive, rgb=rgb[at:at + n]))
+            at += n
+        frame.primitives = prims
+        frame.keyframe = bool(d.Keyframe())
+        return frame
 
     @staticmethod
     def _frame(payload: bytes) -> Frame:
