@@ -104,10 +104,12 @@ nlohmann::json RunScene(const Options& o, const std::string& scene) {
     float intensity = 0.0f;
     for (const auto& n : info.nodes) {
         if (n.dynamic && !mover) mover = &n;
-        if (!n.emissive || light || n.primitives.empty()) continue;
-        for (const auto& m : info.materials)
-            if (m.name == n.primitives[0].material)
-                intensity = std::max({m.emission[0], m.emission[1], m.emission[2]});
+        if (!n.emissive || light) continue;
+        for (const auto& p : n.primitives)
+            for (const auto& m : info.materials)
+                if (m.name == p.material)
+                    intensity =
+                        std::max({intensity, m.emission[0], m.emission[1], m.emission[2]});
         if (intensity > 0.0f) light = &n;
     }
     if (!light) throw std::runtime_error(scene + ": no emissive node to dim");
