@@ -28,6 +28,7 @@ namespace {
 struct Confinement {
     const GltfFiles* files;
     std::filesystem::path self;  // the glTF, canonical
+    std::string overLimit;       // an external file refused for its size (GltfLimitError)
 };
 
 }  // namespace
@@ -55,13 +56,24 @@ namespace {
 // GltfFiles::root.
 bool ReadConfinedFile(std::vector<unsigned char>* out, std::string* err,
                       const std::string& filepath, void* user) {
-    const Confinement& c = *static_cast<const Confinement*>(user);
+    Confinement& c = *static_cast<Confinement*>(user);
     std::error_code ec;
     const std::filesystem::path file = std::filesystem::weakly_canonical(filepath, ec);
     if (ec || file != c.self) {
         const std::string why = gltf::FileRefusal(*c.files, filepath);
         if (!why.empty()) {
             if (err) *err += why;
+            return false;
+        }
+    }
+    // An external file (a buffer or an image) is read whole: its size on disk against the
+    // limit first, so that a huge image is refused before it is read.
+    if (c.files->maxBufferBytes > 0 && !ec && file != c.self) {
+        const uintmax_t bytes = std::filesystem::file_size(file, ec);
+        if (!ec && bytes > c.files->maxBufferBytes) {
+            c.overLimit = "external file '" + filepath + "' is " + std::to_string(bytes) +
+                          " bytes; the limit is " + std::to_string(c.files->maxBufferBytes);
+            if (err) *err += c.overLimit;
             return false;
         }
     }
@@ -227,7 +239,7 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
     CheckDeclaredSize(path, files);
     tinygltf::TinyGLTF loader;
     std::error_code ec;
-    Confinement confinement{&files, std::filesystem::weakly_canonical(path, ec)};
+    Confinement confinement{&files, std::filesystem::weakly_canonical(path, ec), {}};
     tinygltf::FsCallbacks fs{&tinygltf::FileExists, &tinygltf::ExpandFilePath, &ReadConfinedFile,
                              &RefuseWrite, &confinement};
     loader.SetFsCallbacks(fs);
@@ -255,6 +267,8 @@ void ReadGltfModel(const std::string& path, tinygltf::Model* model, const GltfFi
                         ": EXT_meshopt_compression is read from binary glTF (.glb) only: "
                         "`gltfpack -i FILE -o FILE.glb -c` packs one");
     };
+    // tinygltf goes on without an image it could not read: one refused for its size fails.
+    if (!confinement.overLimit.empty()) throw GltfLimitError(path + ": " + confinement.overLimit);
     if (ok && !IsGlbPath(path)) refuseMeshopt(model->extensionsUsed);
     if (!ok) {
         if (!IsGlbPath(path)) {

@@ -46,6 +46,10 @@ class TintMap {
     Wrap s_, t_;
 };
 
+// An encoded image's width and height from its header (nothing decoded); false when stb_image
+// cannot tell.
+bool EncodedImageSize(const std::vector<unsigned char>& encoded, int& width, int& height);
+
 // Decodes an 8-bit sRGB image (PNG, JPEG, ... as stb_image reads them) into linear texels.
 // Returns false with stb's reason in `why` when it cannot.
 bool DecodeSrgbImage(const std::vector<unsigned char>& encoded, int& width, int& height,

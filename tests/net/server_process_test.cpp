@@ -891,6 +891,55 @@ TEST(ServerProcess, DeclaredSizesAreCheckedBeforeReading) {
     EXPECT_NE(message.find("--max-scene-triangles"), std::string::npos) << message;
 }
 
+// Issue 63: images are bounded before they are read or decoded: a file past --max-scene-bytes
+// is not read, and a small PNG whose header claims 10,000 × 10,000 pixels (1.6 GB decoded) is
+// refused from its header.
+TEST(ServerProcess, ImageSizesAreCheckedBeforeReading) {
+    const auto root = testing::TempDir("image-root");
+    {
+        std::ofstream bin(root / "tri.bin", std::ios::binary);
+        const float data[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 1};
+        bin.write(reinterpret_cast<const char*>(data), sizeof data);  // 3 positions, 3 uvs
+    }
+    auto scene = [&](const std::string& name, const std::string& image) {
+        std::ofstream(root / name)
+            << R"({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+              "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1},
+                                          "material": 0}]}],
+              "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+              "textures": [{"source": 0}], "images": [{"uri": ")"
+            << image << R"("}],
+              "buffers": [{"byteLength": 60, "uri": "tri.bin"}],
+              "bufferViews": [{"buffer": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 24}],
+              "accessors": [{"bufferView": 0, "count": 3, "componentType": 5126, "type": "VEC3",
+                             "min": [0, 0, 0], "max": [1, 1, 0]},
+                            {"bufferView": 1, "count": 3, "componentType": 5126, "type": "VEC2"}]})";
+    };
+    // A PNG's signature and IHDR (10000 × 10000, 8-bit RGB): all stb_image reads for its size.
+    const unsigned char bomb[] = {0x89, 'P',  'N',  'G',  0x0d, 0x0a, 0x1a, 0x0a, 0, 0, 0, 13,
+                                  'I',  'H',  'D',  'R',  0,    0,    0x27, 0x10, 0, 0, 0x27,
+                                  0x10, 8,    2,    0,    0,    0,    0,    0,    0,    0};
+    std::ofstream(root / "bomb.png", std::ios::binary)
+        .write(reinterpret_cast<const char*>(bomb), sizeof bomb);
+    std::ofstream(root / "big.png", std::ios::binary) << std::string(2'000'000, 'x');
+    scene("bomb.gltf", "bomb.png");
+    scene("big.gltf", "big.png");
+    ServerProcess server("image-limits", "--max-scene-bytes 1000000", "penumbra-server",
+                         root.string());
+    client::Client c(server.Unix(), "loader");
+    client::LoadOptions o;
+    o.device = "cpu";
+    std::string message;
+    o.path = "bomb.gltf";
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(o); }, &message), int(fb::ErrorCode::LimitReached));
+    EXPECT_NE(message.find("is 10000 × 10000 pixels"), std::string::npos) << message;
+    o.path = "big.gltf";
+    EXPECT_EQ(ErrorCodeOf([&] { c.Load(o); }, &message), int(fb::ErrorCode::LimitReached));
+    EXPECT_NE(message.find("big.png' is 2000000 bytes; the limit is 1000000"), std::string::npos)
+        << message;
+    EXPECT_TRUE(c.Connected());
+}
+
 TEST(ServerProcess, LoadErrorsNameFilesRelativeToTheRoot) {
     const auto root = testing::TempDir("relative-root");
     std::filesystem::create_directories(root / "rooms");
