@@ -1,9 +1,5 @@
 // A client's requests handled against the service (protocol/SPEC.md, "Messages"): fields
 // read and checked by messages.h, slow work on the blocking pool.
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -17,21 +13,6 @@ namespace fb = protocol::fb;
 using protocol::MessageType;
 using service::ErrorKind;
 using service::ServiceError;
-
-namespace {
-
-// Loads run on the blocking pool's threads, which this lowers (nice 10, once a thread; a
-// thread's nice value is its own on Linux) so that the frames of the scenes already loaded
-// come first: the session workers stay at the server's priority.
-void LowerThreadPriority() {
-    thread_local bool lowered = false;
-    if (lowered) return;
-    lowered = true;
-    const int tid = static_cast<int>(syscall(SYS_gettid));
-    setpriority(PRIO_PROCESS, static_cast<id_t>(tid), std::max(10, getpriority(PRIO_PROCESS, tid)));
-}
-
-}  // namespace
 
 void Connection::Dispatch(const protocol::Message& m) {
     const uint32_t id = m.header.requestId;
@@ -167,11 +148,7 @@ void Connection::OnLoadScene(uint32_t id, const fb::LoadScene& l) {
     req.role = role_;
     if (l.progress()) req.progress = ProgressSender(id);
     Blocking(
-        id,
-        [&service, req] {
-            LowerThreadPriority();
-            return service.Load(req);
-        },
+        id, [&service, req] { return service.Load(req); },
         [this, id](service::LoadResult& r) {
             flatbuffers::FlatBufferBuilder b;
             BuildSceneInfo(b, *r.session, r.reused);
