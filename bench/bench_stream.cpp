@@ -88,10 +88,11 @@ struct Options {
     std::vector<std::string> scenes{"office.gltf", "cornell-box.gltf"};
     int steps = 40, fanout = 64, samples = 256;
     std::string out = "bench/results", name = "stream";
+    std::string root = std::string(PENUMBRA_SOURCE_DIR) + "/scenes";
 };
 
 nlohmann::json RunScene(const Options& o, const std::string& scene) {
-    const fs::path root = fs::path(PENUMBRA_SOURCE_DIR) / "scenes";
+    const fs::path root = o.root;
     bench::InProcessServer srv(root);
     client::Client loader(srv.url, "bench-stream");
     client::LoadOptions load;
@@ -108,8 +109,7 @@ nlohmann::json RunScene(const Options& o, const std::string& scene) {
         for (const auto& p : n.primitives)
             for (const auto& m : info.materials)
                 if (m.name == p.material)
-                    intensity =
-                        std::max({intensity, m.emission[0], m.emission[1], m.emission[2]});
+                    intensity = std::max({intensity, m.emission[0], m.emission[1], m.emission[2]});
         if (intensity > 0.0f) light = &n;
     }
     if (!light) throw std::runtime_error(scene + ": no emissive node to dim");
@@ -304,7 +304,11 @@ nlohmann::json RunScene(const Options& o, const std::string& scene) {
 int main(int argc, char** argv) {
     penumbra::Options o;
     CLI::App app{"penumbra-bench-stream: bytes on the wire for each frame encoding"};
-    app.add_option("--scenes", o.scenes, "glTF files under scenes/")->capture_default_str();
+    app.add_option("--scenes", o.scenes, "glTF files under --root")->capture_default_str();
+    app.add_option("--root", o.root,
+                   "the server's scene root (a 10× office: scripts/copies.py scenes/office.gltf "
+                   "DIR/office10.glb 10 20)")
+        ->capture_default_str();
     app.add_option("--steps", o.steps, "slider and move steps, one a frame")->capture_default_str();
     app.add_option("--fanout", o.fanout, "delta subscribers for the fan-out phase (0: none)")
         ->capture_default_str();

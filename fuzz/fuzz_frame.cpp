@@ -1,13 +1,15 @@
 // Fuzz target: the server's frame reader and request decoding. The input is a byte stream as
 // a client would send it, fed to the incremental decoder in pieces (the first byte sets
 // their size); each message that decodes is verified against its table and, for the
-// requests the server reads into its own types, read as the server reads it. Anything may be
+// requests the server reads into its own types, read as the server reads it (and a delta
+// frame applied as a client applies it). Anything may be
 // refused; nothing may crash, leak or hang.
 #include <cstdint>
 #include <filesystem>
 #include <memory>
 
 #include "net/messages.h"
+#include "protocol/delta.h"
 #include "protocol/frame.h"
 #include "service/service.h"
 
@@ -44,9 +46,21 @@ void Read(const protocol::Message& m) {
             case protocol::MessageType::kSetVertices:
                 net::ReadSetVertices(*m.As<fb::SetVertices>());
                 break;
+            case protocol::MessageType::kFrame: {
+                // A delta stream's frame as a client applies it (client/client.cpp): what a
+                // server sends is input too.
+                const fb::DeltaIrradiance* d = m.As<fb::Frame>()->delta();
+                if (d && d->data() && d->vertices() <= (1u << 16)) {
+                    std::vector<uint16_t> held(size_t(d->vertices()) * 3, 0);
+                    protocol::ApplyDelta({d->data()->data(), d->data()->size()}, d->raw_bytes(),
+                                         d->keyframe(), held);
+                }
+                break;
+            }
             default:
                 break;
         }
+    } catch (const protocol::DeltaError&) {
     } catch (const service::ServiceError&) {
         // A bad field, refused with its name: what the server answers.
     }

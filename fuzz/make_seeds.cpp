@@ -13,6 +13,7 @@
 
 #include "base/check.h"
 #include "base/image.h"
+#include "protocol/delta.h"
 #include "protocol/frame.h"
 #include "scene/environment.h"
 #include "scene/gltf_loader.h"
@@ -96,6 +97,22 @@ void Frames(const fs::path& dir) {
         flatbuffers::FlatBufferBuilder b;
         b.Finish(fb::CreateStepDirect(b, "s", 3));
         add("step", protocol::MessageType::kStep, b);
+    }
+    {
+        // A delta frame of four vertices (SPEC.md's example), as a server sends it.
+        std::vector<uint16_t> base(12, 0x3c00), next = base;
+        next[8] = 0x3800;
+        const protocol::DeltaRun run{2, 1};
+        size_t raw = 0;
+        const std::vector<uint8_t> data = protocol::EncodeDelta({&run, 1}, next, base, raw);
+        flatbuffers::FlatBufferBuilder b;
+        auto delta = fb::CreateDeltaIrradianceDirect(b, false, 1, 4, nullptr, protocol::kDeltaZstd,
+                                                     uint32_t(raw), &data, 0.005f);
+        fb::FrameBuilder f(b);
+        f.add_frame(2);
+        f.add_delta(delta);
+        b.Finish(f.Finish());
+        add("delta", protocol::MessageType::kFrame, b);
     }
     for (const auto& [name, bytes] : seeds) Write(dir / (name + ".bin"), bytes);
     // All of them in one stream.
