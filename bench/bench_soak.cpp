@@ -11,15 +11,16 @@
 // attackers of issue 63: connections that never speak and connections that send a Hello a
 // byte a second (on TCP, more than the server lets one address hold), and on the socket
 // loaders that load two scenes and leave (the first half of the run), a client with a
-// viewer's token that tries to reload, darken and unload the office, and one with no token. `--compare` runs the soak without the attackers, then with them, and reports the
-// ratios of the legitimate clients' frame interval and edit-to-frame latency.
-// Figures: frames delivered to each live subscriber, frames they lost (gaps in the frame
-// numbers), p50/p99 frame interval, edit-to-frame latency (an edit's request to the first frame
-// subscriber 0 got that includes it), the server's RSS over the run (start, end, peak), its
-// stats (frames sent, dropped, protocol errors, refusals) and whether it stayed up and exited
-// cleanly on SIGTERM; with attackers, what they got and whether the server counted it. Beside
-// the frame rate, the relative RMSE of the final frame (every edit undone at the end) against
-// `penumbra reference`. Prints a table and writes bench/results/soak.json (`--name`).
+// viewer's token that tries to reload, darken and unload the office, and one with no token.
+// `--compare` runs the soak without the attackers, then with them, and reports the ratios of the
+// legitimate clients' frame interval and edit-to-frame latency. Figures: frames delivered to each
+// live subscriber, frames they lost (gaps in the frame numbers), p50/p99 frame interval,
+// edit-to-frame latency (an edit's request to the first frame subscriber 0 got that includes it),
+// the server's RSS over the run (start, end, peak), its stats (frames sent, dropped, protocol
+// errors, refusals) and whether it stayed up and exited cleanly on SIGTERM; with attackers, what
+// they got and whether the server counted it. Beside the frame rate, the relative RMSE of the final
+// frame (every edit undone at the end) against `penumbra reference`. Prints a table and writes
+// bench/results/soak.json (`--name`).
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -105,8 +106,8 @@ struct ServerProcess {
         char tmpl[] = "/tmp/penumbra-soak-XXXXXX";
         dir = mkdtemp(tmpl);
         const std::string ready = (dir / "ready").string();
-        std::ofstream(dir / "tokens") << "editor " << kEditorToken << "\nviewer " << kViewerToken
-                                      << "\n";
+        std::ofstream(dir / "tokens")
+            << "editor " << kEditorToken << "\nviewer " << kViewerToken << "\n";
         std::ofstream(dir / "viewer.token") << kViewerToken << "\n";
         unixUrl = "unix://" + (dir / "s.sock").string();
         pid = Spawn({binary, "--listen", unixUrl, "--listen", "tcp://127.0.0.1:0", "--scene-root",
@@ -507,10 +508,11 @@ nlohmann::json Soak(const Options& o, bool attack, const IrradianceFile* truth) 
                                                  emitter->emission[2] * s},
                             scene);
                     } else if (e == 2) {
-                        id = c.SetMaterial(wall->name,
-                                           std::array<float, 3>{wall->albedo[0] * s,
-                                                                wall->albedo[1], wall->albedo[2] * s},
-                                           std::nullopt, scene);
+                        id =
+                            c.SetMaterial(wall->name,
+                                          std::array<float, 3>{wall->albedo[0] * s, wall->albedo[1],
+                                                               wall->albedo[2] * s},
+                                          std::nullopt, scene);
                     } else {
                         client::Client::EnvironmentChange sky;
                         sky.color = std::array<float, 3>{0.2f * s, 0.3f * s, 0.5f * s};
@@ -558,8 +560,8 @@ nlohmann::json Soak(const Options& o, bool attack, const IrradianceFile* truth) 
     // The killed subscriber: `penumbra watch`, SIGKILLed every killEvery seconds.
     const std::string watchLog = (server.dir / "watch.log").string();
     auto startWatch = [&] {
-        return Spawn({o.cli, "watch", "--connect", url, "--session", info.scene, "--json"}, watchLog,
-                     "PENUMBRA_TOKEN_FILE=" + (server.dir / "viewer.token").string());
+        return Spawn({o.cli, "watch", "--connect", url, "--session", info.scene, "--json"},
+                     watchLog, "PENUMBRA_TOKEN_FILE=" + (server.dir / "viewer.token").string());
     };
     pid_t watcher = startWatch();
     int kills = 0;
@@ -628,8 +630,7 @@ nlohmann::json Soak(const Options& o, bool attack, const IrradianceFile* truth) 
         lost.push_back(subs[i]->lost);
         repeated += subs[i]->repeated;
         disconnected += subClients[i]->Connected() ? 0 : 1;
-        intervals.insert(intervals.end(), subs[i]->intervalsMs.begin(),
-                         subs[i]->intervalsMs.end());
+        intervals.insert(intervals.end(), subs[i]->intervalsMs.begin(), subs[i]->intervalsMs.end());
     }
     const std::vector<double> latencies = EditLatencies(editTimes, *subs[0]);
     for (auto& c : subClients) c->Close();
@@ -677,9 +678,9 @@ nlohmann::json Soak(const Options& o, bool attack, const IrradianceFile* truth) 
                           {"closed_by_server", garbage.closedByServer},
                           {"left_open_after_1s", garbage.leftOpen},
                           {"bytes", garbage.bytes}};
-    figures["rss_mib"] = {{"start", rssStart},         {"before_attack", rssBeforeAttack},
-                          {"half_time", rssHalf},      {"end", rssEnd},
-                          {"peak", rssPeak},           {"second_half_growth", rssEnd - rssHalf}};
+    figures["rss_mib"] = {{"start", rssStart},    {"before_attack", rssBeforeAttack},
+                          {"half_time", rssHalf}, {"end", rssEnd},
+                          {"peak", rssPeak},      {"second_half_growth", rssEnd - rssHalf}};
     figures["server_exit_code_on_sigterm"] = exitCode;
     figures["crashes"] = 0;
     if (attack) {
@@ -694,17 +695,19 @@ nlohmann::json Soak(const Options& o, bool attack, const IrradianceFile* truth) 
         const uint64_t squatTimedOut = squatters.endings["HelloRequired"];
         const uint64_t forbidden = foreigner.refusals["Forbidden"] + leavers.errors["Forbidden"];
         const uint64_t unauthorized = foreigner.refusals["Unauthorized"];
-        figures["attackers"] = {
-            {"squatters", {{"silent", squatters.silent},
-                           {"slow", squatters.slow},
-                           {"opened", squatters.opened},
-                           {"endings", squatters.endings}}},
-            {"leaving_loaders", {{"scenes_loaded", leavers.loads},
-                                 {"refused_at_the_door", leavers.refused},
-                                 {"errors", leavers.errors}}},
-            {"foreigner", {{"attempts", foreigner.attempts},
-                           {"allowed", foreigner.allowed},
-                           {"refusals", foreigner.refusals}}}};
+        figures["attackers"] = {{"squatters",
+                                 {{"silent", squatters.silent},
+                                  {"slow", squatters.slow},
+                                  {"opened", squatters.opened},
+                                  {"endings", squatters.endings}}},
+                                {"leaving_loaders",
+                                 {{"scenes_loaded", leavers.loads},
+                                  {"refused_at_the_door", leavers.refused},
+                                  {"errors", leavers.errors}}},
+                                {"foreigner",
+                                 {{"attempts", foreigner.attempts},
+                                  {"allowed", foreigner.allowed},
+                                  {"refusals", foreigner.refusals}}}};
         const uint64_t refusedLogged = count(log, "refused a connection: LimitReached");
         figures["refusals_counted"] = {
             {"door_refusals_seen", squatRefused},
@@ -738,7 +741,8 @@ nlohmann::json Soak(const Options& o, bool attack, const IrradianceFile* truth) 
                 (unsigned long long)editErrors.load());
     std::printf("  %-34s %d\n", "watch processes SIGKILLed", kills);
     std::printf("  %-34s %llu (%llu closed by the server)\n", "garbage connections",
-                (unsigned long long)garbage.connections, (unsigned long long)garbage.closedByServer);
+                (unsigned long long)garbage.connections,
+                (unsigned long long)garbage.closedByServer);
     std::printf("  %-34s %llu sent, %llu dropped\n", "server frames",
                 (unsigned long long)net.value("frames_sent", uint64_t(0)),
                 (unsigned long long)net.value("frames_dropped", uint64_t(0)));
@@ -796,11 +800,10 @@ int Run(const Options& o) {
                 const double q = quiet[figure][p].get<double>();
                 return q > 0.0 ? attacked[figure][p].get<double>() / q : 0.0;
             };
-            out["attacked_over_quiet"] = {
-                {"frame_interval_p50", ratio("frame_interval_ms", "p50")},
-                {"frame_interval_p99", ratio("frame_interval_ms", "p99")},
-                {"edit_to_frame_p50", ratio("edit_to_frame_ms", "p50")},
-                {"edit_to_frame_p99", ratio("edit_to_frame_ms", "p99")}};
+            out["attacked_over_quiet"] = {{"frame_interval_p50", ratio("frame_interval_ms", "p50")},
+                                          {"frame_interval_p99", ratio("frame_interval_ms", "p99")},
+                                          {"edit_to_frame_p50", ratio("edit_to_frame_ms", "p50")},
+                                          {"edit_to_frame_p99", ratio("edit_to_frame_ms", "p99")}};
             std::printf("\n  attacked / quiet: %s\n", out["attacked_over_quiet"].dump().c_str());
         }
     } else {

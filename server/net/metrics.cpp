@@ -172,8 +172,8 @@ std::string Server::MetricsText() const {
             const nlohmann::json& h = scene[key];
             const std::string label = "scene=\"" + Label(scene.value("scene", "")) + "\"";
             for (size_t i = 0; i < h["le"].size(); ++i)
-                out << name << "_bucket{" << label << ",le=\"" << h["le"][i].get<double>()
-                    << "\"} " << h["cumulative"][i].get<uint64_t>() << "\n";
+                out << name << "_bucket{" << label << ",le=\"" << h["le"][i].get<double>() << "\"} "
+                    << h["cumulative"][i].get<uint64_t>() << "\n";
             out << name << "_bucket{" << label << ",le=\"+Inf\"} " << h["count"].get<uint64_t>()
                 << "\n";
             out << name << "_sum{" << label << "} " << h["sum"].get<double>() << "\n";

@@ -50,12 +50,11 @@ int ReadMap(const Context& ctx, const std::string& where, const char* what, int 
     // huge picture. Linear texels (12 bytes) and their smaller levels take about 16 a pixel.
     if (ctx.files.maxBufferBytes > 0 && EncodedImageSize(img.image, w, h) &&
         uint64_t(w) * uint64_t(h) * 16 > ctx.files.maxBufferBytes)
-        throw GltfLimitError(ctx.path + ": " + where + ": " + what + " image " +
-                             std::to_string(tex.source) + " is " + std::to_string(w) + " × " +
-                             std::to_string(h) + " pixels, " +
-                             std::to_string(uint64_t(w) * uint64_t(h) * 16) +
-                             " bytes decoded; the limit is " +
-                             std::to_string(ctx.files.maxBufferBytes));
+        throw GltfLimitError(
+            ctx.path + ": " + where + ": " + what + " image " + std::to_string(tex.source) +
+            " is " + std::to_string(w) + " × " + std::to_string(h) + " pixels, " +
+            std::to_string(uint64_t(w) * uint64_t(h) * 16) + " bytes decoded; the limit is " +
+            std::to_string(ctx.files.maxBufferBytes));
     std::vector<glm::vec3> linear;
     const char* why = "";
     if (!DecodeSrgbImage(img.image, w, h, linear, why)) {

@@ -123,8 +123,9 @@ glm::vec3 TintMap::Over(const glm::vec2& a, const glm::vec2& b, const glm::vec2&
 
 bool EncodedImageSize(const std::vector<unsigned char>& encoded, int& width, int& height) {
     int channels = 0;
-    return !encoded.empty() && stbi_info_from_memory(encoded.data(), static_cast<int>(encoded.size()),
-                                                     &width, &height, &channels) != 0;
+    return !encoded.empty() &&
+           stbi_info_from_memory(encoded.data(), static_cast<int>(encoded.size()), &width, &height,
+                                 &channels) != 0;
 }
 
 bool DecodeSrgbImage(const std::vector<unsigned char>& encoded, int& width, int& height,

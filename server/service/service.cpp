@@ -337,8 +337,7 @@ void Service::CheckMay(const std::string& name, uint64_t by, Role role, Change c
     CheckMayLocked(name, by, role, change);
 }
 
-void Service::CheckMayLocked(const std::string& name, uint64_t by, Role role,
-                             Change change) const {
+void Service::CheckMayLocked(const std::string& name, uint64_t by, Role role, Change change) const {
     const char* verb = change == Change::kEdit     ? "edit"
                        : change == Change::kReload ? "reload"
                                                    : "unload";
@@ -348,14 +347,14 @@ void Service::CheckMayLocked(const std::string& name, uint64_t by, Role role,
                                                       name + "', not " + verb + " it");
     if (role == Role::kAdmin || (role == Role::kEditor && change != Change::kUnload)) return;
     if (auto owner = owners_.find(name); owner != owners_.end() && owner->second != by)
-        throw ServiceError(ErrorKind::kForbidden,
-                           "scene '" + name +
-                               "' was loaded by another client, which is still connected: only "
-                               "it may " +
-                               verb + " the scene" +
-                               (change == Change::kUnload
-                                    ? " (or a client whose token has the admin role)"
-                                    : " (or a client whose token has the editor role)"));
+        throw ServiceError(
+            ErrorKind::kForbidden,
+            "scene '" + name +
+                "' was loaded by another client, which is still connected: only "
+                "it may " +
+                verb + " the scene" +
+                (change == Change::kUnload ? " (or a client whose token has the admin role)"
+                                           : " (or a client whose token has the editor role)"));
 }
 std::shared_ptr<Session> Service::Find(const std::string& name) const {
     std::lock_guard lock(mutex_);

@@ -916,9 +916,9 @@ TEST(ServerProcess, ImageSizesAreCheckedBeforeReading) {
                             {"bufferView": 1, "count": 3, "componentType": 5126, "type": "VEC2"}]})";
     };
     // A PNG's signature and IHDR (10000 × 10000, 8-bit RGB): all stb_image reads for its size.
-    const unsigned char bomb[] = {0x89, 'P',  'N',  'G',  0x0d, 0x0a, 0x1a, 0x0a, 0, 0, 0, 13,
-                                  'I',  'H',  'D',  'R',  0,    0,    0x27, 0x10, 0, 0, 0x27,
-                                  0x10, 8,    2,    0,    0,    0,    0,    0,    0,    0};
+    const unsigned char bomb[] = {0x89, 'P',  'N', 'G', 0x0d, 0x0a, 0x1a, 0x0a, 0,    0, 0,
+                                  13,   'I',  'H', 'D', 'R',  0,    0,    0x27, 0x10, 0, 0,
+                                  0x27, 0x10, 8,   2,   0,    0,    0,    0,    0,    0, 0};
     std::ofstream(root / "bomb.png", std::ios::binary)
         .write(reinterpret_cast<const char*>(bomb), sizeof bomb);
     std::ofstream(root / "big.png", std::ios::binary) << std::string(2'000'000, 'x');
