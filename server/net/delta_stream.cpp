@@ -74,12 +74,10 @@ void DeltaStream::Advance(const service::FramePtr& frame) {
         bool send = fresh;
         for (int c = 0; c < 3 && !send; ++c) {
             const float e = values[3 * v + c];
-            const uint16_t half = protocol::FloatToHalf(e);
-            if (tolerance_ <= 0.0f)
-                send = half != baseline_[3 * v + c];
-            else
-                send = std::abs(e - protocol::HalfToFloat(baseline_[3 * v + c])) >
-                       tolerance_ * std::max(std::abs(e), floor);
+            const uint16_t held = baseline_[3 * v + c];
+            send = tolerance_ <= 0.0f ? protocol::FloatToHalf(e) != held
+                                      : std::abs(e - protocol::HalfToFloat(held)) >
+                                            tolerance_ * std::max(std::abs(e), floor);
         }
         if (!send) continue;
         for (int c = 0; c < 3; ++c) baseline_[3 * v + c] = protocol::FloatToHalf(values[3 * v + c]);
