@@ -1,6 +1,9 @@
 // penumbra-server: keeps scenes resident on the device and streams per-vertex irradiance to
 // clients over TCP and Unix sockets (protocol/SPEC.md). Only wiring lives here.
 #include <CLI/CLI.hpp>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include <cctype>
 #include <csignal>
 #include <cstdio>
@@ -13,6 +16,16 @@
 
 int main(int argc, char** argv) {
     using namespace penumbra;
+#ifdef __GLIBC__
+    // glibc's default thresholds grow with the largest block freed (up to 32 MiB mmapped, a
+    // 64 MiB heap top kept), and each thread that builds or runs a scene gets an arena of its
+    // own: a server whose scenes come and go would keep tens of MiB per arena that no
+    // malloc_trim returns. Fixed ones put blocks of a MiB and more in their own mappings and
+    // trim a heap's top past 2 MiB, so the server's memory falls back once a scene is dropped,
+    // while a frame's smaller buffers are still reused from the heap.
+    mallopt(M_MMAP_THRESHOLD, 1 << 20);
+    mallopt(M_TRIM_THRESHOLD, 2 << 20);
+#endif
     CLI::App app{"penumbra-server: a headless lighting service (protocol/SPEC.md)"};
     std::vector<std::string> listen;
     std::string sceneRoot = ".", device = "auto", readyFile;

@@ -265,7 +265,8 @@ LoadResult Service::Load(const LoadRequest& request) {
         // their streams as little as it can (docs/SERVICE.md).
         tbb::task_arena arena(tbb::task_arena::automatic, 1, tbb::task_arena::priority::low);
         arena.execute([&] {
-            session = std::make_shared<Session>(name, std::move(scene), request.settings, cancel);
+            session = std::make_shared<Session>(name, std::move(scene), request.settings, cancel,
+                                                attention_);
         });
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kInvalidArgument, name + ": " + e.what());
@@ -287,7 +288,10 @@ LoadResult Service::Load(const LoadRequest& request) {
 
 void Service::Hold(const std::string& name, uint64_t holder) {
     std::lock_guard lock(mutex_);
-    if (sessions_.count(name)) holders_[name].insert(holder);
+    auto it = sessions_.find(name);
+    if (it == sessions_.end()) return;
+    holders_[name].insert(holder);
+    it->second->SetHeld(true);
 }
 
 void Service::Own(const std::string& name, uint64_t owner) {
@@ -299,7 +303,10 @@ void Service::Own(const std::string& name, uint64_t owner) {
 
 void Service::Release(uint64_t holder) {
     std::lock_guard lock(mutex_);
-    for (auto& [name, held] : holders_) held.erase(holder);
+    for (auto& [name, held] : holders_)
+        if (auto it = sessions_.find(name);
+            held.erase(holder) && held.empty() && it != sessions_.end())
+            it->second->SetHeld(false);
     std::erase_if(owners_, [&](const auto& entry) { return entry.second == holder; });
 }
 

@@ -159,6 +159,8 @@ class Service {
     const SolverSettings defaults_;
     mutable std::mutex mutex_;
     std::map<std::string, std::shared_ptr<Session>> sessions_;
+    // Orders the sessions' work: those a client holds or watches first (Attention).
+    const std::shared_ptr<Attention> attention_ = std::make_shared<Attention>();
     std::vector<std::string> order_;                     // load order, newest last
     std::map<std::string, std::set<uint64_t>> holders_;  // scene -> connections holding it
     std::map<std::string, uint64_t> owners_;             // scene -> the connection that built it

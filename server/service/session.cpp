@@ -58,8 +58,11 @@ uint64_t NextSessionId() {
 }  // namespace
 
 Session::Session(std::string name, Scene scene, SessionSettings settings,
-                 const ProgressFn& progress)
-    : name_(std::move(name)), id_(NextSessionId()), settings_(std::move(settings)) {
+                 const ProgressFn& progress, std::shared_ptr<Attention> attention)
+    : name_(std::move(name)),
+      id_(NextSessionId()),
+      settings_(std::move(settings)),
+      attention_(std::move(attention)) {
     CheckSessionSettings(settings_);
     auto start = Clock::now();
     std::vector<std::string> notes;
@@ -108,6 +111,8 @@ Session::~Session() {
     frameMade_.notify_all();
     if (worker_.joinable()) worker_.join();
     if (rebuild_ && rebuild_->thread.joinable()) rebuild_->thread.join();
+    busy_ = false;
+    Recount();
     for (auto& [n, promise] : steps_)
         promise.set_exception(std::make_exception_ptr(
             ServiceError(ErrorKind::kShuttingDown, "the session closed before the step ran")));
@@ -122,6 +127,7 @@ int Session::AddSubscriber(FrameSink sink) {
         std::lock_guard lock(mutex_);
         id = nextSubscriber_++;
         subscribers_[id] = sink;
+        Recount();
         first = latest_;
         // The replayed frame counts as converged only if nothing is waiting to apply.
         if (first && first->converged && (!converged_ || !pending_.empty() || rebuild_)) {
@@ -137,6 +143,22 @@ int Session::AddSubscriber(FrameSink sink) {
 void Session::RemoveSubscriber(int id) {
     std::lock_guard lock(mutex_);
     subscribers_.erase(id);
+    Recount();
+}
+
+void Session::SetHeld(bool held) {
+    {
+        std::lock_guard lock(mutex_);
+        held_ = held;
+        Recount();
+    }
+    wake_.notify_all();  // a yielding worker comes to the foreground at once
+}
+
+void Session::Recount() {
+    const bool counts = busy_ && !Background();
+    if (counts != counted_ && attention_) attention_->Busy(counts ? 1 : -1);
+    counted_ = counts;
 }
 
 size_t Session::SubscriberCount() const {
@@ -465,13 +487,28 @@ bool Session::ApplyEditsInPlace(std::unique_lock<std::mutex>& lock, std::string&
 
 void Session::Run() {
     std::unique_lock lock(mutex_);
+    const auto work = [&] {
+        return stop_ || (rebuild_ && rebuild_->done) || (!rebuild_ && !pending_.empty()) ||
+               !steps_.empty() || (!settled_ && diverged_.empty()) ||
+               (!diverged_.empty() && !rebuild_ && !fallbackTried_);
+    };
     while (true) {
-        wake_.wait(lock, [&] {
-            return stop_ || (rebuild_ && rebuild_->done) || (!rebuild_ && !pending_.empty()) ||
-                   !steps_.empty() || (!settled_ && diverged_.empty()) ||
-                   (!diverged_.empty() && !rebuild_ && !fallbackTried_);
-        });
+        if (!work()) {
+            busy_ = false;
+            Recount();
+            wake_.wait(lock, work);
+        }
         if (stop_) return;
+        busy_ = true;
+        Recount();
+        // In the background (Attention), a session that only has its convergence to work on
+        // waits while a foreground one has frames to make. Edits, steps and finished
+        // rebuilds are someone's request: they never wait.
+        if (Background() && attention_ && attention_->ForegroundBusy() && pending_.empty() &&
+            steps_.empty() && !(rebuild_ && rebuild_->done)) {
+            wake_.wait_for(lock, std::chrono::milliseconds(50));
+            continue;
+        }
         std::string note;
         if (!gatherNoteSent_) note = gatherNote_, gatherNoteSent_ = true;  // the first frame
 

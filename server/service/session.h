@@ -95,6 +95,20 @@ struct LatencyHistogram {
     nlohmann::json Json() const;
 };
 
+// Which sessions have frames to make that someone is waiting for. A session that no
+// connection holds and nobody subscribes to (its loader has gone) is in the background: it
+// still converges, but only while no foreground session has frames to make, so that scenes
+// left behind by clients that went away do not slow the frames of those still connected.
+class Attention {
+  public:
+    // A foreground session starts (+1) or stops (-1) having frames to make.
+    void Busy(int delta) { busy_.fetch_add(delta, std::memory_order_relaxed); }
+    bool ForegroundBusy() const { return busy_.load(std::memory_order_relaxed) > 0; }
+
+  private:
+    std::atomic<int> busy_{0};
+};
+
 // Which glTF primitive an irradiance array belongs to.
 struct PrimitiveKey {
     std::string node;
@@ -177,8 +191,10 @@ class Session {
   public:
     // Builds the solver (seconds on large scenes) and starts the worker. Throws
     // penumbra::Error for bad settings or an unusable device.
+    // `attention`, shared by a service's sessions, orders their work (Attention); without
+    // it the session never yields.
     Session(std::string name, Scene scene, SessionSettings settings,
-            const ProgressFn& progress = {});
+            const ProgressFn& progress = {}, std::shared_ptr<Attention> attention = nullptr);
     ~Session();  // stops the worker; subscribers get no further frames
 
     const std::string& Name() const { return name_; }
@@ -204,6 +220,9 @@ class Session {
     int AddSubscriber(FrameSink sink);
     void RemoveSubscriber(int id);
     size_t SubscriberCount() const;
+    // Whether a connection holds the scene (Service::Hold; true until the service says
+    // otherwise). Unheld and unsubscribed, the session is in the background (Attention).
+    void SetHeld(bool held);
 
     // The newest frame, waiting for the first one if none exists yet.
     FramePtr Latest();
@@ -359,6 +378,12 @@ class Session {
     // Set by FallBackToCpu: every build from then on is on the CPU back end.
     std::atomic<bool> onCpu_{false};
     std::atomic<bool> editWaiting_{false};  // an edit is queued and no rebuild runs
+    // Attention: held_ by a connection (SetHeld); busy_, the worker has frames to make;
+    // counted_, counted busy in attention_ (busy_ and in the foreground).
+    const std::shared_ptr<Attention> attention_;
+    bool held_ = true, busy_ = false, counted_ = false;
+    bool Background() const { return !held_ && subscribers_.empty(); }
+    void Recount();  // counted_ brought in line with busy_ and Background(); mutex_ held
     std::thread worker_;
 };
 

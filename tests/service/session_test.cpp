@@ -95,6 +95,49 @@ TEST(Session, FirstFramesConvergeAndIdle) {
     EXPECT_EQ(session.Latest()->frame, frames) << "a converged session must idle";
 }
 
+// Issue 63: a scene nobody holds or watches (its loader gone) yields to the scenes that
+// clients are waiting on. It makes no frames while a foreground session is busy, goes on as
+// soon as none is, and is back in the foreground once held or watched.
+TEST(Session, AnUnheldSceneWaitsWhileAWatchedOneIsBusy) {
+    auto attention = std::make_shared<Attention>();
+    SessionSettings settings = Settings();
+    settings.convergedChange = 0.0;  // never idle: frames for as long as it runs
+    settings.maxFramesPerEdit = 1000000;
+    Session session("blocker", LoadGltf(kBlocker), settings, {}, attention);
+    session.Latest();
+    EXPECT_TRUE(attention->ForegroundBusy()) << "a held session making frames is counted";
+    auto framesIn = [&](int ms) {
+        const uint64_t before = session.Latest()->frame;
+        std::this_thread::sleep_for(std::chrono::milliseconds(ms));
+        return session.Latest()->frame - before;
+    };
+    session.SetHeld(false);
+    EXPECT_FALSE(attention->ForegroundBusy()) << "a background session is not counted";
+    EXPECT_GT(framesIn(300), 0u) << "alone, a background session goes on converging";
+
+    attention->Busy(1);  // another session, held, has frames to make
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));  // the frame under way ends
+    EXPECT_EQ(framesIn(400), 0u) << "a background session must wait while a held one is busy";
+
+    int id = session.AddSubscriber([](const FramePtr&) {});
+    EXPECT_GT(framesIn(300), 0u) << "a watched session is in the foreground";
+    session.RemoveSubscriber(id);
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    EXPECT_EQ(framesIn(400), 0u);
+    session.SetHeld(true);
+    EXPECT_GT(framesIn(300), 0u) << "a held session is in the foreground";
+
+    session.SetHeld(false);
+    attention->Busy(-1);  // the other session settled
+    EXPECT_GT(framesIn(300), 0u) << "with no foreground work, the background goes on";
+    // An edit is someone's request: it reaches a frame even while the foreground is busy.
+    attention->Busy(1);
+    const uint64_t edit = session.Submit(Dim("emitter", 0.5f));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    EXPECT_GE(session.Latest()->lastEdit, edit);
+    attention->Busy(-1);
+}
+
 // Issue 63, the frame contract: a frame is converged only when it includes every edit
 // acknowledged before it. A move (a link rebuild) and a light edit sent while the first
 // frames iterate: the old solver's frames go on during the rebuild, none of them converged.
