@@ -1,11 +1,18 @@
 // Scene sessions by name, loading under the scene root, limits.
 #include "service/service.h"
 
+#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#ifdef __linux__
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+#endif
 
 #include <algorithm>
 #include <fstream>
 #include <random>
+#include <thread>
 
 #include "base/check.h"
 #include "scene/gltf_loader.h"
@@ -26,6 +33,14 @@ std::string Replace(std::string message, const std::string& path, const std::str
          at = message.find(path, at + as.size()))
         message.replace(at, path.size(), as);
     return message;
+}
+
+// The calling thread (only it) at a lower priority than the rest of the process (Linux's
+// nice 10): while scenes stream, the operating system gives it what their frames leave.
+void LowerThisThreadsPriority() {
+#ifdef __linux__
+    setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);  // best effort
+#endif
 }
 
 }  // namespace
@@ -51,7 +66,12 @@ std::optional<Role> RoleNamed(const std::string& name) {
 }
 
 Service::Service(fs::path sceneRoot, ServiceLimits limits, SolverSettings defaults)
-    : root_(fs::weakly_canonical(sceneRoot)), limits_(limits), defaults_(std::move(defaults)) {}
+    : root_(fs::weakly_canonical(sceneRoot)), limits_(limits), defaults_(std::move(defaults)) {
+    // TBB starts its worker threads from the thread that first asks for them, with that
+    // thread's priority: asked from here, before a load's lowered thread could be the first.
+    tbb::parallel_for(0, 4 * tbb::this_task_arena::max_concurrency(),
+                      [](int) { std::this_thread::sleep_for(std::chrono::milliseconds(2)); });
+}
 
 SolverSettings Service::DefaultsFor(const std::string& name) const {
     const SolverEntry& entry = FindSolver(name);
@@ -109,6 +129,26 @@ Environment Service::MakeEnvironment(const std::string& path,
 }
 
 LoadResult Service::Load(const LoadRequest& request) {
+    // The load (the file read and decoded, the solver built) on a thread of its own at a lower
+    // priority, so that the frames of the scenes already loaded slow as little as they can;
+    // the new session's worker then starts from here, at the usual priority.
+    LoadResult result;
+    std::exception_ptr failed;
+    std::thread loader([&] {
+        LowerThisThreadsPriority();
+        try {
+            result = LoadHere(request);
+        } catch (...) {
+            failed = std::current_exception();
+        }
+    });
+    loader.join();
+    if (failed) std::rethrow_exception(failed);
+    if (!result.reused) result.session->Start();
+    return result;
+}
+
+LoadResult Service::LoadHere(const LoadRequest& request) {
     // Name the session and find the file before anything slow happens.
     std::string name;
     fs::path file;
@@ -266,7 +306,7 @@ LoadResult Service::Load(const LoadRequest& request) {
         tbb::task_arena arena(tbb::task_arena::automatic, 1, tbb::task_arena::priority::low);
         arena.execute([&] {
             session = std::make_shared<Session>(name, std::move(scene), request.settings, cancel,
-                                                attention_);
+                                                attention_, false);
         });
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kInvalidArgument, name + ": " + e.what());

@@ -148,6 +148,8 @@ class Service {
     SolverSettings DefaultsFor(const std::string& name) const;
 
   private:
+    // Load's work on the calling thread; a new session's worker is not started.
+    LoadResult LoadHere(const LoadRequest& request);
     // With mutex_ held: whether no connection holds scene `name` and nobody watches it;
     // scene `name` taken out of every table (its session returned); CheckMay's test.
     bool Unheld(const std::string& name) const;

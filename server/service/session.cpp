@@ -58,7 +58,7 @@ uint64_t NextSessionId() {
 }  // namespace
 
 Session::Session(std::string name, Scene scene, SessionSettings settings,
-                 const ProgressFn& progress, std::shared_ptr<Attention> attention)
+                 const ProgressFn& progress, std::shared_ptr<Attention> attention, bool startWorker)
     : name_(std::move(name)),
       id_(NextSessionId()),
       settings_(std::move(settings)),
@@ -93,7 +93,11 @@ Session::Session(std::string name, Scene scene, SessionSettings settings,
     reachHi_ = scene.BoundsMax() + reach;
     validated_ = scene;
     applied_ = std::move(scene);
-    worker_ = std::thread([this] { Run(); });
+    if (startWorker) Start();
+}
+
+void Session::Start() {
+    if (!worker_.joinable()) worker_ = std::thread([this] { Run(); });
 }
 
 Session::ReturnFreedMemory::~ReturnFreedMemory() {

@@ -192,10 +192,13 @@ class Session {
     // Builds the solver (seconds on large scenes) and starts the worker. Throws
     // penumbra::Error for bad settings or an unusable device.
     // `attention`, shared by a service's sessions, orders their work (Attention); without
-    // it the session never yields.
+    // it the session never yields. `start` false: no frames until Start (the worker thread
+    // is then the caller's child, with its priority, not the builder's).
     Session(std::string name, Scene scene, SessionSettings settings,
-            const ProgressFn& progress = {}, std::shared_ptr<Attention> attention = nullptr);
-    ~Session();  // stops the worker; subscribers get no further frames
+            const ProgressFn& progress = {}, std::shared_ptr<Attention> attention = nullptr,
+            bool start = true);
+    void Start();  // starts the worker, if not yet started
+    ~Session();    // stops the worker; subscribers get no further frames
 
     const std::string& Name() const { return name_; }
     const SessionSettings& Settings() const { return settings_; }

@@ -3,6 +3,9 @@
 #include "service/session.h"
 
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
 #include <glm/gtc/matrix_transform.hpp>
 
@@ -11,6 +14,7 @@
 #include "gpu/context.h"
 #include "reference/path_tracer.h"
 #include "scene/gltf_loader.h"
+#include "service/service.h"
 #include "solvers/antiradiance/antiradiance_solver.h"
 #include "test_util.h"
 
@@ -136,6 +140,36 @@ TEST(Session, AnUnheldSceneWaitsWhileAWatchedOneIsBusy) {
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     EXPECT_GE(session.Latest()->lastEdit, edit);
     attention->Busy(-1);
+}
+
+// Issue 63: a load reads and builds on a thread at a lower priority (nice + 10), so that the
+// frames of the scenes already loaded slow as little as they can; its session's frames are
+// made at the usual priority (the worker is not the build thread's child).
+TEST(Service, ALoadBuildsAtALowerPriorityAndItsFramesAtTheUsualOne) {
+    auto nice = [] { return getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid))); };
+    Service service(std::string(PENUMBRA_SOURCE_DIR) + "/scenes", ServiceLimits{},
+                    SolverSettings{});
+    LoadRequest request;
+    request.path = "blocker.gltf";
+    request.settings = Settings();
+    std::atomic<int> buildNice{-100};
+    request.progress = [&](const std::string&, double) { buildNice = nice(); };
+    const int usual = nice();
+    LoadResult loaded = service.Load(request);
+    EXPECT_EQ(buildNice.load(), std::min(usual + 10, 19)) << "the build's priority";
+    EXPECT_EQ(nice(), usual) << "the caller's priority is its own";
+    std::atomic<int> frameNice{-100};
+    std::atomic<uint64_t> frame{0};
+    int id = loaded.session->AddSubscriber([&](const FramePtr& f) {
+        frameNice = nice();
+        frame = f->frame;
+    });
+    const uint64_t stepped = loaded.session->Step(1);  // made on the worker
+    for (int i = 0; i < 200 && frame < stepped; ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    loaded.session->RemoveSubscriber(id);
+    EXPECT_GE(frame.load(), stepped);
+    EXPECT_EQ(frameNice.load(), usual) << "the session's frames at the usual priority";
 }
 
 // Issue 63, the frame contract: a frame is converged only when it includes every edit
