@@ -120,6 +120,45 @@ void ReadPenumbraExtras(const Context& ctx, const std::string& where, const tiny
     out.hasMotionBounds = true;
 }
 
+// A textureInfo's KHR_texture_transform: `map` becomes a copy of itself (the texels shared)
+// read through the transform, translation × rotation × scale as the extension defines them,
+// and `set` its texCoord, if it overrides it.
+void ReadTextureTransform(const Context& ctx, const std::string& where, const char* what,
+                          const tinygltf::ExtensionMap& extensions, Scene& scene, int& map,
+                          int& set) {
+    auto it = extensions.find("KHR_texture_transform");
+    if (it == extensions.end() || map < 0) return;
+    const tinygltf::Value& t = it->second;
+    const std::string at = where + ": " + what + "'s KHR_texture_transform";
+    auto number = [&](const tinygltf::Value& v, const char* name) {
+        const double x = v.IsNumber() ? v.GetNumberAsDouble() : NAN;
+        if (!std::isfinite(x)) ctx.Fail(at, std::string(name) + " is not a finite number");
+        return static_cast<float>(x);
+    };
+    auto pair = [&](const char* name, glm::vec2 value) {
+        if (!t.Has(name)) return value;
+        const tinygltf::Value& v = t.Get(name);
+        if (!v.IsArray() || v.ArrayLen() != 2)
+            ctx.Fail(at, std::string(name) + " is not 2 numbers");
+        return glm::vec2(number(v.Get(0), name), number(v.Get(1), name));
+    };
+    const glm::vec2 offset = pair("offset", glm::vec2(0.0f)),
+                    scale = pair("scale", glm::vec2(1.0f));
+    const float rotation = t.Has("rotation") ? number(t.Get("rotation"), "rotation") : 0.0f;
+    if (t.Has("texCoord")) {
+        const float c = number(t.Get("texCoord"), "texCoord");
+        if (!(c >= 0.0f && c <= 7.0f && c == std::floor(c)))
+            ctx.Fail(at, "texCoord must be 0 to 7");
+        set = static_cast<int>(c);
+    }
+    const float cs = std::cos(rotation), sn = std::sin(rotation);
+    const glm::mat3 translate(1, 0, 0, 0, 1, 0, offset.x, offset.y, 1);  // columns, as GLSL's
+    const glm::mat3 rotate(cs, sn, 0, -sn, cs, 0, 0, 0, 1);
+    const glm::mat3 stretch(scale.x, 0, 0, 0, scale.y, 0, 0, 0, 1);
+    scene.maps.push_back(scene.maps[map].Transformed(translate * rotate * stretch));
+    map = static_cast<int>(scene.maps.size()) - 1;
+}
+
 Material ReadMaterial(const Context& ctx, int index, Scene& scene, std::vector<int>& mapOfTexture) {
     const auto& m = ctx.model.materials[index];
     std::string where = "material " + std::to_string(index) + " '" + m.name + "'";
@@ -177,8 +216,13 @@ Material ReadMaterial(const Context& ctx, int index, Scene& scene, std::vector<i
     if (!(transmission >= 0.0f && transmission <= 1.0f))
         ctx.Fail(where, "KHR_materials_transmission's transmissionFactor is not in [0, 1]");
     if (coverage < 1.0f || transmission > 0.0f) PassThrough(out, coverage, transmission);
-    out.baseColorMap = baseMap, out.baseColorSet = pbr.baseColorTexture.texCoord;
-    out.emissionMap = emissionMap, out.emissionSet = m.emissiveTexture.texCoord;
+    int baseSet = pbr.baseColorTexture.texCoord, emissionSet = m.emissiveTexture.texCoord;
+    ReadTextureTransform(ctx, where, "baseColorTexture", pbr.baseColorTexture.extensions, scene,
+                         baseMap, baseSet);
+    ReadTextureTransform(ctx, where, "emissiveTexture", m.emissiveTexture.extensions, scene,
+                         emissionMap, emissionSet);
+    out.baseColorMap = baseMap, out.baseColorSet = baseSet;
+    out.emissionMap = emissionMap, out.emissionSet = emissionSet;
     return out;
 }
 
@@ -233,11 +277,13 @@ namespace {
 
 // The extensions whose meaning the loader takes in: emissive strength, punctual lights,
 // Draco-compressed meshes (decoded by tinygltf with Debian's libdraco as the file is read),
-// quantised attributes (gltf_accessors.cpp) and meshopt-compressed buffers (gltf_meshopt.cpp).
+// quantised attributes (gltf_accessors.cpp), meshopt-compressed buffers (gltf_meshopt.cpp),
+// thin transmission and texture-coordinate transforms of the colour maps.
 bool Supported(const std::string& extension) {
     return extension == "KHR_materials_emissive_strength" || extension == "KHR_lights_punctual" ||
            extension == "KHR_draco_mesh_compression" || extension == "KHR_mesh_quantization" ||
-           extension == "EXT_meshopt_compression" || extension == "KHR_materials_transmission";
+           extension == "EXT_meshopt_compression" || extension == "KHR_materials_transmission" ||
+           extension == "KHR_texture_transform";
 }
 
 }  // namespace

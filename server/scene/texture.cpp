@@ -91,11 +91,19 @@ glm::vec3 TintMap::Bilinear(const Level& level, const glm::vec2& uv) const {
                     glm::mix(at(x0, y0 + 1), at(x0 + 1, y0 + 1), ax), ay);
 }
 
-glm::vec3 TintMap::At(const glm::vec2& uv) const { return Bilinear((*levels_)[0], uv); }
+glm::vec3 TintMap::At(const glm::vec2& uv) const { return Bilinear((*levels_)[0], Apply(uv)); }
 
-glm::vec3 TintMap::Over(const glm::vec2& a, const glm::vec2& b, const glm::vec2& c) const {
+TintMap TintMap::Transformed(const glm::mat3& uv) const {
+    TintMap out = *this;
+    out.uv_ = uv_ * uv;
+    return out;
+}
+
+glm::vec3 TintMap::Over(const glm::vec2& ra, const glm::vec2& rb, const glm::vec2& rc) const {
     // The level at which the triangle covers about 16 texels, then the bilinear tints at the
-    // centroids of its 4 × 4 subdivision into 16 triangles of equal area.
+    // centroids of its 4 × 4 subdivision into 16 triangles of equal area. An affine transform
+    // maps the triangle to a triangle and its centroids to the image's.
+    const glm::vec2 a = Apply(ra), b = Apply(rb), c = Apply(rc);
     const glm::vec2 e1 = b - a, e2 = c - a;
     const double texels =
         0.5 * std::abs(static_cast<double>(e1.x) * e2.y - static_cast<double>(e1.y) * e2.x) *

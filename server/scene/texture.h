@@ -33,6 +33,10 @@ class TintMap {
     glm::vec3 At(const glm::vec2& uv) const;
     // The tint averaged over the triangle a, b, c of texture coordinates.
     glm::vec3 Over(const glm::vec2& a, const glm::vec2& b, const glm::vec2& c) const;
+    // This map read through the affine texture-coordinate transform `uv` (a glTF textureInfo's
+    // KHR_texture_transform: uv' = (uv × (u, v, 1)).xy, applied before this map's own), the
+    // texels shared.
+    TintMap Transformed(const glm::mat3& uv) const;
 
   private:
     struct Level {
@@ -41,9 +45,11 @@ class TintMap {
     };
     glm::vec3 Bilinear(const Level& level, const glm::vec2& uv) const;
 
+    glm::vec2 Apply(const glm::vec2& uv) const { return glm::vec2(uv_ * glm::vec3(uv, 1.0f)); }
     std::shared_ptr<const std::vector<Level>> levels_;
     glm::vec3 mean_{0.0f};
     Wrap s_, t_;
+    glm::mat3 uv_{1.0f};  // Transformed
 };
 
 // An encoded image's width and height from its header (nothing decoded); false when stb_image

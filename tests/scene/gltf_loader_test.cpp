@@ -370,6 +370,80 @@ TEST(GltfLoader, ReadsColourMapsAndTheirCoordinates) {
         Error);
 }
 
+// Issue 62: KHR_texture_transform on a colour map's textureInfo (offset, rotation, scale,
+// texCoord) as the extension defines it, for that map only; the texels are not copied.
+TEST(GltfLoader, ColourMapsReadThroughTheirTextureTransforms) {
+    const auto dir = testing::TempDir("gltf-texture-transform");
+    // 2 × 2 texels: white at the top left (u, v < ½), black elsewhere; clamped.
+    std::vector<uint8_t> rgb(2 * 2 * 3, 0);
+    std::fill(rgb.begin(), rgb.begin() + 3, 255);
+    WritePng((dir / "corner.png").string(), 2, 2, rgb);
+    nlohmann::json doc = Cornell();
+    const int count = doc["accessors"][0]["count"];  // the floor's POSITION
+    std::vector<float> uv;  // every floor vertex at (¼, ¾): a black texel
+    for (int i = 0; i < count; ++i) uv.insert(uv.end(), {0.25f, 0.75f});
+    std::ofstream(dir / "uv.bin", std::ios::binary)
+        .write(reinterpret_cast<const char*>(uv.data()), uv.size() * sizeof(float));
+    const int buffer = static_cast<int>(doc["buffers"].size());
+    doc["buffers"].push_back({{"uri", "uv.bin"}, {"byteLength", uv.size() * sizeof(float)}});
+    doc["bufferViews"].push_back({{"buffer", buffer}, {"byteLength", uv.size() * sizeof(float)}});
+    doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
+                                {"componentType", 5126},
+                                {"count", count},
+                                {"type", "VEC2"}});
+    auto& attributes = doc["meshes"][0]["primitives"][0]["attributes"];
+    attributes["TEXCOORD_0"] = doc["accessors"].size() - 1;
+    doc["images"] = {{{"uri", "corner.png"}}};
+    doc["textures"] = {{{"source", 0}, {"sampler", 0}}};
+    doc["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33071}}};
+    doc["materials"][0]["emissiveTexture"] = {{"index", 0}};
+    doc["materials"][0]["emissiveFactor"] = {1.0, 1.0, 1.0};
+    doc["extensionsUsed"] = {"KHR_texture_transform"};
+    // The floor's first vertex's tints with `transform` on the base colour map.
+    auto tints = [&](const nlohmann::json& transform) {
+        doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {
+            {"index", 0}, {"extensions", {{"KHR_texture_transform", transform}}}};
+        std::ofstream(dir / "transformed.gltf") << doc.dump();
+        const Scene scene = LoadGltf((dir / "transformed.gltf").string());
+        for (const auto& w : scene.warnings)
+            EXPECT_EQ(w.find("KHR_texture_transform"), std::string::npos) << w;
+        const uint32_t p = scene.nodes[FindNode(scene, "floor")].primitives[0];
+        return TintsAt(scene, p, glm::uvec3(0), 0.0f, 0.0f);
+    };
+    // The texture's mean is ¼ white: its white texel is a tint of 4, a black one 0.
+    const Tints none = tints(nlohmann::json::object());
+    EXPECT_NEAR(none.albedo.x, 0.0f, 1e-5f);
+    EXPECT_NEAR(tints({{"offset", {0.0, -0.5}}}).albedo.x, 4.0f, 1e-5f);
+    EXPECT_NEAR(tints({{"scale", {1.0, 1.0 / 3.0}}}).albedo.x, 4.0f, 1e-5f);
+    // A quarter turn, counter-clockwise as the extension's matrix has it: (¼, ¾) → (−¾, ¼),
+    // then the offset: (¼, ¼), white. Turned the other way it would read (1, 0), black.
+    const Tints turned = tints({{"rotation", 1.5707963267948966}, {"offset", {1.0, 0.0}}});
+    EXPECT_NEAR(turned.albedo.x, 4.0f, 1e-4f);
+    EXPECT_NEAR(turned.emission.x, 0.0f, 1e-5f) << "the emissive map has no transform";
+    // texCoord overrides the textureInfo's set: set 1 is at (¼, ¼).
+    for (float& x : uv) x = 0.25f;
+    std::ofstream(dir / "uv1.bin", std::ios::binary)
+        .write(reinterpret_cast<const char*>(uv.data()), uv.size() * sizeof(float));
+    doc["buffers"].push_back({{"uri", "uv1.bin"}, {"byteLength", uv.size() * sizeof(float)}});
+    doc["bufferViews"].push_back(
+        {{"buffer", buffer + 1}, {"byteLength", uv.size() * sizeof(float)}});
+    doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
+                                {"componentType", 5126},
+                                {"count", count},
+                                {"type", "VEC2"}});
+    attributes["TEXCOORD_1"] = doc["accessors"].size() - 1;
+    EXPECT_NEAR(tints({{"texCoord", 1}}).albedo.x, 4.0f, 1e-5f);
+    // A transform that is not numbers is refused, naming the material and the map.
+    try {
+        tints({{"scale", {1.0, "two"}}});
+        ADD_FAILURE() << "a bad scale loaded";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("baseColorTexture's KHR_texture_transform"),
+                  std::string::npos)
+            << e.what();
+    }
+}
+
 // An image in a buffer view that reaches past its buffer is refused with why: tinygltf hands
 // the view's bytes over unchecked (the fuzzer read past a .glb's buffer that way).
 TEST(GltfLoader, AnImageOutsideItsBufferIsRefused) {
