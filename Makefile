@@ -77,9 +77,10 @@ bench-stream: benches
 
 # The soak without issue 63's attackers and with them (silent and slow connections, loaders
 # that leave, a foreign reload), SOAK_ATTACK_SECONDS each: the legitimate clients' ratios.
-SOAK_ATTACK_SECONDS ?= 300
+SOAK_ATTACK_SECONDS ?= 60
+SOAK_ATTACK_PAIRS ?= 3
 bench-soak-attack: benches
-	$(BUILD)/bench/penumbra-bench-soak --compare --seconds $(SOAK_ATTACK_SECONDS) --name soak-attack --out bench/results
+	$(BUILD)/bench/penumbra-bench-soak --compare --pairs $(SOAK_ATTACK_PAIRS) --seconds $(SOAK_ATTACK_SECONDS) --name soak-attack --out bench/results
 
 # The real-world corpus (scripts/real-corpus.sh): Debian's assimp-testmodels (installed when
 # missing) and generated face-node and sunlit scenes, each solver at the defaults against the
