@@ -8,6 +8,7 @@
 #include "output/compare.h"
 #include "render/renderer.h"
 #include "scene/gltf_loader.h"
+#include "scene/refine_output.h"
 #include "solvers/registry.h"
 
 namespace penumbra::cli {
@@ -69,6 +70,16 @@ void AddColor0(CLI::App* app, std::string& color0) {
         ->capture_default_str();
 }
 
+void AddRefine(CLI::App* app, float& edge) {
+    app->add_option("--refine", edge,
+                    "refined output for coarse meshes: triangles subdivided until no edge is "
+                    "longer than this many metres before lighting, and the output (glTF, JSON) "
+                    "carries the refined meshes with a value at each of their vertices; 0: the "
+                    "file's vertices")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0f, 1e30f));
+}
+
 void CheckOutputPath(const std::string& outPath) {
     if (outPath != "-" && !EndsWith(outPath, ".json") && !EndsWith(outPath, ".glb") &&
         !EndsWith(outPath, ".gltf"))
@@ -79,7 +90,7 @@ void CheckOutputPath(const std::string& outPath) {
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
          const IterationOptions& iterations, const std::string& device,
          const std::string& channelName, const EnvironmentOptions& environment,
-         const GatherOptions& gather, DisplayColor color, bool quiet) {
+         const GatherOptions& gather, DisplayColor color, bool quiet, float refine) {
     Channel channel = ParseChannel(channelName);
     CheckOutputPath(outPath);
     const GatherSettings gatherSettings = gather.Settings();
@@ -91,6 +102,7 @@ int Bake(const std::string& scenePath, const std::string& outPath, SolverSetting
     progress.Update("loading " + scenePath, 0.0);
     Scene scene = LoadGltf(scenePath);
     environment.Apply(scene);
+    if (refine > 0.0f) RefineForOutput(scene, refine);
     Warn(scene, scenePath);
     std::string fellBack;
     std::unique_ptr<Solver> solver = Solve(scene, settings, scenePath, gather, gatherSettings,
@@ -182,12 +194,13 @@ std::string Duration(double seconds) {
 }  // namespace
 
 int Reference(const std::string& scenePath, const std::string& outPath, ReferenceSettings settings,
-              const EnvironmentOptions& environment, DisplayColor color, bool quiet) {
+              const EnvironmentOptions& environment, DisplayColor color, bool quiet, float refine) {
     CheckOutputPath(outPath);
     Progress progress(!quiet && StderrIsTerminal());
     progress.Update("loading " + scenePath, 0.0);
     Scene scene = LoadGltf(scenePath);
     environment.Apply(scene);
+    if (refine > 0.0f) RefineForOutput(scene, refine);
     Warn(scene, scenePath);
     settings.progress = [&](double f, double left) {
         progress.Update("path tracing, " + Duration(left) + " left", f);
@@ -288,7 +301,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
     std::unique_ptr<Solver> solver;
     std::string source;
     if (fromFile) {
-        perVertex = render::IrradianceForScene(scene, ReadIrradianceJson(o.lighting));
+        perVertex = render::IrradianceForScene(scene, ReadIrradianceFile(o.lighting));
         source = o.lighting;
     } else {
         std::string fellBack;
@@ -304,7 +317,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
     render::Mesh mesh;
     bool heat = !o.compare.empty();
     if (heat) {
-        auto other = render::IrradianceForScene(scene, ReadIrradianceJson(o.compare));
+        auto other = render::IrradianceForScene(scene, ReadIrradianceFile(o.compare));
         mesh = render::ErrorMesh(scene, perVertex, other, o.errorScale, kDefaultFloor);
     } else if (solver && o.mesh != "input") {
         mesh = render::ShadedRefinedMesh(scene, solver->GetSurfels(), perSurfel);
@@ -343,7 +356,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
 int CompareFiles(const std::string& aPath, const std::string& bPath, bool json, double maxRmse,
                  double floor) {
     if (!(floor > 0.0 && floor <= 1.0)) throw Error("--floor must be in (0, 1]");
-    IrradianceFile a = ReadIrradianceJson(aPath), b = ReadIrradianceJson(bPath);
+    IrradianceFile a = ReadIrradianceFile(aPath), b = ReadIrradianceFile(bPath);
     if (a.channel != b.channel)
         throw Error("channels differ: " + aPath + " holds '" + a.channel + "', " + bPath +
                     " holds '" + b.channel + "'");

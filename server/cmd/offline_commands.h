@@ -196,15 +196,18 @@ constexpr int kGateFailed = 4;
 
 // `--color0` of bake and reference: what glTF out puts in COLOR_0 beside _IRRADIANCE.
 void AddColor0(CLI::App* app, std::string& color0);
+// `--refine EDGE` of bake and reference (RefineForOutput: 0, the file's vertices).
+void AddRefine(CLI::App* app, float& edge);
 // Refuses an output path other than .json, .glb, .gltf or - (JSON on standard output).
 void CheckOutputPath(const std::string& outPath);
 
 int Bake(const std::string& scenePath, const std::string& outPath, SolverSettings settings,
          const IterationOptions& iterations, const std::string& device,
          const std::string& channelName, const EnvironmentOptions& environment,
-         const GatherOptions& gather, DisplayColor color, bool quiet);
+         const GatherOptions& gather, DisplayColor color, bool quiet, float refine = 0.0f);
 int Reference(const std::string& scenePath, const std::string& outPath, ReferenceSettings settings,
-              const EnvironmentOptions& environment, DisplayColor color, bool quiet);
+              const EnvironmentOptions& environment, DisplayColor color, bool quiet,
+              float refine = 0.0f);
 int Render(const RenderOptions& o, SolverSettings settings, const IterationOptions& iterations,
            const std::string& device, const std::string& channelName,
            const EnvironmentOptions& environment);

@@ -49,6 +49,7 @@ struct BakeCommand {
     EnvironmentOptions bakeEnv;
     GatherOptions bakeGather;
     bool quiet = false;
+    float refine = 0.0f;
 
     void Add(CLI::App& app) {
         cmd = app.add_subcommand("bake",
@@ -59,6 +60,7 @@ struct BakeCommand {
                         "output file: .json, .glb or .gltf; - for JSON on standard output")
             ->required();
         AddColor0(cmd, bakeColor0);
+        AddRefine(cmd, refine);
         cli::AddSolverOptions(cmd, settings.solver, settings.options);
         iterations.Add(cmd);
         cmd->add_option(
@@ -94,7 +96,7 @@ struct BakeCommand {
     int Run() {
         settings.backOcclusion = ParseBackOcclusion(backOcclusion);
         return Bake(scenePath, outPath, settings, iterations, device, channel, bakeEnv, bakeGather,
-                    ParseDisplayColor(bakeColor0), quiet);
+                    ParseDisplayColor(bakeColor0), quiet, refine);
     }
 };
 
@@ -105,6 +107,7 @@ struct ReferenceCommand {
     ReferenceSettings refSettings;
     EnvironmentOptions refEnv;
     bool refQuiet = false;
+    float refine = 0.0f;
 
     void Add(CLI::App& app) {
         cmd = app.add_subcommand(
@@ -116,6 +119,7 @@ struct ReferenceCommand {
                         "output file: .json, .glb or .gltf; - for JSON on standard output")
             ->required();
         AddColor0(cmd, refColor0);
+        AddRefine(cmd, refine);
         cmd->add_option("--samples", refSettings.samples, "light paths per vertex (>= 2)")
             ->capture_default_str();
         cmd->add_option("--max-depth", refSettings.maxDepth,
@@ -133,7 +137,7 @@ struct ReferenceCommand {
     int Run() {
         refSettings.channel = ParseChannel(refChannel);
         return Reference(refScene, refOut, refSettings, refEnv, ParseDisplayColor(refColor0),
-                         refQuiet);
+                         refQuiet, refine);
     }
 };
 
@@ -160,7 +164,8 @@ struct RenderCommand {
                         "scene from -Z");
         cmd->add_option("--camera-name", ro.cameraName, "a perspective camera of the file");
         cmd->add_option("--lighting", ro.lighting,
-                        "per-vertex irradiance JSON (bake, reference, get) instead of solving");
+                        "per-vertex irradiance instead of solving: JSON (bake, reference, get) "
+                        "or the .glb/.gltf bake and reference write (its _IRRADIANCE)");
         cmd->add_option("--compare", ro.compare,
                         "reference irradiance JSON: render the relative error as a heat map");
         cmd->add_option("--error-scale", ro.errorScale, "relative error shown as red")

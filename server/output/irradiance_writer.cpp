@@ -3,6 +3,7 @@
 
 #include <tiny_gltf.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -112,6 +113,15 @@ void WriteIrradianceJson(const std::string& path, const Scene& scene,
         nlohmann::json values = nlohmann::json::array();
         for (const auto& v : result.primitives[p]) values.push_back({v.x, v.y, v.z});
         e["irradiance"] = std::move(values);
+        if (prim.refined) {  // RefineForOutput: the vertices the values are at
+            nlohmann::json positions = nlohmann::json::array(), normals = positions;
+            for (const auto& v : prim.objectPositions) positions.push_back({v.x, v.y, v.z});
+            for (const auto& n : prim.objectNormals) normals.push_back({n.x, n.y, n.z});
+            e["refined"] = {{"positions", std::move(positions)},
+                            {"normals", std::move(normals)},
+                            {"indices", prim.indices},
+                            {"parent_triangles", prim.parentTriangles}};
+        }
         if (!result.standardError.empty()) {
             nlohmann::json errors = nlohmann::json::array();
             for (const auto& v : result.standardError[p]) errors.push_back({v.x, v.y, v.z});
@@ -191,6 +201,65 @@ IrradianceFile ReadIrradianceJson(const std::string& path) {
     return file;
 }
 
+IrradianceFile ReadIrradianceGltf(const std::string& path) {
+    tinygltf::Model model;
+    ReadGltfModel(path, &model);
+    IrradianceFile file;
+    const tinygltf::Value& about = model.asset.extras.Get("penumbra");
+    file.solver = about.Get("solver").IsString() ? about.Get("solver").Get<std::string>()
+                                                 : model.asset.generator;
+    if (about.Get("channel").IsString()) file.channel = about.Get("channel").Get<std::string>();
+    for (size_t n = 0; n < model.nodes.size(); ++n) {
+        const tinygltf::Node& node = model.nodes[n];
+        if (node.mesh < 0 || node.mesh >= static_cast<int>(model.meshes.size())) continue;
+        const auto& primitives = model.meshes[node.mesh].primitives;
+        for (size_t k = 0; k < primitives.size(); ++k) {
+            auto it = primitives[k].attributes.find(kIrradianceAttribute);
+            if (it == primitives[k].attributes.end()) continue;
+            IrradianceRecord r;
+            r.node = node.name.empty() ? "node" + std::to_string(n) : node.name;
+            r.mesh = node.mesh;
+            r.primitive = static_cast<int>(k);
+            const std::string where = path + ": mesh " + std::to_string(node.mesh) + " primitive " +
+                                      std::to_string(k) + "'s " + kIrradianceAttribute;
+            if (it->second < 0 || it->second >= static_cast<int>(model.accessors.size()))
+                throw Error(where + " names no accessor");
+            const tinygltf::Accessor& a = model.accessors[it->second];
+            if (a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT || a.type != TINYGLTF_TYPE_VEC3 ||
+                a.sparse.isSparse || a.bufferView < 0 ||
+                a.bufferView >= static_cast<int>(model.bufferViews.size()))
+                throw Error(where + " is not a plain float VEC3 accessor");
+            const tinygltf::BufferView& v = model.bufferViews[a.bufferView];
+            const size_t stride = v.byteStride ? v.byteStride : sizeof(glm::vec3);
+            if (v.buffer < 0 || v.buffer >= static_cast<int>(model.buffers.size()) ||
+                stride < sizeof(glm::vec3) ||
+                (a.count > 0 &&
+                 a.byteOffset + (a.count - 1) * stride + sizeof(glm::vec3) > v.byteLength) ||
+                v.byteOffset + v.byteLength > model.buffers[v.buffer].data.size())
+                throw Error(where + " reaches past its buffer");
+            const unsigned char* base =
+                model.buffers[v.buffer].data.data() + v.byteOffset + a.byteOffset;
+            r.irradiance.resize(a.count);
+            for (size_t i = 0; i < a.count; ++i)
+                std::memcpy(&r.irradiance[i], base + i * stride, sizeof(glm::vec3));
+            file.primitives.push_back(std::move(r));
+        }
+    }
+    if (file.primitives.empty())
+        throw Error(path + ": no primitive has " + kIrradianceAttribute +
+                    " (not written by bake or reference)");
+    return file;
+}
+
+IrradianceFile ReadIrradianceFile(const std::string& path) {
+    auto endsWith = [&](const char* ext) {
+        const size_t n = std::strlen(ext);
+        return path.size() >= n && path.compare(path.size() - n, n, ext) == 0;
+    };
+    return endsWith(".glb") || endsWith(".gltf") ? ReadIrradianceGltf(path)
+                                                 : ReadIrradianceJson(path);
+}
+
 DisplayColor ParseDisplayColor(const std::string& name) {
     if (name == "none") return DisplayColor::kNone;
     if (name == "tonemapped") return DisplayColor::kToneMapped;
@@ -230,35 +299,71 @@ void WriteIrradianceGltf(const std::string& input, const std::string& output, co
     // with the input's).
     tinygltf::Buffer buffer;
     const int bufferIndex = static_cast<int>(model.buffers.size());
-    auto add = [&](const std::vector<glm::vec3>& values) {
-        glm::vec3 lo(std::numeric_limits<float>::max()), hi(std::numeric_limits<float>::lowest());
-        for (const auto& v : values) lo = glm::min(lo, v), hi = glm::max(hi, v);
+    // An accessor over `count` elements of `type` (floats, or unsigned ints for indices), with
+    // their bounds for float vectors (POSITION must have them).
+    auto addRaw = [&](const void* data, size_t count, int type, int components, bool indices) {
+        const size_t bytes = count * components * 4;
         tinygltf::BufferView view;
         view.buffer = bufferIndex;
         view.byteOffset = buffer.data.size();
-        view.byteLength = values.size() * sizeof(glm::vec3);
-        view.target = TINYGLTF_TARGET_ARRAY_BUFFER;
-        buffer.data.resize(buffer.data.size() + view.byteLength);
-        if (!values.empty())
-            std::memcpy(buffer.data.data() + view.byteOffset, values.data(), view.byteLength);
+        view.byteLength = bytes;
+        view.target = indices ? TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER : TINYGLTF_TARGET_ARRAY_BUFFER;
+        buffer.data.resize(buffer.data.size() + bytes);
+        if (bytes) std::memcpy(buffer.data.data() + view.byteOffset, data, bytes);
         model.bufferViews.push_back(view);
         tinygltf::Accessor acc;
         acc.bufferView = static_cast<int>(model.bufferViews.size()) - 1;
-        acc.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
-        acc.type = TINYGLTF_TYPE_VEC3;
-        acc.count = values.size();
-        if (!values.empty()) {
-            acc.minValues = {lo.x, lo.y, lo.z};
-            acc.maxValues = {hi.x, hi.y, hi.z};
+        acc.componentType =
+            indices ? TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT : TINYGLTF_COMPONENT_TYPE_FLOAT;
+        acc.type = type;
+        acc.count = count;
+        if (!indices && count > 0) {
+            const float* f = static_cast<const float*>(data);
+            acc.minValues.assign(components, std::numeric_limits<double>::max());
+            acc.maxValues.assign(components, std::numeric_limits<double>::lowest());
+            for (size_t i = 0; i < count; ++i)
+                for (int c = 0; c < components; ++c) {
+                    acc.minValues[c] = std::min(acc.minValues[c], double(f[i * components + c]));
+                    acc.maxValues[c] = std::max(acc.maxValues[c], double(f[i * components + c]));
+                }
         }
         model.accessors.push_back(acc);
         return static_cast<int>(model.accessors.size()) - 1;
     };
+    auto add = [&](const std::vector<glm::vec3>& values) {
+        return addRaw(values.data(), values.size(), TINYGLTF_TYPE_VEC3, 3, false);
+    };
     for (size_t p = 0; p < scene.primitives.size(); ++p) {
         const auto& prim = scene.primitives[p];
         const auto& values = result.primitives[p];
-        auto& attributes =
-            model.meshes[meshOfNode.at(prim.nodeIndex)].primitives[prim.primitive].attributes;
+        tinygltf::Primitive& out =
+            model.meshes[meshOfNode.at(prim.nodeIndex)].primitives[prim.primitive];
+        auto& attributes = out.attributes;
+        if (prim.refined) {
+            // Refined output (RefineForOutput): the refined geometry replaces the file's, in
+            // the node's own space, with the vertex lists the scene carries (others dropped).
+            attributes.clear();
+            attributes["POSITION"] = add(prim.objectPositions);
+            attributes["NORMAL"] = add(prim.objectNormals);
+            for (size_t set = 0; set < prim.texcoords.size(); ++set)
+                if (prim.texcoords[set].size() == prim.positions.size())
+                    attributes["TEXCOORD_" + std::to_string(set)] =
+                        addRaw(prim.texcoords[set].data(), prim.positions.size(),
+                               TINYGLTF_TYPE_VEC2, 2, false);
+            out.indices =
+                addRaw(prim.indices.data(), prim.indices.size(), TINYGLTF_TYPE_SCALAR, 1, true);
+            out.mode = TINYGLTF_MODE_TRIANGLES;
+            for (size_t t = 0; t < out.targets.size(); ++t) {
+                std::map<std::string, int> target;
+                if (t < prim.morphPositions.size() &&
+                    prim.morphPositions[t].size() == prim.positions.size())
+                    target["POSITION"] = add(prim.morphPositions[t]);
+                if (t < prim.morphNormals.size() &&
+                    prim.morphNormals[t].size() == prim.positions.size())
+                    target["NORMAL"] = add(prim.morphNormals[t]);
+                out.targets[t] = std::move(target);
+            }
+        }
         attributes[kIrradianceAttribute] = add(values);
         if (color == DisplayColor::kToneMapped) {
             std::vector<glm::vec3> display(values.size());
@@ -270,6 +375,14 @@ void WriteIrradianceGltf(const std::string& input, const std::string& output, co
     }
     model.buffers.push_back(std::move(buffer));
     model.asset.generator = "penumbra bake";
+    // What the values are, for a reader of this file (ReadIrradianceGltf).
+    tinygltf::Value::Object about;
+    about["solver"] = tinygltf::Value(result.solver);
+    about["channel"] = tinygltf::Value(result.channel);
+    about["units"] = tinygltf::Value(std::string(kIrradianceUnits));
+    tinygltf::Value::Object extras;
+    extras["penumbra"] = tinygltf::Value(std::move(about));
+    model.asset.extras = tinygltf::Value(std::move(extras));
     const size_t slash = input.find_last_of('/');
     WriteGltfModel(std::move(model), output,
                    slash == std::string::npos ? "." : input.substr(0, slash));

@@ -55,6 +55,12 @@ IrradianceFile ToIrradianceFile(const Scene& scene, const IrradianceResult& resu
 // Reads a file written by WriteIrradianceJson; throws penumbra::Error naming the file and
 // what is wrong with it.
 IrradianceFile ReadIrradianceJson(const std::string& path);
+// The same from a .glb or .gltf that bake or reference wrote: each primitive's _IRRADIANCE,
+// keyed as the glTF loader names it (node, mesh and primitive of this file, whose meshes are
+// the output's own: a refined output's, say). Throws penumbra::Error.
+IrradianceFile ReadIrradianceGltf(const std::string& path);
+// ReadIrradianceGltf for a path ending in .glb or .gltf, else ReadIrradianceJson.
+IrradianceFile ReadIrradianceFile(const std::string& path);
 
 // The vertex attribute that carries irradiance (lux, float RGB) in glTF out: application
 // data, so an underscore name (glTF 2.0, 3.7.2.1).

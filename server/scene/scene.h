@@ -105,6 +105,10 @@ struct Primitive {
     // split from input vertex copyOf[k - InputVertexCount()]. Empty: no copies. Outputs stay
     // per input vertex (ToInputVertices).
     std::vector<uint32_t> copyOf;
+    // Subdivided for output (RefineForOutput): its vertices and triangles are not the file's,
+    // and outputs carry them; parentTriangles[t] is the file's triangle that triangle t lies in.
+    bool refined = false;
+    std::vector<uint32_t> parentTriangles;
 
     // The vertices the file has (what outputs, frames and deformations count).
     size_t InputVertexCount() const { return positions.size() - copyOf.size(); }

@@ -153,6 +153,100 @@ TEST(BakeCli, GltfOutputPassesTheKhronosValidator) {
     }
 }
 
+// Issue 62, refined output for coarse meshes: a 2 m floor of two triangles under a lamp 0.5 m
+// above its middle. At its four corners the light's pool cannot show; with --refine 0.1 the
+// output carries the subdivided floor, every edge at most 0.1 m, each vertex lit as the
+// point light's closed form (I h / d³) says, in the glTF (which passes the validator) as in
+// the JSON, and the reference refines the same way so that `compare` pairs them.
+TEST(BakeCli, RefinedOutputShowsTheLightAcrossACoarseMesh) {
+    auto dir = testing::TempDir("refine");
+    SceneBuilder b;
+    b.AddQuad("floor", b.AddMaterial("grey", glm::vec3(0.5f)), {-1, 0, -1}, {1, 0, -1}, {1, 0, 1},
+              {-1, 0, 1}, {0, 1, 0}, 1);
+    PunctualLight lamp;
+    lamp.name = "lamp";
+    lamp.intensity = 100.0f;
+    lamp.position = {0.0f, 0.5f, 0.0f};
+    b.AddLight(lamp);
+    const std::string scene = (dir / "floor.gltf").string();
+    b.WriteGltf(scene);
+    auto bake = [&](const std::string& out, const std::string& options) {
+        return Execute("bake " + scene + " -o " + (dir / out).string() +
+                       " --device cpu --channel direct -q " + options);
+    };
+    ProcessResult coarse = bake("coarse.json", "");
+    ASSERT_EQ(coarse.exitCode, 0) << coarse.output;
+    const auto coarseJson = nlohmann::json::parse(std::ifstream(dir / "coarse.json"));
+    EXPECT_EQ(coarseJson["primitives"][0]["irradiance"].size(), 4u);
+    EXPECT_FALSE(coarseJson["primitives"][0].contains("refined"));
+
+    ProcessResult fine = bake("fine.json", "--refine 0.1");
+    ASSERT_EQ(fine.exitCode, 0) << fine.output;
+    const auto j = nlohmann::json::parse(std::ifstream(dir / "fine.json"));
+    const auto& prim = j["primitives"][0];
+    ASSERT_TRUE(prim.contains("refined")) << prim.dump().substr(0, 400);
+    const auto& positions = prim["refined"]["positions"];
+    const auto& indices = prim["refined"]["indices"];
+    ASSERT_EQ(positions.size(), prim["irradiance"].size());
+    EXPECT_GT(positions.size(), 400u);
+    EXPECT_EQ(prim["refined"]["parent_triangles"].size() * 3, indices.size());
+    auto at = [&](size_t i) {
+        return glm::vec3(positions[i][0].get<float>(), positions[i][1].get<float>(),
+                         positions[i][2].get<float>());
+    };
+    for (size_t t = 0; t < indices.size(); t += 3)
+        for (int k = 0; k < 3; ++k)
+            ASSERT_LE(glm::distance(at(indices[t + k]), at(indices[t + (k + 1) % 3])),
+                      0.1f + 1e-5f);
+    double lo = 1e30, hi = 0.0;
+    for (size_t i = 0; i < positions.size(); ++i) {
+        const glm::vec3 p = at(i);
+        const double d = glm::distance(p, lamp.position);
+        const double closed = 100.0 * 0.5 / (d * d * d);
+        const double e = prim["irradiance"][i][1].get<double>();
+        EXPECT_NEAR(e, closed, 0.01 * closed) << "vertex " << i << " at " << p.x << ", " << p.z;
+        lo = std::min(lo, e), hi = std::max(hi, e);
+    }
+    EXPECT_GT(hi / lo, 8.0) << "the pool of light, from under the lamp to the corners";
+
+    // The glTF: the refined floor, valid.
+    ProcessResult glb = bake("fine.glb", "--refine 0.1");
+    ASSERT_EQ(glb.exitCode, 0) << glb.output;
+    tinygltf::Model model;
+    tinygltf::TinyGLTF loader;
+    std::string err, warn;
+    ASSERT_TRUE(loader.LoadBinaryFromFile(&model, &err, &warn, (dir / "fine.glb").string())) << err;
+    const auto& out = model.meshes[0].primitives[0];
+    EXPECT_EQ(model.accessors[out.attributes.at("POSITION")].count, positions.size());
+    EXPECT_EQ(model.accessors[out.attributes.at("_IRRADIANCE")].count, positions.size());
+    EXPECT_EQ(model.accessors[out.indices].count, indices.size());
+    const std::string tools = std::string(PENUMBRA_SOURCE_DIR) + "/tests/tools";
+    ProcessResult valid = testing::Shell("node " + tools + "/validate_gltf.js " +
+                                         (dir / "fine.glb").string() + " 2>&1");
+    const auto report = nlohmann::json::parse(valid.output, nullptr, false);
+    ASSERT_FALSE(report.is_discarded()) << valid.output;
+    EXPECT_EQ(report["errors"], 0) << valid.output;
+
+    // The reference refines alike: compare pairs them vertex by vertex.
+    ProcessResult ref = Execute("reference " + scene + " -o " + (dir / "ref.json").string() +
+                                " --channel direct --samples 4 -q --refine 0.1");
+    ASSERT_EQ(ref.exitCode, 0) << ref.output;
+    ProcessResult cmp = Execute("compare " + (dir / "fine.json").string() + " " +
+                                (dir / "ref.json").string() + " --max-rmse 0.02");
+    EXPECT_EQ(cmp.exitCode, 0) << cmp.output;
+    // The glTF's own _IRRADIANCE reads as lighting: compared, and drawn on its refined mesh.
+    ProcessResult fromGlb = Execute("compare " + (dir / "fine.glb").string() + " " +
+                                    (dir / "ref.json").string() + " --max-rmse 0.02");
+    EXPECT_EQ(fromGlb.exitCode, 0) << fromGlb.output;
+    ProcessResult drawn = Execute("render " + (dir / "fine.glb").string() + " --lighting " +
+                                  (dir / "fine.glb").string() + " --mesh input --size 64x48 -o " +
+                                  (dir / "fine.png").string());
+    EXPECT_EQ(drawn.exitCode, 0) << drawn.output;
+    // A bad edge is refused by name.
+    ProcessResult bad = bake("bad.json", "--refine -1");
+    EXPECT_EQ(bad.exitCode, 2) << bad.output;
+}
+
 // `-o -`: the JSON on standard output, nothing else there (-q keeps stderr quiet too).
 TEST(BakeCli, DashWritesJsonToStandardOutput) {
     ProcessResult r =
