@@ -89,6 +89,22 @@ nlohmann::json Cornell() {
     return nlohmann::json::parse(in);
 }
 
+// Appends to `doc` a float VEC2 accessor over `uv` (two floats a vertex), its bytes in the
+// file DIR/NAME; returns the accessor's index.
+size_t AddUvAccessor(nlohmann::json& doc, const std::filesystem::path& dir, const std::string& name,
+                     const std::vector<float>& uv) {
+    std::ofstream(dir / name, std::ios::binary)
+        .write(reinterpret_cast<const char*>(uv.data()), uv.size() * sizeof(float));
+    const size_t buffer = doc["buffers"].size();
+    doc["buffers"].push_back({{"uri", name}, {"byteLength", uv.size() * sizeof(float)}});
+    doc["bufferViews"].push_back({{"buffer", buffer}, {"byteLength", uv.size() * sizeof(float)}});
+    doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
+                                {"componentType", 5126},
+                                {"count", uv.size() / 2},
+                                {"type", "VEC2"}});
+    return doc["accessors"].size() - 1;
+}
+
 TEST(GltfLoader, MissingFileNamesThePath) {
     try {
         LoadGltf("/nonexistent/scene.gltf");
@@ -311,16 +327,8 @@ TEST(GltfLoader, ReadsColourMapsAndTheirCoordinates) {
     // TEXCOORD_0 of the floor: u = ¼ for its first half of vertices, ¾ for the rest.
     std::vector<float> uv;
     for (int i = 0; i < count; ++i) uv.insert(uv.end(), {i < count / 2 ? 0.25f : 0.75f, 0.5f});
-    std::ofstream(dir / "uv.bin", std::ios::binary)
-        .write(reinterpret_cast<const char*>(uv.data()), uv.size() * sizeof(float));
-    const int buffer = static_cast<int>(doc["buffers"].size());
-    doc["buffers"].push_back({{"uri", "uv.bin"}, {"byteLength", uv.size() * sizeof(float)}});
-    doc["bufferViews"].push_back({{"buffer", buffer}, {"byteLength", uv.size() * sizeof(float)}});
-    doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
-                                {"componentType", 5126},
-                                {"count", count},
-                                {"type", "VEC2"}});
-    doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = doc["accessors"].size() - 1;
+    doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] =
+        AddUvAccessor(doc, dir, "uv.bin", uv);
     doc["images"] = {{{"uri", "halves.png"}}};
     doc["textures"] = {{{"source", 0}, {"sampler", 0}}};
     doc["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33071}}};  // clamp to edge
@@ -382,17 +390,8 @@ TEST(GltfLoader, ColourMapsReadThroughTheirTextureTransforms) {
     const int count = doc["accessors"][0]["count"];  // the floor's POSITION
     std::vector<float> uv;  // every floor vertex at (¼, ¾): a black texel
     for (int i = 0; i < count; ++i) uv.insert(uv.end(), {0.25f, 0.75f});
-    std::ofstream(dir / "uv.bin", std::ios::binary)
-        .write(reinterpret_cast<const char*>(uv.data()), uv.size() * sizeof(float));
-    const int buffer = static_cast<int>(doc["buffers"].size());
-    doc["buffers"].push_back({{"uri", "uv.bin"}, {"byteLength", uv.size() * sizeof(float)}});
-    doc["bufferViews"].push_back({{"buffer", buffer}, {"byteLength", uv.size() * sizeof(float)}});
-    doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
-                                {"componentType", 5126},
-                                {"count", count},
-                                {"type", "VEC2"}});
     auto& attributes = doc["meshes"][0]["primitives"][0]["attributes"];
-    attributes["TEXCOORD_0"] = doc["accessors"].size() - 1;
+    attributes["TEXCOORD_0"] = AddUvAccessor(doc, dir, "uv.bin", uv);
     doc["images"] = {{{"uri", "corner.png"}}};
     doc["textures"] = {{{"source", 0}, {"sampler", 0}}};
     doc["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33071}}};
@@ -422,16 +421,7 @@ TEST(GltfLoader, ColourMapsReadThroughTheirTextureTransforms) {
     EXPECT_NEAR(turned.emission.x, 0.0f, 1e-5f) << "the emissive map has no transform";
     // texCoord overrides the textureInfo's set: set 1 is at (¼, ¼).
     for (float& x : uv) x = 0.25f;
-    std::ofstream(dir / "uv1.bin", std::ios::binary)
-        .write(reinterpret_cast<const char*>(uv.data()), uv.size() * sizeof(float));
-    doc["buffers"].push_back({{"uri", "uv1.bin"}, {"byteLength", uv.size() * sizeof(float)}});
-    doc["bufferViews"].push_back(
-        {{"buffer", buffer + 1}, {"byteLength", uv.size() * sizeof(float)}});
-    doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
-                                {"componentType", 5126},
-                                {"count", count},
-                                {"type", "VEC2"}});
-    attributes["TEXCOORD_1"] = doc["accessors"].size() - 1;
+    attributes["TEXCOORD_1"] = AddUvAccessor(doc, dir, "uv1.bin", uv);
     EXPECT_NEAR(tints({{"texCoord", 1}}).albedo.x, 4.0f, 1e-5f);
     // A transform that is not numbers is refused, naming the material and the map.
     try {
