@@ -124,6 +124,20 @@ SceneInfo ToSceneInfo(const protocol::Message& m) {
     out.divergence = Str(s->divergence());
     if (s->warnings())
         for (const auto* w : *s->warnings()) out.warnings.push_back(w->str());
+    if (s->refined())
+        for (const auto* r : *s->refined()) {
+            RefinedPrimitive p;
+            p.node = Str(r->node());
+            p.mesh = r->mesh();
+            p.primitive = r->primitive();
+            if (r->positions()) p.positions.assign(r->positions()->begin(), r->positions()->end());
+            if (r->normals()) p.normals.assign(r->normals()->begin(), r->normals()->end());
+            if (r->indices()) p.indices.assign(r->indices()->begin(), r->indices()->end());
+            if (r->parent_triangles())
+                p.parentTriangles.assign(r->parent_triangles()->begin(),
+                                         r->parent_triangles()->end());
+            out.refined.push_back(std::move(p));
+        }
     if (s->nodes())
         for (const auto* n : *s->nodes()) {
             NodeInfo node;
@@ -431,7 +445,7 @@ SceneInfo Client::Load(const LoadOptions& o) {
         o.convergedChange, o.environment.empty() ? nullptr : o.environment.c_str(),
         sky ? &*sky : nullptr, o.environmentIntensity, o.environmentRotation, o.emitterRays,
         o.gatherRays, options.empty() ? nullptr : &options, bool(o.progress), sun ? &*sun : nullptr,
-        o.clearSky ? "clear" : nullptr, o.turbidity));
+        o.clearSky ? "clear" : nullptr, o.turbidity, o.refine));
     return ToSceneInfo(impl_->Call(MessageType::kLoadScene, b, MessageType::kSceneInfo,
                                    o.progress ? &o.progress : nullptr));
 }

@@ -63,6 +63,16 @@ struct LightInfo {
     float range = 0.0f;                        // metres; 0 = infinite
     float innerCone = 0.0f, outerCone = 0.0f;  // radians (spot)
 };
+// A primitive the server subdivided (LoadOptions::refine): the vertices its frames' values
+// are at, in its node's own space, and its triangles.
+struct RefinedPrimitive {
+    std::string node;
+    int mesh = -1, primitive = -1;
+    std::vector<float> positions, normals;  // x, y, z a vertex
+    std::vector<uint32_t> indices;          // triangles
+    std::vector<uint32_t> parentTriangles;  // the file's triangle each one lies in
+};
+
 struct SceneInfo {
     std::string scene, solver, device;
     std::vector<NodeInfo> nodes;
@@ -77,6 +87,7 @@ struct SceneInfo {
     std::string divergence;  // why the session stopped iterating; empty: it did not
     // What the answer leaves out: input the server ignored or approximated, no light.
     std::vector<std::string> warnings;
+    std::vector<RefinedPrimitive> refined;  // with LoadOptions::refine
     const NodeInfo* Node(const std::string& name) const;
 };
 
@@ -129,6 +140,9 @@ struct LoadOptions {
     std::optional<std::array<float, 3>> sun;
     bool clearSky = false;
     float turbidity = 3.0f;
+    // Refined output for coarse meshes: triangles subdivided until no edge is longer (metres)
+    // before lighting; SceneInfo::refined has the meshes the frames' values are on. 0: none.
+    float refine = 0.0f;
     // Set: the server sends how the build goes (Progress messages) and this gets them.
     ProgressCallback progress;
 };

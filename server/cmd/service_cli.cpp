@@ -190,6 +190,12 @@ void ServiceCommands::AddLoad(CLI::App& app) {
         ->check(CLI::IsMember({"clear"}))
         ->needs(sun);
     s.load->add_option("--turbidity", s.turbidity, "the clear sky's, 1.7 … 10 (default 3)");
+    s.load
+        ->add_option("--refine", s.loadOptions.refine,
+                     "refined output: triangles subdivided until no edge is longer than this "
+                     "many metres; frames carry values on the refined meshes (0: the file's "
+                     "vertices)")
+        ->check(CLI::Range(0.0f, 1e30f));
 }
 
 // `info` and `watch`.

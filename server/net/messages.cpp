@@ -104,6 +104,11 @@ service::LoadRequest ReadLoadScene(const fb::LoadScene& load, const service::Ser
     req.sun = Vec(l->sun());
     req.clearSky = ClearSkyAsked(l->sky(), "LoadScene");
     req.turbidity = l->turbidity();
+    req.refine = l->refine();
+    if (!(req.refine >= 0.0f) || !std::isfinite(req.refine))
+        throw ServiceError(ErrorKind::kInvalidArgument,
+                           "LoadScene refine must be 0 (the file's vertices) or a positive number "
+                           "of metres");
     // The solver and its options: each checked against the registry here, so a
     // bad one is refused before anything loads.
     const std::string solver = Str(l->solver());
@@ -285,12 +290,23 @@ void BuildSceneInfo(flatbuffers::FlatBufferBuilder& b, const service::Session& s
     }
     std::vector<flatbuffers::Offset<flatbuffers::String>> warnings;
     for (const std::string& w : SceneWarnings(scene)) warnings.push_back(b.CreateString(w));
+    std::vector<flatbuffers::Offset<fb::RefinedPrimitive>> refined;
+    for (const Primitive& p : scene.primitives) {
+        if (!p.refined) continue;
+        const float* positions = &p.objectPositions[0].x;
+        const float* normals = &p.objectNormals[0].x;
+        refined.push_back(fb::CreateRefinedPrimitive(
+            b, b.CreateString(p.node), p.mesh, p.primitive,
+            b.CreateVector(positions, 3 * p.objectPositions.size()),
+            b.CreateVector(normals, 3 * p.objectNormals.size()), b.CreateVector(p.indices),
+            b.CreateVector(p.parentTriangles)));
+    }
     b.Finish(fb::CreateSceneInfoDirect(
         b, session.Name().c_str(), stats.solver.c_str(), stats.device.c_str(), &nodes, &materials,
         static_cast<uint32_t>(stats.elements), stats.links, session.BuildSeconds(), reused, &lights,
         scene.environment.Active() ? scene.environment.source.c_str() : nullptr,
         scene.environment.intensity, stats.divergence.empty() ? nullptr : stats.divergence.c_str(),
-        &warnings));
+        &warnings, refined.empty() ? nullptr : &refined));
 }
 
 void BuildFramePayload(flatbuffers::FlatBufferBuilder& b, const service::FrameData& frame,

@@ -16,6 +16,7 @@
 
 #include "base/check.h"
 #include "scene/gltf_loader.h"
+#include "scene/refine_output.h"
 #include "scene/sun_sky.h"
 #include "solvers/registry.h"
 
@@ -278,6 +279,14 @@ LoadResult Service::LoadHere(const LoadRequest& request) {
         ValidateEnvironment(scene.environment);
     } catch (const Error& e) {
         throw ServiceError(ErrorKind::kInvalidArgument, e.what());
+    }
+    if (request.refine > 0.0f) {
+        try {
+            RefineForOutput(scene, request.refine, limits_.maxSceneTriangles);
+        } catch (const Error& e) {
+            throw ServiceError(ErrorKind::kLimitReached,
+                               name + ": " + e.what() + " (--max-scene-triangles)");
+        }
     }
     if (scene.TriangleCount() > limits_.maxSceneTriangles)
         throw ServiceError(

@@ -62,6 +62,9 @@ struct LoadRequest {
     std::optional<glm::vec3> sun;
     bool clearSky = false;
     float turbidity = 3.0f;
+    // Refined output (scene/refine_output.h): the longest edge after subdivision, metres;
+    // 0: the file's vertices.
+    float refine = 0.0f;
     // Told how the build goes (stage, fraction of it), from the loading thread; may be empty.
     ProgressFn progress;
     // The connection asking (Service::Own), 0 in-process, and its role: a reload of a scene

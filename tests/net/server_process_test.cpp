@@ -776,6 +776,45 @@ TEST(ServerProcess, AnIdleSceneIsDroppedAHeldOneStays) {
     EXPECT_EQ(stats["scenes"].size(), 1u) << stats.dump();
 }
 
+// Issue 62: refined output over the socket. LoadScene's refine subdivides the scene before it
+// is lit; SceneInfo carries each refined primitive's vertices and triangles (every edge within
+// the bound), and the frames' values are on those vertices.
+TEST(ServerProcess, ARefinedSceneStreamsItsRefinedMeshes) {
+    ServerProcess server("refined");
+    client::Client c(server.Unix(), "refined");
+    client::LoadOptions load;
+    load.path = "blocker.gltf";
+    load.device = "cpu";
+    load.refine = 0.1f;
+    const client::SceneInfo info = c.Load(load);
+    ASSERT_FALSE(info.refined.empty()) << server.Log();
+    client::Frame frame = c.Get(client::Channel::kIndirect, client::Format::kFloat32);
+    for (const client::RefinedPrimitive& r : info.refined) {
+        const size_t vertices = r.positions.size() / 3;
+        ASSERT_EQ(r.normals.size(), r.positions.size());
+        ASSERT_EQ(r.parentTriangles.size() * 3, r.indices.size());
+        for (size_t t = 0; t < r.indices.size(); ++t) {
+            ASSERT_LT(r.indices[t], vertices);
+            const uint32_t a = r.indices[t], b = r.indices[t - t % 3 + (t + 1) % 3];
+            const glm::vec3 pa(r.positions[3 * a], r.positions[3 * a + 1], r.positions[3 * a + 2]);
+            const glm::vec3 pb(r.positions[3 * b], r.positions[3 * b + 1], r.positions[3 * b + 2]);
+            ASSERT_LE(glm::distance(pa, pb), 0.1f + 1e-5f);  // the nodes here are not scaled
+        }
+        auto it =
+            std::find_if(frame.primitives.begin(), frame.primitives.end(), [&](const auto& p) {
+                return p.node == r.node && p.mesh == r.mesh && p.primitive == r.primitive;
+            });
+        ASSERT_NE(it, frame.primitives.end()) << r.node;
+        EXPECT_EQ(it->rgb.size(), 3 * vertices) << r.node;
+        const client::NodeInfo* node = info.Node(r.node);
+        ASSERT_NE(node, nullptr);
+    }
+    // A refine that is not a length is refused before anything loads.
+    load.refine = -1.0f;
+    load.reload = true;
+    EXPECT_THROW(c.Load(load), client::ClientError);
+}
+
 // Issue 63: a server whose scenes come and go gives their memory back. Each round loads four
 // scenes on new threads (their builds and workers) and unloads them; the server's resident
 // memory after the fourth round is where it was after the first (with glibc's default

@@ -156,6 +156,27 @@ class ClientAgainstALiveServer(unittest.TestCase):
                 c.sky(sun=(0,))
             c.unload("blocker.gltf")  # test_unload loads it afresh
 
+    def test_refined_output(self):
+        # Issue 62: load(refine=...) subdivides before lighting; SceneInfo.refined has the
+        # meshes, and each frame's values are on their vertices.
+        with Client(self.server.unix, name="python-refine") as c:
+            info = c.load("blocker.gltf", refine=0.1, reload=True, **CORNELL)
+            self.assertTrue(info.refined)
+            frame = c.get()
+            for r in info.refined:
+                self.assertEqual(r["positions"].shape[1], 3)
+                self.assertEqual(len(r["indices"]), 3 * len(r["parent_triangles"]))
+                edges = r["positions"][r["indices"].reshape(-1, 3)]
+                lengths = np.linalg.norm(edges - np.roll(edges, 1, axis=1), axis=2)
+                self.assertLessEqual(lengths.max(), 0.1 + 1e-5)
+                values = [p for p in frame.primitives
+                          if (p.node, p.mesh, p.primitive) == (r["node"], r["mesh"], r["primitive"])]
+                self.assertEqual(len(values), 1)
+                self.assertEqual(len(values[0].rgb), len(r["positions"]))
+            with self.assertRaises(ValueError):
+                c.load("blocker.gltf", refine=float("nan"), reload=True)
+            c.unload("blocker.gltf")  # test_unload loads it afresh
+
     def test_delta_stream_matches_the_full_one(self):
         # Issue 64: frames() defaults to a delta stream; at tolerance 0 what the client holds
         # is the full stream's values in fp16, exactly, frame by frame; at the default within

@@ -169,6 +169,10 @@ class SceneInfo:
     nodes: Dict[str, Node] = field(default_factory=dict)
     materials: Dict[str, dict] = field(default_factory=dict)
     lights: Dict[str, dict] = field(default_factory=dict)
+    # With load(refine=...): each primitive the server subdivided, as a dict of node, mesh,
+    # primitive, positions and normals (n × 3, the node's own space), indices (triangles) and
+    # parent_triangles (the file's triangle each one lies in); frames' values are on these.
+    refined: List[dict] = field(default_factory=list)
 
 
 def _text(b) -> str:
@@ -390,7 +394,7 @@ class Client:
              environment_intensity: float = 1.0, environment_rotation: float = 0.0,
              emitter_rays: int = 256, gather_rays: int = 256, progress=None,
              sun: Optional[Sequence[float]] = None, sky: str = "", turbidity: float = 3.0,
-             **solver_options) -> SceneInfo:
+             refine: float = 0.0, **solver_options) -> SceneInfo:
         """Loads a scene (a path under the server's --scene-root, or `glb` bytes), or joins
         the session that has it. `solver` "" is the server's default (lightfield). Other
         keywords are the solver's own options (`penumbra --help`), `_` for `-`:
@@ -398,7 +402,8 @@ class Client:
         `progress(stage, fraction, seconds_left)` is called (on the reader thread) as the
         server builds; `seconds_left` < 0 while not known. `sun` (azimuth, elevation in
         degrees, lux) adds a sun on a node "sun" (north −Z, east +X); `sky="clear"` Preetham's
-        clear sky for it, of `turbidity`.
+        clear sky for it, of `turbidity`. `refine` (metres): triangles subdivided until no
+        edge is longer before lighting; SceneInfo.refined has the meshes frames are on.
         """
         if (path is None) == (glb is None):
             raise ValueError("give a path or glb bytes")
@@ -443,6 +448,7 @@ class Client:
             LoadScene.AddSun(b, Vec3.CreateVec3(b, *_finite("sun", sun, 3)))
         LoadScene.AddSky(b, k)
         LoadScene.AddTurbidity(b, float(turbidity))
+        LoadScene.AddRefine(b, _finite("refine", [refine], 1)[0])
         b.Finish(LoadScene.End(b))
         _, payload = self._request(LOAD_SCENE, b, SCENE_INFO, progress)
         return self._scene_info(payload)
@@ -462,6 +468,21 @@ class Client:
                          environment_intensity=s.EnvironmentIntensity(),
                          divergence=_text(s.Divergence()),
                          warnings=[_text(s.Warnings(i)) for i in range(s.WarningsLength())])
+        for i in range(s.RefinedLength()):
+            r = s.Refined(i)
+            vectors = {}
+            for key, length, numpy in (("positions", r.PositionsLength, r.PositionsAsNumpy),
+                                       ("normals", r.NormalsLength, r.NormalsAsNumpy),
+                                       ("indices", r.IndicesLength, r.IndicesAsNumpy),
+                                       ("parent_triangles", r.ParentTrianglesLength,
+                                        r.ParentTrianglesAsNumpy)):
+                vectors[key] = np.array(numpy()) if length() else np.zeros(0)
+            info.refined.append({"node": _text(r.Node()), "mesh": r.Mesh(),
+                                 "primitive": r.Primitive(),
+                                 "positions": vectors["positions"].reshape(-1, 3),
+                                 "normals": vectors["normals"].reshape(-1, 3),
+                                 "indices": vectors["indices"],
+                                 "parent_triangles": vectors["parent_triangles"]})
         for i in range(s.NodesLength()):
             n = s.Nodes(i)
             columns = n.MatrixAsNumpy() if n.MatrixLength() == 16 else np.eye(4).ravel()
