@@ -1,6 +1,8 @@
 // What a renderer does with Penumbra: load a scene on the server, subscribe to its frames of
 // per-vertex irradiance, and hand each primitive's colours to its own vertex buffers (here:
-// print what would be uploaded). Usage: penumbra-renderer-example URL SCENE [FRAMES]
+// print what would be uploaded). With REFINE (metres) the server subdivides the scene's
+// triangles first, and the renderer draws the refined meshes SceneInfo gives instead of the
+// file's. Usage: penumbra-renderer-example URL SCENE [FRAMES] [REFINE]
 #include <penumbra/client.h>
 
 #include <condition_variable>
@@ -11,7 +13,7 @@
 
 int main(int argc, char** argv) {
     if (argc < 3) {
-        std::fprintf(stderr, "usage: %s URL SCENE [FRAMES]\n", argv[0]);
+        std::fprintf(stderr, "usage: %s URL SCENE [FRAMES] [REFINE]\n", argv[0]);
         return 2;
     }
     const int wanted = argc > 3 ? std::atoi(argv[3]) : 3;
@@ -19,9 +21,16 @@ int main(int argc, char** argv) {
         penumbra::client::Client client(argv[1], "renderer-example");
         penumbra::client::LoadOptions load;
         load.path = argv[2];
+        if (argc > 4) load.refine = std::strtof(argv[4], nullptr);
         const penumbra::client::SceneInfo info = client.Load(load);
         std::printf("scene %s: %zu nodes, solver %s on %s\n", info.scene.c_str(), info.nodes.size(),
                     info.solver.c_str(), info.device.c_str());
+        // A refined primitive's frames are on its refined vertices: a renderer replaces that
+        // primitive's vertex and index buffers with these (positions in its node's own space).
+        for (const auto& r : info.refined)
+            std::printf("refined %s mesh %d primitive %d: %zu vertices, %zu triangles\n",
+                        r.node.c_str(), r.mesh, r.primitive, r.positions.size() / 3,
+                        r.indices.size() / 3);
         std::mutex m;
         std::condition_variable cv;
         int seen = 0;

@@ -46,6 +46,11 @@ for _ in $(seq 1 100); do [ -s "$work/ready" ] && break; sleep 0.1; done
 test -s "$work/ready" || { echo "the server did not start"; cat "$work/server.log"; exit 1; }
 timeout 120 "$work/example/penumbra-renderer-example" "unix://$work/socket" blocker.gltf 2
 timeout 60 "$work/example-pc" "unix://$work/socket" blocker.gltf 1
+# Refined output: the example prints the refined meshes it would draw.
+refined=$(timeout 120 "$work/example/penumbra-renderer-example" "unix://$work/socket" \
+    cornell-box.gltf 1 0.05)
+echo "$refined"
+echo "$refined" | grep -q "^refined " || { echo "no refined meshes in SceneInfo"; exit 1; }
 
 step "the client alone: -DPENUMBRA_CLIENT_ONLY=ON"
 cmake -S "$src" -B "$work/client-only" -DPENUMBRA_CLIENT_ONLY=ON > "$work/client-only.log"
