@@ -36,6 +36,12 @@ void WriteResult(const std::string& scenePath, const std::string& outPath, const
         WriteIrradianceGltf(scenePath, outPath, scene, result, color);
 }
 
+// What WriteResult wrote: a .glb or .gltf's _IRRADIANCE, else the JSON.
+IrradianceFile ReadResult(const std::string& path) {
+    return EndsWith(path, ".glb") || EndsWith(path, ".gltf") ? ReadIrradianceGltf(path)
+                                                             : ReadIrradianceJson(path);
+}
+
 // The solver `settings` names behind the gather, run for `iterations`. Where its solution
 // diverged, the fallback solver (FallbackSettings) is built and run instead, with a warning
 // on stderr (even with -q: the answer is another method's), and `fellBack` says why.
@@ -301,7 +307,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
     std::unique_ptr<Solver> solver;
     std::string source;
     if (fromFile) {
-        perVertex = render::IrradianceForScene(scene, ReadIrradianceFile(o.lighting));
+        perVertex = render::IrradianceForScene(scene, ReadResult(o.lighting));
         source = o.lighting;
     } else {
         std::string fellBack;
@@ -317,7 +323,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
     render::Mesh mesh;
     bool heat = !o.compare.empty();
     if (heat) {
-        auto other = render::IrradianceForScene(scene, ReadIrradianceFile(o.compare));
+        auto other = render::IrradianceForScene(scene, ReadResult(o.compare));
         mesh = render::ErrorMesh(scene, perVertex, other, o.errorScale, kDefaultFloor);
     } else if (solver && o.mesh != "input") {
         mesh = render::ShadedRefinedMesh(scene, solver->GetSurfels(), perSurfel);
@@ -356,7 +362,7 @@ int Render(const RenderOptions& o, SolverSettings settings, const IterationOptio
 int CompareFiles(const std::string& aPath, const std::string& bPath, bool json, double maxRmse,
                  double floor) {
     if (!(floor > 0.0 && floor <= 1.0)) throw Error("--floor must be in (0, 1]");
-    IrradianceFile a = ReadIrradianceFile(aPath), b = ReadIrradianceFile(bPath);
+    IrradianceFile a = ReadResult(aPath), b = ReadResult(bPath);
     if (a.channel != b.channel)
         throw Error("channels differ: " + aPath + " holds '" + a.channel + "', " + bPath +
                     " holds '" + b.channel + "'");

@@ -251,15 +251,6 @@ IrradianceFile ReadIrradianceGltf(const std::string& path) {
     return file;
 }
 
-IrradianceFile ReadIrradianceFile(const std::string& path) {
-    auto endsWith = [&](const char* ext) {
-        const size_t n = std::strlen(ext);
-        return path.size() >= n && path.compare(path.size() - n, n, ext) == 0;
-    };
-    return endsWith(".glb") || endsWith(".gltf") ? ReadIrradianceGltf(path)
-                                                 : ReadIrradianceJson(path);
-}
-
 DisplayColor ParseDisplayColor(const std::string& name) {
     if (name == "none") return DisplayColor::kNone;
     if (name == "tonemapped") return DisplayColor::kToneMapped;

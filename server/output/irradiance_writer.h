@@ -59,8 +59,6 @@ IrradianceFile ReadIrradianceJson(const std::string& path);
 // keyed as the glTF loader names it (node, mesh and primitive of this file, whose meshes are
 // the output's own: a refined output's, say). Throws penumbra::Error.
 IrradianceFile ReadIrradianceGltf(const std::string& path);
-// ReadIrradianceGltf for a path ending in .glb or .gltf, else ReadIrradianceJson.
-IrradianceFile ReadIrradianceFile(const std::string& path);
 
 // The vertex attribute that carries irradiance (lux, float RGB) in glTF out: application
 // data, so an underscore name (glTF 2.0, 3.7.2.1).
